@@ -1,0 +1,46 @@
+# topdress: the two commands of the README are `make demo` and `make test`.
+# Both create .venv and install what they need on first use.
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed-stamp
+CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h) src/topdress/ecu/_build.py
+DURATION ?= 30
+
+.PHONY: demo test ctest pytest lint bench sysdeps clean
+
+$(STAMP): pyproject.toml setup.py $(CSRC)
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/topdress demo --duration $(DURATION)
+
+sysdeps:
+	bash scripts/sysdeps.sh
+
+ctest: sysdeps
+	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null
+	cmake --build build/ecu -j2
+	ctest --test-dir build/ecu --output-on-failure
+	cmake -S ecu -B build/ecu-san -DCMAKE_BUILD_TYPE=Debug -DTD_SANITIZE=ON >/dev/null
+	cmake --build build/ecu-san -j2
+	ctest --test-dir build/ecu-san --output-on-failure
+
+lint: $(STAMP)
+	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff format --check src tests bench
+	$(BIN)/mypy
+
+pytest: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+test: ctest lint pytest
+
+bench: $(STAMP) sysdeps
+	$(BIN)/python bench/ecu_bench.py
+
+clean:
+	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c

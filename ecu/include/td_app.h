@@ -1,0 +1,108 @@
+/**
+ * @file td_app.h
+ * @brief The ECU application: commands in, speed selection, metering targets, PID, fail-safes, frames out.
+ *
+ * Timing (defaults): td_app_step() every control period (10 ms); wheel speed and the
+ * source decision every wheel_update_ms (500 ms); EcuStatus, EcuDiag, EcuSpeeds and
+ * EcuTargets every status_period_ms (100 ms); PcCommand expected every 500 ms, timeout
+ * cmd_timeout_ms (1.5 s). Metering speeds are measured over the last 100 ms of counts.
+ *
+ * Metering is allowed for a layer only when: running (last command was start), no
+ * command timeout, a usable speed >= min_work_speed_kmh, the layer's fan >= fan_min_rpm
+ * and the layer's motor not latched as blocked. Otherwise its target is 0 and its PID is reset.
+ */
+#ifndef TD_APP_H
+#define TD_APP_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include "td_common.h"
+#include "td_params.h"
+#include "td_pid.h"
+#include "td_port.h"
+#include "td_proto.h"
+#include "td_speedq.h"
+#include "td_wheel.h"
+
+#define TD_TXQ_LEN 16u
+#define TD_RATE_WINDOW 10u   /**< control steps in the metering/fan speed window */
+
+/** Everything a port, the simulator or a test may want to see; read-only for them. */
+typedef struct {
+    bool running;
+    td_source_t source;
+    float cv_pct;              /**< < 0: undefined */
+    bool uniform;
+    float v_wheel_kmh;
+    float v_gnss_kmh;
+    bool gnss_valid;
+    float v_kmh;               /**< the selected speed that drives eq. 4 */
+    float rate_kg_ha[2];
+    float target_rpm[2];
+    float meter_rpm[2];        /**< measured */
+    float fan_rpm[2];          /**< measured */
+    float fan_target_rpm;
+    float meter_duty[2];
+    float fan_duty[2];
+    uint16_t faults;
+    uint32_t wheel_updates;    /**< count of wheel-speed updates (each one a source decision) */
+    uint32_t wheel_pulses;     /**< cumulative wheel pulses seen */
+} td_state_t;
+
+typedef struct {
+    uint32_t rx_ok;
+    uint32_t rx_unknown_id;
+    uint32_t rx_bad_length;
+    uint32_t rx_out_of_range;
+    uint32_t rx_param_rejected;
+    uint32_t tx_dropped;
+} td_counters_t;
+
+typedef struct {
+    td_params_t p;
+    td_state_t st;
+    td_counters_t cnt;
+    td_wheel_t wheel;
+    td_speedq_t q;
+    td_pid_t meter_pid[2];
+    td_pid_t fan_pid[2];
+    /* timing */
+    uint32_t last_step_us;
+    uint32_t last_cmd_us;
+    uint32_t last_gnss_us;
+    uint32_t last_status_us;
+    uint32_t start_us;         /**< time of the last stop->start transition */
+    uint32_t enc_fault_since_us;
+    uint32_t blocked_since_us[2];
+    bool have_cmd, have_gnss, stepped, enc_suspect, blocked_suspect[2];
+    /* metering/fan speed windows (ring of counts over TD_RATE_WINDOW steps) */
+    uint32_t meter_hist[TD_RATE_WINDOW][2];
+    uint32_t fan_hist[TD_RATE_WINDOW][2];
+    uint32_t time_hist[TD_RATE_WINDOW];
+    uint8_t hist_head, hist_count;
+    uint32_t wheel_last_count;
+    /* transmit queue */
+    td_can_frame_t txq[TD_TXQ_LEN];
+    uint8_t tx_head, tx_count;
+} td_app_t;
+
+/** Initialise with a parameter set (validated: TD_E_RANGE / TD_E_INCONSISTENT on a bad one). */
+int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
+
+/**
+ * Take one received frame. Returns TD_OK when acted on, TD_E_UNKNOWN_ID, TD_E_LENGTH or
+ * TD_E_RANGE when rejected (counted in cnt, never acted on). PcParamSet is always
+ * answered with an EcuParamAck, and returns the parameter error (TD_E_BUSY, ...) if refused.
+ */
+int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
+
+/** One control step. `in` are the cumulative counters read now; `out` the duties to apply. */
+int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out);
+
+/** Pop the oldest frame to send. Returns 1 and fills *frame, or 0 when the queue is empty. */
+int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
+
+/** Read-only view of the state. */
+const td_state_t *td_app_state(const td_app_t *app);
+
+#endif /* TD_APP_H */

@@ -1,0 +1,58 @@
+/**
+ * @file td_common.h
+ * @brief Error codes, fault bits and small shared types of the topdress ECU core.
+ *
+ * Conventions (whole core): no heap, no globals, no clock reads. Every function
+ * that depends on time takes `now_us`, a free-running microsecond counter of the
+ * port (uint32_t, wraps every 71.6 min; all differences are taken modulo 2^32,
+ * so any interval below 35 min is measured correctly across the wrap).
+ * Errors are negative return codes; faults are latched in one fault word.
+ */
+#ifndef TD_COMMON_H
+#define TD_COMMON_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+/* ---- error codes (negative) ---- */
+#define TD_OK 0
+#define TD_E_ARG (-1)          /**< NULL pointer or argument outside its domain */
+#define TD_E_UNKNOWN_ID (-2)   /**< CAN frame with an identifier the ECU does not take */
+#define TD_E_LENGTH (-3)       /**< CAN frame with the wrong DLC */
+#define TD_E_RANGE (-4)        /**< a value outside its documented range */
+#define TD_E_BUSY (-5)         /**< parameter write while running */
+#define TD_E_UNKNOWN_PARAM (-6) /**< parameter id not defined */
+#define TD_E_INCONSISTENT (-7) /**< parameter set inconsistent (e.g. CV window > queue length) */
+#define TD_E_FULL (-8)         /**< transmit queue full, frame dropped */
+
+/* ---- fault word bits (td_app_t.faults) ---- */
+#define TD_FAULT_CMD_TIMEOUT (1u << 0)   /**< no valid PcCommand for > cmd_timeout_ms: meters stopped; clears on the next valid command */
+#define TD_FAULT_GNSS_LOST (1u << 1)     /**< GNSS speed missing (0xFF) or stale (> gnss_timeout_ms): wheel speed used; clears when GNSS returns */
+#define TD_FAULT_WHEEL_ENCODER (1u << 2) /**< wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms: GNSS used; latched until a stop command */
+#define TD_FAULT_UPPER_BLOCKED (1u << 3) /**< upper meter commanded but not turning for > blocked_time_ms: upper motor stopped; latched until a stop command */
+#define TD_FAULT_LOWER_BLOCKED (1u << 4) /**< same, lower meter */
+#define TD_FAULT_UPPER_FAN_LOW (1u << 5) /**< upper fan below fan_min_rpm after the spin-up grace: upper meter held at zero; clears when the fan is up */
+#define TD_FAULT_LOWER_FAN_LOW (1u << 6) /**< same, lower fan */
+#define TD_FAULT_NO_SPEED (1u << 7)      /**< neither speed source usable: meters held at zero */
+
+/** Latched faults: cleared only by a stop command (operator acknowledgement). */
+#define TD_FAULT_LATCHED_MASK (TD_FAULT_WHEEL_ENCODER | TD_FAULT_UPPER_BLOCKED | TD_FAULT_LOWER_BLOCKED)
+
+/** Layers / metering motors and fans. */
+typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
+
+/** Speed sources, as sent in EcuDiag.SpeedSource. */
+typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2 } td_source_t;
+
+/** Speed modes, as in parameter SpeedMode. */
+typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2 } td_speed_mode_t;
+
+/** Which speed the dual rule compares with switch_speed_kmh (parameter SwitchCompare). */
+typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
+
+/** Elapsed microseconds from `then_us` to `now_us`, correct across the 2^32 wrap. */
+static inline uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us) {
+    return (uint32_t)(now_us - then_us);
+}
+
+#endif /* TD_COMMON_H */

@@ -1,0 +1,71 @@
+/**
+ * @file td_params.h
+ * @brief The ECU parameter set: units, ranges, defaults, validation.
+ *
+ * Every parameter can be written over CAN with PcParamSet (id in parentheses,
+ * range as in protocol/topdress.dbc), only while the ECU is stopped.
+ * Defaults are the paper's values where it gives one.
+ */
+#ifndef TD_PARAMS_H
+#define TD_PARAMS_H
+
+#include <stdint.h>
+#include "td_common.h"
+
+typedef struct {
+    /* machine */
+    float working_width_m;          /**< (1) 0.5..30, default 3.6 (6 rows x 0.60 m) */
+    float kg_per_rev[2];            /**< (2,3) fertilizer per metering revolution, kg/rev, 0.001..5, default 0.3 */
+    float wheel_radius_m;           /**< (4) 0.02..1, default 0.0615 (12.3 cm diameter) */
+    uint16_t wheel_ppr;             /**< (5) wheel encoder pulses/rev, 1..10000, default 500 */
+    /* dual speed rule */
+    uint8_t queue_len;              /**< (6) N, length of queue G, 2..16, default 5 */
+    uint8_t cv_window;              /**< (7) n, last values of G used for the CV, 2..queue_len, default 5 */
+    float cv_threshold_pct;         /**< (8) CV threshold, %, 0.1..50, default 4.2 */
+    float switch_speed_kmh;         /**< (9) V_Grmax, km/h, 0..25, default 6.0 */
+    uint8_t speed_mode;             /**< (10) td_speed_mode_t, default TD_MODE_DUAL */
+    uint8_t switch_compare;         /**< (11) td_compare_t, default TD_CMP_GNSS */
+    /* metering motor PID (duty per r/min) */
+    float pid_kp;                   /**< (12) 0..10, default see td_params.c */
+    float pid_ki;                   /**< (13) 0..10, per second */
+    float pid_kd;                   /**< (14) 0..10, seconds */
+    float pid_kff;                  /**< (15) feed-forward duty per r/min of target, 0..1 */
+    /* timing and fail-safes */
+    uint16_t cmd_timeout_ms;        /**< (16) 100..10000, default 1500 */
+    uint16_t gnss_timeout_ms;       /**< (17) GNSS speed older than this is stale, 100..10000, default 1200 */
+    float min_work_speed_kmh;       /**< (18) below this speed the meters stop, 0..10, default 0.5 */
+    uint16_t wheel_update_ms;       /**< (19) wheel speed update period, 50..5000, default 500 */
+    uint8_t wheel_samples;          /**< (20) frequency samples averaged per update, 1..16, default 4 */
+    uint16_t meter_counts_per_rev;  /**< (21) metering shaft encoder counts/rev, 1..65535, default 6400 */
+    uint16_t fan_min_rpm;           /**< (22) 0..6000, default 2000 */
+    uint8_t fan_ppr;                /**< (23) fan tachometer pulses/rev, 1..255, default 30 */
+    float enc_fault_gnss_kmh;       /**< (24) 0.5..25, default 2.0 */
+    uint16_t enc_fault_time_ms;     /**< (25) 100..30000, default 2000 */
+    uint16_t blocked_time_ms;       /**< (26) 100..30000, default 1000 */
+    uint16_t status_period_ms;      /**< (27) 20..1000, default 100 */
+    /* not on CAN: fixed properties of the build */
+    float fan_rpm_at_full_duty;     /**< fan feed-forward scale, default 4000 rpm */
+    uint16_t fan_spinup_ms;         /**< grace after start before FAN_LOW is flagged, default 3000 */
+    uint32_t status_id;             /**< EcuStatus identifier, default 0x185C6465 */
+    uint32_t command_id;            /**< PcCommand identifier, default 0x0A5C6465 */
+} td_params_t;
+
+/** Number of the highest parameter id. */
+#define TD_PARAM_COUNT 27u
+
+/** Fill `p` with the defaults. */
+void td_params_default(td_params_t *p);
+
+/** Check every range and cross-constraint. Returns TD_OK or TD_E_RANGE / TD_E_INCONSISTENT / TD_E_ARG. */
+int td_params_validate(const td_params_t *p);
+
+/**
+ * Set parameter `param_id` (1..TD_PARAM_COUNT) from its physical value (units as above).
+ * Leaves `p` unchanged on error. Returns TD_OK, TD_E_UNKNOWN_PARAM, TD_E_RANGE or TD_E_INCONSISTENT.
+ */
+int td_params_set(td_params_t *p, uint8_t param_id, float value);
+
+/** Read parameter `param_id` as a physical value into *value. Returns TD_OK or TD_E_UNKNOWN_PARAM. */
+int td_params_get(const td_params_t *p, uint8_t param_id, float *value);
+
+#endif /* TD_PARAMS_H */

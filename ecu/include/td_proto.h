@@ -1,0 +1,88 @@
+/**
+ * @file td_proto.h
+ * @brief The CAN protocol of protocol/topdress.dbc, in physical units, validated.
+ *
+ * Built on the codec generated from the DBC (ecu/src/gen/td_can.[ch], never edited by hand).
+ * Decoders reject a frame (and say why) instead of returning a half-valid value:
+ * wrong DLC -> TD_E_LENGTH, a value outside the DBC range or an undefined enum -> TD_E_RANGE.
+ */
+#ifndef TD_PROTO_H
+#define TD_PROTO_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include "td_port.h"
+
+#define TD_ID_ECU_STATUS 0x185C6465u
+#define TD_ID_PC_COMMAND 0x0A5C6465u
+#define TD_ID_ECU_DIAG 0x185D6465u
+#define TD_ID_ECU_SPEEDS 0x185E6465u
+#define TD_ID_ECU_TARGETS 0x185F6465u
+#define TD_ID_PC_PARAM_SET 0x0A606465u
+#define TD_ID_ECU_PARAM_ACK 0x18616465u
+
+#define TD_RUN_STOPPED 0x00u
+#define TD_RUN_RUNNING 0x0Au
+
+/** PcCommand (paper Table 1), physical. */
+typedef struct {
+    bool start;                /**< byte 0: 0x0A start, 0x00 stop (any other value rejected) */
+    float fan_rpm;             /**< bytes 1-2, 1 rpm, 0..6000 */
+    float rate_kg_ha[2];       /**< bytes 3-4 upper, 5-6 lower, 0.01 kg/ha, 0..600 */
+    bool gnss_valid;           /**< byte 7 != 0xFF */
+    float gnss_kmh;            /**< byte 7, 0.1 km/h, 0..25.0; raw 251..254 rejected */
+} td_command_t;
+
+/** EcuStatus (paper Table 1), physical. */
+typedef struct {
+    bool running;
+    float meter_rpm[2];        /**< 0.01 r/min */
+    float fan_rpm[2];          /**< 20 rpm steps, saturates at 5100 */
+    float wheel_kmh;           /**< 0.1 km/h, saturates at 25.5 */
+} td_status_t;
+
+typedef struct {
+    uint8_t source;            /**< td_source_t */
+    uint8_t mode;              /**< td_speed_mode_t */
+    bool gnss_valid;
+    bool uniform;              /**< CV defined and below threshold */
+    uint8_t compare;           /**< td_compare_t */
+    float cv_pct;              /**< 0.01 %, saturates at 655.35; undefined CV is sent as 655.35 */
+    uint16_t faults;
+    uint32_t wheel_pulses;     /**< cumulative, mod 2^24 */
+} td_diag_t;
+
+typedef struct {
+    float wheel_kmh, gnss_kmh, selected_kmh;  /**< 0.01 km/h; gnss 655.35 = not valid */
+    uint16_t rx_rejected;
+} td_speeds_t;
+
+typedef struct {
+    float target_rpm[2];
+    float meter_duty_pct[2];
+    float fan_duty_pct[2];
+} td_targets_t;
+
+typedef struct {
+    uint8_t param_id;
+    uint8_t result;            /**< 0 ok, 1 unknown param, 2 out of range, 3 busy, 4 inconsistent, 5 bad frame */
+    uint32_t raw;              /**< the value now in force, raw DBC units */
+} td_param_ack_t;
+
+int td_proto_decode_command(const td_can_frame_t *f, td_command_t *out);
+int td_proto_encode_command(const td_command_t *c, td_can_frame_t *f);
+int td_proto_encode_status(const td_status_t *s, td_can_frame_t *f);
+int td_proto_decode_status(const td_can_frame_t *f, td_status_t *out);
+int td_proto_encode_diag(const td_diag_t *d, td_can_frame_t *f);
+int td_proto_encode_speeds(const td_speeds_t *s, td_can_frame_t *f);
+int td_proto_encode_targets(const td_targets_t *t, td_can_frame_t *f);
+int td_proto_encode_param_ack(const td_param_ack_t *a, td_can_frame_t *f);
+/**
+ * Decode PcParamSet into the parameter id and its physical value (units of td_params.h).
+ * TD_E_UNKNOWN_PARAM for an id outside 1..TD_PARAM_COUNT, TD_E_RANGE outside the DBC range.
+ */
+int td_proto_decode_param_set(const td_can_frame_t *f, uint8_t *param_id, float *value);
+/** Physical value -> raw DBC units of parameter `param_id` (for the acknowledgement). */
+uint32_t td_proto_param_raw(uint8_t param_id, float value);
+
+#endif /* TD_PROTO_H */

@@ -1,0 +1,52 @@
+"""The `topdress` command. Each subsystem registers its own subcommands (see REGISTRARS)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from collections.abc import Sequence
+
+from topdress.errors import TopdressError
+
+# Each module defines `register(subparsers)` and sets `func` on its parsers;
+# `func(args) -> int` is the exit code.
+REGISTRARS = (
+    "topdress.terminal.cli",
+    "topdress.terminal.gnss_cli",
+    "topdress.sim.cli",
+    "topdress.log.cli",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="topdress",
+        description="Variable-rate topdressing with dual speed measurement: ECU core, cab terminal, simulator.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in REGISTRARS:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        code: int = args.func(args)
+    except TopdressError as exc:
+        print(f"topdress: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,41 @@
+"""The one error hierarchy of topdress. Every error a user or a device can cause derives from TopdressError."""
+
+
+class TopdressError(Exception):
+    """Base of every topdress error."""
+
+
+class ConfigError(TopdressError):
+    """Invalid configuration; the message names the key."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(f"{key}: {message}")
+        self.key = key
+
+
+class ProtocolError(TopdressError):
+    """A CAN frame that does not decode (unknown id, wrong length, out of range)."""
+
+
+class NmeaError(TopdressError):
+    """An NMEA sentence that is malformed, truncated or fails its checksum."""
+
+
+class SensorError(TopdressError):
+    """A crop sensor line that is malformed or out of range."""
+
+
+class DeviceError(TopdressError):
+    """A device (serial port, CAN interface) that cannot be opened or vanished."""
+
+
+class EcuError(TopdressError):
+    """The ECU core returned an error code."""
+
+    def __init__(self, code: int, what: str) -> None:
+        super().__init__(f"{what}: ECU error {code}")
+        self.code = code
+
+
+class LogError(TopdressError):
+    """The session log cannot be written or read."""

@@ -1,0 +1,1 @@
+"""topdress.sim."""
