@@ -39,3 +39,12 @@ class EcuError(TopdressError):
 
 class LogError(TopdressError):
     """The session log cannot be written or read."""
+
+
+class EcuParamError(TopdressError):
+    """The ECU refused or did not acknowledge a parameter pushed at start-up."""
+
+    def __init__(self, name: str, value: float, message: str) -> None:
+        super().__init__(f"ECU parameter {name} = {value:g}: {message}")
+        self.name = name
+        self.value = value
