@@ -1,0 +1,517 @@
+"""The terminal's configuration: one TOML file, one frozen dataclass per section.
+
+Every key has a default (see DEFAULT_TOML, which is also docs/config.md). Unknown keys, wrong
+types and out-of-range values raise ConfigError naming the dotted key, so a bad file stops
+start-up before any device is opened.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from topdress.errors import ConfigError
+
+# Numeric fields carry metadata {"range": (lo, hi)}; str fields may carry {"choices": (...)}.
+_T = TypeVar("_T")
+
+
+def _num(default: _T, lo: float, hi: float) -> Any:
+    return field(default=default, metadata={"range": (lo, hi)})
+
+
+def _choice(default: str, *choices: str) -> Any:
+    return field(default=default, metadata={"choices": choices})
+
+
+@dataclass(frozen=True)
+class MachineConfig:
+    width_m: float = _num(3.6, 0.5, 30.0)
+    rows: int = _num(6, 1, 64)
+    layers: int = _num(2, 1, 2)
+    kg_per_rev_upper: float = _num(0.3, 0.001, 5.0)
+    kg_per_rev_lower: float = _num(0.3, 0.001, 5.0)
+    wheel_radius_m: float = _num(0.0615, 0.02, 1.0)
+    wheel_ppr: int = _num(500, 1, 10000)
+    fan_rpm: int = _num(3000, 0, 6000)
+
+
+@dataclass(frozen=True)
+class SpeedConfig:
+    # paper = the dual speed mode of the paper; wheel / gnss = one source only.
+    mode: str = _choice("paper", "paper", "wheel", "gnss")
+    queue_len: int = _num(5, 2, 16)
+    cv_window: int = _num(5, 2, 16)
+    cv_threshold_pct: float = _num(4.2, 0.1, 50.0)
+    switch_speed_kmh: float = _num(6.0, 0.0, 25.0)
+    switch_compare: str = _choice("gnss", "gnss", "wheel")
+    min_work_speed_kmh: float = _num(0.5, 0.0, 10.0)
+
+
+# [ecu] keys: td_params_t field -> (PcParamSet id, lo, hi, integer?). Ranges as td_params.h.
+ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
+    "pid_kp": (12, 0.0, 10.0, False),
+    "pid_ki": (13, 0.0, 10.0, False),
+    "pid_kd": (14, 0.0, 10.0, False),
+    "pid_kff": (15, 0.0, 1.0, False),
+    "cmd_timeout_ms": (16, 100, 10000, True),
+    "gnss_timeout_ms": (17, 100, 10000, True),
+    "wheel_update_ms": (19, 50, 5000, True),
+    "wheel_samples": (20, 1, 16, True),
+    "meter_counts_per_rev": (21, 1, 65535, True),
+    "fan_min_rpm": (22, 0, 6000, True),
+    "fan_ppr": (23, 1, 255, True),
+    "enc_fault_gnss_kmh": (24, 0.5, 25.0, False),
+    "enc_fault_time_ms": (25, 100, 30000, True),
+    "blocked_time_ms": (26, 100, 30000, True),
+    "status_period_ms": (27, 20, 1000, True),
+}
+
+SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2}  # td_speed_mode_t
+SWITCH_COMPARE_IDS = {"gnss": 0, "wheel": 1}  # td_compare_t
+
+
+@dataclass(frozen=True)
+class EcuConfig:
+    # Only the keys the user wrote; the ECU keeps its own defaults for the rest.
+    overrides: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class GnssConfig:
+    source: str = _choice("serial", "serial", "file", "stdin")
+    port: str = "/dev/ttyUSB0"
+    baud: int = _num(9600, 300, 921600)
+    path: str = ""
+    # VTG speed is forwarded only when no valid RMC came for this long.
+    rmc_timeout_s: float = _num(1.5, 0.1, 60.0)
+
+
+CROP_COLUMN_NAMES = ("sensor_id", "red", "red_edge", "nir", "ndre", "ndvi")
+
+
+@dataclass(frozen=True)
+class CropConfig:
+    source: str = _choice("serial", "serial", "file", "stdin")
+    port: str = "/dev/ttyUSB1"
+    baud: int = _num(38400, 300, 921600)
+    path: str = ""
+    sensors: int = _num(4, 1, 16)
+    columns: Mapping[str, int] = field(
+        default_factory=lambda: {name: i for i, name in enumerate(CROP_COLUMN_NAMES)}
+    )
+    ndvi_min: float = _num(0.0, -1.0, 1.0)
+    ndvi_max: float = _num(1.0, -1.0, 1.0)
+    stale_s: float = _num(1.0, 0.05, 60.0)
+    sensor_to_meter_m: float = _num(2.0, 0.0, 50.0)
+
+
+@dataclass(frozen=True)
+class LinearRateConfig:
+    # Two points of the line NDVI -> product rate; clamped to [min_kg_ha, max_kg_ha].
+    ndvi_0: float = _num(0.3, -1.0, 1.0)
+    rate_0_kg_ha: float = _num(450.0, 0.0, 1200.0)
+    ndvi_1: float = _num(0.8, -1.0, 1.0)
+    rate_1_kg_ha: float = _num(150.0, 0.0, 1200.0)
+    min_kg_ha: float = _num(0.0, 0.0, 1200.0)
+    max_kg_ha: float = _num(600.0, 0.0, 1200.0)
+
+
+@dataclass(frozen=True)
+class TableRateConfig:
+    # (NDVI, kg/ha) points, NDVI strictly increasing; held constant beyond the ends.
+    points: tuple[tuple[float, float], ...] = ((0.3, 450.0), (0.5, 350.0), (0.8, 150.0))
+
+
+@dataclass(frozen=True)
+class SufficiencyRateConfig:
+    reference: str = _choice("virtual", "virtual", "nrich")
+    ndvi_ref: float = _num(0.85, 0.05, 1.0)  # N-rich strip NDVI (reference = "nrich")
+    percentile: float = _num(95.0, 50.0, 100.0)  # virtual reference percentile
+    min_samples: int = _num(50, 1, 1_000_000)  # before that, fallback_kg_ha is applied
+    fallback_kg_ha: float = _num(300.0, 0.0, 1200.0)
+    mz_opt_n_kg_ha: float = _num(200.0, 0.0, 500.0)
+    n_pre_kg_ha: float = _num(50.0, 0.0, 500.0)
+    n_credits_kg_ha: float = _num(0.0, 0.0, 500.0)
+    delta_si: float = _num(0.3, 0.01, 1.0)
+    max_n_kg_ha: float = _num(200.0, 0.0, 500.0)
+    n_fraction: float = _num(0.46, 0.01, 1.0)  # urea
+
+
+@dataclass(frozen=True)
+class RateConfig:
+    model: str = _choice("linear", "linear", "table", "sufficiency")
+    split_upper: float = _num(0.5, 0.0, 1.0)
+    linear: LinearRateConfig = field(default_factory=LinearRateConfig)
+    table: TableRateConfig = field(default_factory=TableRateConfig)
+    sufficiency: SufficiencyRateConfig = field(default_factory=SufficiencyRateConfig)
+
+
+CAN_ID_NAMES = ("status", "command", "diag", "speeds", "targets", "param_set", "param_ack")
+
+
+@dataclass(frozen=True)
+class CanConfig:
+    interface: str = "virtual"
+    channel: str = "topdress"
+    bitrate: int = _num(250000, 10000, 1000000)
+    command_period_s: float = _num(0.5, 0.02, 10.0)
+    send_on_gnss: bool = False
+    ecu_timeout_s: float = _num(0.5, 0.05, 60.0)
+    ids: Mapping[str, int] = field(
+        default_factory=lambda: {
+            "status": 0x185C6465,
+            "command": 0x0A5C6465,
+            "diag": 0x185D6465,
+            "speeds": 0x185E6465,
+            "targets": 0x185F6465,
+            "param_set": 0x0A606465,
+            "param_ack": 0x18616465,
+        }
+    )
+
+
+@dataclass(frozen=True)
+class LogConfig:
+    dir: str = "topdress-sessions"
+
+
+@dataclass(frozen=True)
+class DisplayConfig:
+    refresh_s: float = _num(0.5, 0.05, 10.0)
+
+
+@dataclass(frozen=True)
+class TerminalConfig:
+    machine: MachineConfig = field(default_factory=MachineConfig)
+    speed: SpeedConfig = field(default_factory=SpeedConfig)
+    ecu: EcuConfig = field(default_factory=EcuConfig)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
+    crop: CropConfig = field(default_factory=CropConfig)
+    rate: RateConfig = field(default_factory=RateConfig)
+    can: CanConfig = field(default_factory=CanConfig)
+    log: LogConfig = field(default_factory=LogConfig)
+    display: DisplayConfig = field(default_factory=DisplayConfig)
+
+    def ecu_params(self) -> dict[int, float]:
+        """PcParamSet id -> physical value of every parameter to push at start.
+
+        Machine and speed parameters are always pushed (the terminal's file is the truth
+        for them); of [ecu], only the keys the user set.
+        """
+        m, s = self.machine, self.speed
+        params: dict[int, float] = {
+            1: m.width_m,
+            2: m.kg_per_rev_upper,
+            3: m.kg_per_rev_lower,
+            4: m.wheel_radius_m,
+            5: m.wheel_ppr,
+            6: s.queue_len,
+            7: s.cv_window,
+            8: s.cv_threshold_pct,
+            9: s.switch_speed_kmh,
+            10: SPEED_MODE_IDS[s.mode],
+            11: SWITCH_COMPARE_IDS[s.switch_compare],
+            18: s.min_work_speed_kmh,
+        }
+        for name, value in self.ecu.overrides.items():
+            params[ECU_KEYS[name][0]] = value
+        return dict(sorted(params.items()))
+
+
+def default_config() -> TerminalConfig:
+    return TerminalConfig()
+
+
+def load_config(path: str | Path) -> TerminalConfig:
+    """Read and validate a TOML file; any problem raises ConfigError."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(str(path), f"cannot read the configuration file: {exc}") from exc
+    return loads_config(text, source=str(path))
+
+
+def loads_config(text: str, source: str = "<config>") -> TerminalConfig:
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(source, f"not valid TOML: {exc}") from exc
+    sections = {f.name: f for f in dataclasses.fields(TerminalConfig)}
+    _reject_unknown(doc, sections, "")
+    built: dict[str, Any] = {}
+    for name, table in doc.items():
+        table = _table(table, name)
+        if name == "ecu":
+            built[name] = _ecu(table)
+        elif name == "rate":
+            built[name] = _rate(table)
+        else:
+            built[name] = _section(sections[name].type, table, name)
+    cfg = TerminalConfig(**built)
+    _cross_check(cfg)
+    return cfg
+
+
+# ---- parsing helpers ----------------------------------------------------------------------
+
+
+def _table(value: Any, key: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise ConfigError(key, "must be a table (a [section])")
+    return value
+
+
+def _reject_unknown(table: Mapping[str, Any], known: Mapping[str, Any], prefix: str) -> None:
+    for key in table:
+        if key not in known:
+            dotted = f"{prefix}{key}"
+            raise ConfigError(dotted, f"unknown key (known: {', '.join(sorted(known))})")
+
+
+def _section(cls: Any, table: dict[str, Any], prefix: str) -> Any:
+    if isinstance(cls, str):  # postponed annotations: resolve the section class by name
+        cls = globals()[cls]
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    _reject_unknown(table, fields, f"{prefix}.")
+    values: dict[str, Any] = {}
+    for key, raw in table.items():
+        f = fields[key]
+        values[key] = _value(f, raw, f"{prefix}.{key}")
+    return cls(**values)
+
+
+def _value(f: dataclasses.Field[Any], raw: Any, key: str) -> Any:
+    if f.name == "columns":
+        return _columns(raw, key)
+    if f.name == "ids":
+        return _can_ids(raw, key)
+    default = f.default
+    if isinstance(default, bool):
+        if not isinstance(raw, bool):
+            raise ConfigError(key, f"must be true or false, not {raw!r}")
+        return raw
+    if isinstance(default, str):
+        if not isinstance(raw, str):
+            raise ConfigError(key, f"must be a string, not {raw!r}")
+        choices = f.metadata.get("choices")
+        if choices and raw not in choices:
+            raise ConfigError(key, f"must be one of {', '.join(choices)}, not {raw!r}")
+        return raw
+    lo, hi = f.metadata["range"]
+    return _number(raw, key, lo, hi, integer=isinstance(default, int))
+
+
+def _number(raw: Any, key: str, lo: float, hi: float, integer: bool) -> Any:
+    if isinstance(raw, bool) or not isinstance(raw, int | float):
+        raise ConfigError(key, f"must be a number, not {raw!r}")
+    if integer and not isinstance(raw, int):
+        raise ConfigError(key, f"must be an integer, not {raw!r}")
+    if not math.isfinite(raw) or not lo <= raw <= hi:
+        raise ConfigError(key, f"{raw!r} is outside {lo:g}..{hi:g}")
+    return raw if integer else float(raw)
+
+
+def _columns(raw: Any, key: str) -> dict[str, int]:
+    table = _table(raw, key)
+    _reject_unknown(table, dict.fromkeys(CROP_COLUMN_NAMES), f"{key}.")
+    cols = {name: _number(v, f"{key}.{name}", 0, 63, integer=True) for name, v in table.items()}
+    if "sensor_id" not in cols:
+        raise ConfigError(f"{key}.sensor_id", "the sensor id column is required")
+    if "ndvi" not in cols and not {"red", "nir"} <= cols.keys():
+        raise ConfigError(key, "needs an ndvi column, or red and nir columns to compute NDVI")
+    if len(set(cols.values())) != len(cols):
+        raise ConfigError(key, "two names map to the same column")
+    return cols
+
+
+def _can_ids(raw: Any, key: str) -> dict[str, int]:
+    table = _table(raw, key)
+    _reject_unknown(table, dict.fromkeys(CAN_ID_NAMES), f"{key}.")
+    ids = dict(CanConfig().ids)
+    for name, v in table.items():
+        ids[name] = _number(v, f"{key}.{name}", 0, 0x1FFFFFFF, integer=True)
+    if len(set(ids.values())) != len(ids):
+        raise ConfigError(key, "two frames share one identifier")
+    return ids
+
+
+def _ecu(table: dict[str, Any]) -> EcuConfig:
+    _reject_unknown(table, ECU_KEYS, "ecu.")
+    overrides: dict[str, float] = {}
+    for name, raw in table.items():
+        _, lo, hi, integer = ECU_KEYS[name]
+        overrides[name] = _number(raw, f"ecu.{name}", lo, hi, integer)
+    return EcuConfig(overrides=overrides)
+
+
+def _rate(table: dict[str, Any]) -> RateConfig:
+    subs = {
+        "linear": LinearRateConfig,
+        "table": TableRateConfig,
+        "sufficiency": SufficiencyRateConfig,
+    }
+    flat = {k: v for k, v in table.items() if k not in subs}
+    base: RateConfig = _section(RateConfig, flat, "rate")
+    built: dict[str, Any] = {}
+    for name, cls in subs.items():
+        if name not in table:
+            continue
+        sub = _table(table[name], f"rate.{name}")
+        if name == "table":
+            built[name] = TableRateConfig(points=_points(sub))
+        else:
+            built[name] = _section(cls, sub, f"rate.{name}")
+    return dataclasses.replace(base, **built)
+
+
+def _points(table: dict[str, Any]) -> tuple[tuple[float, float], ...]:
+    _reject_unknown(table, {"points": None}, "rate.table.")
+    raw = table.get("points", [])
+    key = "rate.table.points"
+    if not isinstance(raw, list) or len(raw) < 2:
+        raise ConfigError(key, "needs at least two [ndvi, kg_ha] points")
+    points: list[tuple[float, float]] = []
+    for i, p in enumerate(raw):
+        if not isinstance(p, list) or len(p) != 2:
+            raise ConfigError(f"{key}[{i}]", f"must be [ndvi, kg_ha], not {p!r}")
+        ndvi = _number(p[0], f"{key}[{i}]", -1.0, 1.0, integer=False)
+        rate = _number(p[1], f"{key}[{i}]", 0.0, 1200.0, integer=False)
+        if points and ndvi <= points[-1][0]:
+            raise ConfigError(f"{key}[{i}]", "NDVI values must increase strictly")
+        points.append((ndvi, rate))
+    return tuple(points)
+
+
+def _cross_check(cfg: TerminalConfig) -> None:
+    if cfg.speed.cv_window > cfg.speed.queue_len:
+        raise ConfigError("speed.cv_window", "must not exceed speed.queue_len")
+    if cfg.crop.ndvi_min >= cfg.crop.ndvi_max:
+        raise ConfigError("crop.ndvi_min", "must be below crop.ndvi_max")
+    for section, src in (("gnss", cfg.gnss), ("crop", cfg.crop)):
+        if src.source == "file" and not src.path:
+            raise ConfigError(f"{section}.path", "is required when source = 'file'")
+        if src.source == "serial" and not src.port:
+            raise ConfigError(f"{section}.port", "is required when source = 'serial'")
+    if cfg.gnss.source == "stdin" and cfg.crop.source == "stdin":
+        raise ConfigError("crop.source", "gnss already reads stdin")
+    lin = cfg.rate.linear
+    if lin.ndvi_0 == lin.ndvi_1:
+        raise ConfigError("rate.linear.ndvi_1", "must differ from rate.linear.ndvi_0")
+    if lin.min_kg_ha > lin.max_kg_ha:
+        raise ConfigError("rate.linear.min_kg_ha", "must not exceed rate.linear.max_kg_ha")
+    if not cfg.can.interface:
+        raise ConfigError("can.interface", "must name a python-can interface")
+
+
+DEFAULT_TOML = """\
+# topdress terminal configuration. Every key is optional; shown here with its default.
+
+[machine]
+width_m = 3.6              # working width, m (6 rows x 0.60 m)
+rows = 6
+layers = 2                 # fertilizer layers (upper, lower), each with its meter and fan
+kg_per_rev_upper = 0.3     # fertilizer per metering-wheel revolution, kg/rev
+kg_per_rev_lower = 0.3
+wheel_radius_m = 0.0615    # ground wheel, 12.3 cm diameter
+wheel_ppr = 500            # ground-wheel encoder pulses per revolution
+fan_rpm = 3000             # fan target sent in every command frame, rpm
+
+[speed]
+mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss
+queue_len = 5              # N, wheel-speed queue length
+cv_window = 5              # n, last speeds of the queue used for the CV
+cv_threshold_pct = 4.2     # CV below this = uniform motion
+switch_speed_kmh = 6.0     # V_Grmax: GNSS used above this speed in uniform motion
+switch_compare = "gnss"    # which speed is compared with switch_speed_kmh: gnss | wheel
+min_work_speed_kmh = 0.5   # below this the meters stop
+
+[ecu]
+# ECU parameters by their td_params_t name; only the keys set here are pushed, the ECU
+# keeps its defaults for the others. Keys: pid_kp pid_ki pid_kd pid_kff cmd_timeout_ms
+# gnss_timeout_ms wheel_update_ms wheel_samples meter_counts_per_rev fan_min_rpm fan_ppr
+# enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms
+# pid_kp = 0.02
+
+[gnss]
+source = "serial"          # serial | file | stdin
+port = "/dev/ttyUSB0"
+baud = 9600
+path = ""                  # NMEA file when source = "file"
+rmc_timeout_s = 1.5        # VTG speed used only when no RMC came for this long
+
+[crop]
+source = "serial"          # serial | file | stdin
+port = "/dev/ttyUSB1"
+baud = 38400
+path = ""
+sensors = 4                # sensor ids 1..sensors; their mean NDVI drives the rate
+ndvi_min = 0.0             # NDVI outside [ndvi_min, ndvi_max] is rejected
+ndvi_max = 1.0
+stale_s = 1.0              # a sensor silent for longer is left out of the mean
+sensor_to_meter_m = 2.0    # along-track distance from the sensors to the meter outlets
+
+[crop.columns]             # field index (0-based) of each value in a sensor line
+sensor_id = 0
+red = 1
+red_edge = 2
+nir = 3
+ndre = 4
+ndvi = 5
+
+[rate]
+model = "linear"           # linear | table | sufficiency
+split_upper = 0.5          # fraction of the total rate given to the upper layer
+
+[rate.linear]              # product kg/ha through two points, clamped
+ndvi_0 = 0.3
+rate_0_kg_ha = 450.0
+ndvi_1 = 0.8
+rate_1_kg_ha = 150.0
+min_kg_ha = 0.0
+max_kg_ha = 600.0
+
+[rate.table]               # [NDVI, product kg/ha], NDVI increasing; constant beyond the ends
+points = [[0.3, 450.0], [0.5, 350.0], [0.8, 150.0]]
+
+[rate.sufficiency]         # Holland-Schepers sufficiency index, N in kg N/ha
+reference = "virtual"      # virtual (percentile of NDVI seen) | nrich (N-rich strip)
+ndvi_ref = 0.85            # N-rich strip NDVI, used when reference = "nrich"
+percentile = 95.0
+min_samples = 50           # virtual reference needs this many readings; until then:
+fallback_kg_ha = 300.0     # product rate applied until the virtual reference exists
+mz_opt_n_kg_ha = 200.0     # economic optimum N for the management zone
+n_pre_kg_ha = 50.0         # N applied before the crop sensing
+n_credits_kg_ha = 0.0      # N credits (previous crop, manure, ...)
+delta_si = 0.3             # 1 - SI of unfertilized crop
+max_n_kg_ha = 200.0
+n_fraction = 0.46          # N fraction of the product (urea 0.46)
+
+[can]
+interface = "virtual"      # python-can interface: socketcan, slcan, pcan, kvaser, udp_multicast...
+channel = "topdress"
+bitrate = 250000
+command_period_s = 0.5     # command frame period
+send_on_gnss = false       # also send a command at once on each new GNSS speed
+ecu_timeout_s = 0.5        # no ECU status for this long = ECU lost
+
+[can.ids]
+status = 0x185C6465
+command = 0x0A5C6465
+diag = 0x185D6465
+speeds = 0x185E6465
+targets = 0x185F6465
+param_set = 0x0A606465
+param_ack = 0x18616465
+
+[log]
+dir = "topdress-sessions"  # one SQLite file per session
+
+[display]
+refresh_s = 0.5
+"""

@@ -1,0 +1,170 @@
+"""The terminal configuration: defaults, the documented file, and every kind of bad value."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from topdress.errors import ConfigError
+from topdress.terminal.config import (
+    DEFAULT_TOML,
+    default_config,
+    load_config,
+    loads_config,
+)
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "config.md"
+
+
+def test_documented_default_file_equals_built_in_defaults() -> None:
+    assert loads_config(DEFAULT_TOML) == default_config()
+    assert loads_config("") == default_config()
+
+
+def test_docs_show_the_default_file() -> None:
+    assert DEFAULT_TOML.strip() in DOCS.read_text(encoding="utf-8")
+
+
+def test_paper_values_are_the_defaults() -> None:
+    cfg = default_config()
+    assert cfg.machine.width_m == 3.6
+    assert cfg.machine.rows == 6
+    assert cfg.machine.wheel_radius_m == 0.0615
+    assert cfg.machine.wheel_ppr == 500
+    assert (cfg.speed.queue_len, cfg.speed.cv_window) == (5, 5)
+    assert cfg.speed.cv_threshold_pct == 4.2
+    assert cfg.speed.switch_speed_kmh == 6.0
+    assert cfg.gnss.baud == 9600
+    assert cfg.crop.baud == 38400
+    assert cfg.crop.sensors == 4
+    assert cfg.can.command_period_s == 0.5
+    assert cfg.can.send_on_gnss is False
+    assert cfg.can.ids["status"] == 0x185C6465
+    assert cfg.can.ids["command"] == 0x0A5C6465
+
+
+def test_load_from_file_with_sections(tmp_path: Path) -> None:
+    path = tmp_path / "field7.toml"
+    path.write_text(
+        """
+[machine]
+width_m = 4.2
+kg_per_rev_upper = 0.25
+[speed]
+mode = "gnss"
+switch_compare = "wheel"
+[ecu]
+pid_kp = 0.05
+cmd_timeout_ms = 2000
+[crop.columns]
+sensor_id = 0
+red = 2
+nir = 1
+[rate]
+model = "table"
+split_upper = 0.3
+[rate.table]
+points = [[0.2, 500], [0.9, 100]]
+[can]
+interface = "udp_multicast"
+channel = "239.74.163.2"
+send_on_gnss = true
+[can.ids]
+command = 0x0A5C6466
+""",
+        encoding="utf-8",
+    )
+    cfg = load_config(path)
+    assert cfg.machine.width_m == 4.2
+    assert cfg.speed.mode == "gnss"
+    assert cfg.crop.columns == {"sensor_id": 0, "red": 2, "nir": 1}
+    assert cfg.rate.model == "table"
+    assert cfg.rate.table.points == ((0.2, 500.0), (0.9, 100.0))
+    assert cfg.can.ids["command"] == 0x0A5C6466
+    assert cfg.can.ids["status"] == 0x185C6465  # untouched ids keep their defaults
+    params = cfg.ecu_params()
+    assert params[1] == 4.2
+    assert params[2] == 0.25
+    assert params[10] == 2  # GnssOnly
+    assert params[11] == 1  # compare wheel
+    assert params[12] == 0.05
+    assert params[16] == 2000
+    assert 13 not in params  # pid_ki not set by the user: not pushed
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("[machine]\nwidth = 3.6", "machine.width"),
+        ("[machin]\nwidth_m = 3.6", "machin"),
+        ("machine = 3", "machine"),
+        ("[machine]\nwidth_m = 0.1", "machine.width_m"),
+        ("[machine]\nwidth_m = 'wide'", "machine.width_m"),
+        ("[machine]\nwheel_ppr = 500.5", "machine.wheel_ppr"),
+        ("[machine]\nwheel_ppr = true", "machine.wheel_ppr"),
+        ("[machine]\nwidth_m = nan", "machine.width_m"),
+        ("[speed]\nmode = 'dual'", "speed.mode"),
+        ("[speed]\nqueue_len = 3\ncv_window = 4", "speed.cv_window"),
+        ("[speed]\nswitch_compare = 'both'", "speed.switch_compare"),
+        ("[ecu]\npid_kq = 1.0", "ecu.pid_kq"),
+        ("[ecu]\npid_kp = 11.0", "ecu.pid_kp"),
+        ("[ecu]\ncmd_timeout_ms = 1500.0", "ecu.cmd_timeout_ms"),
+        ("[gnss]\nbaud = 0", "gnss.baud"),
+        ("[gnss]\nsource = 'file'", "gnss.path"),
+        ("[gnss]\nsource = 'tcp'", "gnss.source"),
+        ("[gnss]\nsource = 'stdin'\n[crop]\nsource = 'stdin'", "crop.source"),
+        ("[crop]\nndvi_min = 0.9\nndvi_max = 0.2", "crop.ndvi_min"),
+        ("[crop]\nstale_s = -1", "crop.stale_s"),
+        ("[crop.columns]\nsensor_id = 0\nred = 1", "crop.columns"),
+        ("[crop.columns]\nred = 1\nnir = 2", "crop.columns.sensor_id"),
+        ("[crop.columns]\nsensor_id = 0\nndvi = 0", "crop.columns"),
+        ("[crop.columns]\nsensor_id = 0\nevi = 3", "crop.columns.evi"),
+        ("[rate]\nmodel = 'quadratic'", "rate.model"),
+        ("[rate]\nsplit_upper = 1.5", "rate.split_upper"),
+        ("[rate.linear]\nndvi_0 = 0.5\nndvi_1 = 0.5", "rate.linear.ndvi_1"),
+        ("[rate.linear]\nmin_kg_ha = 500\nmax_kg_ha = 100", "rate.linear.min_kg_ha"),
+        ("[rate.linear]\nslope = 2", "rate.linear.slope"),
+        ("[rate.table]\npoints = [[0.5, 100]]", "rate.table.points"),
+        ("[rate.table]\npoints = [[0.5, 100], [0.4, 50]]", "rate.table.points[1]"),
+        ("[rate.table]\npoints = [[0.5, 100], [0.6]]", "rate.table.points[1]"),
+        ("[rate.table]\npoints = [[0.5, 100], [0.6, -5]]", "rate.table.points[1]"),
+        ("[rate.sufficiency]\nreference = 'strip'", "rate.sufficiency.reference"),
+        ("[rate.sufficiency]\nn_fraction = 0", "rate.sufficiency.n_fraction"),
+        ("[can]\ncommand_period_s = 0", "can.command_period_s"),
+        ("[can]\nsend_on_gnss = 1", "can.send_on_gnss"),
+        ("[can]\ninterface = ''", "can.interface"),
+        ("[can.ids]\ncommand = 0x20000000", "can.ids.command"),
+        ("[can.ids]\ncommand = 0x185C6465", "can.ids"),
+        ("[can.ids]\nheartbeat = 1", "can.ids.heartbeat"),
+        ("[display]\nrefresh_s = 0", "display.refresh_s"),
+        ("[log]\ndir = 5", "log.dir"),
+    ],
+)
+def test_bad_value_names_its_key(text: str, key: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        loads_config(text)
+    assert info.value.key == key
+    assert str(info.value).startswith(f"{key}: ")
+
+
+def test_toml_syntax_error_names_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text("[machine\nwidth_m = 3.6\n", encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert info.value.key == str(path)
+    assert "not valid TOML" in str(info.value)
+
+
+def test_missing_file_names_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "absent.toml"
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert info.value.key == str(path)
+
+
+def test_integers_accepted_for_float_keys() -> None:
+    cfg = loads_config("[machine]\nwidth_m = 4\n")
+    assert cfg.machine.width_m == 4.0
+    assert isinstance(cfg.machine.width_m, float)
