@@ -1,0 +1,35 @@
+"""The CAN database: protocol/topdress.dbc, shipped inside the package.
+
+`src/topdress/protocol/topdress.dbc` is a symbolic link to the repository's `protocol/topdress.dbc`
+(the single source of truth); building a wheel copies the file it points to, so an installed
+package reads the same text.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from importlib import resources
+from typing import Any
+
+import cantools
+
+from topdress.errors import ProtocolError
+
+
+def dbc_text() -> str:
+    """The DBC file as text."""
+    return (resources.files("topdress.protocol") / "topdress.dbc").read_text(encoding="utf-8")
+
+
+@cache
+def database() -> Any:
+    """The cantools database of the protocol (loaded once)."""
+    return cantools.database.load_string(dbc_text(), database_format="dbc")
+
+
+def message(name: str) -> Any:
+    """A cantools message of the protocol by name."""
+    try:
+        return database().get_message_by_name(name)
+    except KeyError:
+        raise ProtocolError(f"no frame named {name!r} in the protocol") from None

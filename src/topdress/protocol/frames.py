@@ -1,0 +1,305 @@
+"""Typed encode/decode of every frame of protocol/topdress.dbc, in physical units.
+
+Decoding never returns a half-valid value: an unknown identifier, a wrong length, a raw value
+outside the DBC range or an undefined enum value raises ProtocolError, as the C core rejects it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import can
+import cantools
+
+from topdress.errors import ProtocolError
+from topdress.protocol.dbc import message
+from topdress.protocol.model import (
+    DEFAULT_IDS,
+    AckResult,
+    CanFrame,
+    Compare,
+    Fault,
+    FrameIds,
+    Source,
+    SpeedMode,
+)
+from topdress.protocol.params import ParamSpec, decimals, param
+
+GNSS_NA_RAW = 0xFF  # PcCommand.GnssSpeed: "not available"
+GNSS_MAX_KMH = 25.0  # raw 251..254 are out of range
+NA_RAW_16 = 0xFFFF  # EcuDiag.Cv undefined, EcuSpeeds.GnssSpeedFine not valid
+_RUN = 0x0A
+
+
+@dataclass(frozen=True)
+class PcCommand:
+    """PC -> ECU command (paper Table 1); gnss_kmh None = not available."""
+
+    start: bool
+    fan_rpm: float
+    rate_upper_kg_ha: float
+    rate_lower_kg_ha: float
+    gnss_kmh: float | None
+
+
+@dataclass(frozen=True)
+class EcuStatus:
+    """ECU -> PC status (paper Table 1)."""
+
+    running: bool
+    meter_rpm_upper: float
+    meter_rpm_lower: float
+    fan_rpm_upper: float
+    fan_rpm_lower: float
+    wheel_kmh: float
+
+
+@dataclass(frozen=True)
+class EcuDiag:
+    """Speed source, CV (None = undefined), fault word, cumulative wheel pulses mod 2^24."""
+
+    source: Source
+    mode: SpeedMode
+    gnss_valid: bool
+    uniform: bool
+    compare: Compare
+    cv_pct: float | None
+    faults: Fault
+    wheel_pulses: int
+
+
+@dataclass(frozen=True)
+class EcuSpeeds:
+    """Both speeds and the selected one at 0.01 km/h; gnss_kmh None = not valid."""
+
+    wheel_kmh: float
+    gnss_kmh: float | None
+    selected_kmh: float
+    rx_rejected: int
+
+
+@dataclass(frozen=True)
+class EcuTargets:
+    """Target metering speeds and the PWM duties, %."""
+
+    target_rpm_upper: float
+    target_rpm_lower: float
+    meter_duty_pct_upper: float
+    meter_duty_pct_lower: float
+    fan_duty_pct_upper: float
+    fan_duty_pct_lower: float
+
+
+@dataclass(frozen=True)
+class PcParamSet:
+    """Write one ECU parameter (physical value, units of td_params.h)."""
+
+    param_id: int
+    value: float
+
+    @property
+    def spec(self) -> ParamSpec:
+        return param(self.param_id)
+
+
+@dataclass(frozen=True)
+class EcuParamAck:
+    """Answer to PcParamSet: the result and the value now in force (raw DBC units)."""
+
+    param_id: int
+    result: AckResult
+    raw: int
+
+    @property
+    def value(self) -> float | None:
+        """The value in force in physical units; None for an unknown parameter id."""
+        try:
+            return param(self.param_id).from_raw(self.raw)
+        except ProtocolError:
+            return None
+
+
+Frame = PcCommand | EcuStatus | EcuDiag | EcuSpeeds | EcuTargets | PcParamSet | EcuParamAck
+
+
+def _frame_parts(frame: can.Message | CanFrame) -> tuple[int, bytes]:
+    if isinstance(frame, can.Message):
+        if frame.is_remote_frame or frame.is_error_frame:
+            raise ProtocolError(f"CAN id 0x{frame.arbitration_id:08X}: remote or error frame")
+        return frame.arbitration_id, bytes(frame.data)
+    frame_id, data = frame
+    return frame_id, bytes(data)
+
+
+def _decode_raw(name: str, data: bytes) -> dict[str, int]:
+    """Raw signal values of frame `name`, every one checked against the DBC."""
+    msg = message(name)
+    if len(data) != msg.length:
+        raise ProtocolError(f"{name}: {len(data)} data bytes, expected {msg.length}")
+    try:
+        raw: dict[str, int] = msg.decode(data, decode_choices=False, scaling=False)
+    except cantools.database.DecodeError as exc:  # an undefined multiplexer id
+        raise ProtocolError(f"{name}: {exc}") from None
+    return raw
+
+
+def _check(name: str, signal: str, raw: int, allow: tuple[int, ...] = ()) -> float:
+    """Physical value of a raw signal, or ProtocolError when outside its range or choices."""
+    sig = message(name).get_signal_by_name(signal)
+    value = round(raw * sig.scale + sig.offset, decimals(sig.scale))
+    if raw in allow:
+        return value
+    if sig.choices is not None and raw not in sig.choices:
+        raise ProtocolError(f"{name}.{signal}: undefined value {raw}")
+    tol = sig.scale / 2
+    if not sig.minimum - tol <= value <= sig.maximum + tol:
+        raise ProtocolError(f"{name}.{signal} = {value:g} outside {sig.minimum:g}..{sig.maximum:g}")
+    return value
+
+
+def _decode_command(data: bytes) -> PcCommand:
+    raw = _decode_raw("PcCommand", data)
+    g = raw["GnssSpeed"]
+    if GNSS_MAX_KMH / 0.1 < g < GNSS_NA_RAW:
+        raise ProtocolError(f"PcCommand.GnssSpeed raw {g} is out of range (0..250, 255 = n/a)")
+    return PcCommand(
+        start=_check("PcCommand", "StartStop", raw["StartStop"]) == _RUN,
+        fan_rpm=_check("PcCommand", "FanSpeed", raw["FanSpeed"]),
+        rate_upper_kg_ha=_check("PcCommand", "UpperRate", raw["UpperRate"]),
+        rate_lower_kg_ha=_check("PcCommand", "LowerRate", raw["LowerRate"]),
+        gnss_kmh=None if g == GNSS_NA_RAW else _check("PcCommand", "GnssSpeed", g),
+    )
+
+
+def _decode_status(data: bytes) -> EcuStatus:
+    raw = _decode_raw("EcuStatus", data)
+    v = {k: _check("EcuStatus", k, r) for k, r in raw.items()}
+    return EcuStatus(
+        running=v["RunState"] == _RUN,
+        meter_rpm_upper=v["UpperMeterSpeed"],
+        meter_rpm_lower=v["LowerMeterSpeed"],
+        fan_rpm_upper=v["UpperFanSpeed"],
+        fan_rpm_lower=v["LowerFanSpeed"],
+        wheel_kmh=v["WheelSpeed"],
+    )
+
+
+def _decode_diag(data: bytes) -> EcuDiag:
+    raw = _decode_raw("EcuDiag", data)
+    v = {k: _check("EcuDiag", k, r) for k, r in raw.items()}
+    return EcuDiag(
+        source=Source.from_code(raw["SpeedSource"]),
+        mode=SpeedMode.from_code(raw["SpeedMode"]),
+        gnss_valid=bool(raw["GnssValid"]),
+        uniform=bool(raw["Uniform"]),
+        compare=Compare.from_code(raw["SwitchCompare"]),
+        cv_pct=None if raw["Cv"] == NA_RAW_16 else v["Cv"],
+        faults=Fault(raw["FaultWord"]),
+        wheel_pulses=raw["WheelPulses"],
+    )
+
+
+def _decode_speeds(data: bytes) -> EcuSpeeds:
+    raw = _decode_raw("EcuSpeeds", data)
+    v = {k: _check("EcuSpeeds", k, r) for k, r in raw.items()}
+    return EcuSpeeds(
+        wheel_kmh=v["WheelSpeedFine"],
+        gnss_kmh=None if raw["GnssSpeedFine"] == NA_RAW_16 else v["GnssSpeedFine"],
+        selected_kmh=v["SelectedSpeed"],
+        rx_rejected=raw["RxRejected"],
+    )
+
+
+def _decode_targets(data: bytes) -> EcuTargets:
+    raw = _decode_raw("EcuTargets", data)
+    v = {k: _check("EcuTargets", k, r) for k, r in raw.items()}
+    return EcuTargets(
+        target_rpm_upper=v["UpperTargetSpeed"],
+        target_rpm_lower=v["LowerTargetSpeed"],
+        meter_duty_pct_upper=v["UpperDuty"],
+        meter_duty_pct_lower=v["LowerDuty"],
+        fan_duty_pct_upper=v["UpperFanDuty"],
+        fan_duty_pct_lower=v["LowerFanDuty"],
+    )
+
+
+def _decode_param_set(data: bytes) -> PcParamSet:
+    raw = _decode_raw("PcParamSet", data)
+    spec = param(raw["ParamId"])
+    return PcParamSet(spec.id, _check("PcParamSet", spec.signal, raw[spec.signal]))
+
+
+def _decode_param_ack(data: bytes) -> EcuParamAck:
+    raw = _decode_raw("EcuParamAck", data)
+    try:
+        result = AckResult(raw["AckResult"])
+    except ValueError:
+        raise ProtocolError(f"EcuParamAck.AckResult: undefined value {raw['AckResult']}") from None
+    return EcuParamAck(raw["AckParamId"], result, raw["AckRaw"])
+
+
+def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
+    """Decode any frame of the protocol; ProtocolError if it is not one, or not a valid one."""
+    frame_id, data = _frame_parts(frame)
+    decoders: dict[int, Callable[[bytes], Frame]] = {
+        ids.command: _decode_command,
+        ids.status: _decode_status,
+        ids.diag: _decode_diag,
+        ids.speeds: _decode_speeds,
+        ids.targets: _decode_targets,
+        ids.param_set: _decode_param_set,
+        ids.param_ack: _decode_param_ack,
+    }
+    try:
+        decoder = decoders[frame_id]
+    except KeyError:
+        raise ProtocolError(f"unknown CAN id 0x{frame_id:08X}") from None
+    return decoder(data)
+
+
+def _message(frame_id: int, data: bytes) -> can.Message:
+    return can.Message(arbitration_id=frame_id, data=data, is_extended_id=True)
+
+
+def _encode(name: str, signals: dict[str, Any]) -> bytes:
+    for key, value in signals.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ProtocolError(f"{name}.{key}: {value} is not a number")
+    try:
+        data: bytes = message(name).encode(signals, strict=True)
+    except (cantools.database.EncodeError, OverflowError) as exc:
+        raise ProtocolError(f"{name}: {exc}") from None
+    return data
+
+
+def encode_command(
+    start: bool,
+    fan_rpm: float,
+    rate_upper_kg_ha: float,
+    rate_lower_kg_ha: float,
+    gnss_kmh: float | None,
+    *,
+    ids: FrameIds = DEFAULT_IDS,
+) -> can.Message:
+    """The paper's command frame; gnss_kmh None (no valid GNSS speed) is sent as 0xFF."""
+    if gnss_kmh is not None and not 0.0 <= gnss_kmh <= GNSS_MAX_KMH:
+        raise ProtocolError(f"PcCommand.GnssSpeed = {gnss_kmh} outside 0..{GNSS_MAX_KMH:g} km/h")
+    signals = {
+        "StartStop": _RUN if start else 0,
+        "FanSpeed": float(fan_rpm),
+        "UpperRate": float(rate_upper_kg_ha),
+        "LowerRate": float(rate_lower_kg_ha),
+        "GnssSpeed": GNSS_NA_RAW * 0.1 if gnss_kmh is None else float(gnss_kmh),
+    }
+    return _message(ids.command, _encode("PcCommand", signals))
+
+
+def encode_param_set(key: int | str, value: float, *, ids: FrameIds = DEFAULT_IDS) -> can.Message:
+    """PcParamSet for one parameter by id, DBC name or EcuParams name; range-checked."""
+    spec = param(key)
+    spec.check(value)
+    data = _encode("PcParamSet", {"ParamId": spec.id, spec.signal: float(value)})
+    return _message(ids.param_set, data)
