@@ -146,12 +146,10 @@ def _decode_raw(name: str, data: bytes) -> dict[str, int]:
     return raw
 
 
-def _check(name: str, signal: str, raw: int, allow: tuple[int, ...] = ()) -> float:
+def _check(name: str, signal: str, raw: int) -> float:
     """Physical value of a raw signal, or ProtocolError when outside its range or choices."""
     sig = message(name).get_signal_by_name(signal)
-    value = round(raw * sig.scale + sig.offset, decimals(sig.scale))
-    if raw in allow:
-        return value
+    value = float(round(raw * sig.scale + sig.offset, decimals(sig.scale)))
     if sig.choices is not None and raw not in sig.choices:
         raise ProtocolError(f"{name}.{signal}: undefined value {raw}")
     tol = sig.scale / 2
