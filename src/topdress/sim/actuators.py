@@ -1,0 +1,93 @@
+"""Metering motors (DC motor + gearbox + metering wheel, 6400 counts/rev encoder) and fans."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class MeterParams:
+    """One metering drive seen at the metering shaft.
+
+    A brushed DC gear motor is first order in speed (electrical time constant negligible):
+    tau_s * dw/dt = max_rpm * (duty - friction_duty - load_duty) - w while turning.
+    From standstill it breaks away only when duty exceeds breakaway_duty + load_duty
+    (static friction). PWM duty saturates to 0..1. max_rpm is the no-load shaft speed at
+    full duty after the gearbox. Encoder: counts_per_rev at the metering shaft.
+    """
+
+    max_rpm: float = 80.0
+    tau_s: float = 0.12
+    breakaway_duty: float = 0.06
+    friction_duty: float = 0.03
+    load_duty: float = 0.04  # fertilizer in the box drags the metering wheel
+    counts_per_rev: int = 6400
+    jammed_at_s: float = -1.0  # fault knob: metering wheel blocked; < 0 never
+    encoder_dead_at_s: float = -1.0  # fault knob: encoder stops counting; < 0 never
+
+
+class MeterMotor:
+    def __init__(self, p: MeterParams, dt: float) -> None:
+        self.p = p
+        self._decay = math.exp(-dt / p.tau_s)
+        self.rpm = 0.0
+        self.revolutions = 0.0
+        self.count = 0
+
+    def step(self, t: float, dt: float, duty: float) -> int:
+        """Apply duty for dt; return the cumulative encoder count."""
+        p = self.p
+        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)
+        if 0.0 <= p.jammed_at_s <= t:
+            self.rpm = 0.0
+            return self.count
+        if self.rpm <= 0.0 and duty <= p.breakaway_duty + p.load_duty:
+            return self.count
+        w_ss = p.max_rpm * (duty - p.friction_duty - p.load_duty)
+        w = w_ss + (self.rpm - w_ss) * self._decay
+        if w <= 0.0:
+            w = 0.0  # friction holds the shaft; it does not turn backwards
+        self.revolutions += 0.5 * (self.rpm + w) * dt / 60.0
+        self.rpm = w
+        if not 0.0 <= p.encoder_dead_at_s <= t:
+            self.count = int(self.revolutions * p.counts_per_rev)
+        return self.count
+
+    def steady_rpm(self, duty: float) -> float:
+        """Steady-state shaft speed for a constant duty (0 below breakaway)."""
+        p = self.p
+        if duty <= p.breakaway_duty + p.load_duty:
+            return 0.0
+        return p.max_rpm * (min(duty, 1.0) - p.friction_duty - p.load_duty)
+
+
+@dataclass(frozen=True)
+class FanParams:
+    """Blower: first order to max_rpm * duty, tachometer with ppr pulses per revolution."""
+
+    max_rpm: float = 4000.0
+    tau_s: float = 0.8
+    ppr: int = 30
+    failed_at_s: float = -1.0  # fault knob: fan motor dies (coasts down); < 0 never
+    belt_slip: float = 0.0  # fault knob: fraction of speed lost to a slipping belt
+
+
+class Fan:
+    def __init__(self, p: FanParams, dt: float) -> None:
+        self.p = p
+        self._decay = math.exp(-dt / p.tau_s)
+        self.rpm = 0.0
+        self.revolutions = 0.0
+        self.count = 0
+
+    def step(self, t: float, dt: float, duty: float) -> int:
+        p = self.p
+        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)
+        if 0.0 <= p.failed_at_s <= t:
+            duty = 0.0
+        w_ss = p.max_rpm * duty * (1.0 - p.belt_slip)
+        self.rpm = w_ss + (self.rpm - w_ss) * self._decay
+        self.revolutions += self.rpm * dt / 60.0
+        self.count = int(self.revolutions * p.ppr)
+        return self.count

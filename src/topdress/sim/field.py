@@ -1,0 +1,98 @@
+"""A field with a smooth spatial NDVI pattern, and the crop sensors reading it."""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class FieldParams:
+    """NDVI(x, y) = mean + a sum of smooth waves and patches, clipped to 0.15..0.92.
+
+    Wavelengths of tens of metres, like the nitrogen stress patterns at V6-V8 corn.
+    """
+
+    ndvi_mean: float = 0.62
+    wave_amp: float = 0.10
+    wavelength_m: float = 45.0
+    patches: int = 6
+    patch_amp: float = 0.12
+    patch_radius_m: float = 12.0
+    size_m: float = 200.0
+    nir_mean: float = 0.42
+
+
+class Field:
+    def __init__(self, p: FieldParams, seed: int) -> None:
+        self.p = p
+        rng = random.Random(seed)
+        self._phase = (rng.uniform(0, 2 * math.pi), rng.uniform(0, 2 * math.pi))
+        self._patches = [
+            (
+                rng.uniform(0, p.size_m),
+                rng.uniform(0, p.size_m),
+                rng.uniform(-p.patch_amp, p.patch_amp),
+            )
+            for _ in range(p.patches)
+        ]
+
+    def ndvi(self, x: float, y: float) -> float:
+        p = self.p
+        k = 2 * math.pi / p.wavelength_m
+        v = p.ndvi_mean + p.wave_amp * 0.5 * (
+            math.sin(k * x + self._phase[0]) + math.sin(0.7 * k * y + self._phase[1])
+        )
+        r2 = p.patch_radius_m * p.patch_radius_m
+        for px, py, amp in self._patches:
+            d2 = (x - px) ** 2 + (y - py) ** 2
+            v += amp * math.exp(-d2 / (2 * r2))
+        return min(0.92, max(0.15, v))
+
+
+@dataclass(frozen=True)
+class CropSensorParams:
+    """An active canopy sensor (670/730/780 nm) as logged by the data logger."""
+
+    period_s: float = 0.5
+    refl_sd: float = 0.004  # reflectance noise per band
+    dead_at_s: float = -1.0  # fault knob: sensor stops reporting; < 0 never
+    garble_prob: float = 0.0  # fault knob: probability that a line is corrupted on the wire
+
+
+class CropSensor:
+    """Sensor `sensor_id` (1..4) mounted `offset_m` to the right of the machine centre."""
+
+    def __init__(self, sensor_id: int, offset_m: float, p: CropSensorParams, seed: int) -> None:
+        self.sensor_id = sensor_id
+        self.offset_m = offset_m
+        self.p = p
+        self._rng = random.Random(seed * 10 + sensor_id)
+        # stagger the four sensors so their lines interleave as on the logger
+        self._next = p.period_s * sensor_id / 4.0
+        self.last_ndvi = 0.0
+
+    def step(self, t: float, field: Field, x: float, y: float, heading: float) -> str | None:
+        """Return a line when a reading is due."""
+        if t + 1e-9 < self._next:
+            return None
+        self._next += self.p.period_s
+        if 0.0 <= self.p.dead_at_s <= t:
+            return None
+        sx = x + self.offset_m * math.cos(heading)
+        sy = y - self.offset_m * math.sin(heading)
+        true_ndvi = field.ndvi(sx, sy)
+        g = self._rng.gauss
+        sd = self.p.refl_sd
+        nir = max(0.05, field.p.nir_mean + g(0.0, sd))
+        red = max(0.001, nir * (1.0 - true_ndvi) / (1.0 + true_ndvi) + g(0.0, sd * 0.3))
+        edge = max(0.001, nir * (0.55 - 0.25 * true_ndvi) + g(0.0, sd))
+        ndvi = (nir - red) / (nir + red)
+        ndre = (nir - edge) / (nir + edge)
+        self.last_ndvi = ndvi
+        line = f"{self.sensor_id},{red:.4f},{edge:.4f},{nir:.4f},{ndre:.4f},{ndvi:.4f}\r\n"
+        if self.p.garble_prob > 0.0 and self._rng.random() < self.p.garble_prob:
+            cut = self._rng.randrange(1, len(line) - 2)
+            line = line[:cut] + "#" + line[cut + 1 :]
+        return line

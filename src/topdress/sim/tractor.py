@@ -1,0 +1,198 @@
+"""Tractor motion and the driver's plan (Drive): straight runs, headland turns, stops."""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, field
+
+KMH = 1.0 / 3.6
+
+
+@dataclass(frozen=True)
+class TractorParams:
+    """Longitudinal dynamics of a loaded tractor with the topdresser.
+
+    The launch acceleration grows with the target speed (a higher gear and more throttle
+    for a faster pass): accel = accel_base_ms2 + accel_per_kmh * target_kmh. The clutch
+    engages gradually (jerk limit), which makes the first half-metre slow.
+    """
+
+    accel_base_ms2: float = 0.10
+    accel_per_kmh: float = 0.060
+    decel_ms2: float = 0.80
+    jerk_ms3: float = 0.60
+    speed_tau_s: float = 0.6
+    ripple_sd: float = 0.004  # relative speed ripple in steady motion (engine, terrain)
+    ripple_tau_s: float = 1.0
+    stall_at_s: float = -1.0  # fault knob: engine stalls (speed -> 0) at this time; < 0 never
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One element of a Drive.
+
+    kind "straight": drive length_m at speed_kmh; with hold=True length_m counts only from the
+    moment the speed first reaches the target (the paper's "40 m at constant speed").
+    kind "turn": turn angle_deg (left positive) on radius_m at speed_kmh.
+    kind "stop": stand still for duration_s.
+    """
+
+    kind: str
+    speed_kmh: float = 0.0
+    length_m: float = 0.0
+    hold: bool = False
+    angle_deg: float = 0.0
+    radius_m: float = 0.0
+    duration_s: float = 0.0
+
+
+@dataclass
+class Drive:
+    """A driver following a list of segments; gives the tractor its speed and curvature targets."""
+
+    segments: list[Segment]
+    index: int = 0
+    _progress: float = 0.0
+    _reached: bool = False
+    _heading0: float = 0.0
+    finished: bool = False
+
+    @staticmethod
+    def paper_run(target_kmh: float, hold_m: float = 40.0, wait_s: float = 3.0) -> Drive:
+        """The paper's protocol: stand, accelerate, hold the target speed for hold_m, stop."""
+        return Drive(
+            [
+                Segment("stop", duration_s=wait_s),
+                Segment("straight", speed_kmh=target_kmh, length_m=hold_m, hold=True),
+                Segment("stop", duration_s=4.0),
+            ]
+        )
+
+    @staticmethod
+    def field_passes(
+        passes: int,
+        length_m: float,
+        speed_kmh: float,
+        width_m: float = 3.6,
+        turn_kmh: float = 3.0,
+        headland_stop_s: float = 2.0,
+    ) -> Drive:
+        """Back-and-forth passes; at each headland slow down, stop, turn 180 deg, go on."""
+        segs: list[Segment] = [Segment("stop", duration_s=3.0)]
+        for i in range(passes):
+            segs.append(Segment("straight", speed_kmh=speed_kmh, length_m=length_m))
+            if i == passes - 1:
+                break
+            segs.append(Segment("stop", duration_s=headland_stop_s))
+            sign = 1.0 if i % 2 == 0 else -1.0
+            segs.append(
+                Segment("turn", speed_kmh=turn_kmh, angle_deg=180.0 * sign, radius_m=width_m / 2)
+            )
+        segs.append(Segment("stop", duration_s=3.0))
+        return Drive(segs)
+
+    @property
+    def segment(self) -> Segment | None:
+        return None if self.finished else self.segments[self.index]
+
+    def _next_speed_ms(self) -> float:
+        nxt = self.index + 1
+        return self.segments[nxt].speed_kmh * KMH if nxt < len(self.segments) else 0.0
+
+    def command(self, tr: Tractor, dt: float) -> tuple[float, float]:
+        """Advance the plan by one step; return (target speed m/s, curvature 1/m)."""
+        seg = self.segment
+        if seg is None:
+            return 0.0, 0.0
+        if seg.kind == "stop":
+            if tr.v < 0.01:
+                self._progress += dt
+            if self._progress >= seg.duration_s:
+                self._advance()
+            return 0.0, 0.0
+        v_t = seg.speed_kmh * KMH
+        ds = tr.v * dt
+        if seg.kind == "turn":
+            if self._progress == 0.0:
+                self._heading0 = tr.heading
+            self._progress += ds / seg.radius_m
+            if self._progress >= math.radians(abs(seg.angle_deg)):
+                # the driver straightens up on the new line exactly
+                tr.heading = self._heading0 + math.radians(seg.angle_deg)
+                self._advance()
+            return v_t, math.copysign(1.0 / seg.radius_m, seg.angle_deg)
+        if seg.hold:
+            if not self._reached and tr.v >= 0.995 * v_t:
+                self._reached = True
+            if self._reached:
+                self._progress += ds
+            if self._progress >= seg.length_m:
+                self._advance()
+            return v_t, 0.0
+        self._progress += ds
+        remaining = seg.length_m - self._progress
+        v_next = self._next_speed_ms()
+        brake_m = max(0.0, (tr.v * tr.v - v_next * v_next) / (2.0 * tr.p.decel_ms2))
+        if remaining <= brake_m + tr.v * tr.p.decel_ms2 / tr.p.jerk_ms3:
+            v_t = min(v_t, v_next)
+        if remaining <= 0.0:
+            self._advance()
+        return v_t, 0.0
+
+    def _advance(self) -> None:
+        self.index += 1
+        self._progress = 0.0
+        self._reached = False
+        if self.index >= len(self.segments):
+            self.finished = True
+
+
+@dataclass
+class Tractor:
+    """Point-mass tractor: speed with acceleration, jerk and ripple; planar position and heading."""
+
+    p: TractorParams = field(default_factory=TractorParams)
+    seed: int = 0
+    x: float = 0.0  # east, m
+    y: float = 0.0  # north, m
+    heading: float = 0.0  # radians, 0 = north, clockwise positive
+    v: float = 0.0
+    a: float = 0.0
+    odometer: float = 0.0
+    t: float = 0.0
+    _ripple: float = 0.0
+    _vb: float = 0.0  # speed without ripple
+    _accel_limit: float = 0.0
+    _target: float = -1.0
+
+    def __post_init__(self) -> None:
+        self._rng = random.Random(self.seed)
+
+    def step(self, dt: float, v_target: float, curvature: float) -> None:
+        p = self.p
+        self.t += dt
+        if v_target != self._target:
+            # the driver picks gear and throttle for the new target speed
+            self._target = v_target
+            self._accel_limit = p.accel_base_ms2 + p.accel_per_kmh * v_target * 3.6
+        if 0.0 <= p.stall_at_s <= self.t:
+            v_target = 0.0
+        a_des = (v_target - self._vb) / p.speed_tau_s
+        a_des = min(self._accel_limit, max(-p.decel_ms2, a_des))
+        da = p.jerk_ms3 * dt
+        self.a += min(da, max(-da, a_des - self.a))
+        self._vb += self.a * dt
+        if v_target <= 0.0 and self._vb < 0.02:
+            self._vb, self.a = 0.0, 0.0
+        if self._vb > 0.0 and p.ripple_sd > 0.0:
+            k = dt / p.ripple_tau_s
+            self._ripple += -k * self._ripple + p.ripple_sd * math.sqrt(2 * k) * self._rng.gauss(
+                0.0, 1.0
+            )
+        self.v = max(0.0, self._vb * (1.0 + self._ripple))
+        ds = self.v * dt
+        self.odometer += ds
+        self.heading += ds * curvature
+        self.x += ds * math.sin(self.heading)
+        self.y += ds * math.cos(self.heading)
