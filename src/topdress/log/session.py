@@ -1,0 +1,355 @@
+"""The session log: one SQLite file (WAL) per session, written off the control path.
+
+The caller (the terminal's control loop) only ever enqueues: `raw()` and `state()` put a tuple
+on a bounded queue and return at once. A writer thread drains the queue and commits a batch at
+least every `commit_period_s` (0.5 s). WAL with synchronous=FULL makes every commit durable and
+atomic, so a SIGKILL or a power cut loses at most the last uncommitted batch and never corrupts
+the file. Write failures (unwritable path, full disk) are logged and counted in `errors`, the
+rows they carried in `lost`; a full queue counts its rows in `dropped`. Nothing here raises into
+the caller after `create()` has returned, and `create()` itself only reports, never raises.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import sqlite3
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Final
+
+from topdress import __version__
+from topdress.errors import LogError
+from topdress.log.model import CAN_KINDS, LINE_KINDS, RAW_KINDS, STATE_COLUMNS, StateRow
+
+_log = logging.getLogger(__name__)
+
+SCHEMA_VERSION: Final = 1
+SUFFIX: Final = ".sqlite"
+
+_SCHEMA: Final = f"""
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE raw (
+    id INTEGER PRIMARY KEY,
+    t REAL NOT NULL,
+    kind TEXT NOT NULL CHECK (kind IN ({", ".join(repr(k) for k in RAW_KINDS)})),
+    line TEXT,
+    can_id INTEGER,
+    data BLOB
+);
+CREATE TABLE state (
+    id INTEGER PRIMARY KEY,
+    t REAL NOT NULL, lat REAL, lon REAL,
+    v_gnss_kmh REAL, v_wheel_kmh REAL NOT NULL, v_kmh REAL NOT NULL,
+    source TEXT NOT NULL, cv_pct REAL, ndvi REAL,
+    rate_kg_ha_upper REAL NOT NULL, rate_kg_ha_lower REAL NOT NULL,
+    target_rpm_upper REAL NOT NULL, target_rpm_lower REAL NOT NULL,
+    meter_rpm_upper REAL NOT NULL, meter_rpm_lower REAL NOT NULL,
+    fan_rpm_upper REAL NOT NULL, fan_rpm_lower REAL NOT NULL,
+    faults INTEGER NOT NULL
+);
+PRAGMA user_version = {SCHEMA_VERSION};
+"""
+
+_INSERT_RAW: Final = "INSERT INTO raw (t, kind, line, can_id, data) VALUES (?, ?, ?, ?, ?)"
+_INSERT_STATE: Final = (
+    f"INSERT INTO state ({', '.join(STATE_COLUMNS)}) VALUES ({', '.join('?' * len(STATE_COLUMNS))})"
+)
+
+_RawRec = tuple[float, str, str | None, int | None, bytes | None]
+_StateRec = tuple[object, ...]
+
+
+class _Sync:
+    """A marker put on the queue; the writer sets `done` once everything before it is committed."""
+
+    def __init__(self) -> None:
+        self.done = threading.Event()
+
+
+_STOP: Final = object()
+
+
+def _connect(path: Path) -> sqlite3.Connection:
+    # isolation_level=None: transactions are explicit (BEGIN/COMMIT in the writer).
+    conn = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+    conn.execute("PRAGMA journal_mode = WAL")
+    conn.execute("PRAGMA synchronous = FULL")
+    return conn
+
+
+def _unique_path(directory: Path, name: str | None) -> Path:
+    stem = name or datetime.now(UTC).strftime("session-%Y%m%dT%H%M%SZ")
+    path = directory / f"{stem}{SUFFIX}"
+    n = 1
+    while path.exists():
+        path = directory / f"{stem}-{n}{SUFFIX}"
+        n += 1
+    return path
+
+
+class SessionLog:
+    """Append-only log of one working session. Build with `SessionLog.create()`."""
+
+    def __init__(
+        self,
+        path: Path,
+        conn: sqlite3.Connection | None,
+        queue_size: int,
+        commit_period_s: float,
+        open_error: str | None,
+    ) -> None:
+        self.path = path
+        self.dropped = 0  # rows refused because the queue was full or the log closed/failed
+        self.lost = 0  # rows in batches that failed to commit
+        self.errors = 0  # write failures (open, commit)
+        self.last_error: str | None = None
+        self._commit_failing = False
+        self.commit_period_s = commit_period_s
+        self._conn = conn
+        self._queue: queue.Queue[object] = queue.Queue(maxsize=queue_size)
+        self._closed = False
+        self._thread: threading.Thread | None = None
+        if open_error is not None:
+            self._fail(open_error)
+        if conn is not None:
+            self._thread = threading.Thread(target=self._run, name="session-log", daemon=True)
+            self._thread.start()
+
+    @classmethod
+    def create(
+        cls,
+        directory: str | Path,
+        config_toml: str,
+        *,
+        name: str | None = None,
+        queue_size: int = 20000,
+        commit_period_s: float = 0.5,
+        max_bytes: int | None = None,
+    ) -> SessionLog:
+        """Create a new session file in `directory` (made if missing) holding `config_toml`.
+
+        Never raises on I/O: if the file cannot be made, the returned log has `ok` False,
+        `errors` 1 and `last_error` set, and counts every row given to it as dropped.
+        `max_bytes` caps the file size (SQLite reports "disk full" beyond it).
+        """
+        directory = Path(directory)
+        path = directory / f"{name or 'session'}{SUFFIX}"
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            path = _unique_path(directory, name)
+            conn = _connect(path)
+            if max_bytes is not None:
+                page_size = int(conn.execute("PRAGMA page_size").fetchone()[0])
+                conn.execute(f"PRAGMA max_page_count = {max(1, max_bytes // page_size)}")
+            _init_schema(conn, config_toml)
+        except (OSError, sqlite3.Error) as exc:
+            return cls(path, None, queue_size, commit_period_s, f"cannot create the file: {exc}")
+        return cls(path, conn, queue_size, commit_period_s, None)
+
+    @property
+    def ok(self) -> bool:
+        """True while the log is open and its last write succeeded."""
+        return self._thread is not None and not self._closed and self.last_error is None
+
+    def raw(self, kind: str, t: float, payload: str | tuple[int, bytes]) -> None:
+        """Enqueue one raw input: a line (kind nmea/crop) or a CAN frame (can_rx/can_tx)."""
+        if kind in LINE_KINDS and isinstance(payload, str):
+            rec: _RawRec = (t, kind, payload, None, None)
+        elif kind in CAN_KINDS and isinstance(payload, tuple):
+            rec = (t, kind, None, int(payload[0]), bytes(payload[1]))
+        else:
+            self.dropped += 1
+            self._fail(f"raw input of kind {kind!r} with a {type(payload).__name__} payload")
+            return
+        self._put(("raw", rec))
+
+    def state(self, row: StateRow) -> None:
+        """Enqueue one decoded state row."""
+        self._put(("state", row.as_tuple()))
+
+    def sync(self, timeout_s: float = 5.0) -> bool:
+        """Block until everything enqueued so far is committed (for shutdown and tests)."""
+        if self._thread is None or self._closed:
+            return False
+        marker = _Sync()
+        self._queue.put(marker, timeout=timeout_s)
+        return marker.done.wait(timeout_s)
+
+    def close(self) -> None:
+        """Commit what is queued, record the loss counters in the file, and stop the writer."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._thread is not None:
+            self._queue.put(_STOP)
+            self._thread.join()
+
+    def __enter__(self) -> SessionLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _put(self, item: tuple[str, object]) -> None:
+        if self._closed or self._thread is None:
+            self.dropped += 1
+            return
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            self.dropped += 1
+
+    def _fail(self, message: str) -> None:
+        self.errors += 1
+        if self.last_error is None or self.errors in (10, 100) or self.errors % 1000 == 0:
+            _log.error("session log %s: %s (%d errors)", self.path, message, self.errors)
+        self.last_error = message
+
+    # ---- writer thread ----
+
+    def _run(self) -> None:
+        raws: list[_RawRec] = []
+        states: list[_StateRec] = []
+        syncs: list[_Sync] = []
+        deadline = time.monotonic() + self.commit_period_s
+        stop = False
+        while not stop:
+            try:
+                item = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                item = None
+            if item is _STOP:
+                stop = True
+            elif isinstance(item, _Sync):
+                syncs.append(item)
+            elif isinstance(item, tuple):
+                if item[0] == "raw":
+                    raws.append(item[1])
+                else:
+                    states.append(item[1])
+            if stop or syncs or time.monotonic() >= deadline:
+                self._commit(raws, states)
+                raws, states = [], []
+                for s in syncs:
+                    s.done.set()
+                syncs = []
+                deadline = time.monotonic() + self.commit_period_s
+        self._finish()
+
+    def _commit(self, raws: list[_RawRec], states: list[_StateRec]) -> None:
+        if not raws and not states:
+            return
+        assert self._conn is not None
+        try:
+            self._conn.execute("BEGIN")
+            self._conn.executemany(_INSERT_RAW, raws)
+            self._conn.executemany(_INSERT_STATE, states)
+            self._conn.execute("COMMIT")
+        except sqlite3.Error as exc:
+            self.lost += len(raws) + len(states)
+            self._commit_failing = True
+            self._fail(f"commit of {len(raws) + len(states)} rows failed: {exc}")
+            if self._conn.in_transaction:
+                self._conn.execute("ROLLBACK")
+        else:
+            if self._commit_failing:
+                _log.warning("session log %s: writing again", self.path)
+            self._commit_failing = False
+            self.last_error = None
+
+    def _finish(self) -> None:
+        assert self._conn is not None
+        counters = {
+            "closed_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "dropped": str(self.dropped),
+            "lost": str(self.lost),
+            "errors": str(self.errors),
+        }
+        try:
+            self._conn.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)", counters.items())
+            self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except sqlite3.Error as exc:
+            self._fail(f"closing failed: {exc}")
+        finally:
+            self._conn.close()
+
+
+def _init_schema(conn: sqlite3.Connection, config_toml: str) -> None:
+    meta = {
+        "config_toml": config_toml,
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "software": f"topdress {__version__}",
+    }
+    conn.executescript(f"BEGIN; {_SCHEMA} COMMIT;")
+    conn.execute("BEGIN")
+    conn.executemany("INSERT INTO meta VALUES (?, ?)", meta.items())
+    conn.execute("COMMIT")
+
+
+# ---- reading ----
+
+
+@dataclass(frozen=True, slots=True)
+class RawRecord:
+    """One raw input as logged: `line` for nmea/crop, `can_id`/`data` for CAN."""
+
+    t: float
+    kind: str
+    line: str | None
+    can_id: int | None
+    data: bytes | None
+
+
+class SessionReader:
+    """Read access to a session file (also one left behind by a killed writer)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise LogError(f"{self.path}: no such session file")
+        try:
+            self._conn = sqlite3.connect(self.path)
+            version = int(self._conn.execute("PRAGMA user_version").fetchone()[0])
+            if version != SCHEMA_VERSION:
+                raise LogError(
+                    f"{self.path}: session schema {version}, this software reads {SCHEMA_VERSION}"
+                )
+            rows = self._conn.execute("SELECT key, value FROM meta").fetchall()
+            self.meta: dict[str, str] = {str(k): str(v) for k, v in rows}
+        except sqlite3.Error as exc:
+            raise LogError(f"{self.path}: not a readable session log: {exc}") from exc
+
+    @property
+    def config_toml(self) -> str:
+        return self.meta.get("config_toml", "")
+
+    def raw(self) -> Iterator[RawRecord]:
+        """Raw inputs in the order they were logged."""
+        cur = self._conn.execute("SELECT t, kind, line, can_id, data FROM raw ORDER BY id")
+        for t, kind, line, can_id, data in cur:
+            yield RawRecord(t, kind, line, can_id, data)
+
+    def states(self) -> Iterator[StateRow]:
+        """State rows in the order they were logged."""
+        cur = self._conn.execute(f"SELECT {', '.join(STATE_COLUMNS)} FROM state ORDER BY id")
+        for values in cur:
+            yield StateRow(*values)
+
+    def count(self, table: str) -> int:
+        if table not in ("raw", "state"):
+            raise ValueError(table)
+        return int(self._conn.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self) -> SessionReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
