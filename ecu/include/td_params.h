@@ -68,4 +68,10 @@ int td_params_set(td_params_t *p, uint8_t param_id, float value);
 /** Read parameter `param_id` as a physical value into *value. Returns TD_OK or TD_E_UNKNOWN_PARAM. */
 int td_params_get(const td_params_t *p, uint8_t param_id, float *value);
 
+/**
+ * DBC encoding of parameter `param_id`: physical units per raw unit and the raw range
+ * (PcParamSet, EcuParamAck). Returns TD_OK or TD_E_UNKNOWN_PARAM.
+ */
+int td_params_encoding(uint8_t param_id, float *scale, uint32_t *raw_min, uint32_t *raw_max);
+
 #endif /* TD_PARAMS_H */

@@ -28,6 +28,7 @@ typedef struct {
     uint8_t n_freq;                /**< samples taken since the last update */
     bool started;
     float speed_kmh;               /**< last fed-back speed */
+    uint32_t due_us;               /**< when the next sample is due (fixed grid, so updates keep their period) */
 } td_wheel_t;
 
 /** Initialise. Returns TD_E_ARG on a bad argument (samples 1..16, update_ms >= samples, ppr >= 1, radius > 0). */

@@ -1,0 +1,440 @@
+/**
+ * @file td_app.c
+ * @brief The ECU application: command decoding, dual speed selection, eq. 4 targets, motor and
+ *        fan control, fail-safes and the periodic frames.
+ */
+#include "td_app.h"
+
+#include <stddef.h>
+#include <string.h>
+#include "td_meter.h"
+#include "td_speedsel.h"
+
+/* Fan PI trim around the feed-forward target/fan_rpm_at_full_duty (duty per rpm, per rpm*s). */
+#define TD_FAN_KP 0.0001f
+#define TD_FAN_KI 0.0001f
+/* Wheel slower than this counts as "reads ~0" for the encoder fault. */
+#define TD_ENC_FAULT_WHEEL_KMH 0.2f
+/* Blocked meter: commanded above this, duty at least this, turning below this share of target. */
+#define TD_BLOCKED_MIN_TARGET_RPM 1.0f
+#define TD_BLOCKED_MIN_DUTY 0.3f
+#define TD_BLOCKED_SPEED_SHARE 0.1f
+/* Longest dt fed to the controllers: a late step must not inject a big integral jump. */
+#define TD_MAX_DT_S 0.05f
+#define TD_BACKWARD_LIMIT 0x80000000u
+
+static uint32_t fwd_diff(uint32_t now_count, uint32_t then_count) {
+    const uint32_t d = now_count - then_count;
+    return d >= TD_BACKWARD_LIMIT ? 0u : d;
+}
+
+static void apply_gains(td_app_t *app) {
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        td_pid_t *m = &app->meter_pid[l];
+        m->kp = app->p.pid_kp;
+        m->ki = app->p.pid_ki;
+        m->kd = app->p.pid_kd;
+        m->kff = app->p.pid_kff;
+        app->fan_pid[l].kff = 1.0f / app->p.fan_rpm_at_full_duty;
+    }
+}
+
+/* (Re)build the wheel estimator and queue G from the parameters: both restart empty. */
+static void init_speed_chain(td_app_t *app) {
+    (void)td_wheel_init(&app->wheel, app->p.wheel_radius_m, app->p.wheel_ppr, app->p.wheel_samples,
+                        app->p.wheel_update_ms);
+    (void)td_speedq_init(&app->q, app->p.queue_len);
+    app->st.cv_pct = -1.0f;
+    app->st.uniform = false;
+}
+
+static void set_fault(td_app_t *app, uint16_t bit, bool on) {
+    if (on) {
+        app->st.faults |= bit;
+    } else {
+        app->st.faults &= (uint16_t)~bit;
+    }
+}
+
+static void decide_source(td_app_t *app) {
+    td_state_t *st = &app->st;
+    st->source = td_speedsel_rule((td_speed_mode_t)app->p.speed_mode, (td_compare_t)app->p.switch_compare,
+                                  st->cv_pct, app->p.cv_threshold_pct, app->p.switch_speed_kmh, st->v_wheel_kmh,
+                                  st->v_gnss_kmh, st->gnss_valid, (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u);
+}
+
+int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
+    if (app == NULL || params == NULL) {
+        return TD_E_ARG;
+    }
+    const int rc = td_params_validate(params);
+    if (rc != TD_OK) {
+        return rc;
+    }
+    memset(app, 0, sizeof *app);
+    app->p = *params;
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        td_pid_init(&app->meter_pid[l], 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 1.0f);
+        td_pid_init(&app->fan_pid[l], TD_FAN_KP, TD_FAN_KI, 0.0f, 0.0f, 0.0f, 1.0f);
+    }
+    apply_gains(app);
+    init_speed_chain(app);
+    app->last_step_us = now_us;
+    app->last_cmd_us = now_us;
+    app->last_gnss_us = now_us;
+    app->last_status_us = now_us;
+    app->start_us = now_us;
+    app->st.source = TD_SRC_WHEEL;
+    app->st.faults = TD_FAULT_GNSS_LOST;
+    return TD_OK;
+}
+
+static void txq_push(td_app_t *app, const td_can_frame_t *f) {
+    if (app->tx_count >= TD_TXQ_LEN) {
+        app->cnt.tx_dropped++;
+        return;
+    }
+    app->txq[(app->tx_head + app->tx_count) % TD_TXQ_LEN] = *f;
+    app->tx_count++;
+}
+
+int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame) {
+    if (app == NULL || frame == NULL || app->tx_count == 0u) {
+        return 0;
+    }
+    *frame = app->txq[app->tx_head];
+    app->tx_head = (uint8_t)((app->tx_head + 1u) % TD_TXQ_LEN);
+    app->tx_count--;
+    return 1;
+}
+
+const td_state_t *td_app_state(const td_app_t *app) {
+    return app == NULL ? NULL : &app->st;
+}
+
+/* Stop command: motors stop, controllers and fault timers restart, latched faults clear. */
+static void stop(td_app_t *app) {
+    app->st.running = false;
+    app->st.faults &= (uint16_t)~TD_FAULT_LATCHED_MASK;
+    app->enc_suspect = false;
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        app->blocked_suspect[l] = false;
+        td_pid_reset(&app->meter_pid[l]);
+        td_pid_reset(&app->fan_pid[l]);
+    }
+}
+
+static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
+    td_command_t c;
+    const int rc = td_proto_decode_command(frame, &c);
+    if (rc == TD_E_LENGTH) {
+        app->cnt.rx_bad_length++;
+        return rc;
+    }
+    if (rc != TD_OK) {
+        app->cnt.rx_out_of_range++;
+        return rc;
+    }
+    app->cnt.rx_ok++;
+    app->have_cmd = true;
+    app->last_cmd_us = now_us;
+    set_fault(app, TD_FAULT_CMD_TIMEOUT, false);
+    td_state_t *st = &app->st;
+    st->rate_kg_ha[TD_UPPER] = c.rate_kg_ha[TD_UPPER];
+    st->rate_kg_ha[TD_LOWER] = c.rate_kg_ha[TD_LOWER];
+    st->fan_target_rpm = c.fan_rpm;
+    if (c.gnss_valid) {
+        st->v_gnss_kmh = c.gnss_kmh;
+        app->have_gnss = true;
+        app->last_gnss_us = now_us;
+    } else {
+        /* 0xFF: the PC says it has no GNSS speed; do not wait for the stale timeout */
+        app->have_gnss = false;
+    }
+    if (c.start && !st->running) {
+        st->running = true;
+        app->start_us = now_us;
+    } else if (!c.start) {
+        const bool had_latched = (st->faults & TD_FAULT_LATCHED_MASK) != 0u;
+        stop(app);
+        if (had_latched) {
+            decide_source(app);
+        }
+    }
+    return TD_OK;
+}
+
+static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
+    td_param_ack_t ack = { 0u, 0u, 0u };
+    uint8_t id = 0u;
+    float value = 0.0f;
+    int rc = td_proto_decode_param_set(frame, &id, &value);
+    if (rc == TD_E_LENGTH) {
+        ack.param_id = frame->dlc > 0u ? frame->data[0] : 0u;
+        ack.result = 5u;
+        app->cnt.rx_bad_length++;
+    } else {
+        ack.param_id = frame->data[0];
+        if (rc == TD_OK) {
+            id = frame->data[0];
+            rc = app->st.running ? TD_E_BUSY : td_params_set(&app->p, id, value);
+        }
+        switch (rc) {
+        case TD_OK:
+            ack.result = 0u;
+            break;
+        case TD_E_UNKNOWN_PARAM:
+            ack.result = 1u;
+            break;
+        case TD_E_RANGE:
+            ack.result = 2u;
+            break;
+        case TD_E_BUSY:
+            ack.result = 3u;
+            break;
+        default:
+            ack.result = 4u;
+            break;
+        }
+        float in_force = 0.0f;
+        if (td_params_get(&app->p, ack.param_id, &in_force) == TD_OK) {
+            ack.raw = td_proto_param_raw(ack.param_id, in_force);
+        }
+        if (rc == TD_OK) {
+            app->cnt.rx_ok++;
+            apply_gains(app);
+            /* radius, ppr, N, update period, samples: the estimator and queue G restart */
+            if (id == 4u || id == 5u || id == 6u || id == 19u || id == 20u) {
+                init_speed_chain(app);
+            }
+        } else {
+            app->cnt.rx_param_rejected++;
+        }
+    }
+    td_can_frame_t out;
+    (void)td_proto_encode_param_ack(&ack, &out);
+    txq_push(app, &out);
+    return rc;
+}
+
+int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
+    if (app == NULL || frame == NULL) {
+        return TD_E_ARG;
+    }
+    if (frame->extended != 0u) {
+        if (frame->id == app->p.command_id) {
+            return apply_command(app, frame, now_us);
+        }
+        if (frame->id == TD_ID_PC_PARAM_SET) {
+            return apply_param_set(app, frame);
+        }
+    }
+    app->cnt.rx_unknown_id++;
+    return TD_E_UNKNOWN_ID;
+}
+
+/* Metering and fan speeds over the last TD_RATE_WINDOW steps of counts. */
+static void measure_rates(td_app_t *app, uint32_t now_us, const td_io_in_t *in) {
+    const uint8_t oldest = app->hist_count < TD_RATE_WINDOW ? 0u : app->hist_head;
+    if (app->hist_count > 0u) {
+        const uint32_t span_us = td_elapsed_us(now_us, app->time_hist[oldest]);
+        if (span_us > 0u) {
+            const float per_min = 60.0e6f / (float)span_us;
+            for (unsigned l = 0u; l < TD_LAYERS; l++) {
+                app->st.meter_rpm[l] = (float)fwd_diff(in->meter_count[l], app->meter_hist[oldest][l]) * per_min /
+                                       (float)app->p.meter_counts_per_rev;
+                app->st.fan_rpm[l] =
+                    (float)fwd_diff(in->fan_count[l], app->fan_hist[oldest][l]) * per_min / (float)app->p.fan_ppr;
+            }
+        }
+    }
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        app->meter_hist[app->hist_head][l] = in->meter_count[l];
+        app->fan_hist[app->hist_head][l] = in->fan_count[l];
+    }
+    app->time_hist[app->hist_head] = now_us;
+    app->hist_head = (uint8_t)((app->hist_head + 1u) % TD_RATE_WINDOW);
+    if (app->hist_count < TD_RATE_WINDOW) {
+        app->hist_count++;
+    }
+}
+
+static void update_wheel(td_app_t *app, uint32_t now_us, uint32_t wheel_count) {
+    td_state_t *st = &app->st;
+    if (app->stepped) {
+        st->wheel_pulses += fwd_diff(wheel_count, app->wheel_last_count);
+    }
+    app->wheel_last_count = wheel_count;
+    float v;
+    if (td_wheel_step(&app->wheel, now_us, wheel_count, &v)) {
+        st->v_wheel_kmh = v;
+        td_speedq_push(&app->q, v);
+        st->cv_pct = td_speedq_cv_pct(&app->q, app->p.cv_window);
+        st->uniform = st->cv_pct >= 0.0f && st->cv_pct < app->p.cv_threshold_pct;
+        st->wheel_updates++;
+        decide_source(app);
+    }
+}
+
+/* Encoder fault: the wheel reads ~0 while GNSS says we move; latched (cleared by a stop). */
+static void check_encoder(td_app_t *app, uint32_t now_us) {
+    const td_state_t *st = &app->st;
+    const bool suspect = st->running && st->gnss_valid && st->v_gnss_kmh > app->p.enc_fault_gnss_kmh &&
+                         st->v_wheel_kmh < TD_ENC_FAULT_WHEEL_KMH && (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
+    if (!suspect) {
+        app->enc_suspect = false;
+        return;
+    }
+    if (!app->enc_suspect) {
+        app->enc_suspect = true;
+        app->enc_fault_since_us = now_us;
+    } else if (td_elapsed_us(now_us, app->enc_fault_since_us) > (uint32_t)app->p.enc_fault_time_ms * 1000u) {
+        app->st.faults |= TD_FAULT_WHEEL_ENCODER;
+        decide_source(app);
+    }
+}
+
+static void control_fans(td_app_t *app, uint32_t now_us, float dt_s, td_io_out_t *out) {
+    td_state_t *st = &app->st;
+    const bool spun_up = td_elapsed_us(now_us, app->start_us) > (uint32_t)app->p.fan_spinup_ms * 1000u;
+    const float target = st->running ? st->fan_target_rpm : 0.0f;
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        if (target > 0.0f) {
+            st->fan_duty[l] = td_pid_step(&app->fan_pid[l], target, st->fan_rpm[l], dt_s);
+        } else {
+            td_pid_reset(&app->fan_pid[l]);
+            st->fan_duty[l] = 0.0f;
+        }
+        const bool low = st->fan_rpm[l] < (float)app->p.fan_min_rpm;
+        set_fault(app, (uint16_t)(TD_FAULT_UPPER_FAN_LOW << l), st->running && spun_up && low);
+        out->fan_duty[l] = st->fan_duty[l];
+    }
+}
+
+static void check_blocked(td_app_t *app, unsigned l, uint32_t now_us) {
+    td_state_t *st = &app->st;
+    const bool suspect = st->target_rpm[l] > TD_BLOCKED_MIN_TARGET_RPM && st->meter_duty[l] >= TD_BLOCKED_MIN_DUTY &&
+                         st->meter_rpm[l] < TD_BLOCKED_SPEED_SHARE * st->target_rpm[l];
+    if (!suspect) {
+        app->blocked_suspect[l] = false;
+        return;
+    }
+    if (!app->blocked_suspect[l]) {
+        app->blocked_suspect[l] = true;
+        app->blocked_since_us[l] = now_us;
+    } else if (td_elapsed_us(now_us, app->blocked_since_us[l]) > (uint32_t)app->p.blocked_time_ms * 1000u) {
+        st->faults |= (uint16_t)(TD_FAULT_UPPER_BLOCKED << l);
+        app->blocked_suspect[l] = false;
+        td_pid_reset(&app->meter_pid[l]);
+        st->meter_duty[l] = 0.0f;
+        st->target_rpm[l] = 0.0f;
+    }
+}
+
+static void control_meters(td_app_t *app, uint32_t now_us, float dt_s, td_io_out_t *out) {
+    td_state_t *st = &app->st;
+    const bool may_meter = st->running && (st->faults & (TD_FAULT_CMD_TIMEOUT | TD_FAULT_NO_SPEED)) == 0u &&
+                           st->v_kmh >= app->p.min_work_speed_kmh;
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        const bool allowed = may_meter && st->fan_rpm[l] >= (float)app->p.fan_min_rpm &&
+                             (st->faults & (uint16_t)(TD_FAULT_UPPER_BLOCKED << l)) == 0u;
+        st->target_rpm[l] = allowed ? td_meter_target_rpm(app->p.working_width_m, st->rate_kg_ha[l], st->v_kmh,
+                                                          app->p.kg_per_rev[l], app->p.min_work_speed_kmh)
+                                    : 0.0f;
+        if (st->target_rpm[l] > 0.0f) {
+            st->meter_duty[l] = td_pid_step(&app->meter_pid[l], st->target_rpm[l], st->meter_rpm[l], dt_s);
+            check_blocked(app, l, now_us);
+        } else {
+            td_pid_reset(&app->meter_pid[l]);
+            st->meter_duty[l] = 0.0f;
+            app->blocked_suspect[l] = false;
+        }
+        out->meter_duty[l] = st->meter_duty[l];
+    }
+}
+
+static uint16_t sat16(uint32_t v) {
+    return v > 0xFFFFu ? (uint16_t)0xFFFFu : (uint16_t)v;
+}
+
+static void emit_status(td_app_t *app) {
+    const td_state_t *st = &app->st;
+    td_can_frame_t f;
+    const td_status_t s = { st->running,
+                            { st->meter_rpm[TD_UPPER], st->meter_rpm[TD_LOWER] },
+                            { st->fan_rpm[TD_UPPER], st->fan_rpm[TD_LOWER] },
+                            st->v_wheel_kmh };
+    (void)td_proto_encode_status(&s, &f);
+    f.id = app->p.status_id;
+    txq_push(app, &f);
+    const td_diag_t d = { (uint8_t)st->source, app->p.speed_mode, st->gnss_valid, st->uniform,
+                          app->p.switch_compare, st->cv_pct, st->faults, st->wheel_pulses };
+    (void)td_proto_encode_diag(&d, &f);
+    txq_push(app, &f);
+    const uint32_t rejected =
+        app->cnt.rx_unknown_id + app->cnt.rx_bad_length + app->cnt.rx_out_of_range + app->cnt.rx_param_rejected;
+    const td_speeds_t sp = { st->v_wheel_kmh, st->gnss_valid ? st->v_gnss_kmh : -1.0f, st->v_kmh, sat16(rejected) };
+    (void)td_proto_encode_speeds(&sp, &f);
+    txq_push(app, &f);
+    const td_targets_t t = { { st->target_rpm[TD_UPPER], st->target_rpm[TD_LOWER] },
+                             { st->meter_duty[TD_UPPER] * 100.0f, st->meter_duty[TD_LOWER] * 100.0f },
+                             { st->fan_duty[TD_UPPER] * 100.0f, st->fan_duty[TD_LOWER] * 100.0f } };
+    (void)td_proto_encode_targets(&t, &f);
+    txq_push(app, &f);
+}
+
+int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out) {
+    if (app == NULL || in == NULL || out == NULL) {
+        return TD_E_ARG;
+    }
+    td_state_t *st = &app->st;
+    const uint32_t dt_us = td_elapsed_us(now_us, app->last_step_us);
+    float dt_s = (float)dt_us * 1.0e-6f;
+    if (dt_s > TD_MAX_DT_S) {
+        dt_s = TD_MAX_DT_S;
+    }
+    app->last_step_us = now_us;
+
+    update_wheel(app, now_us, in->wheel_count);
+    measure_rates(app, now_us, in);
+    app->stepped = true;
+
+    /* command timeout: strictly longer than cmd_timeout_ms without a valid PcCommand */
+    if (td_elapsed_us(now_us, app->last_cmd_us) > (uint32_t)app->p.cmd_timeout_ms * 1000u) {
+        st->faults |= TD_FAULT_CMD_TIMEOUT;
+    }
+    /* GNSS: missing (0xFF) or stale; re-decide at once when it comes or goes */
+    const bool gnss_valid =
+        app->have_gnss && td_elapsed_us(now_us, app->last_gnss_us) <= (uint32_t)app->p.gnss_timeout_ms * 1000u;
+    set_fault(app, TD_FAULT_GNSS_LOST, !gnss_valid);
+    if (gnss_valid != st->gnss_valid) {
+        st->gnss_valid = gnss_valid;
+        decide_source(app);
+    }
+    check_encoder(app, now_us);
+
+    set_fault(app, TD_FAULT_NO_SPEED, st->source == TD_SRC_NONE);
+    st->v_kmh = st->source == TD_SRC_GNSS ? st->v_gnss_kmh : st->source == TD_SRC_WHEEL ? st->v_wheel_kmh : 0.0f;
+
+    if (dt_s > 0.0f) {
+        control_fans(app, now_us, dt_s, out);
+        control_meters(app, now_us, dt_s, out);
+    } else {
+        /* a repeated timestamp: hold the last outputs, nothing to integrate */
+        for (unsigned l = 0u; l < TD_LAYERS; l++) {
+            out->meter_duty[l] = st->meter_duty[l];
+            out->fan_duty[l] = st->fan_duty[l];
+        }
+    }
+
+    const uint32_t period_us = (uint32_t)app->p.status_period_ms * 1000u;
+    if (td_elapsed_us(now_us, app->last_status_us) >= period_us) {
+        emit_status(app);
+        /* keep the period on its grid; after a long gap restart it from now */
+        app->last_status_us += period_us;
+        if (td_elapsed_us(now_us, app->last_status_us) >= period_us) {
+            app->last_status_us = now_us;
+        }
+    }
+    return TD_OK;
+}

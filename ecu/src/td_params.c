@@ -1,0 +1,194 @@
+/**
+ * @file td_params.c
+ * @brief Parameter defaults, ranges (those of PcParamSet in protocol/topdress.dbc) and access by id.
+ */
+#include "td_params.h"
+
+#include <stddef.h>
+
+typedef enum { F32, U8, U16 } td_ptype_t;
+
+typedef struct {
+    uint16_t offset;   /* offsetof the field in td_params_t */
+    uint8_t type;      /* td_ptype_t */
+    float scale;       /* physical units per raw DBC unit */
+    uint32_t raw_min, raw_max;
+} td_pdesc_t;
+
+#define P(field, type, scale, lo, hi) { (uint16_t)offsetof(td_params_t, field), (type), (scale), (lo), (hi) }
+
+/* Index = parameter id - 1. Raw ranges exactly as the multiplexed signals of PcParamSet;
+ * test_params checks this table against the generated codec. */
+static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
+    P(working_width_m, F32, 0.001f, 500u, 30000u),
+    P(kg_per_rev[0], F32, 0.0001f, 10u, 50000u),
+    P(kg_per_rev[1], F32, 0.0001f, 10u, 50000u),
+    P(wheel_radius_m, F32, 0.0001f, 200u, 10000u),
+    P(wheel_ppr, U16, 1.0f, 1u, 10000u),
+    P(queue_len, U8, 1.0f, 2u, 16u),
+    P(cv_window, U8, 1.0f, 2u, 16u),
+    P(cv_threshold_pct, F32, 0.01f, 10u, 5000u),
+    P(switch_speed_kmh, F32, 0.01f, 0u, 2500u),
+    P(speed_mode, U8, 1.0f, 0u, 2u),
+    P(switch_compare, U8, 1.0f, 0u, 1u),
+    P(pid_kp, F32, 0.0001f, 0u, 100000u),
+    P(pid_ki, F32, 0.0001f, 0u, 100000u),
+    P(pid_kd, F32, 0.0001f, 0u, 100000u),
+    P(pid_kff, F32, 0.00001f, 0u, 100000u),
+    P(cmd_timeout_ms, U16, 1.0f, 100u, 10000u),
+    P(gnss_timeout_ms, U16, 1.0f, 100u, 10000u),
+    P(min_work_speed_kmh, F32, 0.01f, 0u, 1000u),
+    P(wheel_update_ms, U16, 1.0f, 50u, 5000u),
+    P(wheel_samples, U8, 1.0f, 1u, 16u),
+    P(meter_counts_per_rev, U16, 1.0f, 1u, 65535u),
+    P(fan_min_rpm, U16, 1.0f, 0u, 6000u),
+    P(fan_ppr, U8, 1.0f, 1u, 255u),
+    P(enc_fault_gnss_kmh, F32, 0.01f, 50u, 2500u),
+    P(enc_fault_time_ms, U16, 1.0f, 100u, 30000u),
+    P(blocked_time_ms, U16, 1.0f, 100u, 30000u),
+    P(status_period_ms, U16, 1.0f, 20u, 1000u),
+};
+
+/* Float rounding of a value that went through raw * scale stays well inside this many raw units. */
+#define TD_RAW_TOL 0.05f
+
+void td_params_default(td_params_t *p) {
+    if (p == NULL) {
+        return;
+    }
+    p->working_width_m = 3.6f;
+    p->kg_per_rev[TD_UPPER] = 0.3f;
+    p->kg_per_rev[TD_LOWER] = 0.3f;
+    p->wheel_radius_m = 0.0615f;
+    p->wheel_ppr = 500u;
+    p->queue_len = 5u;
+    p->cv_window = 5u;
+    p->cv_threshold_pct = 4.2f;
+    p->switch_speed_kmh = 6.0f;
+    p->speed_mode = (uint8_t)TD_MODE_DUAL;
+    p->switch_compare = (uint8_t)TD_CMP_GNSS;
+    /* Tuned on the reference metering motor (1.0 duty -> 60 r/min, tau 0.15 s, 10 ms period):
+     * the feed-forward does most of the work, P speeds it up, a small I removes the residual
+     * error without winding up during the transient (overshoot ~2 %, settled in ~0.2 s). The
+     * measured speed is a 100 ms count window, too coarse for a useful derivative: kd = 0. */
+    p->pid_kp = 0.015f;
+    p->pid_ki = 0.01f;
+    p->pid_kd = 0.0f;
+    p->pid_kff = 1.0f / 60.0f;
+    p->cmd_timeout_ms = 1500u;
+    p->gnss_timeout_ms = 1200u;
+    p->min_work_speed_kmh = 0.5f;
+    p->wheel_update_ms = 500u;
+    p->wheel_samples = 4u;
+    p->meter_counts_per_rev = 6400u;
+    p->fan_min_rpm = 2000u;
+    p->fan_ppr = 30u;
+    p->enc_fault_gnss_kmh = 2.0f;
+    p->enc_fault_time_ms = 2000u;
+    p->blocked_time_ms = 1000u;
+    p->status_period_ms = 100u;
+    p->fan_rpm_at_full_duty = 4000.0f;
+    p->fan_spinup_ms = 3000u;
+    p->status_id = 0x185C6465u;
+    p->command_id = 0x0A5C6465u;
+}
+
+static float field_get(const td_params_t *p, const td_pdesc_t *d) {
+    const unsigned char *base = (const unsigned char *)p + d->offset;
+    switch (d->type) {
+    case U8:
+        return (float)*(const uint8_t *)(const void *)base;
+    case U16:
+        return (float)*(const uint16_t *)(const void *)base;
+    default:
+        return *(const float *)(const void *)base;
+    }
+}
+
+static void field_set(td_params_t *p, const td_pdesc_t *d, float value) {
+    unsigned char *base = (unsigned char *)p + d->offset;
+    switch (d->type) {
+    case U8:
+        *(uint8_t *)(void *)base = (uint8_t)(value + 0.5f);
+        break;
+    case U16:
+        *(uint16_t *)(void *)base = (uint16_t)(value + 0.5f);
+        break;
+    default:
+        *(float *)(void *)base = value;
+        break;
+    }
+}
+
+static bool in_range(const td_pdesc_t *d, float value) {
+    const float raw = value / d->scale;
+    /* written so that NaN fails */
+    return raw >= (float)d->raw_min - TD_RAW_TOL && raw <= (float)d->raw_max + TD_RAW_TOL;
+}
+
+int td_params_validate(const td_params_t *p) {
+    if (p == NULL) {
+        return TD_E_ARG;
+    }
+    for (uint8_t i = 0u; i < TD_PARAM_COUNT; i++) {
+        if (!in_range(&k_desc[i], field_get(p, &k_desc[i]))) {
+            return TD_E_RANGE;
+        }
+    }
+    if (!(p->fan_rpm_at_full_duty > 0.0f) || p->status_id > 0x1FFFFFFFu || p->command_id > 0x1FFFFFFFu) {
+        return TD_E_RANGE;
+    }
+    if (p->cv_window > p->queue_len || p->status_id == p->command_id) {
+        return TD_E_INCONSISTENT;
+    }
+    return TD_OK;
+}
+
+int td_params_set(td_params_t *p, uint8_t param_id, float value) {
+    if (p == NULL) {
+        return TD_E_ARG;
+    }
+    if (param_id < 1u || param_id > TD_PARAM_COUNT) {
+        return TD_E_UNKNOWN_PARAM;
+    }
+    const td_pdesc_t *d = &k_desc[param_id - 1u];
+    if (!in_range(d, value)) {
+        return TD_E_RANGE;
+    }
+    td_params_t next = *p;
+    field_set(&next, d, value);
+    const int rc = td_params_validate(&next);
+    if (rc != TD_OK) {
+        return rc;
+    }
+    *p = next;
+    return TD_OK;
+}
+
+int td_params_get(const td_params_t *p, uint8_t param_id, float *value) {
+    if (p == NULL || value == NULL) {
+        return TD_E_ARG;
+    }
+    if (param_id < 1u || param_id > TD_PARAM_COUNT) {
+        return TD_E_UNKNOWN_PARAM;
+    }
+    *value = field_get(p, &k_desc[param_id - 1u]);
+    return TD_OK;
+}
+
+int td_params_encoding(uint8_t param_id, float *scale, uint32_t *raw_min, uint32_t *raw_max) {
+    if (param_id < 1u || param_id > TD_PARAM_COUNT) {
+        return TD_E_UNKNOWN_PARAM;
+    }
+    const td_pdesc_t *d = &k_desc[param_id - 1u];
+    if (scale != NULL) {
+        *scale = d->scale;
+    }
+    if (raw_min != NULL) {
+        *raw_min = d->raw_min;
+    }
+    if (raw_max != NULL) {
+        *raw_max = d->raw_max;
+    }
+    return TD_OK;
+}
