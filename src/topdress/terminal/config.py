@@ -90,6 +90,8 @@ class GnssConfig:
     path: str = ""
     # VTG speed is forwarded only when no valid RMC came for this long.
     rmc_timeout_s: float = _num(1.5, 0.1, 60.0)
+    # A GNSS speed older than this is not forwarded (the ECU gets "not available").
+    stale_s: float = _num(2.0, 0.1, 60.0)
 
 
 CROP_COLUMN_NAMES = ("sensor_id", "red", "red_edge", "nir", "ndre", "ndvi")
@@ -444,6 +446,7 @@ port = "/dev/ttyUSB0"
 baud = 9600
 path = ""                  # NMEA file when source = "file"
 rmc_timeout_s = 1.5        # VTG speed used only when no RMC came for this long
+stale_s = 2.0              # a GNSS speed older than this is sent as "not available"
 
 [crop]
 source = "serial"          # serial | file | stdin

@@ -1,0 +1,203 @@
+"""NMEA 0183 sentences to GNSS fixes: framing and checksum here, field parsing by pynmeagps.
+
+The decoder never raises on input: every line gives a GnssFix, with `ok=False` and an `error`
+reason for a line that cannot be trusted, and every reason is counted in `NmeaDecoder.counters`.
+Only RMC, VTG and GGA are parsed into fields (any talker); other well-formed sentences are
+accepted (`ok=True`) and carry no fix.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+from pynmeagps import NMEAReader
+
+KNOT_KMH = 1.852
+
+# Least number of data fields for each parsed type (NMEA 0183 v2.0 layouts).
+_MIN_FIELDS = {"RMC": 11, "VTG": 8, "GGA": 14}
+# Attribute of the pynmeagps message -> index of its data field, to catch bad numbers that
+# pynmeagps turns into "" instead of rejecting.
+_CHECKED = {
+    "RMC": {"time": 0, "lat": 2, "lon": 4, "spd": 6, "cog": 7, "date": 8},
+    "VTG": {"cogt": 0, "sogn": 4, "sogk": 6},
+    "GGA": {"time": 0, "lat": 1, "lon": 3, "quality": 5},
+}
+_ADDRESS = re.compile(rb"^[A-Z][A-Z0-9]{2,9}$")
+_HEX2 = re.compile(rb"^[0-9A-Fa-f]{2}$")
+
+
+@dataclass(frozen=True)
+class GnssFix:
+    """What one NMEA line says. `utc` is ISO 8601: date and time when the sentence carries a
+    date (RMC), else the time of day only; `speed_kmh`/`course_deg` from RMC or VTG."""
+
+    talker: str | None
+    type: str | None
+    ok: bool
+    error: str | None = None
+    fix_valid: bool = False
+    speed_kmh: float | None = None
+    course_deg: float | None = None
+    lat: float | None = None
+    lon: float | None = None
+    utc: str | None = None
+
+
+def nmea_checksum(body: bytes) -> int:
+    """XOR of the bytes between '$' and '*'."""
+    value = 0
+    for b in body:
+        value ^= b
+    return value
+
+
+def make_sentence(body: str) -> bytes:
+    """A complete sentence for `body` (without '$'): '$' + body + '*' + checksum + CRLF."""
+    raw = body.encode("ascii")
+    return b"$" + raw + b"*" + f"{nmea_checksum(raw):02X}".encode() + b"\r\n"
+
+
+class NmeaDecoder:
+    """Decodes NMEA lines. `counters` counts 'ok' and each error reason:
+    empty, binary, no_start, no_checksum, truncated, bad_checksum, malformed; and 'resync'
+    for a sentence found after garbage on its line (decoded normally)."""
+
+    def __init__(self) -> None:
+        self.counters: Counter[str] = Counter()
+
+    def decode(self, line: bytes | str) -> GnssFix:
+        raw = line.encode("latin-1", "replace") if isinstance(line, str) else bytes(line)
+        fix = self._decode(raw.strip(b"\r\n\x00 "))
+        self.counters["ok" if fix.ok else _reason(fix.error)] += 1
+        return fix
+
+    def _decode(self, raw: bytes) -> GnssFix:
+        if not raw:
+            return _bad("empty", "empty line")
+        start = raw.rfind(b"$")
+        if start < 0:
+            if _printable(raw):
+                return _bad("no_start", "no '$' sentence start")
+            return _bad("binary", "binary data, no NMEA sentence")
+        if start > 0:
+            self.counters["resync"] += 1
+            raw = raw[start:]
+        if not _printable(raw):
+            return _bad("binary", "binary data inside the sentence")
+        star = raw.rfind(b"*")
+        if star < 0:
+            return _bad("no_checksum", "no '*hh' checksum (missing, or the line was cut)")
+        body, given = raw[1:star], raw[star + 1 :]
+        if len(given) < 2:
+            return _bad("truncated", "line ends inside the checksum")
+        if not _HEX2.match(given):
+            return _bad("malformed", f"checksum field {given.decode()!r} is not two hex digits")
+        address = body.split(b",", 1)[0]
+        if not _ADDRESS.match(address):
+            return _bad("malformed", f"bad address field {address.decode()!r}")
+        talker, kind = _split_address(address.decode())
+        expected = nmea_checksum(body)
+        if int(given, 16) != expected:
+            msg = f"checksum {given.decode().upper()} != computed {expected:02X}"
+            return _bad("bad_checksum", msg, talker, kind)
+        if kind not in _MIN_FIELDS:
+            return GnssFix(talker=talker, type=kind, ok=True)
+        return _parse(raw[: star + 3], body, talker, kind)
+
+
+def _reason(error: str | None) -> str:
+    return (error or "malformed").split(":", 1)[0]
+
+
+def _bad(reason: str, message: str, talker: str | None = None, kind: str | None = None) -> GnssFix:
+    return GnssFix(talker=talker, type=kind, ok=False, error=f"{reason}: {message}")
+
+
+def _printable(raw: bytes) -> bool:
+    return all(0x20 <= b <= 0x7E for b in raw)
+
+
+def _split_address(address: str) -> tuple[str, str]:
+    if address.startswith("P"):  # proprietary: P + manufacturer + type
+        return "P", address[1:]
+    return address[:2], address[2:]
+
+
+def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
+    fields = body.split(b",")[1:]
+    if len(fields) < _MIN_FIELDS[kind]:
+        msg = f"{kind} has {len(fields)} fields, needs {_MIN_FIELDS[kind]}"
+        return _bad("truncated", msg, talker, kind)
+    try:
+        msg = NMEAReader.parse(sentence, validate=0)
+    except Exception as exc:  # pynmeagps raises many types on odd fields
+        return _bad("malformed", f"{type(exc).__name__}: {exc}", talker, kind)
+    for attr, index in _CHECKED[kind].items():
+        if fields[index] and getattr(msg, attr, "") == "":
+            text = fields[index].decode()
+            return _bad("malformed", f"{kind} field {attr}={text!r}", talker, kind)
+    return _FIELD_PARSERS[kind](msg, talker)
+
+
+def _opt(value: Any) -> float | None:
+    return None if value == "" or value is None else float(value)
+
+
+def _utc(time: Any, date: Any = "") -> str | None:
+    if not isinstance(time, dt.time):
+        return None
+    clock = time.isoformat(timespec="milliseconds")
+    return f"{date.isoformat()}T{clock}Z" if isinstance(date, dt.date) else clock
+
+
+def _rmc(msg: Any, talker: str) -> GnssFix:
+    mode = getattr(msg, "posMode", "")
+    valid = msg.status == "A" and mode != "N"
+    knots = _opt(msg.spd)
+    return GnssFix(
+        talker=talker,
+        type="RMC",
+        ok=True,
+        fix_valid=valid and knots is not None,
+        speed_kmh=None if knots is None else knots * KNOT_KMH,
+        course_deg=_opt(msg.cog),
+        lat=_opt(msg.lat),
+        lon=_opt(msg.lon),
+        utc=_utc(msg.time, msg.date),
+    )
+
+
+def _vtg(msg: Any, talker: str) -> GnssFix:
+    kmh = _opt(msg.sogk)
+    if kmh is None and (knots := _opt(msg.sogn)) is not None:
+        kmh = knots * KNOT_KMH
+    mode = getattr(msg, "posMode", "")
+    return GnssFix(
+        talker=talker,
+        type="VTG",
+        ok=True,
+        fix_valid=kmh is not None and mode != "N",
+        speed_kmh=kmh,
+        course_deg=_opt(msg.cogt),
+    )
+
+
+def _gga(msg: Any, talker: str) -> GnssFix:
+    quality = msg.quality if isinstance(msg.quality, int) else 0
+    return GnssFix(
+        talker=talker,
+        type="GGA",
+        ok=True,
+        fix_valid=quality > 0,
+        lat=_opt(msg.lat),
+        lon=_opt(msg.lon),
+        utc=_utc(msg.time),
+    )
+
+
+_FIELD_PARSERS = {"RMC": _rmc, "VTG": _vtg, "GGA": _gga}

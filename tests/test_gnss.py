@@ -1,0 +1,263 @@
+"""NMEA decoding, the GNSS speed choice, the real gpsd captures and `topdress gnss decode`."""
+
+from __future__ import annotations
+
+import datetime as dt
+import io
+import json
+from pathlib import Path
+
+import pytest
+
+from topdress.cli import main
+from topdress.terminal.gnss import GnssSpeedTracker
+from topdress.terminal.gnss_cli import decode_stream
+from topdress.terminal.nmea import GnssFix, NmeaDecoder, make_sentence, nmea_checksum
+
+GPSD_LOGS = Path(__file__).resolve().parents[1].parent / "shared" / "nmea" / "gpsd-logs"
+
+# Trimble RTK line from the gpsd captures: 3.252 kn = 6.0227 km/h = 1.673 m/s.
+TRIMBLE_RMC = (
+    b"$GPRMC,132820.60,A,4134.49821229,N,09345.03351845,W,3.252,92.308,180320,11.5985,E,D*1A"
+)
+
+
+def test_rmc_fields() -> None:
+    fix = NmeaDecoder().decode(TRIMBLE_RMC + b"\r\n")
+    assert fix.ok and fix.fix_valid and fix.error is None
+    assert (fix.talker, fix.type) == ("GP", "RMC")
+    assert fix.speed_kmh == pytest.approx(3.252 * 1.852)
+    assert fix.course_deg == pytest.approx(92.308)
+    assert fix.lat == pytest.approx(41 + 34.49821229 / 60)
+    assert fix.lon == pytest.approx(-(93 + 45.03351845 / 60))
+    assert fix.utc == "2020-03-18T13:28:20.600Z"
+
+
+@pytest.mark.parametrize("talker", ["GP", "BD", "GB", "GN", "GL", "GA", "GQ"])
+def test_any_talker(talker: str) -> None:
+    line = make_sentence(f"{talker}RMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A")
+    fix = NmeaDecoder().decode(line)
+    assert fix.ok and fix.fix_valid
+    assert fix.talker == talker
+    assert fix.speed_kmh == pytest.approx(6.00048)
+    assert fix.lat == pytest.approx(43.07613)
+    assert fix.utc == "2026-05-21T08:18:36.000Z"
+
+
+def test_make_sentence_checksum_matches_a_receiver() -> None:
+    assert make_sentence("GPGSA,A,1,,,,,,,,,,,,,,,,") == b"$GPGSA,A,1,,,,,,,,,,,,,,,,*32\r\n"
+    assert nmea_checksum(b"BDGSA,A,1,,,,,,,,,,,,,,,,") == 0x23
+
+
+def test_status_v_and_mode_n_are_no_valid_fix() -> None:
+    d = NmeaDecoder()
+    void = d.decode(make_sentence("GNRMC,074150.799,V,,,,,,,250215,,,N"))
+    assert void.ok and not void.fix_valid and void.speed_kmh is None
+    mode_n = d.decode(
+        make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,N")
+    )
+    assert mode_n.ok and not mode_n.fix_valid
+    assert not d.decode(make_sentence("GPVTG,87.5,T,,M,3.24,N,6.00,K,N")).fix_valid
+    assert not d.decode(
+        make_sentence("GPGGA,081836.00,4304.5678,N,12534.1234,E,0,00,,,M,,M,,")
+    ).fix_valid
+
+
+def test_vtg_and_gga() -> None:
+    d = NmeaDecoder()
+    vtg = d.decode(make_sentence("BDVTG,054.7,T,034.4,M,005.5,N,010.2,K,A"))
+    assert vtg.ok and vtg.fix_valid
+    assert vtg.speed_kmh == pytest.approx(10.2)  # the km/h field is taken as given
+    assert vtg.course_deg == pytest.approx(54.7)
+    knots_only = d.decode(make_sentence("GPVTG,054.7,T,,M,005.5,N,,K"))
+    assert knots_only.speed_kmh == pytest.approx(5.5 * 1.852)
+    gga = d.decode(
+        make_sentence("GNGGA,081836.00,4304.5678,N,12534.1234,E,1,12,0.8,210.0,M,8.0,M,,")
+    )
+    assert gga.ok and gga.fix_valid and gga.speed_kmh is None
+    assert gga.utc == "08:18:36.000"
+    assert gga.lon == pytest.approx(125.56872)
+
+
+def test_other_sentences_are_accepted_without_a_fix() -> None:
+    d = NmeaDecoder()
+    gsv = d.decode(b"$GPGSV,7,7,25,04,08,012,*41")
+    assert gsv == GnssFix(talker="GP", type="GSV", ok=True)
+    prop = d.decode(b"$PSRFEPE,074150.799,V,,,,,*23")
+    assert (prop.talker, prop.type, prop.ok) == ("P", "SRFEPE", True)
+
+
+@pytest.mark.parametrize(
+    ("line", "reason"),
+    [
+        (b"", "empty"),
+        (b"\r\n", "empty"),
+        (b"\xb5b\x01\x07\x5c\x00\xff\x10\x80", "binary"),
+        (b"GPRMC,081836.00,A*1F", "no_start"),
+        (b"$GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24", "no_checksum"),
+        (b"$GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A*", "truncated"),
+        (b"$GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A*1", "truncated"),
+        (b"$GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A*00", "bad_checksum"),
+        (b"$GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A*G1", "malformed"),
+        (b"$GPRMC,08\xff836.00,A,4304.5678,N,12534.1234,E,3.24*00", "binary"),
+        (make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24"), "truncated"),
+        (make_sentence("GPGGA,081836.00,4304.5678,N"), "truncated"),
+        (make_sentence("GPVTG,054.7,T"), "truncated"),
+        (
+            make_sentence("GPRMC,081836.00,A,43x4.5678,N,12534.1234,E,3.24,87.5,210526,,,A"),
+            "malformed",
+        ),
+        (
+            make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,fast,87.5,210526,,,A"),
+            "malformed",
+        ),
+        (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,ten,K,A"), "malformed"),
+        (make_sentence("gprmc,1"), "malformed"),
+        (make_sentence(",,,"), "malformed"),
+    ],
+)
+def test_bad_lines_are_rejected_and_counted(line: bytes, reason: str) -> None:
+    d = NmeaDecoder()
+    fix = d.decode(line)
+    assert not fix.ok and not fix.fix_valid and fix.speed_kmh is None
+    assert fix.error is not None and fix.error.startswith(reason + ":")
+    assert d.counters == {reason: 1}
+
+
+def test_sentence_after_binary_garbage_is_found() -> None:
+    d = NmeaDecoder()
+    fix = d.decode(b"\xb5b\x01\x07\x00\xff" + TRIMBLE_RMC)
+    assert fix.ok and fix.speed_kmh == pytest.approx(6.0227, abs=1e-4)
+    assert d.counters == {"ok": 1, "resync": 1}
+
+
+def test_str_input_and_counters_by_reason() -> None:
+    d = NmeaDecoder()
+    d.decode(TRIMBLE_RMC.decode())
+    d.decode("$GPRMC,junk*00")
+    d.decode("$GPRMC,junk*00")
+    d.decode(b"\x00\x01\x02")
+    assert d.counters == {"ok": 1, "bad_checksum": 2, "binary": 1}
+
+
+def _fix(kind: str, speed: float | None, valid: bool = True) -> GnssFix:
+    return GnssFix(talker="GN", type=kind, ok=True, fix_valid=valid, speed_kmh=speed)
+
+
+def test_tracker_prefers_rmc_and_uses_vtg_only_without_rmc() -> None:
+    tr = GnssSpeedTracker(rmc_timeout_s=1.5, stale_s=2.0)
+    assert tr.current(0.0) is None
+    assert tr.update(0.0, _fix("VTG", 5.0)) is not None  # no RMC yet: VTG is used
+    assert tr.current(0.1) == 5.0
+    sample = tr.update(0.2, _fix("RMC", 6.1))
+    assert sample is not None and sample.sentence == "RMC"
+    assert tr.update(0.25, _fix("VTG", 9.9)) is None  # RMC present: VTG ignored
+    assert tr.current(0.3) == 6.1
+    assert tr.update(1.7, _fix("VTG", 7.0)) is None  # 1.5 s after the RMC: still ignored
+    assert tr.update(1.71, _fix("VTG", 7.0)) is not None  # RMC silent > 1.5 s: VTG used
+    assert tr.current(1.8) == 7.0
+
+
+def test_tracker_loses_gnss_on_status_v_stale_or_disconnect() -> None:
+    tr = GnssSpeedTracker(rmc_timeout_s=1.5, stale_s=2.0)
+    tr.update(10.0, _fix("RMC", 8.0))
+    assert tr.current(11.9) == 8.0
+    assert tr.current(12.01) is None  # stale
+    assert tr.current(10.5, connected=False) is None
+    tr.update(12.1, _fix("RMC", None, valid=False))
+    assert tr.current(12.2) is None  # status V forwards "not available" at once
+    tr.update(12.3, _fix("GSV", None, valid=False))
+    bad = GnssFix(talker=None, type=None, ok=False, error="bad_checksum: x")
+    assert tr.update(12.4, bad) is None
+    tr.update(12.5, _fix("RMC", 8.2))
+    assert tr.current(12.6) == 8.2
+
+
+def test_tracker_keeps_the_position() -> None:
+    tr = GnssSpeedTracker()
+    tr.update(1.0, NmeaDecoder().decode(TRIMBLE_RMC))
+    assert tr.position is not None
+    assert (tr.position.t, round(tr.position.lat, 6)) == (1.0, 41.57497)
+
+
+def _gpsd_files() -> list[Path]:
+    if not GPSD_LOGS.is_dir():
+        pytest.skip(f"{GPSD_LOGS} not present")
+    return sorted(GPSD_LOGS.glob("*.log"))
+
+
+def _tpv_speeds(chk: Path) -> dict[dt.datetime, set[float]]:
+    speeds: dict[dt.datetime, set[float]] = {}
+    for raw in chk.read_bytes().splitlines():
+        if not raw.startswith(b'{"class":"TPV"'):
+            continue
+        obj = json.loads(raw)
+        if "time" in obj and "speed" in obj:
+            speeds.setdefault(_when(obj["time"]), set()).add(obj["speed"])
+    return speeds
+
+
+def _when(iso: str) -> dt.datetime:
+    return dt.datetime.fromisoformat(iso.replace("Z", "+00:00"))
+
+
+def test_gpsd_captures_decode_and_rmc_speeds_agree_with_gpsd() -> None:
+    files = _gpsd_files()
+    assert len(files) >= 10
+    compared = 0
+    for path in files:
+        tpv = _tpv_speeds(path.with_name(path.name + ".chk"))
+        out, err = io.StringIO(), io.StringIO()
+        with path.open("rb") as stream:
+            assert decode_stream(stream, out, err) == 0
+        for row in map(json.loads, out.getvalue().splitlines()):
+            if row["type"] != "RMC" or row["speed_kmh"] is None or "T" not in (row["utc"] or ""):
+                continue
+            gpsd = tpv.get(_when(row["utc"]))
+            if gpsd is None:  # gpsd reported no speed for that epoch
+                continue
+            # gpsd prints m/s with 3 decimals.
+            assert any(abs(row["speed_kmh"] / 3.6 - s) < 6e-4 for s in gpsd), (path.name, row)
+            compared += 1
+    assert compared >= 600
+
+
+def test_gpsd_binary_and_cut_lines_are_counted_not_raised() -> None:
+    path = next((p for p in _gpsd_files() if p.name == "ublox-8.log"), None)
+    if path is None:
+        pytest.skip("ublox-8.log not present")
+    err = io.StringIO()
+    with path.open("rb") as stream:
+        decode_stream(stream, io.StringIO(), err)
+    assert "no_checksum=1" in err.getvalue()
+    assert "resync=1" in err.getvalue()
+
+
+def test_gnss_decode_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "capture.nmea"
+    path.write_bytes(b"# header\r\n" + TRIMBLE_RMC + b"\r\n\r\n$GPRMC,cut\r\n")
+    assert main(["gnss", "decode", str(path)]) == 0
+    out, err = capsys.readouterr()
+    rows = [json.loads(x) for x in out.splitlines()]
+    assert [r["line"] for r in rows] == [2, 4]
+    assert list(rows[0]) == [
+        "line",
+        "talker",
+        "type",
+        "ok",
+        "error",
+        "fix_valid",
+        "speed_kmh",
+        "course_deg",
+        "lat",
+        "lon",
+        "utc",
+    ]
+    assert rows[0]["ok"] and rows[0]["speed_kmh"] == pytest.approx(6.022704)
+    assert rows[1]["ok"] is False and rows[1]["error"].startswith("no_checksum")
+    assert "no_checksum=1" in err and "ok=1" in err
+
+
+def test_gnss_decode_missing_file(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["gnss", "decode", "/nonexistent/capture.nmea"]) == 2
+    assert "cannot read /nonexistent/capture.nmea" in capsys.readouterr().err
