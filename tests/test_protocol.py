@@ -28,7 +28,9 @@ from topdress.protocol import (
     decode,
     encode_command,
     encode_param_set,
+    is_known_id,
     param,
+    param_name,
     params,
 )
 
@@ -248,3 +250,14 @@ def test_parameter_ack() -> None:
     assert unknown.result is AckResult.UNKNOWN_PARAM and unknown.value is None
     with pytest.raises(ProtocolError, match="AckResult: undefined value 6"):
         decode((DEFAULT_IDS.param_ack, bytes([8, 6, 0, 0, 0, 0, 0, 0])))
+
+
+def test_known_ids_and_parameter_names() -> None:
+    assert is_known_id(0x185C6465) and is_known_id(0x0A606465)
+    assert not is_known_id(0x185C6466)
+    assert is_known_id(0x123, FrameIds(status=0x123)) and not is_known_id(
+        0x185C6465, FrameIds(status=0x123)
+    )
+    assert param_name(8) == "CvThreshold" and param_name("kg_per_rev[0]") == "UpperKgPerRev"
+    with pytest.raises(ProtocolError):
+        param_name(0)

@@ -13,6 +13,7 @@ from topdress.protocol.frames import (
     decode,
     encode_command,
     encode_param_set,
+    is_known_id,
 )
 from topdress.protocol.model import (
     DEFAULT_IDS,
@@ -25,7 +26,7 @@ from topdress.protocol.model import (
     Source,
     SpeedMode,
 )
-from topdress.protocol.params import ParamSpec, param, params
+from topdress.protocol.params import ParamSpec, param, param_name, params
 
 __all__ = [
     "DEFAULT_IDS",
@@ -51,6 +52,8 @@ __all__ = [
     "decode",
     "encode_command",
     "encode_param_set",
+    "is_known_id",
     "param",
+    "param_name",
     "params",
 ]

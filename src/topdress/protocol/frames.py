@@ -239,6 +239,19 @@ def _decode_param_ack(data: bytes) -> EcuParamAck:
     return EcuParamAck(raw["AckParamId"], result, raw["AckRaw"])
 
 
+def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
+    """True for the identifier of a frame of the protocol (to tell malformed from foreign)."""
+    return frame_id in (
+        ids.command,
+        ids.status,
+        ids.diag,
+        ids.speeds,
+        ids.targets,
+        ids.param_set,
+        ids.param_ack,
+    )
+
+
 def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
     """Decode any frame of the protocol; ProtocolError if it is not one, or not a valid one."""
     frame_id, data = _frame_parts(frame)

@@ -131,3 +131,8 @@ def param(key: int | str) -> ParamSpec:
         return _index()[key]
     except KeyError:
         raise ProtocolError(f"unknown ECU parameter {key!r}") from None
+
+
+def param_name(key: int | str) -> str:
+    """The DBC name of a parameter (`CvThreshold`), for messages."""
+    return param(key).signal

@@ -1,0 +1,278 @@
+"""cffi (API mode) builder of `topdress.ecu._core`: the C ECU core compiled into the package.
+
+setup.py runs from the repository root (`cffi_modules=["src/topdress/ecu/_build.py:ffibuilder"]`).
+The cdef restates the public part of ecu/include/td_*.h; `...;` lets the C compiler supply
+struct layouts, so a changed header is caught at build time instead of corrupting memory.
+"""
+
+from __future__ import annotations
+
+from glob import glob
+
+from cffi import FFI
+
+CDEF = r"""
+/* td_common.h */
+#define TD_OK ...
+#define TD_E_ARG ...
+#define TD_E_UNKNOWN_ID ...
+#define TD_E_LENGTH ...
+#define TD_E_RANGE ...
+#define TD_E_BUSY ...
+#define TD_E_UNKNOWN_PARAM ...
+#define TD_E_INCONSISTENT ...
+#define TD_E_FULL ...
+#define TD_FAULT_CMD_TIMEOUT ...
+#define TD_FAULT_GNSS_LOST ...
+#define TD_FAULT_WHEEL_ENCODER ...
+#define TD_FAULT_UPPER_BLOCKED ...
+#define TD_FAULT_LOWER_BLOCKED ...
+#define TD_FAULT_UPPER_FAN_LOW ...
+#define TD_FAULT_LOWER_FAN_LOW ...
+#define TD_FAULT_NO_SPEED ...
+#define TD_FAULT_LATCHED_MASK ...
+typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
+typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2 } td_source_t;
+typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2 } td_speed_mode_t;
+typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
+uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us);
+
+/* td_port.h */
+typedef struct { uint32_t id; uint8_t extended; uint8_t dlc; uint8_t data[8]; ...; } td_can_frame_t;
+typedef struct { uint32_t wheel_count; uint32_t meter_count[2]; uint32_t fan_count[2]; ...; }
+    td_io_in_t;
+typedef struct { float meter_duty[2]; float fan_duty[2]; ...; } td_io_out_t;
+
+/* td_params.h */
+typedef struct {
+    float working_width_m;
+    float kg_per_rev[2];
+    float wheel_radius_m;
+    uint16_t wheel_ppr;
+    uint8_t queue_len;
+    uint8_t cv_window;
+    float cv_threshold_pct;
+    float switch_speed_kmh;
+    uint8_t speed_mode;
+    uint8_t switch_compare;
+    float pid_kp;
+    float pid_ki;
+    float pid_kd;
+    float pid_kff;
+    uint16_t cmd_timeout_ms;
+    uint16_t gnss_timeout_ms;
+    float min_work_speed_kmh;
+    uint16_t wheel_update_ms;
+    uint8_t wheel_samples;
+    uint16_t meter_counts_per_rev;
+    uint16_t fan_min_rpm;
+    uint8_t fan_ppr;
+    float enc_fault_gnss_kmh;
+    uint16_t enc_fault_time_ms;
+    uint16_t blocked_time_ms;
+    uint16_t status_period_ms;
+    float fan_rpm_at_full_duty;
+    uint16_t fan_spinup_ms;
+    uint32_t status_id;
+    uint32_t command_id;
+    ...;
+} td_params_t;
+#define TD_PARAM_COUNT ...
+void td_params_default(td_params_t *p);
+int td_params_validate(const td_params_t *p);
+int td_params_set(td_params_t *p, uint8_t param_id, float value);
+int td_params_get(const td_params_t *p, uint8_t param_id, float *value);
+int td_params_encoding(uint8_t param_id, float *scale, uint32_t *raw_min, uint32_t *raw_max);
+
+/* td_wheel.h */
+#define TD_WHEEL_MAX_SAMPLES ...
+float td_wheel_speed_kmh(float f_hz, float radius_m, uint16_t ppr);
+typedef struct { float speed_kmh; uint8_t n_freq; ...; } td_wheel_t;
+int td_wheel_init(td_wheel_t *w, float radius_m, uint16_t ppr, uint8_t samples, uint16_t update_ms);
+bool td_wheel_step(td_wheel_t *w, uint32_t now_us, uint32_t count, float *speed_kmh);
+
+/* td_speedq.h */
+#define TD_SPEEDQ_MAX ...
+typedef struct { uint8_t len; uint8_t count; ...; } td_speedq_t;
+int td_speedq_init(td_speedq_t *q, uint8_t len);
+void td_speedq_push(td_speedq_t *q, float v_kmh);
+float td_speedq_cv_pct(const td_speedq_t *q, uint8_t n);
+float td_cv_pct(const float *v, uint8_t n);
+
+/* td_slip.h */
+float td_slip_measured_pct(float revolutions, float radius_m, float distance_m);
+float td_slip_model_pct(float v_kmh);
+float td_slip_model_speed_kmh(float slip_pct);
+
+/* td_meter.h */
+float td_meter_target_rpm(float width_m, float rate_kg_ha, float v_kmh, float kg_per_rev,
+                          float min_speed_kmh);
+
+/* td_pid.h */
+typedef struct {
+    float kp, ki, kd, kff;
+    float d_tau_s;
+    float out_min, out_max;
+    float integ;
+    float d_filt;
+    float prev_meas;
+    bool primed;
+    ...;
+} td_pid_t;
+void td_pid_init(td_pid_t *pid, float kp, float ki, float kd, float kff, float out_min,
+                 float out_max);
+void td_pid_reset(td_pid_t *pid);
+float td_pid_step(td_pid_t *pid, float setpoint, float measured, float dt_s);
+
+/* td_speedsel.h */
+td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float cv_pct,
+                             float cv_threshold_pct, float switch_speed_kmh, float v_wheel_kmh,
+                             float v_gnss_kmh, bool gnss_valid, bool wheel_valid);
+
+/* td_proto.h */
+#define TD_ID_ECU_STATUS ...
+#define TD_ID_PC_COMMAND ...
+#define TD_ID_ECU_DIAG ...
+#define TD_ID_ECU_SPEEDS ...
+#define TD_ID_ECU_TARGETS ...
+#define TD_ID_PC_PARAM_SET ...
+#define TD_ID_ECU_PARAM_ACK ...
+#define TD_RUN_STOPPED ...
+#define TD_RUN_RUNNING ...
+typedef struct {
+    bool start; float fan_rpm; float rate_kg_ha[2]; bool gnss_valid; float gnss_kmh; ...;
+} td_command_t;
+typedef struct {
+    bool running; float meter_rpm[2]; float fan_rpm[2]; float wheel_kmh; ...;
+} td_status_t;
+typedef struct {
+    uint8_t source; uint8_t mode; bool gnss_valid; bool uniform; uint8_t compare; float cv_pct;
+    uint16_t faults; uint32_t wheel_pulses; ...;
+} td_diag_t;
+typedef struct { float wheel_kmh, gnss_kmh, selected_kmh; uint16_t rx_rejected; ...; } td_speeds_t;
+typedef struct {
+    float target_rpm[2]; float meter_duty_pct[2]; float fan_duty_pct[2]; ...;
+} td_targets_t;
+typedef struct { uint8_t param_id; uint8_t result; uint32_t raw; ...; } td_param_ack_t;
+int td_proto_decode_command(const td_can_frame_t *f, td_command_t *out);
+int td_proto_encode_command(const td_command_t *c, td_can_frame_t *f);
+int td_proto_encode_status(const td_status_t *s, td_can_frame_t *f);
+int td_proto_decode_status(const td_can_frame_t *f, td_status_t *out);
+int td_proto_encode_diag(const td_diag_t *d, td_can_frame_t *f);
+int td_proto_encode_speeds(const td_speeds_t *s, td_can_frame_t *f);
+int td_proto_encode_targets(const td_targets_t *t, td_can_frame_t *f);
+int td_proto_encode_param_ack(const td_param_ack_t *a, td_can_frame_t *f);
+int td_proto_decode_param_set(const td_can_frame_t *f, uint8_t *param_id, float *value);
+uint32_t td_proto_param_raw(uint8_t param_id, float value);
+
+/* td_app.h */
+#define TD_TXQ_LEN ...
+typedef struct {
+    bool running;
+    td_source_t source;
+    float cv_pct;
+    bool uniform;
+    float v_wheel_kmh;
+    float v_gnss_kmh;
+    bool gnss_valid;
+    float v_kmh;
+    float rate_kg_ha[2];
+    float target_rpm[2];
+    float meter_rpm[2];
+    float fan_rpm[2];
+    float fan_target_rpm;
+    float meter_duty[2];
+    float fan_duty[2];
+    uint16_t faults;
+    uint32_t wheel_updates;
+    uint32_t wheel_pulses;
+    ...;
+} td_state_t;
+typedef struct {
+    uint32_t rx_ok;
+    uint32_t rx_unknown_id;
+    uint32_t rx_bad_length;
+    uint32_t rx_out_of_range;
+    uint32_t rx_param_rejected;
+    uint32_t tx_dropped;
+    ...;
+} td_counters_t;
+typedef struct { td_params_t p; td_state_t st; td_counters_t cnt; ...; } td_app_t;
+int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
+int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
+int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out);
+int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
+const td_state_t *td_app_state(const td_app_t *app);
+
+/* fast paths of the binding (below): one C call per step, per frame in, per frame out */
+int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
+              uint32_t f0, uint32_t f1, float out[4]);
+int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *data, size_t len,
+            uint32_t now_us);
+int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
+"""
+
+# Small C shims so that one Python call does one whole step, without filling structs field
+# by field from Python (the simulator calls step 360,000 times per simulated hour).
+SHIMS = r"""
+#include <string.h>
+#include "td_app.h"
+#include "td_meter.h"
+#include "td_slip.h"
+#include "td_speedsel.h"
+
+static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
+                     uint32_t f0, uint32_t f1, float out[4]) {
+    td_io_in_t in;
+    td_io_out_t o;
+    int rc;
+    in.wheel_count = wheel;
+    in.meter_count[0] = m0;
+    in.meter_count[1] = m1;
+    in.fan_count[0] = f0;
+    in.fan_count[1] = f1;
+    rc = td_app_step(app, now_us, &in, &o);
+    out[0] = o.meter_duty[0];
+    out[1] = o.meter_duty[1];
+    out[2] = o.fan_duty[0];
+    out[3] = o.fan_duty[1];
+    return rc;
+}
+
+/* A frame longer than 8 bytes (CAN FD) keeps its length in dlc so the core rejects it as
+   TD_E_LENGTH and counts it; only the first 8 bytes are copied. */
+static int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *data, size_t len,
+                   uint32_t now_us) {
+    td_can_frame_t f;
+    memset(&f, 0, sizeof f);
+    f.id = id;
+    f.extended = extended;
+    f.dlc = (uint8_t)(len > 255u ? 255u : len);
+    memcpy(f.data, data, len > 8u ? 8u : len);
+    return td_app_rx(app, &f, now_us);
+}
+
+/* Returns the frame length, or -1 when the transmit queue is empty. */
+static int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]) {
+    td_can_frame_t f;
+    if (!td_app_tx_pop(app, &f)) {
+        return -1;
+    }
+    *id = f.id;
+    memcpy(data, f.data, 8);
+    return f.dlc;
+}
+"""
+
+ffibuilder = FFI()
+ffibuilder.cdef(CDEF)
+ffibuilder.set_source(
+    "topdress.ecu._core",
+    SHIMS,
+    sources=[*sorted(glob("ecu/src/*.c")), "ecu/src/gen/td_can.c"],
+    include_dirs=["ecu/include", "ecu/src/gen"],
+    extra_compile_args=["-std=c99", "-O2"],
+)
+
+if __name__ == "__main__":
+    ffibuilder.compile(verbose=True)

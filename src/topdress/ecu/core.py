@@ -1,0 +1,185 @@
+"""The ECU application (td_app_t) from Python: frames in, a control step, frames out.
+
+The same C code as on the microcontroller; the caller plays the port (td_port.h): it passes
+the time and the cumulative encoder counters into every step, applies the duties, hands over
+received frames and drains the transmit queue. Counters and times wrap modulo 2**32.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import can
+
+from topdress.ecu._core import ffi, lib
+from topdress.ecu.params import EcuParams, check
+from topdress.errors import ProtocolError
+from topdress.protocol import CanFrame, Fault, Source
+
+_U32 = 0xFFFFFFFF
+_MAX_ID = 0x1FFFFFFF
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """PWM duties to apply after a step, 0..1, [upper, lower]."""
+
+    meter_duty: tuple[float, float]
+    fan_duty: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class EcuState:
+    """A snapshot of td_state_t; per-layer values are (upper, lower); cv_pct None = undefined."""
+
+    running: bool
+    source: Source
+    cv_pct: float | None
+    uniform: bool
+    v_wheel_kmh: float
+    v_gnss_kmh: float
+    gnss_valid: bool
+    v_kmh: float
+    rate_kg_ha: tuple[float, float]
+    target_rpm: tuple[float, float]
+    meter_rpm: tuple[float, float]
+    fan_rpm: tuple[float, float]
+    fan_target_rpm: float
+    meter_duty: tuple[float, float]
+    fan_duty: tuple[float, float]
+    faults: Fault
+    wheel_updates: int
+    wheel_pulses: int
+
+
+@dataclass(frozen=True)
+class EcuCounters:
+    """Frames received and refused, and frames dropped for a full transmit queue."""
+
+    rx_ok: int
+    rx_unknown_id: int
+    rx_bad_length: int
+    rx_out_of_range: int
+    rx_param_rejected: int
+    tx_dropped: int
+
+
+def _pair(a: Any) -> tuple[float, float]:
+    return (float(a[0]), float(a[1]))
+
+
+class Ecu:
+    """One ECU core instance (a td_app_t owned by Python)."""
+
+    def __init__(self, params: EcuParams | None = None, now_us: int = 0) -> None:
+        self._app = ffi.new("td_app_t *")
+        p = (params or EcuParams.defaults()).to_c()
+        check(lib.td_app_init(self._app, p, now_us & _U32), "Ecu")
+        self._out = ffi.new("float[4]")
+        self._tx_id = ffi.new("uint32_t *")
+        self._tx_data = ffi.new("char[8]")
+        # bound once: step_raw is the simulator's inner loop
+        self._step_fn = lib.tdpy_step
+        self._pop_fn = lib.tdpy_tx_pop
+
+    def rx(self, frame: can.Message | CanFrame, now_us: int) -> int:
+        """Hand one received frame to the core. Returns TD_OK (0) when acted on, or the negative
+        reason it was refused (counted in `counters`, never acted on). A tuple frame is
+        extended when its id does not fit 11 bits."""
+        if isinstance(frame, can.Message):
+            frame_id, data, ext = frame.arbitration_id, bytes(frame.data), frame.is_extended_id
+        else:
+            frame_id, data = frame[0], bytes(frame[1])
+            ext = frame_id > 0x7FF
+        if not 0 <= frame_id <= _MAX_ID:
+            raise ProtocolError(f"CAN id {frame_id:#x} is not an 11- or 29-bit identifier")
+        return int(lib.tdpy_rx(self._app, frame_id, ext, data, len(data), now_us & _U32))
+
+    def step_raw(
+        self, now_us: int, wheel_count: int, m0: int, m1: int, f0: int, f1: int
+    ) -> tuple[float, float, float, float]:
+        """One control step on plain values: (meter_duty_upper, meter_duty_lower,
+        fan_duty_upper, fan_duty_lower)."""
+        out = self._out
+        rc = self._step_fn(
+            self._app,
+            now_us & _U32,
+            wheel_count & _U32,
+            m0 & _U32,
+            m1 & _U32,
+            f0 & _U32,
+            f1 & _U32,
+            out,
+        )
+        if rc < 0:
+            check(rc, "Ecu.step")
+        return (out[0], out[1], out[2], out[3])
+
+    def step(
+        self,
+        now_us: int,
+        wheel_count: int,
+        meter_counts: tuple[int, int],
+        fan_counts: tuple[int, int],
+    ) -> Outputs:
+        """One control step: cumulative counters in, the duties to apply out."""
+        d = self.step_raw(now_us, wheel_count, *meter_counts, *fan_counts)
+        return Outputs(meter_duty=(d[0], d[1]), fan_duty=(d[2], d[3]))
+
+    def tx_raw(self) -> list[CanFrame]:
+        """Drain the transmit queue as (arbitration_id, data) tuples, oldest first."""
+        frames = []
+        id_p, data = self._tx_id, self._tx_data
+        while (n := self._pop_fn(self._app, id_p, data)) >= 0:
+            frames.append((int(id_p[0]), ffi.buffer(data, n)[:]))
+        return frames
+
+    def tx(self) -> list[can.Message]:
+        """Drain the transmit queue as python-can messages (29-bit ids), oldest first."""
+        return [
+            can.Message(arbitration_id=i, data=d, is_extended_id=True) for i, d in self.tx_raw()
+        ]
+
+    @property
+    def state(self) -> EcuState:
+        """A snapshot of the core's state, built on demand."""
+        s = lib.td_app_state(self._app)
+        return EcuState(
+            running=bool(s.running),
+            source=Source.from_code(int(s.source)),
+            cv_pct=None if s.cv_pct < 0 else float(s.cv_pct),
+            uniform=bool(s.uniform),
+            v_wheel_kmh=float(s.v_wheel_kmh),
+            v_gnss_kmh=float(s.v_gnss_kmh),
+            gnss_valid=bool(s.gnss_valid),
+            v_kmh=float(s.v_kmh),
+            rate_kg_ha=_pair(s.rate_kg_ha),
+            target_rpm=_pair(s.target_rpm),
+            meter_rpm=_pair(s.meter_rpm),
+            fan_rpm=_pair(s.fan_rpm),
+            fan_target_rpm=float(s.fan_target_rpm),
+            meter_duty=_pair(s.meter_duty),
+            fan_duty=_pair(s.fan_duty),
+            faults=Fault(int(s.faults)),
+            wheel_updates=int(s.wheel_updates),
+            wheel_pulses=int(s.wheel_pulses),
+        )
+
+    @property
+    def counters(self) -> EcuCounters:
+        """Receive and transmit counters of the core."""
+        c = self._app.cnt
+        return EcuCounters(
+            rx_ok=int(c.rx_ok),
+            rx_unknown_id=int(c.rx_unknown_id),
+            rx_bad_length=int(c.rx_bad_length),
+            rx_out_of_range=int(c.rx_out_of_range),
+            rx_param_rejected=int(c.rx_param_rejected),
+            tx_dropped=int(c.tx_dropped),
+        )
+
+    @property
+    def params(self) -> EcuParams:
+        """The parameters in force (they change through PcParamSet frames)."""
+        return EcuParams.from_c(ffi.addressof(self._app, "p"))
