@@ -340,6 +340,11 @@ class SessionReader:
         for values in cur:
             yield StateRow(*values)
 
+    def raw_counts(self) -> dict[str, int]:
+        """Number of raw inputs of each kind."""
+        rows = self._conn.execute("SELECT kind, count(*) FROM raw GROUP BY kind").fetchall()
+        return {str(kind): int(n) for kind, n in rows}
+
     def count(self, table: str) -> int:
         if table not in ("raw", "state"):
             raise ValueError(table)

@@ -1,0 +1,173 @@
+"""Raw-input events: the NDJSON format of `topdress log export` and `topdress replay`.
+
+One JSON object per line: "t" (seconds, monotonic) and exactly one of "nmea" (a sentence as
+received), "wheel_count" (cumulative ground-wheel encoder pulses), "crop" (a raw sensor line)
+or "can" ({"id": int, "data": "hex"}, optional "dir": "rx" ECU->terminal or "tx"
+terminal->ECU). Unknown keys are ignored; a malformed line is reported with its number and
+skipped, never fatal. See docs/log.md.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final, TextIO
+
+from topdress.errors import LogError
+
+_log = logging.getLogger(__name__)
+
+PAYLOAD_KEYS: Final = ("nmea", "wheel_count", "crop", "can")
+CAN_DIRS: Final = ("rx", "tx")
+_MAX_CAN_ID: Final = 0x1FFFFFFF
+
+
+@dataclass(frozen=True, slots=True)
+class NmeaEvent:
+    t: float
+    nmea: str
+
+
+@dataclass(frozen=True, slots=True)
+class WheelEvent:
+    t: float
+    wheel_count: int
+
+
+@dataclass(frozen=True, slots=True)
+class CropEvent:
+    t: float
+    crop: str
+
+
+@dataclass(frozen=True, slots=True)
+class CanEvent:
+    t: float
+    can_id: int
+    data: bytes
+    dir: str | None = None  # "rx": ECU -> terminal, "tx": terminal -> ECU, None: not known
+
+
+Event = NmeaEvent | WheelEvent | CropEvent | CanEvent
+
+
+class EventLineError(ValueError):
+    """One malformed event line (the reader reports it and goes on)."""
+
+
+def to_json(event: Event) -> str:
+    """One NDJSON line (without the newline). Floats keep full precision (repr)."""
+    obj: dict[str, Any] = {"t": event.t}
+    if isinstance(event, NmeaEvent):
+        obj["nmea"] = event.nmea
+    elif isinstance(event, WheelEvent):
+        obj["wheel_count"] = event.wheel_count
+    elif isinstance(event, CropEvent):
+        obj["crop"] = event.crop
+    else:
+        can: dict[str, Any] = {"id": event.can_id, "data": event.data.hex()}
+        if event.dir is not None:
+            can["dir"] = event.dir
+        obj["can"] = can
+    return json.dumps(obj, separators=(",", ":"), ensure_ascii=False)
+
+
+def parse(line: str) -> Event:
+    """Parse one line; EventLineError says what is wrong."""
+    try:
+        obj = json.loads(line)
+    except json.JSONDecodeError as exc:
+        raise EventLineError(f"not JSON: {exc.msg}") from None
+    if not isinstance(obj, dict):
+        raise EventLineError("not a JSON object")
+    t = obj.get("t")
+    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t):
+        raise EventLineError(f'"t" must be a number of seconds, not {t!r}')
+    keys = [k for k in PAYLOAD_KEYS if k in obj]
+    if len(keys) != 1:
+        raise EventLineError(
+            f"needs exactly one of {', '.join(PAYLOAD_KEYS)}; has {', '.join(keys) or 'none'}"
+        )
+    key = keys[0]
+    value = obj[key]
+    if key in ("nmea", "crop"):
+        if not isinstance(value, str):
+            raise EventLineError(f'"{key}" must be a string')
+        return NmeaEvent(float(t), value) if key == "nmea" else CropEvent(float(t), value)
+    if key == "wheel_count":
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise EventLineError(f'"wheel_count" must be an integer >= 0, not {value!r}')
+        return WheelEvent(float(t), value)
+    return _parse_can(float(t), value)
+
+
+def _parse_can(t: float, value: Any) -> CanEvent:
+    if not isinstance(value, dict):
+        raise EventLineError('"can" must be an object {"id": int, "data": "hex"}')
+    can_id = value.get("id")
+    if isinstance(can_id, bool) or not isinstance(can_id, int) or not 0 <= can_id <= _MAX_CAN_ID:
+        raise EventLineError(f'"can.id" must be an integer 0..0x1FFFFFFF, not {can_id!r}')
+    hexdata = value.get("data")
+    if not isinstance(hexdata, str):
+        raise EventLineError('"can.data" must be a hex string')
+    try:
+        data = bytes.fromhex(hexdata)
+    except ValueError:
+        raise EventLineError(f'"can.data" is not hex: {hexdata!r}') from None
+    if len(data) > 8:
+        raise EventLineError(f'"can.data" has {len(data)} bytes, a CAN frame at most 8')
+    direction = value.get("dir")
+    if direction is not None and direction not in CAN_DIRS:
+        raise EventLineError(f'"can.dir" must be "rx" or "tx", not {direction!r}')
+    return CanEvent(t, can_id, data, direction)
+
+
+@dataclass
+class ReadResult:
+    """Events in file order, and the malformed lines as (line number, reason)."""
+
+    events: list[Event] = field(default_factory=list)
+    bad: list[tuple[int, str]] = field(default_factory=list)
+
+
+def read_lines(lines: Iterable[str]) -> ReadResult:
+    """Parse NDJSON lines. Blank lines are skipped; a "t" earlier than the event before it is
+    reported and skipped (the clock is monotonic, so such a line is damaged)."""
+    result = ReadResult()
+    last_t = -math.inf
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            event = parse(line)
+            if event.t < last_t:
+                raise EventLineError(f"t = {event.t!r} goes back from {last_t!r}")
+        except EventLineError as exc:
+            result.bad.append((number, str(exc)))
+            _log.warning("events line %d skipped: %s", number, exc)
+            continue
+        last_t = event.t
+        result.events.append(event)
+    return result
+
+
+def read_file(path: str | Path) -> ReadResult:
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return read_lines(f)
+    except OSError as exc:
+        raise LogError(f"cannot read events {path}: {exc}") from exc
+
+
+def write(events: Iterable[Event], out: TextIO) -> int:
+    """Write events as NDJSON; returns how many."""
+    n = 0
+    for event in events:
+        out.write(to_json(event))
+        out.write("\n")
+        n += 1
+    return n

@@ -1,0 +1,234 @@
+"""Replay recorded raw inputs through the ECU core (the same C code as in the field).
+
+Virtual time: the ECU steps every 10 ms from the first event's time. Before each step every
+event due by then is applied:
+- `nmea`: through the terminal's NmeaDecoder and GnssSpeedTracker; the speed is forwarded in a
+  PcCommand every `can.command_period_s` (and on each new fix with `can.send_on_gnss`), as
+  the terminal does, carrying "not available" when the tracker has no fresh valid speed.
+- `wheel_count`: the wheel encoder input, linearly interpolated between events (integer
+  pulses, rounded down); held before the first and after the last. Between two events the
+  wheel is taken to turn evenly, which is what a frequency input sees; events every 10 ms on
+  the step grid make the input exact.
+- `can` terminal->ECU PcCommand: its start flag, fan speed and rates are kept for the next
+  commands (its GNSS speed is not: that comes from the NMEA). Other frames are ignored.
+- `crop`: ignored (the speeds do not depend on it).
+Output: one row at every ECU speed update (wheel_updates increments).
+"""
+
+from __future__ import annotations
+
+import bisect
+import csv
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Final, TextIO
+
+from topdress import protocol
+from topdress.ecu import Ecu, EcuParams
+from topdress.errors import ProtocolError
+from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent
+from topdress.protocol.frames import GNSS_MAX_KMH
+from topdress.terminal.config import SPEED_MODE_IDS, TerminalConfig
+from topdress.terminal.gnss import GnssSpeedTracker
+from topdress.terminal.nmea import NmeaDecoder
+
+_log = logging.getLogger(__name__)
+
+STEP_US: Final = 10_000
+COLUMNS: Final = ("t", "v_wheel_kmh", "v_gnss_kmh", "v_kmh", "source", "cv_pct")
+
+
+@dataclass(frozen=True, slots=True)
+class ReplayRow:
+    t: float
+    v_wheel_kmh: float
+    v_gnss_kmh: float | None  # None: the ECU has no valid GNSS speed
+    v_kmh: float
+    source: str
+    cv_pct: float | None  # None: undefined (queue not full yet)
+
+
+@dataclass
+class ReplayStats:
+    steps: int = 0
+    commands: int = 0
+    nmea_rejected: int = 0
+    bad_commands: int = 0  # recorded PcCommand frames that did not decode
+    ecu_rx_refused: int = 0
+
+
+@dataclass
+class _Command:
+    start: bool
+    fan_rpm: float
+    rate_upper_kg_ha: float = 0.0
+    rate_lower_kg_ha: float = 0.0
+
+
+@dataclass
+class _WheelInput:
+    """Cumulative wheel pulses at any step time, from the wheel_count events."""
+
+    times_us: list[int] = field(default_factory=list)
+    counts: list[int] = field(default_factory=list)
+
+    def at(self, t_us: int) -> int:
+        if not self.counts:
+            return 0
+        i = bisect.bisect_right(self.times_us, t_us)
+        if i == 0:
+            return self.counts[0]
+        if i == len(self.counts):
+            return self.counts[-1]
+        t0, t1 = self.times_us[i - 1], self.times_us[i]
+        c0, c1 = self.counts[i - 1], self.counts[i]
+        return c0 + (c1 - c0) * (t_us - t0) // (t1 - t0)
+
+
+def ecu_params(cfg: TerminalConfig, speed_mode: str) -> EcuParams:
+    """The parameters the terminal would push at start, with the replay's speed mode."""
+    pushed = cfg.ecu_params()
+    pushed[protocol.param("speed_mode").id] = SPEED_MODE_IDS[speed_mode]
+    base = EcuParams.defaults()
+    kg = list(base.kg_per_rev)
+    changes: dict[str, float | int] = {}
+    for pid, value in pushed.items():
+        spec = protocol.param(pid)
+        if spec.index is not None:
+            kg[spec.index] = float(value)
+        else:
+            changes[spec.field] = int(value) if spec.integer else float(value)
+    ids = cfg.can.ids
+    return base.replace(
+        **changes,
+        kg_per_rev=(kg[0], kg[1]),
+        status_id=ids["status"],
+        command_id=ids["command"],
+    ).validate()
+
+
+def _us(t: float, t0: float) -> int:
+    return round((t - t0) * 1e6)
+
+
+def replay(
+    events: Sequence[Event],
+    cfg: TerminalConfig,
+    speed_mode: str = "paper",
+    stats: ReplayStats | None = None,
+) -> list[ReplayRow]:
+    """Run `events` (in time order) through a fresh ECU core; rows at each speed update."""
+    stats = stats if stats is not None else ReplayStats()
+    if not events:
+        return []
+    t0 = events[0].t
+    ids = protocol.FrameIds(**cfg.can.ids)
+    ecu = Ecu(ecu_params(cfg, speed_mode), now_us=0)
+    wheel = _WheelInput()
+    for e in events:
+        if isinstance(e, WheelEvent):
+            wheel.times_us.append(_us(e.t, t0))
+            wheel.counts.append(e.wheel_count)
+    decoder = NmeaDecoder()
+    tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
+    command = _Command(start=True, fan_rpm=float(cfg.machine.fan_rpm))
+    period_us = round(cfg.can.command_period_s * 1e6)
+    last_cmd_us: int | None = None
+    end_us = _us(events[-1].t, t0)
+    rows: list[ReplayRow] = []
+    updates = ecu.state.wheel_updates
+    i = 0
+    now_us = 0
+    while now_us <= end_us:
+        t = t0 + now_us / 1e6
+        new_fix = False
+        while i < len(events) and _us(events[i].t, t0) <= now_us:
+            e = events[i]
+            i += 1
+            if isinstance(e, NmeaEvent):
+                fix = decoder.decode(e.nmea)
+                if not fix.ok:
+                    stats.nmea_rejected += 1
+                new_fix |= tracker.update(e.t, fix) is not None
+            elif isinstance(e, CanEvent) and e.dir != "rx" and e.can_id == ids.command:
+                _take_command(command, e, ids, stats)
+        if (
+            last_cmd_us is None
+            or now_us - last_cmd_us >= period_us
+            or (new_fix and cfg.can.send_on_gnss)
+        ):
+            msg = protocol.encode_command(
+                command.start,
+                command.fan_rpm,
+                command.rate_upper_kg_ha,
+                command.rate_lower_kg_ha,
+                _forwardable(tracker.current(t)),
+                ids=ids,
+            )
+            if ecu.rx(msg, now_us) < 0:
+                stats.ecu_rx_refused += 1
+            stats.commands += 1
+            last_cmd_us = now_us
+        ecu.step_raw(now_us, wheel.at(now_us), 0, 0, 0, 0)
+        ecu.tx_raw()  # the ECU's frames are not needed here; keep its queue from filling
+        stats.steps += 1
+        state = ecu.state
+        if state.wheel_updates != updates:
+            updates = state.wheel_updates
+            rows.append(
+                ReplayRow(
+                    t=t,
+                    v_wheel_kmh=state.v_wheel_kmh,
+                    v_gnss_kmh=state.v_gnss_kmh if state.gnss_valid else None,
+                    v_kmh=state.v_kmh,
+                    source=str(state.source),
+                    cv_pct=state.cv_pct,
+                )
+            )
+        now_us += STEP_US
+    return rows
+
+
+def _forwardable(kmh: float | None) -> float | None:
+    # PcCommand carries 0..25 km/h; a faster (bogus) reading is sent as "not available".
+    if kmh is None or not 0.0 <= kmh <= GNSS_MAX_KMH:
+        return None
+    return kmh
+
+
+def _take_command(
+    command: _Command, e: CanEvent, ids: protocol.FrameIds, stats: ReplayStats
+) -> None:
+    try:
+        decoded = protocol.decode((e.can_id, e.data), ids)
+    except ProtocolError as exc:
+        stats.bad_commands += 1
+        _log.warning("recorded PcCommand at t=%r not decoded: %s", e.t, exc)
+        return
+    assert isinstance(decoded, protocol.PcCommand)
+    command.start = decoded.start
+    command.fan_rpm = decoded.fan_rpm
+    command.rate_upper_kg_ha = decoded.rate_upper_kg_ha
+    command.rate_lower_kg_ha = decoded.rate_lower_kg_ha
+
+
+def _fmt(value: float | None) -> str:
+    return "" if value is None else f"{value:.3f}"
+
+
+def write_csv(rows: Sequence[ReplayRow], out: TextIO) -> None:
+    """Columns t,v_wheel_kmh,v_gnss_kmh,v_kmh,source,cv_pct; empty = not available."""
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(COLUMNS)
+    for r in rows:
+        writer.writerow(
+            (
+                f"{r.t:.3f}",
+                _fmt(r.v_wheel_kmh),
+                _fmt(r.v_gnss_kmh),
+                _fmt(r.v_kmh),
+                r.source,
+                _fmt(r.cv_pct),
+            )
+        )

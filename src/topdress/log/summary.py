@@ -1,0 +1,150 @@
+"""The figures an engineer checks after a run, from a session's state rows.
+
+Integrals are left sums over consecutive rows (each row's values hold until the next row);
+an interval longer than MAX_GAP_S (the log lost rows, or the terminal was paused) is not
+integrated and is reported as a gap instead.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict, dataclass, field
+from typing import Any, Final
+
+from topdress import protocol
+from topdress.errors import ConfigError
+from topdress.log.model import RAW_KINDS, SOURCES, StateRow
+from topdress.log.session import SessionReader
+from topdress.terminal.config import MachineConfig, loads_config
+
+_log = logging.getLogger(__name__)
+
+MAX_GAP_S: Final = 1.0
+LAYERS: Final = ("upper", "lower")
+
+
+@dataclass
+class LayerSummary:
+    applied_kg: float = 0.0  # integral of measured metering speed x kg/rev
+    target_kg: float = 0.0  # integral of target metering speed x kg/rev
+    applied_kg_ha: float | None = None  # over the metered area
+    rate_error_pct: float | None = None  # (applied - target) / target; None when no target
+
+
+@dataclass
+class Summary:
+    path: str
+    duration_s: float = 0.0
+    distance_m: float = 0.0  # of the selected speed (the one that drove the meters)
+    metering_distance_m: float = 0.0
+    area_ha: float = 0.0  # metering distance x working width
+    width_m: float = 0.0
+    layers: dict[str, LayerSummary] = field(default_factory=dict)
+    source_s: dict[str, float] = field(default_factory=dict)
+    faults_s: dict[str, float] = field(default_factory=dict)
+    gaps: int = 0
+    gap_s: float = 0.0
+    state_rows: int = 0
+    raw_inputs: dict[str, int] = field(default_factory=dict)
+    log_meta: dict[str, str] = field(default_factory=dict)  # loss counters stored at close
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _machine(config_toml: str) -> MachineConfig:
+    try:
+        return loads_config(config_toml).machine
+    except ConfigError as exc:
+        _log.warning("session configuration unreadable (%s): default machine used", exc)
+        return MachineConfig()
+
+
+def summarise(reader: SessionReader) -> Summary:
+    machine = _machine(reader.config_toml)
+    kg_per_rev = (machine.kg_per_rev_upper, machine.kg_per_rev_lower)
+    s = Summary(str(reader.path), width_m=machine.width_m)
+    s.source_s = dict.fromkeys(SOURCES, 0.0)
+    s.raw_inputs = reader.raw_counts()
+    s.log_meta = {
+        k: v
+        for k, v in reader.meta.items()
+        if k in ("created_utc", "closed_utc", "dropped", "lost", "errors")
+    }
+    layers = [LayerSummary(), LayerSummary()]
+    first: StateRow | None = None
+    prev: StateRow | None = None
+    for row in reader.states():
+        s.state_rows += 1
+        if prev is None:
+            first = row
+        else:
+            _integrate(s, layers, kg_per_rev, prev, row.t - prev.t)
+        prev = row
+    if first is not None and prev is not None:
+        s.duration_s = prev.t - first.t
+    s.area_ha = s.metering_distance_m * machine.width_m / 10_000.0
+    for layer in layers:
+        if s.area_ha > 0:
+            layer.applied_kg_ha = layer.applied_kg / s.area_ha
+        if layer.target_kg > 0:
+            layer.rate_error_pct = (layer.applied_kg - layer.target_kg) / layer.target_kg * 100.0
+    s.layers = dict(zip(LAYERS, layers, strict=True))
+    return s
+
+
+def _integrate(
+    s: Summary,
+    layers: list[LayerSummary],
+    kg_per_rev: tuple[float, float],
+    row: StateRow,
+    dt: float,
+) -> None:
+    if dt > MAX_GAP_S or dt < 0:
+        s.gaps += 1
+        s.gap_s += max(dt, 0.0)
+        return
+    metres = row.v_kmh / 3.6 * dt
+    s.distance_m += metres
+    meter_rpm = (row.meter_rpm_upper, row.meter_rpm_lower)
+    target_rpm = (row.target_rpm_upper, row.target_rpm_lower)
+    if any(rpm > 0 for rpm in meter_rpm):
+        s.metering_distance_m += metres
+    for i, layer in enumerate(layers):
+        layer.applied_kg += meter_rpm[i] / 60.0 * kg_per_rev[i] * dt
+        layer.target_kg += target_rpm[i] / 60.0 * kg_per_rev[i] * dt
+    s.source_s[row.source] = s.source_s.get(row.source, 0.0) + dt
+    for fault in protocol.Fault(row.faults & 0xFFFF):
+        name = fault.name or str(int(fault))
+        s.faults_s[name] = s.faults_s.get(name, 0.0) + dt
+
+
+def format_text(s: Summary) -> str:
+    lines = [
+        f"session          {s.path}",
+        f"duration         {s.duration_s:.1f} s ({s.state_rows} state rows)",
+        f"distance         {s.distance_m:.1f} m, metering {s.metering_distance_m:.1f} m",
+        f"area             {s.area_ha:.4f} ha ({s.width_m:g} m working width)",
+    ]
+    for name, layer in s.layers.items():
+        rate = "-" if layer.applied_kg_ha is None else f"{layer.applied_kg_ha:.1f} kg/ha"
+        err = "-" if layer.rate_error_pct is None else f"{layer.rate_error_pct:+.1f} %"
+        lines.append(
+            f"{name + ' layer':<16} applied {layer.applied_kg:.2f} kg ({rate}), "
+            f"target {layer.target_kg:.2f} kg, rate error {err}"
+        )
+    sources = ", ".join(f"{k} {v:.1f} s" for k, v in s.source_s.items())
+    lines.append(f"speed source     {sources}")
+    faults = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(s.faults_s.items())) or "none"
+    lines.append(f"faults           {faults}")
+    if s.gaps:
+        lines.append(f"gaps             {s.gaps} (longer than {MAX_GAP_S:g} s), {s.gap_s:.1f} s")
+    raw = ", ".join(f"{k} {s.raw_inputs.get(k, 0)}" for k in RAW_KINDS)
+    lines.append(f"raw inputs       {raw}")
+    if s.log_meta:
+        lines.append("log              " + ", ".join(f"{k} {v}" for k, v in s.log_meta.items()))
+    if "closed_utc" not in s.log_meta:
+        lines.append(
+            "log              not closed cleanly (power cut or kill): the tail may be missing"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,166 @@
+"""Event format (NDJSON) and `topdress log export`."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from topdress import protocol
+from topdress.cli import main
+from topdress.log.events import (
+    CanEvent,
+    CropEvent,
+    Event,
+    NmeaEvent,
+    WheelEvent,
+    parse,
+    read_file,
+    read_lines,
+    to_json,
+)
+from topdress.log.export import WHEEL_PULSES_MOD, WheelUnwrap, session_events
+from topdress.log.model import StateRow
+from topdress.log.session import SessionLog, SessionReader
+
+RMC = "$GPRMC,123519,A,4807.038,N,01131.000,E,3.78,084.4,230394,003.1,W*6E"
+CROP = "2,0.0412,0.2104,0.4419,0.3541,0.8295"
+
+
+def diag_frame(pulses: int, ids: protocol.FrameIds = protocol.DEFAULT_IDS) -> tuple[int, bytes]:
+    data = (
+        protocol.database()
+        .get_message_by_name("EcuDiag")
+        .encode(
+            {
+                "SpeedSource": 1,
+                "SpeedMode": 0,
+                "GnssValid": 1,
+                "Uniform": 1,
+                "SwitchCompare": 0,
+                "Cv": 1.5,
+                "FaultWord": 0,
+                "WheelPulses": pulses,
+            }
+        )
+    )
+    return ids.diag, bytes(data)
+
+
+@pytest.mark.parametrize(
+    "event",
+    [
+        NmeaEvent(12.5, RMC),
+        WheelEvent(0.1 + 0.2, 16_777_300),
+        CropEvent(1e-3, CROP),
+        CanEvent(3.0, 0x0A5C6465, bytes.fromhex("0ab80b983a000037"), "tx"),
+        CanEvent(3.0, 0x123, b"", None),
+    ],
+)
+def test_every_event_round_trips_exactly(event: Event) -> None:
+    line = to_json(event)
+    assert "\n" not in line
+    assert parse(line) == event
+
+
+def test_documented_examples_parse() -> None:
+    assert parse('{"t": 100.02, "can": {"id": 408708197, "data": "0a"}}') == CanEvent(
+        100.02, 0x185C6465, b"\x0a"
+    )
+    assert parse('{"t": 7, "wheel_count": 1500, "note": "x"}') == WheelEvent(7.0, 1500)
+
+
+def test_malformed_lines_are_reported_with_their_number_and_skipped() -> None:
+    lines = [
+        '{"t": 1.0, "nmea": "' + RMC + '"}',  # 1 ok
+        "not json",  # 2
+        "[1, 2]",  # 3
+        '{"nmea": "x"}',  # 4 no t
+        '{"t": true, "crop": "x"}',  # 5
+        '{"t": 2.0, "nmea": "x", "crop": "y"}',  # 6 two payloads
+        '{"t": 2.0, "speed": 3}',  # 7 no payload
+        '{"t": 2.0, "wheel_count": -5}',  # 8
+        '{"t": 2.0, "wheel_count": 2.5}',  # 9
+        '{"t": 2.0, "can": {"id": 536870912, "data": "00"}}',  # 10 id > 29 bits
+        '{"t": 2.0, "can": {"id": 1, "data": "zz"}}',  # 11
+        '{"t": 2.0, "can": {"id": 1, "data": "000000000000000000"}}',  # 12 9 bytes
+        "",  # 13 blank: skipped silently
+        '{"t": 0.5, "crop": "' + CROP + '"}',  # 14 goes back in time
+        '{"t": 2.0, "wheel_count": 40, "extra": {"a": 1}}',  # 15 ok (unknown key)
+        '{"t": 2.0, "can": {"id": 1, "data": "00", "dir": "up"}}',  # 16
+        '{"t": NaN, "nmea": "x"}',  # 17
+    ]
+    result = read_lines(lines)
+    assert result.events == [NmeaEvent(1.0, RMC), WheelEvent(2.0, 40)]
+    numbers = [n for n, _ in result.bad]
+    assert numbers == [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 14, 16, 17]
+    reasons = dict(result.bad)
+    assert "not JSON" in reasons[2]
+    assert "exactly one" in reasons[6] and "nmea, crop" in reasons[6]
+    assert "goes back" in reasons[14]
+
+
+def test_unwrap_counts_forward_across_the_24_bit_wrap() -> None:
+    u = WheelUnwrap()
+    assert u.update(WHEEL_PULSES_MOD - 10) == WHEEL_PULSES_MOD - 10
+    assert u.update(5) == WHEEL_PULSES_MOD + 5
+    assert u.update(5) == WHEEL_PULSES_MOD + 5
+    assert u.update(105) == WHEEL_PULSES_MOD + 105
+
+
+def make_session(directory: Path) -> Path:
+    with SessionLog.create(directory, "[machine]\nwidth_m = 3.6\n") as log:
+        log.raw("nmea", 100.0, RMC)
+        log.raw("crop", 100.01, CROP)
+        log.raw("can_rx", 100.05, diag_frame(WHEEL_PULSES_MOD - 100))
+        log.raw("can_tx", 100.08, (0x0A5C6465, bytes.fromhex("0ab80b983a000037")))
+        log.raw("can_rx", 100.15, diag_frame(50))
+        log.raw("can_rx", 100.16, (0x185D6465, b"\x00\x01"))  # short EcuDiag: not decodable
+        log.state(StateRow(100.1, 45.5, 126.5, None, 1.2, 1.2, "wheel", None, 0.83, *[0.0] * 8, 2))
+    return log.path
+
+
+def test_export_turns_diag_frames_into_cumulative_wheel_counts(tmp_path: Path) -> None:
+    path = make_session(tmp_path)
+    with SessionReader(path) as reader:
+        events = list(session_events(reader))
+    assert events == [
+        NmeaEvent(100.0, RMC),
+        CropEvent(100.01, CROP),
+        CanEvent(100.05, *diag_frame(WHEEL_PULSES_MOD - 100), "rx"),
+        WheelEvent(100.05, WHEEL_PULSES_MOD - 100),
+        CanEvent(100.08, 0x0A5C6465, bytes.fromhex("0ab80b983a000037"), "tx"),
+        CanEvent(100.15, *diag_frame(50), "rx"),
+        WheelEvent(100.15, WHEEL_PULSES_MOD + 50),
+        CanEvent(100.16, 0x185D6465, b"\x00\x01", "rx"),
+    ]
+
+
+def test_export_command_writes_events_and_csv(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = make_session(tmp_path)
+    events, table = tmp_path / "out.ndjson", tmp_path / "out.csv"
+    assert main(["log", "export", str(path), "--events", str(events), "--csv", str(table)]) == 0
+    assert "8 events (2 wheel counts), 1 EcuDiag frames not decoded" in capsys.readouterr().out
+    lines = events.read_text().splitlines()
+    assert json.loads(lines[3]) == {"t": 100.05, "wheel_count": WHEEL_PULSES_MOD - 100}
+    assert read_file(events).events[0] == NmeaEvent(100.0, RMC)
+    with table.open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 1
+    assert rows[0]["lat"] == "45.5" and rows[0]["v_gnss_kmh"] == "" and rows[0]["faults"] == "2"
+    assert rows[0]["ndvi"] == "0.83" and rows[0]["source"] == "wheel"
+
+
+def test_export_errors_are_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["log", "export", str(tmp_path / "none.sqlite"), "--events", "x"]) == 2
+    assert "no such session file" in capsys.readouterr().err
+    path = make_session(tmp_path)
+    assert main(["log", "export", str(path)]) == 2
+    assert "nothing to do" in capsys.readouterr().err
+    out = tmp_path / "missing-dir" / "e.ndjson"
+    assert main(["log", "export", str(path), "--events", str(out)]) == 2
+    assert "cannot write" in capsys.readouterr().err
