@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from topdress.ecu._core import ffi, lib
 
 from topdress.ecu import (
     cv_pct,
@@ -16,7 +17,6 @@ from topdress.ecu import (
     speed_rule,
     wheel_speed_kmh,
 )
-from topdress.ecu._core import ffi, lib
 from topdress.errors import EcuError
 from topdress.protocol import Compare, Source, SpeedMode
 
