@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 from collections.abc import Iterator
 from typing import Any, BinaryIO, TextIO
@@ -30,12 +31,21 @@ def register(sub: Any) -> None:
 
 def _decode_command(args: argparse.Namespace) -> int:
     if args.file == "-":
-        return decode_stream(sys.stdin.buffer, sys.stdout, sys.stderr)
+        return _decode_to_stdout(sys.stdin.buffer)
     try:
-        with open(args.file, "rb") as stream:
-            return decode_stream(stream, sys.stdout, sys.stderr)
+        stream = open(args.file, "rb")  # noqa: SIM115 - closed below
     except OSError as exc:
         raise DeviceError(f"cannot read {args.file}: {exc}") from exc
+    with stream:
+        return _decode_to_stdout(stream)
+
+
+def _decode_to_stdout(stream: BinaryIO) -> int:
+    try:
+        return decode_stream(stream, sys.stdout, sys.stderr)
+    except BrokenPipeError:  # `| head`: the reader has all it wanted
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - quiets the flush at exit
+        return 0
 
 
 def decode_stream(stream: BinaryIO, out: TextIO, err: TextIO) -> int:
