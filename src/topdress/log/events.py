@@ -148,7 +148,7 @@ def read_lines(lines: Iterable[str]) -> ReadResult:
                 raise EventLineError(f"t = {event.t!r} goes back from {last_t!r}")
         except EventLineError as exc:
             result.bad.append((number, str(exc)))
-            _log.warning("events line %d skipped: %s", number, exc)
+            _log.debug("events line %d skipped: %s", number, exc)
             continue
         last_t = event.t
         result.events.append(event)
