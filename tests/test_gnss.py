@@ -261,3 +261,14 @@ def test_gnss_decode_command(tmp_path: Path, capsys: pytest.CaptureFixture[str])
 def test_gnss_decode_missing_file(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["gnss", "decode", "/nonexistent/capture.nmea"]) == 2
     assert "cannot read /nonexistent/capture.nmea" in capsys.readouterr().err
+
+
+def test_gnss_decode_reads_stdin(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = TRIMBLE_RMC + b"\r\n\xb5b\x01\x07\r\n"
+    monkeypatch.setattr("sys.stdin", io.TextIOWrapper(io.BytesIO(data)))
+    assert main(["gnss", "decode", "-"]) == 0
+    rows = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    assert [(r["line"], r["ok"]) for r in rows] == [(1, True), (2, False)]
+    assert rows[1]["error"].startswith("binary:")

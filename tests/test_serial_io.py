@@ -12,12 +12,14 @@ from pathlib import Path
 import pytest
 
 from topdress.errors import DeviceError
+from topdress.terminal.config import CropConfig, GnssConfig
 from topdress.terminal.nmea import NmeaDecoder, make_sentence
 from topdress.terminal.serial_io import (
     FakeLineSource,
     FileLineSource,
     LineSplitter,
     SerialLineSource,
+    StdinLineSource,
     open_line_source,
 )
 
@@ -156,7 +158,25 @@ def test_missing_file_is_a_device_error(tmp_path: Path) -> None:
     with pytest.raises(DeviceError):
         FileLineSource(tmp_path / "absent.nmea")
     with pytest.raises(DeviceError):
-        open_line_source("tcp", "", 9600, "")
+        open_line_source(GnssConfig(source="file", path=str(tmp_path / "absent.nmea")))
+    with pytest.raises(DeviceError):
+        open_line_source(GnssConfig(source="tcp"))
+
+
+def test_open_line_source_follows_the_config(tmp_path: Path) -> None:
+    path = tmp_path / "crop.txt"
+    path.write_bytes(b"1,0.0412,0.2104,0.4419,0.3541,0.8295\r\n")
+    src = open_line_source(CropConfig(source="file", path=str(path), replay_interval_s=0.0))
+    assert isinstance(src, FileLineSource)
+    got = Collector()
+    src.start(got)
+    assert src.finished.wait(5.0)
+    src.stop()
+    assert got.lines == [b"1,0.0412,0.2104,0.4419,0.3541,0.8295"]
+    serial_src = open_line_source(GnssConfig(port="/dev/ttyS9", baud=4800))
+    assert isinstance(serial_src, SerialLineSource)
+    assert (serial_src.port, serial_src.baud) == ("/dev/ttyS9", 4800)
+    assert isinstance(open_line_source(GnssConfig(source="stdin")), StdinLineSource)
 
 
 def test_fake_source_fault_knobs_and_decoder_counts() -> None:

@@ -88,6 +88,7 @@ class GnssConfig:
     port: str = "/dev/ttyUSB0"
     baud: int = _num(9600, 300, 921600)
     path: str = ""
+    replay_interval_s: float = _num(0.1, 0.0, 10.0)  # pause between lines of a replayed file
     # VTG speed is forwarded only when no valid RMC came for this long.
     rmc_timeout_s: float = _num(1.5, 0.1, 60.0)
     # A GNSS speed older than this is not forwarded (the ECU gets "not available").
@@ -103,6 +104,7 @@ class CropConfig:
     port: str = "/dev/ttyUSB1"
     baud: int = _num(38400, 300, 921600)
     path: str = ""
+    replay_interval_s: float = _num(0.025, 0.0, 10.0)
     sensors: int = _num(4, 1, 16)
     columns: Mapping[str, int] = field(
         default_factory=lambda: {name: i for i, name in enumerate(CROP_COLUMN_NAMES)}
@@ -445,6 +447,7 @@ source = "serial"          # serial | file | stdin
 port = "/dev/ttyUSB0"
 baud = 9600
 path = ""                  # NMEA file when source = "file"
+replay_interval_s = 0.1    # pause between the lines of that file (0 = as fast as read)
 rmc_timeout_s = 1.5        # VTG speed used only when no RMC came for this long
 stale_s = 2.0              # a GNSS speed older than this is sent as "not available"
 
@@ -452,7 +455,8 @@ stale_s = 2.0              # a GNSS speed older than this is sent as "not availa
 source = "serial"          # serial | file | stdin
 port = "/dev/ttyUSB1"
 baud = 38400
-path = ""
+path = ""                  # sensor line file when source = "file"
+replay_interval_s = 0.025  # 4 sensors at 10 Hz
 sensors = 4                # sensor ids 1..sensors; their mean NDVI drives the rate
 ndvi_min = 0.0             # NDVI outside [ndvi_min, ndvi_max] is rejected
 ndvi_max = 1.0

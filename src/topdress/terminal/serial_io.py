@@ -20,6 +20,7 @@ from typing import BinaryIO, Protocol
 import serial
 
 from topdress.errors import DeviceError
+from topdress.terminal.config import CropConfig, GnssConfig
 
 Sink = Callable[[float, bytes], None]
 Clock = Callable[[], float]
@@ -271,12 +272,12 @@ class FakeLineSource:
         return line[:i] + bytes([flipped]) + line[i + 1 :]
 
 
-def open_line_source(source: str, port: str, baud: int, path: str) -> LineSource:
+def open_line_source(cfg: GnssConfig | CropConfig) -> LineSource:
     """The source a [gnss] or [crop] section asks for."""
-    if source == "serial":
-        return SerialLineSource(port, baud)
-    if source == "file":
-        return FileLineSource(path)
-    if source == "stdin":
+    if cfg.source == "serial":
+        return SerialLineSource(cfg.port, cfg.baud)
+    if cfg.source == "file":
+        return FileLineSource(cfg.path, cfg.replay_interval_s)
+    if cfg.source == "stdin":
         return StdinLineSource()
-    raise DeviceError(f"unknown line source {source!r}")
+    raise DeviceError(f"unknown line source {cfg.source!r}")
