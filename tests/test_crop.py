@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+import threading
 
 import pytest
 
@@ -15,6 +17,7 @@ from topdress.terminal.crop import (
     Odometer,
     parse_crop_line,
 )
+from topdress.terminal.serial_io import SerialLineSource
 
 CFG = default_config().crop
 COLUMNS = CFG.columns
@@ -170,3 +173,30 @@ def test_compensation_applies_a_step_when_the_meters_reach_it() -> None:
     assert first[3.9] == pytest.approx(0.5)
     assert first[4.0] == pytest.approx(0.8)
     assert first[7.9] == pytest.approx(0.8)
+
+
+def test_crop_lines_over_a_pseudo_terminal() -> None:
+    master, slave = os.openpty()
+    sensors = CropSensors(CFG)
+    done = threading.Event()
+
+    times: list[float] = []
+
+    def sink(t: float, line: bytes) -> None:
+        times.append(t)
+        sensors.feed(t, line)
+        if sum(sensors.counters.values()) == 5:
+            done.set()
+
+    src = SerialLineSource(os.ttyname(slave), CFG.baud)
+    src.start(sink)
+    try:
+        lines = b"".join(_line(sid, 0.5 + 0.1 * sid) for sid in range(1, 5))
+        os.write(master, lines + b"7,0.0412,0.2104,0.4419,0.3541,0.8295\r\n")
+        assert done.wait(5.0)
+    finally:
+        src.stop()
+        os.close(master)
+        os.close(slave)
+    assert sensors.counters == {"ok": 4, "sensor_id": 1}
+    assert sensors.mean_ndvi(times[-1]) == pytest.approx((0.6 + 0.7 + 0.8 + 0.9) / 4)
