@@ -49,6 +49,7 @@ typedef struct {
     double pc_fan_rpm;
     bool pc_sending;
     uint32_t next_cmd_us;
+    uint32_t last_cmd_sent_us;
     td_io_out_t out;
 } rig_t;
 
@@ -104,6 +105,7 @@ static inline int rig_drain(rig_t *r, uint32_t id) {
 static inline void rig_step(rig_t *r) {
     if (r->pc_sending && (int32_t)(r->now_us - r->next_cmd_us) >= 0) {
         rig_send_command(r);
+        r->last_cmd_sent_us = r->now_us;
         r->next_cmd_us = r->now_us + 500000u;
     }
     td_io_in_t in;

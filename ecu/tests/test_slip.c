@@ -1,7 +1,6 @@
-/* Eq. 3, eq. 5 and eq. 4 on the paper's numbers. */
+/* Eq. 3 (measured slip) and the eq. 5 model on the paper's numbers. */
 #include "td_test.h"
 
-#include "td_meter.h"
 #include "td_slip.h"
 
 static void test_eq5_model(void **state) {
@@ -27,23 +26,10 @@ static void test_eq3_measured(void **state) {
     assert_float_equal(td_slip_measured_pct(100.0f, 0.0615f, -40.0f), -1.0, 0.0);
 }
 
-static void test_eq4_target(void **state) {
-    (void)state;
-    assert_float_equal(td_meter_target_rpm(3.6f, 200.0f, 6.0f, 0.3f, 0.5f), 24.0, 1e-4);
-    /* linear in speed: 8 km/h -> 32 r/min */
-    assert_float_equal(td_meter_target_rpm(3.6f, 200.0f, 8.0f, 0.3f, 0.5f), 32.0, 1e-4);
-    assert_float_equal(td_meter_target_rpm(3.6f, 200.0f, 0.49f, 0.3f, 0.5f), 0.0, 0.0);
-    assert_float_equal(td_meter_target_rpm(3.6f, 200.0f, 0.5f, 0.3f, 0.5f), 2.0, 1e-5);
-    assert_float_equal(td_meter_target_rpm(3.6f, 0.0f, 6.0f, 0.3f, 0.5f), 0.0, 0.0);
-    assert_float_equal(td_meter_target_rpm(3.6f, 200.0f, NAN, 0.3f, 0.5f), 0.0, 0.0);
-    assert_float_equal(td_meter_target_rpm(3.6f, 200.0f, 6.0f, 0.0f, 0.5f), -1.0, 0.0);
-}
-
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_eq5_model),
         cmocka_unit_test(test_eq3_measured),
-        cmocka_unit_test(test_eq4_target),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
