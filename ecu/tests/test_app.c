@@ -307,7 +307,31 @@ static void test_stop_command_stops_motors_and_fans(void **state) {
     for (int l = 0; l < 2; l++) {
         assert_float_equal(r.out.meter_duty[l], 0.0, 0.0);
         assert_float_equal(r.out.fan_duty[l], 0.0, 0.0);
+        /* controllers restart clean on the next start */
+        assert_float_equal(r.app.meter_pid[l].integ, 0.0, 0.0);
+        assert_false(r.app.meter_pid[l].primed);
     }
+}
+
+static void test_headland_stop_meters_reach_zero(void **state) {
+    (void)state;
+    rig_t r;
+    rig_init(&r, NULL, 0u);
+    r.pc_start = true;
+    r.pc_gnss_kmh = 4.0;
+    r.wheel_kmh = 4.0;
+    rig_run_ms(&r, 4000);
+    assert_true(r.out.meter_duty[TD_UPPER] > 0.1f);
+    /* the tractor stops at the headland; the PC keeps the ECU running */
+    r.pc_gnss_kmh = 0.0;
+    r.wheel_kmh = 0.0;
+    rig_run_ms(&r, 1000);
+    const td_state_t *st = rig_st(&r);
+    assert_true(st->running);
+    assert_true(st->v_kmh < 0.5f);
+    assert_float_equal(st->target_rpm[TD_UPPER], 0.0, 0.0);
+    assert_float_equal(r.out.meter_duty[TD_UPPER], 0.0, 0.0);
+    assert_float_equal(r.out.meter_duty[TD_LOWER], 0.0, 0.0);
 }
 
 static td_can_frame_t frame8(uint32_t id, const uint8_t *d) {
@@ -515,6 +539,7 @@ int main(void) {
         cmocka_unit_test(test_blocked_meter_stops_that_motor_only),
         cmocka_unit_test(test_fan_low_gates_its_layer),
         cmocka_unit_test(test_stop_command_stops_motors_and_fans),
+        cmocka_unit_test(test_headland_stop_meters_reach_zero),
         cmocka_unit_test(test_malformed_frames_counted_never_acted_on),
         cmocka_unit_test(test_parameter_frames_and_acks),
         cmocka_unit_test(test_tx_queue_overflow_counted),
