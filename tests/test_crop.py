@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import threading
+import time
 
 import pytest
 
@@ -191,6 +192,10 @@ def test_crop_lines_over_a_pseudo_terminal() -> None:
     src = SerialLineSource(os.ttyname(slave), CFG.baud)
     src.start(sink)
     try:
+        deadline = time.monotonic() + 5.0
+        while not src.connected:  # bytes written before the port is open are flushed by it
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
         lines = b"".join(_line(sid, 0.5 + 0.1 * sid) for sid in range(1, 5))
         os.write(master, lines + b"7,0.0412,0.2104,0.4419,0.3541,0.8295\r\n")
         assert done.wait(5.0)
