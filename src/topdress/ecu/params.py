@@ -99,7 +99,7 @@ class EcuParams:
                 else:
                     setattr(p, f.name, getattr(self, f.name))
         except (OverflowError, TypeError) as exc:
-            raise EcuError(lib.TD_E_RANGE, f"EcuParams: {exc}") from None
+            raise EcuError(lib.TD_E_RANGE, f"EcuParams: value out of range ({exc})") from None
         return p
 
     def validate(self) -> EcuParams:
