@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Final, TextIO
 
 from topdress import protocol
-from topdress.ecu import Ecu, EcuParams
+from topdress.ecu import Ecu, EcuParams, EcuState
 from topdress.errors import ProtocolError
 from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent
 from topdress.protocol.frames import GNSS_MAX_KMH
@@ -119,75 +119,96 @@ def replay(
     stats: ReplayStats | None = None,
 ) -> list[ReplayRow]:
     """Run `events` (in time order) through a fresh ECU core; rows at each speed update."""
-    stats = stats if stats is not None else ReplayStats()
     if not events:
         return []
-    t0 = events[0].t
-    ids = protocol.FrameIds(**cfg.can.ids)
-    ecu = Ecu(ecu_params(cfg, speed_mode), now_us=0)
-    wheel = _WheelInput()
-    for e in events:
-        if isinstance(e, WheelEvent):
-            wheel.times_us.append(_us(e.t, t0))
-            wheel.counts.append(e.wheel_count)
-    decoder = NmeaDecoder()
-    tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
-    command = _Command(start=True, fan_rpm=float(cfg.machine.fan_rpm))
-    period_us = round(cfg.can.command_period_s * 1e6)
-    last_cmd_us: int | None = None
-    end_us = _us(events[-1].t, t0)
-    rows: list[ReplayRow] = []
-    updates = ecu.state.wheel_updates
-    i = 0
-    now_us = 0
-    while now_us <= end_us:
-        t = t0 + now_us / 1e6
-        new_fix = False
-        while i < len(events) and _us(events[i].t, t0) <= now_us:
-            e = events[i]
-            i += 1
-            if isinstance(e, NmeaEvent):
-                fix = decoder.decode(e.nmea)
-                if not fix.ok:
-                    stats.nmea_rejected += 1
-                new_fix |= tracker.update(e.t, fix) is not None
-            elif isinstance(e, CanEvent) and e.dir != "rx" and e.can_id == ids.command:
-                _take_command(command, e, ids, stats)
-        if (
-            last_cmd_us is None
-            or now_us - last_cmd_us >= period_us
-            or (new_fix and cfg.can.send_on_gnss)
-        ):
-            msg = protocol.encode_command(
-                command.start,
-                command.fan_rpm,
-                command.rate_upper_kg_ha,
-                command.rate_lower_kg_ha,
-                _forwardable(tracker.current(t)),
-                ids=ids,
-            )
-            if ecu.rx(msg, now_us) < 0:
-                stats.ecu_rx_refused += 1
-            stats.commands += 1
-            last_cmd_us = now_us
-        ecu.step_raw(now_us, wheel.at(now_us), 0, 0, 0, 0)
-        ecu.tx_raw()  # the ECU's frames are not needed here; keep its queue from filling
-        stats.steps += 1
-        state = ecu.state
-        if state.wheel_updates != updates:
-            updates = state.wheel_updates
-            rows.append(
-                ReplayRow(
-                    t=t,
-                    v_wheel_kmh=state.v_wheel_kmh,
-                    v_gnss_kmh=state.v_gnss_kmh if state.gnss_valid else None,
-                    v_kmh=state.v_kmh,
-                    source=str(state.source),
-                    cv_pct=state.cv_pct,
-                )
-            )
-        now_us += STEP_US
-    return rows
+    return _Replayer(events, cfg, speed_mode, stats or ReplayStats()).run()
+
+
+class _Replayer:
+    """The terminal's side (GNSS forwarding, commands) and the ECU, on the 10 ms grid."""
+
+    def __init__(
+        self, events: Sequence[Event], cfg: TerminalConfig, speed_mode: str, stats: ReplayStats
+    ) -> None:
+        self.events = events
+        self.cfg = cfg
+        self.stats = stats
+        self.t0 = events[0].t
+        self.ids = protocol.FrameIds(**cfg.can.ids)
+        # Initialised one period before its first step, as a port's ECU is.
+        self.ecu = Ecu(ecu_params(cfg, speed_mode), now_us=-STEP_US & 0xFFFFFFFF)
+        self.wheel = _WheelInput()
+        for e in events:
+            if isinstance(e, WheelEvent):
+                self.wheel.times_us.append(_us(e.t, self.t0))
+                self.wheel.counts.append(e.wheel_count)
+        self.decoder = NmeaDecoder()
+        self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
+        self.command = _Command(start=True, fan_rpm=float(cfg.machine.fan_rpm))
+        self.period_us = round(cfg.can.command_period_s * 1e6)
+        self.last_cmd_us: int | None = None
+
+    def run(self) -> list[ReplayRow]:
+        # Each period: the ECU steps on the counters of that instant, then the terminal takes
+        # the inputs that arrived by then and sends its command, which the ECU acts on from
+        # its next step (the order of a port's main loop and of the simulator).
+        rows: list[ReplayRow] = []
+        updates = self.ecu.state.wheel_updates
+        end_us = _us(self.events[-1].t, self.t0)
+        next_event = 0
+        now_us = 0
+        while now_us <= end_us:
+            self.ecu.step_raw(now_us, self.wheel.at(now_us), 0, 0, 0, 0)
+            self.ecu.tx_raw()  # the ECU's frames are not needed here; keep its queue free
+            self.stats.steps += 1
+            state = self.ecu.state
+            if state.wheel_updates != updates:
+                updates = state.wheel_updates
+                rows.append(_row(self.t0 + now_us / 1e6, state))
+            new_fix = False
+            while (
+                next_event < len(self.events) and _us(self.events[next_event].t, self.t0) <= now_us
+            ):
+                new_fix |= self._take(self.events[next_event])
+                next_event += 1
+            due = self.last_cmd_us is None or now_us - self.last_cmd_us >= self.period_us
+            if due or (new_fix and self.cfg.can.send_on_gnss):
+                self._send_command(now_us)
+            now_us += STEP_US
+        return rows
+
+    def _take(self, e: Event) -> bool:
+        """Apply one event; True when it gave a new GNSS speed sample."""
+        if isinstance(e, NmeaEvent):
+            fix = self.decoder.decode(e.nmea)
+            if not fix.ok:
+                self.stats.nmea_rejected += 1
+            return self.tracker.update(e.t, fix) is not None
+        if isinstance(e, CanEvent) and e.dir != "rx" and e.can_id == self.ids.command:
+            _take_command(self.command, e, self.ids, self.stats)
+        return False
+
+    def _send_command(self, now_us: int) -> None:
+        c = self.command
+        gnss = _forwardable(self.tracker.current(self.t0 + now_us / 1e6))
+        msg = protocol.encode_command(
+            c.start, c.fan_rpm, c.rate_upper_kg_ha, c.rate_lower_kg_ha, gnss, ids=self.ids
+        )
+        if self.ecu.rx(msg, now_us) < 0:
+            self.stats.ecu_rx_refused += 1
+        self.stats.commands += 1
+        self.last_cmd_us = now_us
+
+
+def _row(t: float, state: EcuState) -> ReplayRow:
+    return ReplayRow(
+        t=t,
+        v_wheel_kmh=state.v_wheel_kmh,
+        v_gnss_kmh=state.v_gnss_kmh if state.gnss_valid else None,
+        v_kmh=state.v_kmh,
+        source=str(state.source),
+        cv_pct=state.cv_pct,
+    )
 
 
 def _forwardable(kmh: float | None) -> float | None:
