@@ -1,7 +1,7 @@
 """Replay recorded raw inputs through the ECU core (the same C code as in the field).
 
-Virtual time: the ECU steps every 10 ms from the first event's time. Before each step every
-event due by then is applied:
+Virtual time: the ECU steps every 10 ms from the first event's time; after each step every
+event due by then is applied (the ECU sees its effect from the next step):
 - `nmea`: through the terminal's NmeaDecoder and GnssSpeedTracker; the speed is forwarded in a
   PcCommand every `can.command_period_s` (and on each new fix with `can.send_on_gnss`), as
   the terminal does, carrying "not available" when the tracker has no fresh valid speed.
