@@ -1,0 +1,345 @@
+"""The terminal's CAN link to the implement ECU.
+
+One `CanLink` speaks the protocol of protocol/topdress.dbc over any python-can bus (socketcan,
+slcan, pcan, kvaser, virtual, udp_multicast, ...). It never reads a clock and never blocks: the
+terminal loop hands it every received frame (`on_frame`) and calls `poll(now)` often; `now` is
+seconds on any monotonic clock (virtual in tests). It
+
+- pushes the ECU parameters at start, one PcParamSet each, and waits for each EcuParamAck
+  (a silent ECU is retried, a refusal fails at once; either error names the parameter);
+- sends the paper's PcCommand every `command_period_s`, and at once on a new GNSS speed when
+  `send_on_gnss` is set;
+- decodes EcuStatus, EcuDiag, EcuSpeeds and EcuTargets, counting foreign and malformed frames;
+- tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back".
+
+`SimulatedEcu` is the twin of the real ECU on the other end of a bus: the C core through the
+binding, on virtual time, with fault knobs (mute, deaf to parameters).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import can
+
+from topdress import protocol
+from topdress.ecu import Ecu, EcuParams
+from topdress.errors import DeviceError, EcuParamError, ProtocolError
+from topdress.protocol import AckResult, FrameIds
+from topdress.terminal.config import CanConfig
+
+log = logging.getLogger(__name__)
+
+# Limits of PcCommand (DBC): values beyond them are clamped rather than failing the loop.
+MAX_GNSS_KMH = 25.0
+MAX_RATE_KG_HA = 600.0
+MAX_FAN_RPM = 6000.0
+# Tolerance of time comparisons: a deadline met to the microsecond counts as met.
+_EPS_S = 1e-6
+
+
+def open_bus(cfg: CanConfig, **extra: Any) -> can.BusABC:
+    """Open the python-can bus of the `[can]` section; DeviceError when it cannot be opened."""
+    kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": cfg.channel}
+    if cfg.interface == "udp_multicast":
+        kwargs["fd"] = False  # classic CAN frames, like the real bus
+    elif cfg.interface != "virtual":
+        kwargs["bitrate"] = cfg.bitrate
+    kwargs.update(extra)
+    try:
+        return can.Bus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError) as exc:
+        raise DeviceError(
+            f"cannot open CAN interface {cfg.interface!r} channel {cfg.channel!r}: {exc}"
+        ) from exc
+
+
+def frame_ids(cfg: CanConfig) -> FrameIds:
+    """The identifiers of the `[can.ids]` table."""
+    return FrameIds(**cfg.ids)
+
+
+@dataclass(frozen=True)
+class Command:
+    """What the terminal asks of the ECU (the content of PcCommand)."""
+
+    start: bool = False
+    fan_rpm: float = 0.0
+    rate_upper_kg_ha: float = 0.0
+    rate_lower_kg_ha: float = 0.0
+    gnss_kmh: float | None = None
+
+
+@dataclass
+class LinkCounters:
+    rx_frames: int = 0
+    rx_foreign: int = 0
+    rx_malformed: int = 0
+    tx_commands: int = 0
+    tx_params: int = 0
+    tx_errors: int = 0
+    param_retries: int = 0
+    ecu_lost: int = 0
+    clamped: int = 0
+
+
+@dataclass(frozen=True)
+class EcuView:
+    """The latest of each ECU frame, decoded (None until first received)."""
+
+    status: protocol.EcuStatus | None = None
+    diag: protocol.EcuDiag | None = None
+    speeds: protocol.EcuSpeeds | None = None
+    targets: protocol.EcuTargets | None = None
+    status_t: float | None = None
+
+
+@dataclass
+class _ParamPush:
+    items: list[tuple[int, float]]
+    index: int = 0
+    tries: int = 0
+    sent_t: float | None = None
+
+    @property
+    def done(self) -> bool:
+        return self.index >= len(self.items)
+
+
+def _clamp(value: float, hi: float) -> float:
+    return min(max(value, 0.0), hi)
+
+
+class CanLink:
+    """The PC side of the protocol on one bus. Not thread-safe: one control loop owns it."""
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        cfg: CanConfig,
+        fan_rpm: float = 0.0,
+        param_ack_timeout_s: float = 0.2,
+        param_retries: int = 3,
+        on_tx: Callable[[can.Message], None] | None = None,
+        on_event: Callable[[str], None] | None = None,
+    ) -> None:
+        self._bus = bus
+        self.cfg = cfg
+        self.ids = frame_ids(cfg)
+        self._ack_timeout_s = param_ack_timeout_s
+        self._retries = param_retries
+        self._on_tx = on_tx
+        self._on_event = on_event
+        self.counters = LinkCounters()
+        self.command = Command(fan_rpm=_clamp(fan_rpm, MAX_FAN_RPM))
+        self.ecu = EcuView()
+        self._push: _ParamPush | None = None
+        self._next_cmd_t: float | None = None
+        self._alive = False
+        self._lost = False
+        self._started_t: float | None = None
+
+    # ---- start-up: parameters -------------------------------------------------------------
+    def begin(self, params: Mapping[int, float], now: float) -> None:
+        """Start pushing `params` (PcParamSet id -> physical value); see `params_done`.
+
+        Raises ProtocolError at once for a value the frame cannot carry."""
+        for param_id, value in params.items():
+            protocol.param(param_id).check(value)
+        self._started_t = now
+        self._push = _ParamPush(sorted(params.items()))
+        self._send_param(now)
+
+    @property
+    def params_done(self) -> bool:
+        return self._push is not None and self._push.done
+
+    def _send_param(self, now: float) -> None:
+        push = self._push
+        if push is None or push.done:
+            return
+        param_id, value = push.items[push.index]
+        push.tries += 1
+        push.sent_t = now
+        self._send(protocol.encode_param_set(param_id, value, ids=self.ids))
+        self.counters.tx_params += 1
+
+    def _on_ack(self, ack: protocol.EcuParamAck, now: float) -> None:
+        push = self._push
+        if push is None or push.done:
+            return
+        param_id, value = push.items[push.index]
+        if ack.param_id != param_id:
+            return  # a late answer to an earlier parameter
+        if ack.result is AckResult.BUSY:
+            # The ECU is running (the terminal restarted mid-field): stop it, then write again.
+            self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
+            push.tries = 0
+            self._send_param(now)
+            return
+        if ack.result is not AckResult.OK:
+            reason = ack.result.name.lower().replace("_", " ")
+            raise EcuParamError(
+                protocol.param_name(param_id), value, f"refused by the ECU: {reason}"
+            )
+        push.index += 1
+        push.tries = 0
+        self._send_param(now)
+
+    def _poll_params(self, now: float) -> None:
+        push = self._push
+        if push is None or push.done or push.sent_t is None:
+            return
+        if now - push.sent_t < self._ack_timeout_s - _EPS_S:
+            return
+        if push.tries > self._retries:
+            param_id, value = push.items[push.index]
+            raise EcuParamError(
+                protocol.param_name(param_id),
+                value,
+                f"no acknowledgement from the ECU after {push.tries} tries",
+            )
+        self.counters.param_retries += 1
+        self._send_param(now)
+
+    # ---- running --------------------------------------------------------------------------
+    def set_command(
+        self, start: bool, fan_rpm: float, rate_upper_kg_ha: float, rate_lower_kg_ha: float
+    ) -> None:
+        """Set what the next PcCommand carries (sent on the period)."""
+        values = (fan_rpm, rate_upper_kg_ha, rate_lower_kg_ha)
+        limits = (MAX_FAN_RPM, MAX_RATE_KG_HA, MAX_RATE_KG_HA)
+        fan, upper, lower = (_clamp(v, hi) for v, hi in zip(values, limits, strict=True))
+        if (fan, upper, lower) != values:
+            self.counters.clamped += 1
+        self.command = replace(
+            self.command, start=start, fan_rpm=fan, rate_upper_kg_ha=upper, rate_lower_kg_ha=lower
+        )
+
+    def set_gnss(self, kmh: float | None, now: float) -> None:
+        """A new GNSS speed (None: not available). Sent at once when send_on_gnss is set."""
+        if kmh is not None and not 0.0 <= kmh <= MAX_GNSS_KMH:
+            self.counters.clamped += 1
+            kmh = _clamp(kmh, MAX_GNSS_KMH)
+        self.command = replace(self.command, gnss_kmh=kmh)
+        if self.cfg.send_on_gnss and self.params_done:
+            self._send_command()
+
+    def poll(self, now: float) -> None:
+        """Periodic work: parameter retries, the command period, ECU liveness.
+
+        Raises EcuParamError when a parameter is refused or never acknowledged."""
+        self._poll_params(now)
+        if self.params_done and (self._next_cmd_t is None or now >= self._next_cmd_t - _EPS_S):
+            # On a fixed grid, so send-on-GNSS frames in between do not shift the period;
+            # after a stall the grid restarts from now.
+            period = self.cfg.command_period_s
+            due = now if self._next_cmd_t is None else self._next_cmd_t
+            self._next_cmd_t = due + period if now - due < period else now + period
+            self._send_command()
+        self._poll_liveness(now)
+
+    def _send_command(self) -> None:
+        c = self.command
+        msg = protocol.encode_command(
+            c.start, c.fan_rpm, c.rate_upper_kg_ha, c.rate_lower_kg_ha, c.gnss_kmh, ids=self.ids
+        )
+        if self._send(msg):
+            self.counters.tx_commands += 1
+        # A failed send is not retried early: the next period carries fresher values.
+
+    def _send(self, msg: can.Message) -> bool:
+        try:
+            self._bus.send(msg, timeout=0.01)
+        except can.CanError as exc:
+            self.counters.tx_errors += 1
+            log.warning("CAN send failed: %s", exc)
+            return False
+        if self._on_tx is not None:
+            self._on_tx(msg)
+        return True
+
+    # ---- receiving --------------------------------------------------------------------------
+    def on_frame(self, msg: can.Message, now: float) -> None:
+        """Take one received frame; foreign or malformed frames are counted, never acted on."""
+        self.counters.rx_frames += 1
+        try:
+            decoded = protocol.decode(msg, self.ids)
+        except ProtocolError as exc:
+            if protocol.is_known_id(msg.arbitration_id, self.ids):
+                self.counters.rx_malformed += 1
+                log.debug("malformed frame: %s", exc)
+            else:
+                self.counters.rx_foreign += 1
+            return
+        if isinstance(decoded, protocol.EcuStatus):
+            self.ecu = replace(self.ecu, status=decoded, status_t=now)
+            self._alive = True
+            if self._lost:
+                self._lost = False
+                self._event("ECU back")
+        elif isinstance(decoded, protocol.EcuDiag):
+            self.ecu = replace(self.ecu, diag=decoded)
+        elif isinstance(decoded, protocol.EcuSpeeds):
+            self.ecu = replace(self.ecu, speeds=decoded)
+        elif isinstance(decoded, protocol.EcuTargets):
+            self.ecu = replace(self.ecu, targets=decoded)
+        elif isinstance(decoded, protocol.EcuParamAck):
+            self._on_ack(decoded, now)
+        # PC frames (another PC on the bus, or our own echo) are not for us.
+
+    def _poll_liveness(self, now: float) -> None:
+        last = self.ecu.status_t if self.ecu.status_t is not None else self._started_t
+        if last is None or self._lost or now - last <= self.cfg.ecu_timeout_s + _EPS_S:
+            return
+        self._lost = True
+        self._alive = False
+        self.counters.ecu_lost += 1
+        self._event(f"ECU lost: no status for {now - last:.1f} s")
+
+    @property
+    def ecu_alive(self) -> bool:
+        return self._alive
+
+    def _event(self, text: str) -> None:
+        log.info("%s", text)
+        if self._on_event is not None:
+            self._on_event(text)
+
+
+class SimulatedEcu:
+    """The ECU's twin on a bus: the C core on virtual time, with zero encoder inputs.
+
+    Fault knobs: `mute` (sends nothing: the link must report the ECU lost), `deaf_to_params`
+    (drops every PcParamSet unanswered: the link must retry, then fail).
+    """
+
+    STEP_S = 0.01
+
+    def __init__(self, bus: can.BusABC, params: EcuParams | None = None, now: float = 0.0) -> None:
+        self._bus = bus
+        self.ecu = Ecu(params, now_us=self._us(now))
+        self._t = now
+        self.mute = False
+        self.deaf_to_params = False
+
+    @staticmethod
+    def _us(t: float) -> int:
+        return round(t * 1e6)
+
+    def pump(self, now: float) -> None:
+        """Take every pending frame, step the core up to `now`, send what it put out."""
+        while (msg := self._bus.recv(timeout=0)) is not None:
+            if self.deaf_to_params and msg.arbitration_id == protocol.DEFAULT_IDS.param_set:
+                continue
+            self.ecu.rx(msg, self._us(self._t))
+        while self._t + self.STEP_S <= now + 1e-9:
+            self._t += self.STEP_S
+            self.ecu.step_raw(self._us(self._t), 0, 0, 0, 0, 0)
+        frames = self.ecu.tx()
+        if not self.mute:
+            for frame in frames:
+                self._bus.send(frame)

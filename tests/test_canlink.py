@@ -1,0 +1,280 @@
+"""The terminal's CAN link against the ECU's twin (the C core) on a virtual bus, in virtual time."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from dataclasses import replace
+
+import can
+import pytest
+
+from topdress import protocol
+from topdress.errors import DeviceError, EcuParamError, ProtocolError
+from topdress.terminal.canlink import CanLink, SimulatedEcu, open_bus
+from topdress.terminal.config import CanConfig, default_config, loads_config
+
+_channels = itertools.count()
+
+
+class Rig:
+    """A link, the ECU twin and a listener on one virtual bus; `run` advances virtual time."""
+
+    def __init__(self, cfg: CanConfig | None = None, **link_kw: float) -> None:
+        channel = f"test-canlink-{next(_channels)}"
+        self.cfg = replace(cfg or CanConfig(), channel=channel)
+        self.pc_bus = open_bus(self.cfg)
+        self.ecu_bus = open_bus(self.cfg)
+        self.spy = open_bus(self.cfg)
+        self.events: list[tuple[float, str]] = []
+        self.t = 0.0
+        self.link = CanLink(
+            self.pc_bus,
+            self.cfg,
+            fan_rpm=3000,
+            on_event=lambda text: self.events.append((self.t, text)),
+            **link_kw,  # type: ignore[arg-type]
+        )
+        self.twin = SimulatedEcu(self.ecu_bus)
+        self.seen: list[tuple[float, can.Message]] = []
+
+    def run(self, until: float) -> None:
+        while self.t < until - 1e-9:
+            self.t = round(self.t + 0.01, 6)
+            self.twin.pump(self.t)
+            while (msg := self.pc_bus.recv(timeout=0)) is not None:
+                self.link.on_frame(msg, self.t)
+            self.link.poll(self.t)
+            while (msg := self.spy.recv(timeout=0)) is not None:
+                self.seen.append((self.t, msg))
+
+    def commands(self) -> list[tuple[float, protocol.PcCommand]]:
+        out = []
+        for t, msg in self.seen:
+            if msg.arbitration_id == protocol.DEFAULT_IDS.command:
+                decoded = protocol.decode(msg)
+                assert isinstance(decoded, protocol.PcCommand)
+                out.append((t, decoded))
+        return out
+
+    def close(self) -> None:
+        for bus in (self.pc_bus, self.ecu_bus, self.spy):
+            bus.shutdown()
+
+
+@pytest.fixture
+def rig() -> Iterator[Rig]:
+    r = Rig()
+    yield r
+    r.close()
+
+
+def test_parameters_pushed_and_acknowledged_one_by_one(rig: Rig) -> None:
+    cfg = loads_config(
+        "[machine]\nwidth_m = 4.2\nkg_per_rev_lower = 0.25\n[speed]\nqueue_len = 7\n"
+    )
+    params = cfg.ecu_params()
+    rig.link.begin(params, 0.0)
+    assert not rig.link.params_done
+    rig.run(1.0)
+    assert rig.link.params_done
+    p = rig.twin.ecu.params
+    assert p.working_width_m == pytest.approx(4.2)
+    assert p.kg_per_rev[1] == pytest.approx(0.25)
+    assert p.queue_len == 7
+    assert rig.link.counters.tx_params == len(params)
+    assert rig.link.counters.param_retries == 0
+    # no command before every parameter is in force, then one at once
+    first_cmd_t = rig.commands()[0][0]
+    sets = [t for t, m in rig.seen if m.arbitration_id == protocol.DEFAULT_IDS.param_set]
+    assert first_cmd_t >= max(sets)
+
+
+def test_refused_parameter_fails_at_once_naming_it(rig: Rig) -> None:
+    # queue_len 3 is in range but inconsistent with the ECU's cv_window 5 -> the core refuses
+    rig.link.begin({6: 3}, 0.0)
+    with pytest.raises(EcuParamError, match=r"QueueLength = 3: refused by the ECU: inconsistent"):
+        rig.run(0.5)
+    assert rig.twin.ecu.params.queue_len == 5
+
+
+def test_silent_ecu_retried_then_error_naming_the_parameter(rig: Rig) -> None:
+    rig.twin.deaf_to_params = True
+    rig.link.begin(default_config().ecu_params(), 0.0)
+    with pytest.raises(EcuParamError, match=r"WorkingWidth = 3.6: no acknowledgement .* 4 tries"):
+        rig.run(5.0)
+    # 1 try + 3 retries, 0.2 s apart; raised at the fourth timeout
+    assert rig.link.counters.param_retries == 3
+    assert rig.t == pytest.approx(0.8)
+    assert not rig.link.params_done
+
+
+def test_ecu_that_wakes_up_during_retries_is_accepted(rig: Rig) -> None:
+    rig.twin.deaf_to_params = True
+    rig.link.begin({1: 3.0}, 0.0)
+    rig.run(0.3)
+    rig.twin.deaf_to_params = False
+    rig.run(1.0)
+    assert rig.link.params_done
+    assert rig.link.counters.param_retries == 2
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(3.0)
+
+
+def test_running_ecu_is_stopped_before_parameters_are_written(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.link.set_command(True, 3000, 200, 100)
+    rig.run(1.0)
+    assert rig.twin.ecu.state.running
+    # the terminal restarts while the ECU still runs
+    link2 = CanLink(rig.pc_bus, rig.cfg)
+    rig.link = link2
+    link2.begin({1: 4.0}, rig.t)
+    rig.run(2.0)
+    assert link2.params_done
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(4.0)
+    assert not rig.twin.ecu.state.running
+
+
+def test_value_the_frame_cannot_carry_is_refused_before_sending(rig: Rig) -> None:
+    with pytest.raises(ProtocolError, match="WorkingWidth"):
+        rig.link.begin({1: 31.0}, 0.0)
+    assert rig.link.counters.tx_params == 0
+
+
+def test_command_every_period_with_the_values_set(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.link.set_command(True, 3200, 250.5, 120.25)
+    rig.link.set_gnss(7.3, 0.0)
+    rig.run(5.0)
+    cmds = rig.commands()
+    times = [t for t, _ in cmds]
+    # first at once (t = 0.01), then every 0.5 s
+    assert times[0] == pytest.approx(0.01)
+    gaps = [b - a for a, b in itertools.pairwise(times)]
+    assert all(g == pytest.approx(0.5) for g in gaps)
+    assert len(cmds) == 10
+    last = cmds[-1][1]
+    assert last.start and last.fan_rpm == 3200
+    assert (last.rate_upper_kg_ha, last.rate_lower_kg_ha) == (250.5, 120.25)
+    assert last.gnss_kmh == pytest.approx(7.3)
+    # the ECU acts on them
+    s = rig.twin.ecu.state
+    assert s.running and s.rate_kg_ha == pytest.approx((250.5, 120.25))
+    assert s.v_gnss_kmh == pytest.approx(7.3)
+
+
+def test_send_on_gnss_sends_at_once_and_none_is_not_available() -> None:
+    rig = Rig(replace(CanConfig(), send_on_gnss=True))
+    try:
+        rig.link.begin({}, 0.0)
+        rig.run(0.2)
+        rig.link.set_gnss(5.5, rig.t)
+        rig.link.set_gnss(None, rig.t)
+        rig.run(0.21)
+        cmds = rig.commands()
+        assert [c.gnss_kmh for _, c in cmds] == [None, 5.5, None]
+        assert rig.link.counters.tx_commands == 3
+    finally:
+        rig.close()
+
+
+def test_gnss_speed_without_send_on_gnss_waits_for_the_period(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.run(0.2)
+    rig.link.set_gnss(5.5, rig.t)
+    rig.run(0.4)
+    assert len(rig.commands()) == 1
+    rig.run(0.6)
+    assert [c.gnss_kmh for _, c in rig.commands()] == [None, 5.5]
+
+
+def test_values_beyond_the_frame_are_clamped_and_counted(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.link.set_command(True, 7000, 700, -5)
+    rig.link.set_gnss(31.0, 0.0)
+    rig.run(0.05)
+    cmd = rig.commands()[0][1]
+    assert (cmd.fan_rpm, cmd.rate_upper_kg_ha, cmd.rate_lower_kg_ha) == (6000, 600, 0)
+    assert cmd.gnss_kmh == 25.0
+    assert rig.link.counters.clamped == 2
+
+
+def test_ecu_frames_decoded(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.link.set_command(True, 3000, 200, 200)
+    rig.link.set_gnss(4.0, 0.0)
+    rig.run(1.0)
+    ecu = rig.link.ecu
+    assert ecu.status is not None and ecu.status.running
+    assert ecu.diag is not None and ecu.diag.source is protocol.Source.WHEEL
+    assert ecu.speeds is not None and ecu.speeds.gnss_kmh == pytest.approx(4.0)
+    assert ecu.targets is not None
+    assert ecu.status_t == pytest.approx(1.0, abs=0.1)
+    assert rig.link.ecu_alive
+
+
+def test_ecu_lost_and_back(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.run(2.0)
+    assert rig.link.ecu_alive and rig.events == []
+    rig.twin.mute = True
+    rig.run(4.0)
+    assert not rig.link.ecu_alive
+    assert len(rig.events) == 1
+    t_lost, text = rig.events[0]
+    assert text.startswith("ECU lost")
+    # last status at ~2.0 s, timeout 0.5 s
+    assert 2.5 < t_lost <= 2.62
+    rig.twin.mute = False
+    rig.run(5.0)
+    assert rig.link.ecu_alive
+    assert [e for _, e in rig.events] == [rig.events[0][1], "ECU back"]
+    assert rig.link.counters.ecu_lost == 1
+
+
+def test_ecu_never_heard_is_reported_lost(rig: Rig) -> None:
+    rig.twin.mute = True
+    rig.link.begin({}, 0.0)
+    rig.run(1.0)
+    assert rig.link.counters.ecu_lost == 1
+    assert not rig.link.ecu_alive
+
+
+def test_bad_frames_counted_and_ignored(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.run(0.5)
+    before = rig.link.ecu
+    ids = protocol.DEFAULT_IDS
+    bad = [
+        can.Message(arbitration_id=0x123, data=b"\x00" * 8),  # foreign
+        can.Message(arbitration_id=ids.status, data=b"\x0a\x00"),  # short
+        can.Message(arbitration_id=ids.status, data=b"\x07" + b"\x00" * 7),  # RunState 7
+        can.Message(arbitration_id=ids.diag, data=b"\x03" + b"\x00" * 7),  # source 3
+        can.Message(arbitration_id=ids.param_ack, data=b"\x01\x09" + b"\x00" * 6),  # result 9
+    ]
+    for msg in bad:
+        rig.link.on_frame(msg, 0.5)
+    c = rig.link.counters
+    assert (c.rx_foreign, c.rx_malformed) == (1, 4)
+    assert rig.link.ecu == before
+
+
+def test_configured_identifiers_are_used() -> None:
+    cfg = loads_config("[can.ids]\ncommand = 0x0A5C6499\n").can
+    rig = Rig(cfg)
+    try:
+        rig.link.begin({}, 0.0)
+        rig.run(0.1)
+        assert [m.arbitration_id for _, m in rig.seen if m.arbitration_id >> 24 == 0x0A] == [
+            0x0A5C6499
+        ]
+        # the twin uses the paper's identifier, so it rejects the command as unknown
+        assert rig.twin.ecu.counters.rx_unknown_id == 1
+    finally:
+        rig.close()
+
+
+def test_unopenable_interface_is_a_device_error() -> None:
+    cfg = replace(CanConfig(), interface="socketcan", channel="nosuchcan9")
+    with pytest.raises(DeviceError, match="nosuchcan9"):
+        open_bus(cfg)
