@@ -1,14 +1,70 @@
-"""Subcommands of this subsystem (registered by topdress.cli)."""
+"""`topdress experiment NAME --out DIR`: the paper's experiments in the loop with the ECU core."""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, TypeVar
+
+from tqdm import tqdm
+
+from topdress.errors import ConfigError
+from topdress.sim import experiments as ex
+from topdress.sim import report
+
+NAMES = ("cv", "slip", "table2", "table34", "table5", "fig10", "all")
+T = TypeVar("T")
 
 
 def register(sub: Any) -> None:
-    """Add this subsystem's subcommands to the top-level parser."""
-    del sub
+    """Add `experiment` to the top-level parser."""
+    p = sub.add_parser(
+        "experiment",
+        help="reproduce one of the paper's experiments in simulation",
+        description="Run the paper's experiments with the ECU core in the loop and write "
+        "Markdown reports and PNG figures, our numbers beside the paper's.",
+    )
+    p.add_argument("name", choices=NAMES, help="which experiment (all = every one + index)")
+    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument("--reps", type=int, default=5, help="repetitions per speed (default 5)")
+    p.add_argument("--seed", type=int, default=0, help="base seed of the runs")
+    p.add_argument("--quick", action="store_true", help="reduced run: fewer reps and speeds")
+    p.set_defaults(func=run)
 
 
-_ = argparse
+def _progress(items: Iterable[T], what: str) -> Iterable[T]:
+    bar: Iterable[T] = tqdm(list(items), desc=what, unit="run", leave=False)
+    return bar
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.reps < 1:
+        raise ConfigError("--reps", f"must be at least 1, got {args.reps}")
+    out: Path = args.out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--out", f"cannot create {out}: {exc.strerror}") from None
+    reps = min(args.reps, 2) if args.quick else args.reps
+    slip_speeds = ex.SLIP_SPEEDS_KMH[::2] if args.quick else ex.SLIP_SPEEDS_KMH
+    jumps = ex.TABLE5_JUMPS_RPM[:2] if args.quick else ex.TABLE5_JUMPS_RPM
+    lab = ex.Lab(base_seed=args.seed, progress=_progress)
+    targets = ex.TARGETS_KMH
+    jobs: dict[str, Callable[[], Path]] = {
+        "cv": lambda: report.write_cv(out, ex.cv_experiment(lab, targets, reps)),
+        "slip": lambda: report.write_slip(out, ex.slip_experiment(lab, slip_speeds, reps)),
+        "table2": lambda: report.write_table2(out, ex.table2(lab, targets, reps)),
+        "table34": lambda: report.write_table34(out, ex.table34(lab, targets, reps)),
+        "table5": lambda: report.write_table5(out, ex.table5(lab, jumps)),
+        "fig10": lambda: report.write_fig10(out, lab, targets),
+    }
+    names = list(jobs) if args.name == "all" else [args.name]
+    written = []
+    for name in tqdm(names, desc="experiments", unit="exp", disable=len(names) == 1):
+        written.append(jobs[name]())
+    if args.name == "all":
+        written.append(report.write_index(out, written, reps, args.seed))
+    for path in written:
+        print(path)
+    return 0

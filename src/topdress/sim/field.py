@@ -70,14 +70,14 @@ class CropSensor:
         self.p = p
         self._rng = random.Random(seed * 10 + sensor_id)
         # stagger the four sensors so their lines interleave as on the logger
-        self._next = p.period_s * sensor_id / 4.0
+        self.next_t = p.period_s * sensor_id / 4.0
         self.last_ndvi = 0.0
 
     def step(self, t: float, field: Field, x: float, y: float, heading: float) -> str | None:
         """Return a line when a reading is due."""
-        if t + 1e-9 < self._next:
+        if t + 1e-9 < self.next_t:
             return None
-        self._next += self.p.period_s
+        self.next_t += self.p.period_s
         if 0.0 <= self.p.dead_at_s <= t:
             return None
         sx = x + self.offset_m * math.cos(heading)

@@ -54,13 +54,17 @@ class Drive:
     segments: list[Segment]
     index: int = 0
     _progress: float = 0.0
-    _reached: bool = False
+    reached: bool = False
     _heading0: float = 0.0
     finished: bool = False
 
     @staticmethod
     def paper_run(target_kmh: float, hold_m: float = 40.0, wait_s: float = 3.0) -> Drive:
-        """The paper's protocol: stand, accelerate, hold the target speed for hold_m, stop."""
+        """The paper's protocol: stand, accelerate, hold the target speed for hold_m, stop.
+
+        Vary wait_s between runs: the moment the driver lets the clutch in is not tied to
+        the ECU's 500 ms wheel-update grid.
+        """
         return Drive(
             [
                 Segment("stop", duration_s=wait_s),
@@ -96,6 +100,17 @@ class Drive:
     def segment(self) -> Segment | None:
         return None if self.finished else self.segments[self.index]
 
+    def phase(self, v_ms: float) -> str:
+        """rest, accel, uniform (a hold segment at speed), decel, turn or run (other straight)."""
+        seg = self.segment
+        if seg is None or seg.kind == "stop":
+            return "decel" if v_ms > 0.0 else "rest"
+        if seg.kind == "turn":
+            return "turn"
+        if seg.hold:
+            return "uniform" if self.reached else "accel"
+        return "run"
+
     def _next_speed_ms(self) -> float:
         nxt = self.index + 1
         return self.segments[nxt].speed_kmh * KMH if nxt < len(self.segments) else 0.0
@@ -123,9 +138,9 @@ class Drive:
                 self._advance()
             return v_t, math.copysign(1.0 / seg.radius_m, seg.angle_deg)
         if seg.hold:
-            if not self._reached and tr.v >= 0.995 * v_t:
-                self._reached = True
-            if self._reached:
+            if not self.reached and tr.v >= 0.995 * v_t:
+                self.reached = True
+            if self.reached:
                 self._progress += ds
             if self._progress >= seg.length_m:
                 self._advance()
@@ -143,7 +158,7 @@ class Drive:
     def _advance(self) -> None:
         self.index += 1
         self._progress = 0.0
-        self._reached = False
+        self.reached = False
         if self.index >= len(self.segments):
             self.finished = True
 

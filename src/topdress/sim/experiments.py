@@ -1,0 +1,447 @@
+"""The paper's field experiments, run in the loop with the C ECU core, and their analyses.
+
+Protocol (paper section 3): targets 3.5, 5.0, 6.5, 8.0 km/h; each run starts from rest,
+holds the target speed for 40 m, then stops; repetitions use different seeds. Every
+figure here is computed from what the cab PC sees on the CAN bus (the paper's CAN
+analyser, 100 ms samples) plus the ground truth a field crew would measure (the tape
+and the spade: travelled distance, where the fertilizer landed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from topdress.ecu import cv_pct, meter_target_rpm, slip_measured_pct
+from topdress.protocol import SpeedMode
+from topdress.sim.sil import COLUMNS, PHASES, SOURCES, PcParams, Sil
+from topdress.sim.tractor import Drive
+from topdress.sim.world import SimConfig, World
+
+TARGETS_KMH = (3.5, 5.0, 6.5, 8.0)
+SLIP_SPEEDS_KMH = (2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
+CV_QUEUES = (3, 5, 7)
+TABLE5_JUMPS_RPM = (6.6, 7.0, 7.4, 7.6, 6.8)
+UNIFORM = float(PHASES.index("uniform"))
+DECEL = float(PHASES.index("decel"))
+GNSS = float(SOURCES.index("gnss"))
+WHEEL = float(SOURCES.index("wheel"))
+
+# The paper's numbers, side by side with ours in the reports.
+PAPER_TABLE2 = {
+    3.5: (1.9, 2.2, 0.24, 0.56),
+    5.0: (1.6, 1.9, 0.32, 0.62),
+    6.5: (1.4, 1.5, 0.34, 0.96),
+    8.0: (1.5, 1.6, 0.35, 1.28),
+}
+PAPER_TABLE34 = {
+    ("accel", 3.5): (3.5, 3.9, 0.4, 1.5, 1.3),
+    ("accel", 5.0): (5.1, 5.4, 0.3, 1.1, 1.0),
+    ("accel", 6.5): (6.3, 6.9, 0.6, 1.6, 1.8),
+    ("accel", 8.0): (7.3, 7.9, 0.6, 1.8, 1.9),
+    ("decel", 3.5): (3.2, 3.1, 0.1, 0.4, 0.4),
+    ("decel", 5.0): (2.1, 3.0, 0.9, 3.1, 3.0),
+    ("decel", 6.5): (0.2, 2.4, 2.0, 5.3, 4.8),
+    ("decel", 8.0): (0.0, 3.2, 3.2, 9.4, 7.1),
+}
+PAPER_TABLE5 = (
+    (6.6, 7.3, 0.6, 1.2),
+    (7.0, 8.6, 0.7, 1.4),
+    (7.4, 9.5, 0.8, 1.4),
+    (7.6, 10.4, 1.1, 1.6),
+    (6.8, 7.5, 0.7, 1.0),
+)
+PAPER_SLIP = (0.167, -0.296, 0.773, 0.9826, 6.0)
+PAPER_CV_THRESHOLD = 4.2
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One run: the CAN analyser trace and what the crew measured."""
+
+    target_kmh: float
+    seed: int
+    mode: SpeedMode
+    trace: dict[str, np.ndarray]
+    first_landing_m: float | None
+    working_width_m: float
+    kg_per_rev: float
+    rate_kg_ha: float
+
+
+@dataclass
+class Lab:
+    """Runs experiments on one simulated machine; caches runs shared by several analyses."""
+
+    cfg: SimConfig = field(default_factory=SimConfig)
+    pc: PcParams = field(default_factory=PcParams)
+    base_seed: int = 0
+    progress: Callable[[Iterable[tuple[float, int]], str], Iterable[tuple[float, int]]] | None = (
+        None
+    )
+    _cache: dict[tuple[float, int, SpeedMode, float], RunResult] = field(default_factory=dict)
+
+    def _iter(self, items: list[tuple[float, int]], what: str) -> Iterable[tuple[float, int]]:
+        return items if self.progress is None else self.progress(items, what)
+
+    def paper_run(
+        self, target_kmh: float, rep: int, mode: SpeedMode, hold_m: float = 40.0
+    ) -> RunResult:
+        """From rest, hold target_kmh for hold_m, stop; the ECU in `mode`."""
+        key = (target_kmh, rep, mode, hold_m)
+        if key in self._cache:
+            return self._cache[key]
+        seed = self.base_seed * 1000 + rep
+        # the clutch goes in at an arbitrary moment of the ECU's 500 ms wheel-update grid
+        wait_s = 3.0 + (seed * 0.6180339887 % 1.0)
+        world = World(self.cfg, seed=seed, drive=Drive.paper_run(target_kmh, hold_m, wait_s))
+        params = self.pc.ecu_params
+        if mode is not SpeedMode.DUAL:
+            params = (*params, ("SpeedMode", float(mode.code)))
+        with Sil(world, PcParams(**{**self.pc.__dict__, "ecu_params": params})) as sil:
+            sil.run_until_done(max_s=hold_m / (target_kmh / 3.6) + 60.0)
+            assert sil.record is not None
+            trace = sil.record.arrays()
+        ecu = world.ecu.params
+        res = RunResult(
+            target_kmh,
+            seed,
+            mode,
+            trace,
+            world.first_landing_m[0],
+            ecu.working_width_m,
+            ecu.kg_per_rev[0],
+            self.pc.rate_kg_ha[0],
+        )
+        self._cache[key] = res
+        return res
+
+
+# ---------------------------------------------------------------- response (Table 2, Fig. 10)
+
+
+def response_times(run: RunResult) -> tuple[float, float]:
+    """(on, off): the first sample with metering speed non-zero, and after the uniform phase
+    the first sample back at zero (the paper's definition of the response)."""
+    tr = run.trace
+    t = tr["t"]
+    on = tr["meter_rpm_upper"] > 0.0
+    if not on.any():
+        return math.nan, math.nan
+    t_on = float(t[np.argmax(on)])
+    uni = np.nonzero(tr["phase"] == UNIFORM)[0]
+    if uni.size == 0:
+        return t_on, math.nan
+    after = ~on[uni[-1] :]
+    t_off = float(t[uni[-1] + int(np.argmax(after))]) if after.any() else math.nan
+    return t_on, t_off
+
+
+@dataclass(frozen=True)
+class Table2Row:
+    target_kmh: float
+    accel_earlier_s: float
+    decel_earlier_s: float
+    dual_delay_m: float
+    gnss_delay_m: float
+    reps: int
+
+
+def table2(lab: Lab, targets: Iterable[float] = TARGETS_KMH, reps: int = 5) -> list[Table2Row]:
+    """Relative response times and delay distances, dual mode vs GNSS only."""
+    rows = []
+    items = [(v, r) for v in targets for r in range(reps)]
+    per: dict[float, list[tuple[float, float, float, float]]] = {}
+    for v, r in lab._iter(items, "table2"):
+        dual = lab.paper_run(v, r, SpeedMode.DUAL)
+        gnss = lab.paper_run(v, r, SpeedMode.GNSS_ONLY)
+        d_on, d_off = response_times(dual)
+        g_on, g_off = response_times(gnss)
+        per.setdefault(v, []).append(
+            (
+                g_on - d_on,
+                g_off - d_off,
+                math.nan if dual.first_landing_m is None else dual.first_landing_m,
+                math.nan if gnss.first_landing_m is None else gnss.first_landing_m,
+            )
+        )
+    for v, vals in per.items():
+        a = np.array(vals)
+        m = np.nanmean(a, axis=0)
+        rows.append(Table2Row(v, float(m[0]), float(m[1]), float(m[2]), float(m[3]), len(vals)))
+    return rows
+
+
+# ---------------------------------------------------------------- CV (Fig. 6/7)
+
+
+@dataclass(frozen=True)
+class CvSeries:
+    """The fed-back wheel speeds of one run (one per 500 ms update) and their CVs per N."""
+
+    target_kmh: float
+    t: np.ndarray
+    v_kmh: np.ndarray
+    phase: np.ndarray
+    cv: dict[int, np.ndarray]  # N -> CV of the last N speeds (nan: undefined)
+
+
+def wheel_updates(run: RunResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, wheel speed, phase) at every ECU wheel-speed update seen in the trace."""
+    tr = run.trace
+    u = tr["wheel_updates"]
+    idx = np.nonzero(np.diff(u, prepend=u[0]) > 0)[0]
+    return tr["t"][idx], tr["wheel_kmh"][idx], tr["phase"][idx]
+
+
+def cv_series(run: RunResult, queues: Iterable[int] = CV_QUEUES) -> CvSeries:
+    """Eq. 2 over the queue G of the last N wheel speeds, for each N (the core's cv_pct)."""
+    t, v, ph = wheel_updates(run)
+    cvs = {}
+    for n in queues:
+        out = np.full(v.size, math.nan)
+        for k in range(n - 1, v.size):
+            c = cv_pct([float(x) for x in v[k - n + 1 : k + 1]])
+            out[k] = math.nan if c is None else c
+        cvs[n] = out
+    return CvSeries(run.target_kmh, t, v, ph, cvs)
+
+
+def uniform_cv(s: CvSeries, n: int) -> np.ndarray:
+    """CVs of windows lying wholly in the uniform phase."""
+    ok = np.array(
+        [
+            k >= n - 1 and bool(np.all(s.phase[k - n + 1 : k + 1] == UNIFORM))
+            for k in range(s.t.size)
+        ]
+    )
+    c: np.ndarray = s.cv[n][ok] if ok.any() else np.array([])
+    out: np.ndarray = c[~np.isnan(c)]
+    return out
+
+
+def decel_detect_s(s: CvSeries, n: int, threshold: float) -> float:
+    """Time from the first decel update until CV first exceeds the threshold."""
+    dec = np.nonzero(s.phase == DECEL)[0]
+    if dec.size == 0:
+        return math.nan
+    t0 = s.t[dec[0]]
+    for k in range(dec[0], s.t.size):
+        if s.cv[n][k] > threshold:
+            return float(s.t[k] - t0)
+    return math.nan
+
+
+@dataclass(frozen=True)
+class CvResult:
+    series: list[CvSeries]
+    max_uniform: dict[int, float]  # N -> largest CV in uniform motion
+    max_uniform_by_target: dict[int, dict[float, float]]
+    decel_detect: dict[int, float]  # N -> mean time to flag the deceleration, s
+    chosen_n: int
+    threshold_pct: float
+
+
+def cv_experiment(lab: Lab, targets: Iterable[float] = TARGETS_KMH, reps: int = 5) -> CvResult:
+    """The paper's analysis: CV in uniform motion per N; N and the threshold chosen from it.
+
+    N is the shortest queue whose uniform-motion CV does not fluctuate: its largest uniform CV
+    is within 25 % of the longest queue's. The threshold is that N's largest uniform CV.
+    """
+    series = []
+    items = [(v, r) for v in targets for r in range(reps)]
+    for v, r in lab._iter(items, "cv"):
+        series.append(cv_series(lab.paper_run(v, r, SpeedMode.DUAL)))
+    by_target: dict[int, dict[float, float]] = {}
+    max_uni: dict[int, float] = {}
+    for n in CV_QUEUES:
+        per: dict[float, float] = {}
+        for s in series:
+            u = uniform_cv(s, n)
+            if u.size:
+                per[s.target_kmh] = max(per.get(s.target_kmh, 0.0), float(u.max()))
+        by_target[n] = per
+        max_uni[n] = max(per.values()) if per else math.nan
+    longest = max_uni[max(CV_QUEUES)]
+    chosen = next(n for n in CV_QUEUES if max_uni[n] <= 1.25 * longest)
+    detect = {}
+    for n in CV_QUEUES:
+        d = [decel_detect_s(s, n, max_uni[n]) for s in series]
+        detect[n] = float(np.nanmean(d)) if not all(math.isnan(x) for x in d) else math.nan
+    return CvResult(series, max_uni, by_target, detect, chosen, max_uni[chosen])
+
+
+# ---------------------------------------------------------------- slip (Fig. 8)
+
+
+@dataclass(frozen=True)
+class SlipResult:
+    points: list[tuple[float, float]]  # (measured speed km/h, slip %) per run
+    coef: tuple[float, float, float]  # a, b, c of slip = a v^2 + b v + c
+    r2: float
+    speed_at_5pct: float
+
+
+def slip_run(lab: Lab, v_kmh: float, rep: int) -> tuple[float, float]:
+    """Eq. 3 over the 40 m at constant speed: wheel pulses from EcuDiag, tape-measured L."""
+    run = lab.paper_run(v_kmh, rep, SpeedMode.DUAL)
+    tr = run.trace
+    uni = np.nonzero(tr["phase"] == UNIFORM)[0]
+    i0, i1 = uni[0], uni[-1]
+    pulses = (tr["wheel_pulses"][i1] - tr["wheel_pulses"][i0]) % (1 << 24)
+    dist = tr["odometer_m"][i1] - tr["odometer_m"][i0]
+    v_meas = float(np.nanmean(tr["gnss_kmh"][i0 : i1 + 1]))
+    radius = lab.cfg.wheel.radius_m
+    return v_meas, slip_measured_pct(pulses / lab.cfg.wheel.ppr, radius, float(dist))
+
+
+def slip_experiment(
+    lab: Lab, speeds: Iterable[float] = SLIP_SPEEDS_KMH, reps: int = 5
+) -> SlipResult:
+    """Quadratic fit of slip against speed, R^2, and the speed where slip reaches 5 %."""
+    items = [(v, r) for v in speeds for r in range(reps)]
+    pts = [slip_run(lab, v, r) for v, r in lab._iter(items, "slip")]
+    x = np.array([p[0] for p in pts])
+    y = np.array([p[1] for p in pts])
+    coef = np.polyfit(x, y, 2)
+    fit = np.polyval(coef, x)
+    r2 = 1.0 - float(np.sum((y - fit) ** 2) / np.sum((y - y.mean()) ** 2))
+    roots = np.roots([coef[0], coef[1], coef[2] - 5.0])
+    real = [float(r.real) for r in roots if abs(r.imag) < 1e-9 and r.real > 0]
+    v5 = max(real) if real else math.nan
+    return SlipResult(pts, (float(coef[0]), float(coef[1]), float(coef[2])), r2, v5)
+
+
+# ---------------------------------------------------------------- switching (Tables 3, 4)
+
+
+@dataclass(frozen=True)
+class SwitchEvent:
+    phase: str  # "accel" (wheel -> GNSS) or "decel" (GNSS -> wheel)
+    target_kmh: float
+    t: float
+    wheel_kmh: float
+    gnss_kmh: float
+    dv_kmh: float
+    dr_theory_rpm: float
+    dr_measured_rpm: float
+
+
+def switch_events(run: RunResult) -> list[SwitchEvent]:
+    """Every change of speed source in a dual-mode run, with both speeds and the meter jump.
+
+    The measured jump is the change of the metering speed from the sample before the switch
+    to 0.4 s after it (the motor's settling), so it also holds 0.5 s of the speed trend.
+    """
+    tr = run.trace
+    src = tr["source"]
+    out = []
+    for k in np.nonzero(np.diff(src) != 0)[0] + 1:
+        if src[k] not in (GNSS, WHEEL) or src[k - 1] not in (GNSS, WHEEL):
+            continue
+        ph = "accel" if src[k] == GNSS else "decel"
+        wh, gn = float(tr["wheel_kmh"][k]), float(tr["gnss_kmh"][k])
+        dv = abs(gn - wh)
+        theory = meter_target_rpm(run.working_width_m, run.rate_kg_ha, dv, run.kg_per_rev, 0.0)
+        k2 = min(int(k) + 4, int(tr["t"].size) - 1)
+        meas = abs(float(tr["meter_rpm_upper"][k2] - tr["meter_rpm_upper"][k - 1]))
+        out.append(SwitchEvent(ph, run.target_kmh, float(tr["t"][k]), wh, gn, dv, theory, meas))
+    return out
+
+
+def table34(
+    lab: Lab, targets: Iterable[float] = TARGETS_KMH, reps: int = 5
+) -> dict[tuple[str, float], list[SwitchEvent]]:
+    """The first switch of each direction in every dual run, grouped by phase and target."""
+    out: dict[tuple[str, float], list[SwitchEvent]] = {}
+    items = [(v, r) for v in targets for r in range(reps)]
+    for v, r in lab._iter(items, "table34"):
+        ev = switch_events(lab.paper_run(v, r, SpeedMode.DUAL))
+        out.setdefault(("accel", v), [])
+        out.setdefault(("decel", v), [])
+        for ph in ("accel", "decel"):
+            first = next((e for e in ev if e.phase == ph), None)
+            if first is not None:
+                out[(ph, v)].append(first)
+    return out
+
+
+def rule_violations(run: RunResult, cv_threshold_pct: float, switch_kmh: float) -> int:
+    """Samples where the ECU used GNSS although its own CV and GNSS speed say it must not
+    (the rule: GNSS only when CV < threshold and v_GNSS > switch speed)."""
+    tr = run.trace
+    g = tr["source"] == GNSS
+    ok = (tr["cv_pct"] < cv_threshold_pct) & (tr["gnss_kmh"] > switch_kmh)
+    return int(np.count_nonzero(g & ~ok))
+
+
+def gnss_outside_uniform_s(run: RunResult) -> tuple[float, float]:
+    """How long before the uniform phase began (truth) GNSS was first used, and how long after
+    it ended GNSS was still used; (0, 0) when GNSS was never used."""
+    tr = run.trace
+    g = np.nonzero(tr["source"] == GNSS)[0]
+    uni_t = tr["t"][tr["phase"] == UNIFORM]
+    if g.size == 0 or uni_t.size == 0:
+        return 0.0, 0.0
+    return float(uni_t.min() - tr["t"][g].min()), float(tr["t"][g].max() - uni_t.max())
+
+
+# ---------------------------------------------------------------- Table 5
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    jump_rpm: float
+    overshoot_pct: float
+    steady_error_rpm: float
+    response_s: float
+    t: np.ndarray
+    meter_rpm: np.ndarray
+    target_rpm: np.ndarray
+
+
+def step_response(
+    lab: Lab, jump_rpm: float, rep: int, v_kmh: float = 8.0, settle_s: float = 4.0
+) -> StepResponse:
+    """Drive at v_kmh in uniform motion, then lower the rate so that the target metering speed
+    drops by jump_rpm at once (the size of the paper's deceleration jumps); measure the
+    metering motor: overshoot beyond the new target (% of the jump), steady-state error (mean
+    |error| over the last second) and the time until it stays within 5 % of the new target."""
+    seed = lab.base_seed * 1000 + 500 + rep
+    world = World(lab.cfg, seed=seed, drive=Drive.paper_run(v_kmh, hold_m=80.0))
+    with Sil(world, lab.pc) as sil:
+        tr_ = world.tractor
+        while world.drive.phase(tr_.v) != "uniform" or tr_.odometer < 25.0:
+            sil.step()
+        st = world.ecu.state
+        r0 = st.target_rpm[0]
+        q0 = sil.pc.rate_kg_ha
+        q1 = q0[0] * (r0 - jump_rpm) / r0
+        sil.pc.rate_kg_ha = (q1, q0[1])
+        t_jump = world.t_s
+        n0 = len(sil.record.rows) if sil.record else 0
+        for _ in range(round(settle_s / world.dt)):
+            sil.step()
+        assert sil.record is not None
+        rows = np.array(sil.record.rows[n0:])
+    tr = {name: rows[:, i] for i, name in enumerate(COLUMNS)}
+    t = tr["t"] - t_jump
+    meas = tr["meter_rpm_upper"]
+    target = tr["target_rpm_upper"]
+    after = t > 0.5  # the command with the new rate reaches the ECU within 500 ms
+    r1 = float(np.median(target[t > 1.0]))
+    under = max(0.0, r1 - float(meas[after].min()))
+    last = t > settle_s - 1.0
+    ss = float(np.mean(np.abs(meas[last] - target[last])))
+    t_cmd = float(t[np.argmax(np.abs(target - target[0]) > 0.5 * jump_rpm)])
+    outside = np.nonzero(np.abs(meas - r1) > 0.05 * r1)[0]
+    settle = float(t[outside[-1] + 1]) - t_cmd if outside.size else 0.0
+    return StepResponse(jump_rpm, 100.0 * under / jump_rpm, ss, settle, t, meas, target)
+
+
+def table5(lab: Lab, jumps: Iterable[float] = TABLE5_JUMPS_RPM) -> list[StepResponse]:
+    items = [(j, r) for r, j in enumerate(jumps)]
+    return [step_response(lab, j, r) for j, r in lab._iter(items, "table5")]

@@ -1,0 +1,227 @@
+"""Software in the loop: the World's ECU and a simulated cab PC talk DBC frames over a
+python-can virtual bus, in virtual time, as the paper's machine does over its USB-CAN link.
+
+The cab PC reads the NMEA stream in its own program cycle (323 ms, as measured in the
+paper), keeps the speed of the last valid RMC, and sends the PcCommand every 500 ms. It
+records every EcuStatus period (100 ms) like the paper's CAN analyser.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import can
+import numpy as np
+
+from topdress import protocol
+from topdress.errors import EcuParamError, ProtocolError
+from topdress.sim.nmea import parse_rmc_speed_kmh
+from topdress.sim.world import World
+
+_channels = itertools.count()
+
+COLUMNS = (
+    "t",
+    "odometer_m",
+    "v_true_kmh",
+    "phase",
+    "meter_rpm_upper",
+    "meter_rpm_lower",
+    "target_rpm_upper",
+    "target_rpm_lower",
+    "wheel_kmh",
+    "gnss_kmh",
+    "selected_kmh",
+    "source",
+    "cv_pct",
+    "faults",
+    "wheel_updates",
+    "pc_gnss_kmh",
+    "wheel_pulses",
+)
+PHASES = ("rest", "accel", "uniform", "decel", "turn", "run")
+SOURCES = ("wheel", "gnss", "none")
+
+
+@dataclass(frozen=True)
+class PcParams:
+    """The cab PC of the experiments."""
+
+    command_period_s: float = 0.5
+    cycle_s: float = 0.323
+    fan_rpm: float = 3000.0
+    rate_kg_ha: tuple[float, float] = (180.0, 180.0)
+    ecu_params: tuple[tuple[str, float], ...] = ()  # PcParamSet writes before the start
+    start_at_s: float = 0.0
+
+
+@dataclass
+class Record:
+    """The CAN analyser's trace: one row per EcuStatus (100 ms), columns as COLUMNS."""
+
+    rows: list[tuple[float, ...]] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        a = np.array(self.rows, dtype=float).reshape(-1, len(COLUMNS))
+        return {name: a[:, i] for i, name in enumerate(COLUMNS)}
+
+
+class CabPc:
+    """The PC side: NMEA in, PcCommand out every 500 ms, ECU frames decoded."""
+
+    def __init__(self, p: PcParams) -> None:
+        self.p = p
+        self.gnss_kmh: float | None = None
+        self._serial: list[str] = []
+        self._next_cycle = p.cycle_s
+        self._next_cmd = p.start_at_s
+        self.status: protocol.EcuStatus | None = None
+        self.diag: protocol.EcuDiag | None = None
+        self.speeds: protocol.EcuSpeeds | None = None
+        self.targets: protocol.EcuTargets | None = None
+        self.acks: list[protocol.EcuParamAck] = []
+        self.rejected_frames = 0
+        self.rate_kg_ha = p.rate_kg_ha
+        self.start = True
+
+    def on_nmea(self, line: str) -> None:
+        self._serial.append(line)
+
+    def poll(self, t: float) -> can.Message | None:
+        """Run the program cycle and the command timer; the command when one is due."""
+        if t + 1e-9 >= self._next_cycle:
+            self._next_cycle += self.p.cycle_s
+            for line in self._serial:
+                if line[3:6] == "RMC":
+                    self.gnss_kmh = parse_rmc_speed_kmh(line)
+            self._serial.clear()
+        if t + 1e-9 < self._next_cmd:
+            return None
+        self._next_cmd += self.p.command_period_s
+        gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
+        up, lo = self.rate_kg_ha
+        return protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss)
+
+    def on_frame(self, msg: can.Message) -> bool:
+        """Decode one ECU frame; True if it was an EcuStatus."""
+        try:
+            f = protocol.decode(msg)
+        except ProtocolError:
+            self.rejected_frames += 1
+            return False
+        if isinstance(f, protocol.EcuStatus):
+            self.status = f
+            return True
+        if isinstance(f, protocol.EcuDiag):
+            self.diag = f
+        elif isinstance(f, protocol.EcuSpeeds):
+            self.speeds = f
+        elif isinstance(f, protocol.EcuTargets):
+            self.targets = f
+        elif isinstance(f, protocol.EcuParamAck):
+            self.acks.append(f)
+        return False
+
+
+class Sil:
+    """World + cab PC over a virtual CAN bus; step() advances one control period."""
+
+    def __init__(self, world: World, pc: PcParams | None = None, record: bool = True) -> None:
+        self.world = world
+        self.pc = CabPc(pc or PcParams())
+        channel = f"topdress-sil-{next(_channels)}"
+        self.ecu_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.pc_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.record: Record | None = Record() if record else None
+        self.nmea_lines = 0
+        self.crop_lines = 0
+        self._pending_to_ecu = 0
+        self._push_params()
+
+    def close(self) -> None:
+        self.ecu_bus.shutdown()
+        self.pc_bus.shutdown()
+
+    def __enter__(self) -> Sil:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _push_params(self) -> None:
+        """Write the PC's parameters while the ECU is stopped, each acknowledged."""
+        for key, value in self.pc.p.ecu_params:
+            self.pc_bus.send(protocol.encode_param_set(key, value))
+            self._pending_to_ecu += 1
+            self.step()
+            ack = self.pc.acks[-1] if self.pc.acks else None
+            if ack is None or ack.result != protocol.AckResult.OK:
+                result = "no answer" if ack is None else ack.result.name
+                raise EcuParamError(key, value, f"refused by the ECU: {result}")
+
+    def step(self) -> None:
+        w = self.world
+        if self._pending_to_ecu:
+            now = w.now_us
+            while (msg := self.ecu_bus.recv(0)) is not None:
+                w.deliver_can(msg, now)
+            self._pending_to_ecu = 0
+        out = w.step()
+        pc = self.pc
+        if out.nmea:
+            self.nmea_lines += len(out.nmea)
+            for line in out.nmea:
+                pc.on_nmea(line)
+        self.crop_lines += len(out.crop)
+        if out.can:
+            for fid, data in out.can:
+                self.ecu_bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=True))
+            status = False
+            while (msg := self.pc_bus.recv(0)) is not None:
+                status |= pc.on_frame(msg)
+            if status and self.record is not None:
+                self._record(out.t_s)
+        cmd = pc.poll(out.t_s)
+        if cmd is not None:
+            self.pc_bus.send(cmd)
+            self._pending_to_ecu += 1
+
+    def _record(self, t: float) -> None:
+        pc = self.pc
+        st, dg, sp, tg = pc.status, pc.diag, pc.speeds, pc.targets
+        if st is None or dg is None or sp is None or tg is None or self.record is None:
+            return
+        w = self.world
+        tr = w.tractor
+        self.record.rows.append(
+            (
+                t,
+                tr.odometer,
+                tr.v * 3.6,
+                float(PHASES.index(w.drive.phase(tr.v))),
+                st.meter_rpm_upper,
+                st.meter_rpm_lower,
+                tg.target_rpm_upper,
+                tg.target_rpm_lower,
+                sp.wheel_kmh,
+                math.nan if sp.gnss_kmh is None else sp.gnss_kmh,
+                sp.selected_kmh,
+                float(SOURCES.index(str(dg.source))),
+                math.nan if dg.cv_pct is None else dg.cv_pct,
+                float(int(dg.faults)),
+                float(w.ecu.state.wheel_updates),
+                math.nan if pc.gnss_kmh is None else pc.gnss_kmh,
+                float(dg.wheel_pulses),
+            )
+        )
+
+    def run_until_done(self, max_s: float = 600.0) -> None:
+        """Step until the Drive is finished (or max_s)."""
+        w = self.world
+        n = round(max_s / w.dt)
+        for _ in range(n):
+            self.step()
+            if w.drive.finished:
+                return

@@ -1,0 +1,185 @@
+"""The World: every plant device and the C ECU core, advanced together in virtual time."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from dataclasses import field as dc_field
+from typing import Any
+
+from topdress.ecu import Ecu, EcuParams
+from topdress.sim.actuators import Fan, FanParams, MeterMotor, MeterParams
+from topdress.sim.field import CropSensor, CropSensorParams, Field, FieldParams
+from topdress.sim.gnss import EARTH_R_M, GnssParams, GnssReceiver
+from topdress.sim.tractor import Drive, Tractor, TractorParams
+from topdress.sim.transport import AirLine, AirLineParams
+from topdress.sim.wheel import GroundWheel, WheelParams
+
+_U32 = 0xFFFFFFFF
+LAYERS = ("upper", "lower")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Every model parameter of the simulated machine (defaults: docs/simulation.md)."""
+
+    dt_s: float = 0.01
+    tractor: TractorParams = dc_field(default_factory=TractorParams)
+    gnss: GnssParams = dc_field(default_factory=GnssParams)
+    wheel: WheelParams = dc_field(default_factory=WheelParams)
+    meter: tuple[MeterParams, MeterParams] = (MeterParams(), MeterParams())
+    fan: tuple[FanParams, FanParams] = (FanParams(), FanParams())
+    airline: tuple[AirLineParams, AirLineParams] = (AirLineParams(), AirLineParams())
+    field: FieldParams = dc_field(default_factory=FieldParams)
+    crop: CropSensorParams = dc_field(default_factory=CropSensorParams)
+    crop_offsets_m: tuple[float, float, float, float] = (-1.35, -0.45, 0.45, 1.35)
+    kg_per_rev: tuple[float, float] = (0.3, 0.3)  # true fertilizer per metering revolution
+    ecu: EcuParams | None = None  # None: the ECU's defaults
+    bin_m: float = 0.5  # resolution of the applied-fertilizer record along the track
+
+
+@dataclass(frozen=True)
+class StepOutput:
+    """What the devices put out during one step."""
+
+    t_s: float
+    nmea: list[str]
+    crop: list[str]
+    can: list[tuple[int, bytes]]
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth, for analysis (never seen by the ECU or the terminal)."""
+
+    t_s: float
+    x_m: float
+    y_m: float
+    lat_deg: float
+    lon_deg: float
+    heading_deg: float
+    v_kmh: float
+    odometer_m: float
+    wheel_revolutions: float
+    meter_rpm: tuple[float, float]
+    fan_rpm: tuple[float, float]
+    applied_kg: tuple[float, float]
+    in_flight_kg: tuple[float, float]
+    first_landing_m: tuple[float | None, float | None]  # odometer where fertilizer first landed
+    ndvi: float  # true NDVI under the machine centre
+
+
+class World:
+    """A tractor with the topdresser in a field; step() advances one control period."""
+
+    def __init__(self, cfg: SimConfig | None = None, seed: int = 0, drive: Drive | None = None):
+        self.cfg = cfg = cfg or SimConfig()
+        self.seed = seed
+        dt = cfg.dt_s
+        self.dt = dt
+        self.tractor = Tractor(cfg.tractor, seed=seed * 7 + 1)
+        self.drive = drive or Drive.paper_run(6.5)
+        self.gnss = GnssReceiver(cfg.gnss, seed * 7 + 2)
+        self.wheel = GroundWheel(cfg.wheel, seed * 7 + 3)
+        self.meters = (MeterMotor(cfg.meter[0], dt), MeterMotor(cfg.meter[1], dt))
+        self.fans = (Fan(cfg.fan[0], dt), Fan(cfg.fan[1], dt))
+        self.airlines = (AirLine(cfg.airline[0]), AirLine(cfg.airline[1]))
+        self.field = Field(cfg.field, seed * 7 + 4)
+        self.sensors = [
+            CropSensor(i + 1, off, cfg.crop, seed * 7 + 5)
+            for i, off in enumerate(cfg.crop_offsets_m)
+        ]
+        self.ecu = Ecu(cfg.ecu, now_us=0)
+        self.t_s = 0.0
+        self._step_n = 0
+        self._duty = (0.0, 0.0, 0.0, 0.0)
+        self._rev_prev = [0.0, 0.0]
+        self.first_landing_m: list[float | None] = [None, None]
+        self.first_landing_t: list[float | None] = [None, None]
+        self.applied_by_bin: tuple[dict[int, float], dict[int, float]] = ({}, {})
+        self._crop_next = min(s.next_t for s in self.sensors)
+
+    @property
+    def now_us(self) -> int:
+        return (self._step_n * round(self.dt * 1e6)) & _U32
+
+    def deliver_can(self, frame: Any, now_us: int | None = None) -> int:
+        """Hand a PC -> ECU frame (can.Message or (id, bytes)) to the ECU; its return code."""
+        rc: int = self.ecu.rx(frame, self.now_us if now_us is None else now_us)
+        return rc
+
+    def step(self) -> StepOutput:
+        """Advance one control period: plant under the last duties, then one ECU step."""
+        dt = self.dt
+        self._step_n += 1
+        t = self._step_n * dt
+        self.t_s = t
+        tr = self.tractor
+        v_t, k = self.drive.command(tr, dt)
+        tr.step(dt, v_t, k)
+        wc = self.wheel.step(t, dt, tr.v)
+        d = self._duty
+        m0, m1 = self.meters
+        f0, f1 = self.fans
+        c0 = m0.step(t, dt, d[0])
+        c1 = m1.step(t, dt, d[1])
+        g0 = f0.step(t, dt, d[2])
+        g1 = f1.step(t, dt, d[3])
+        self._transport(0, t, m0.revolutions, f0.rpm)
+        self._transport(1, t, m1.revolutions, f1.rpm)
+        lines = self.gnss.step(t, tr.x, tr.y, tr.v, tr.heading)
+        crop: list[str] = []
+        if t + 1e-9 >= self._crop_next:
+            for s in self.sensors:
+                line = s.step(t, self.field, tr.x, tr.y, tr.heading)
+                if line is not None:
+                    crop.append(line)
+            self._crop_next = min(s.next_t for s in self.sensors)
+        now = (self._step_n * round(dt * 1e6)) & _U32
+        self._duty = self.ecu.step_raw(now, wc & _U32, c0 & _U32, c1 & _U32, g0 & _U32, g1 & _U32)
+        return StepOutput(t, lines, crop, self.ecu.tx_raw())
+
+    def _transport(self, i: int, t: float, rev: float, fan_rpm: float) -> None:
+        d_rev = rev - self._rev_prev[i]
+        self._rev_prev[i] = rev
+        line = self.airlines[i]
+        if d_rev <= 0.0 and line.in_flight_kg <= 0.0:
+            return
+        landed = line.step(t, d_rev, self.cfg.kg_per_rev[i], fan_rpm)
+        if landed > 0.0:
+            odo = self.tractor.odometer
+            if self.first_landing_m[i] is None:
+                self.first_landing_m[i] = odo
+                self.first_landing_t[i] = t
+            b = int(odo / self.cfg.bin_m)
+            bins = self.applied_by_bin[i]
+            bins[b] = bins.get(b, 0.0) + landed
+
+    def run(self, seconds: float) -> None:
+        """Advance `seconds` of virtual time, discarding the outputs."""
+        for _ in range(round(seconds / self.dt)):
+            self.step()
+
+    @property
+    def truth(self) -> Truth:
+        tr = self.tractor
+        g = self.cfg.gnss
+        lat = g.lat0_deg + math.degrees(tr.y / EARTH_R_M)
+        lon = g.lon0_deg + math.degrees(tr.x / (EARTH_R_M * math.cos(math.radians(g.lat0_deg))))
+        return Truth(
+            t_s=self.t_s,
+            x_m=tr.x,
+            y_m=tr.y,
+            lat_deg=lat,
+            lon_deg=lon,
+            heading_deg=math.degrees(tr.heading) % 360.0,
+            v_kmh=tr.v * 3.6,
+            odometer_m=tr.odometer,
+            wheel_revolutions=self.wheel.revolutions,
+            meter_rpm=(self.meters[0].rpm, self.meters[1].rpm),
+            fan_rpm=(self.fans[0].rpm, self.fans[1].rpm),
+            applied_kg=(self.airlines[0].landed_kg, self.airlines[1].landed_kg),
+            in_flight_kg=(self.airlines[0].in_flight_kg, self.airlines[1].in_flight_kg),
+            first_landing_m=(self.first_landing_m[0], self.first_landing_m[1]),
+            ndvi=self.field.ndvi(tr.x, tr.y),
+        )
