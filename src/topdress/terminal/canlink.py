@@ -225,7 +225,12 @@ class CanLink:
             self.counters.clamped += 1
             kmh = _clamp(kmh, MAX_GNSS_KMH)
         self.command = replace(self.command, gnss_kmh=kmh)
-        if self.cfg.send_on_gnss and self.params_done:
+        if self.cfg.send_on_gnss:
+            self.send_now()
+
+    def send_now(self) -> None:
+        """Send the command at once (once the parameters are in force), off the period."""
+        if self.params_done:
             self._send_command()
 
     def poll(self, now: float) -> None:

@@ -1,0 +1,340 @@
+"""The cab terminal: GNSS and crop lines in, the rate per layer out to the ECU, everything logged.
+
+Sources (GNSS line source, crop line source, the CAN bus) run in their own reader threads and
+put `(kind, t, payload)` on one queue; the control loop alone touches the state. It never waits
+on a device, only on that queue, with a timeout that keeps its 10 Hz tick:
+
+- an NMEA line: decoded; a new GNSS speed goes to the CAN link (sent at once with send_on_gnss);
+- a crop line: parsed into the sensor table;
+- a CAN frame: to the CAN link (status, diagnostics, speeds, targets, parameter acks);
+- every tick: the NDVI where the meters are now (sensor mean through the distance queue, driven
+  by the ECU's selected speed), the rate per layer from the NDVI model, the next command, one
+  state row to the session log, and a fresh `Snapshot` for the display.
+
+GNSS lost (port vanished, no valid fix, stale speed) is forwarded as "not available", so the
+ECU falls back to the wheel.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+from topdress.log.model import StateRow
+from topdress.log.rows import state_row
+from topdress.log.session import SessionLog
+from topdress.terminal.canlink import CanLink
+from topdress.terminal.config import TerminalConfig
+from topdress.terminal.crop import CompensatedNdvi
+from topdress.terminal.gnss import GnssSpeedTracker
+from topdress.terminal.nmea import NmeaDecoder
+from topdress.terminal.rate import build_rate_model, split_layers
+from topdress.terminal.serial_io import LineSource
+
+log = logging.getLogger(__name__)
+
+TICK_S = 0.1  # control tick and state-row period (10 Hz)
+_CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the display shows; built by the control loop every tick."""
+
+    t_s: float = 0.0
+    running: bool = False
+    source: str = "none"
+    v_kmh: float = 0.0
+    v_wheel_kmh: float = 0.0
+    v_gnss_kmh: float | None = None
+    cv_pct: float | None = None
+    uniform: bool = False
+    ndvi_sensors: float | None = None
+    ndvi: float | None = None
+    rate_kg_ha: tuple[float, float] = (0.0, 0.0)
+    target_rpm: tuple[float, float] = (0.0, 0.0)
+    meter_rpm: tuple[float, float] = (0.0, 0.0)
+    fan_rpm: tuple[float, float] = (0.0, 0.0)
+    faults: int = 0
+    ecu_link: str = "wait"  # wait (never heard), ok, lost
+    gnss_link: str = "wait"  # wait, ok, no fix, lost
+    lat: float | None = None
+    lon: float | None = None
+    distance_m: float = 0.0
+    counters: dict[str, int] = field(default_factory=dict)
+    last_event: str | None = None
+
+
+class Terminal:
+    """The terminal's control loop over its three sources and the session log."""
+
+    def __init__(
+        self,
+        cfg: TerminalConfig,
+        gnss: LineSource,
+        crop: LineSource,
+        bus: can.BusABC,
+        session: SessionLog | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        start: bool = True,
+        on_event: Callable[[str], None] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.gnss = gnss
+        self.crop = crop
+        self.bus = bus
+        self.session = session
+        self.clock = clock
+        self.start_requested = start
+        self._on_event = on_event
+        self.inbox: queue.Queue[tuple[str, float, Any]] = queue.Queue()
+        self.link = CanLink(
+            bus,
+            cfg.can,
+            fan_rpm=cfg.machine.fan_rpm,
+            on_tx=self._log_tx,
+            on_event=self._event,
+        )
+        self.nmea = NmeaDecoder()
+        self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s)
+        self.ndvi = CompensatedNdvi(cfg.crop)
+        self.model = build_rate_model(cfg.rate)
+        self.counters: Counter[str] = Counter()
+        self.snapshot = Snapshot()
+        self._t0: float | None = None
+        self._gnss_state = "wait"
+        self._gnss_seen = False
+        self._last_event: str | None = None
+        self._stop = threading.Event()
+        self._can_thread: threading.Thread | None = None
+
+    # ---- life cycle ---------------------------------------------------------------------------
+    def open(self) -> None:
+        """Start the line sources and the parameter push. `run` also starts the CAN reader;
+        a caller driving `handle`/`tick` itself (virtual time) hands CAN frames in directly."""
+        now = self.clock()
+        self._t0 = now
+        self.gnss.start(lambda t, line: self.inbox.put(("nmea", t, line)))
+        self.crop.start(lambda t, line: self.inbox.put(("crop", t, line)))
+        self.link.begin(self.cfg.ecu_params(), now)
+
+    def close(self) -> None:
+        """Stop the ECU (a stop command), the readers, and the log."""
+        self.link.set_command(False, 0.0, 0.0, 0.0)
+        self.link.send_now()
+        self._stop.set()
+        self.gnss.stop()
+        self.crop.stop()
+        if self._can_thread is not None:
+            self._can_thread.join(timeout=2.0)
+        if self.session is not None:
+            self.session.close()
+
+    def _can_reader(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self.bus.recv(timeout=_CAN_POLL_S)
+            except (can.CanError, OSError) as exc:
+                self.inbox.put(("can_error", self.clock(), str(exc)))
+                self._stop.wait(0.5)
+                continue
+            if msg is not None:
+                self.inbox.put(("can", self.clock(), msg))
+
+    def run(
+        self,
+        duration_s: float | None = None,
+        on_tick: Callable[[Snapshot, float], None] | None = None,
+        stop: threading.Event | None = None,
+    ) -> None:
+        """Open, loop until `duration_s` has passed or `stop` is set, close (always)."""
+        self.open()
+        self._can_thread = threading.Thread(target=self._can_reader, name="can-rx", daemon=True)
+        self._can_thread.start()
+        assert self._t0 is not None
+        end = None if duration_s is None else self._t0 + duration_s
+        next_tick = self._t0
+        try:
+            while stop is None or not stop.is_set():
+                now = self.clock()
+                if end is not None and now >= end:
+                    break
+                try:
+                    kind, t, payload = self.inbox.get(timeout=max(0.0, next_tick - now))
+                except queue.Empty:
+                    pass
+                else:
+                    self.handle(kind, t, payload)
+                now = self.clock()
+                if now >= next_tick:
+                    self.tick(now)
+                    # Keep the 10 Hz grid; after a stall, restart it rather than burst.
+                    next_tick = next_tick + TICK_S if now - next_tick < TICK_S else now + TICK_S
+                    if on_tick is not None:
+                        on_tick(self.snapshot, now)
+        finally:
+            self.close()
+
+    # ---- inputs -------------------------------------------------------------------------------
+    def handle(self, kind: str, t: float, payload: Any) -> None:
+        """Act on one queued input."""
+        if kind == "nmea":
+            self._on_nmea(t, payload)
+        elif kind == "crop":
+            self._on_crop(t, payload)
+        elif kind == "can":
+            if self.session is not None:
+                self.session.raw("can_rx", t, (payload.arbitration_id, bytes(payload.data)))
+            self.link.on_frame(payload, t)
+        elif kind == "can_error":
+            self.counters["can_rx_errors"] += 1
+            self._event(f"CAN receive error: {payload}")
+        self.link.poll(t)
+
+    def _on_nmea(self, t: float, line: bytes) -> None:
+        text = line.decode("latin-1")
+        if self.session is not None:
+            self.session.raw("nmea", t, text)
+        fix = self.nmea.decode(line)
+        if not fix.ok:
+            return
+        if self.tracker.update(t, fix) is not None:
+            self._gnss_seen = True
+            self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
+
+    def _on_crop(self, t: float, line: bytes) -> None:
+        if self.session is not None:
+            self.session.raw("crop", t, line.decode("latin-1"))
+        reading = self.ndvi.sensors.feed(t, line)
+        if reading is not None:
+            self.model.observe(reading.ndvi)
+
+    # ---- the tick -----------------------------------------------------------------------------
+    def tick(self, now: float) -> None:
+        """10 Hz: GNSS state, NDVI at the meters, rates, command, state row, snapshot."""
+        gnss_kmh = self.tracker.current(now, self.gnss.connected)
+        if gnss_kmh is None and self.link.command.gnss_kmh is not None:
+            self.link.set_gnss(None, now)  # lost: the ECU falls back to the wheel at once
+        self._track_gnss_state(gnss_kmh)
+        ecu = self.link.ecu
+        v_sel = ecu.speeds.selected_kmh if ecu.speeds is not None and self.link.ecu_alive else 0.0
+        ndvi_sensors = self.ndvi.sensors.mean_ndvi(now)
+        ndvi_meters = self.ndvi.update(now, v_sel)
+        # Before the meters reach the first spot sensed, the nearest information is the sensors'.
+        ndvi = ndvi_meters if ndvi_meters is not None else ndvi_sensors
+        if ndvi is None:
+            self.counters["no_ndvi_ticks"] += 1
+            rates = split_layers(0.0, self.cfg.rate.split_upper, self.cfg.machine.layers)
+        else:
+            total = self.model.rate_kg_ha(ndvi)
+            rates = split_layers(total, self.cfg.rate.split_upper, self.cfg.machine.layers)
+        start = self.start_requested and self.link.params_done
+        self.link.set_command(start, self.cfg.machine.fan_rpm, rates.upper_kg_ha, rates.lower_kg_ha)
+        self.link.poll(now)
+        self.snapshot = self._snapshot(
+            now, ndvi_sensors, ndvi, (rates.upper_kg_ha, rates.lower_kg_ha)
+        )
+        if self.session is not None:
+            self.session.state(self._row(now))
+
+    def _track_gnss_state(self, gnss_kmh: float | None) -> None:
+        if gnss_kmh is not None:
+            state = "ok"
+        elif not self.gnss.connected:
+            state = "lost"
+        elif not self._gnss_seen:
+            state = "wait"
+        else:
+            state = "no fix"
+        if state != self._gnss_state:
+            if self._gnss_state != "wait" or state != "ok":
+                self._event(f"GNSS {state}")
+            self._gnss_state = state
+
+    def _snapshot(
+        self,
+        now: float,
+        ndvi_sensors: float | None,
+        ndvi: float | None,
+        rates: tuple[float, float],
+    ) -> Snapshot:
+        ecu = self.link.ecu
+        st, diag, sp, tg = ecu.status, ecu.diag, ecu.speeds, ecu.targets
+        pos = self.tracker.position
+        lost = "lost" if self.link.counters.ecu_lost else "wait"
+        ecu_link = "ok" if self.link.ecu_alive else lost
+        return Snapshot(
+            t_s=now - (self._t0 if self._t0 is not None else now),
+            running=st.running if st is not None else False,
+            source=str(diag.source) if diag is not None else "none",
+            v_kmh=sp.selected_kmh if sp is not None else 0.0,
+            v_wheel_kmh=sp.wheel_kmh if sp is not None else 0.0,
+            v_gnss_kmh=self.link.command.gnss_kmh,
+            cv_pct=diag.cv_pct if diag is not None else None,
+            uniform=diag.uniform if diag is not None else False,
+            ndvi_sensors=ndvi_sensors,
+            ndvi=ndvi,
+            rate_kg_ha=rates,
+            target_rpm=(tg.target_rpm_upper, tg.target_rpm_lower) if tg else (0.0, 0.0),
+            meter_rpm=(st.meter_rpm_upper, st.meter_rpm_lower) if st else (0.0, 0.0),
+            fan_rpm=(st.fan_rpm_upper, st.fan_rpm_lower) if st else (0.0, 0.0),
+            faults=int(diag.faults) if diag is not None else 0,
+            ecu_link=ecu_link,
+            gnss_link=self._gnss_state,
+            lat=pos.lat if pos else None,
+            lon=pos.lon if pos else None,
+            distance_m=self.ndvi.odometer.distance_m,
+            counters=self._counters(),
+            last_event=self._last_event,
+        )
+
+    def _counters(self) -> dict[str, int]:
+        lc = self.link.counters
+        bad_nmea = sum(v for k, v in self.nmea.counters.items() if k not in ("ok", "resync"))
+        crop = self.ndvi.sensors.counters
+        out = {
+            "nmea": self.nmea.counters["ok"],
+            "nmea_bad": bad_nmea,
+            "crop": crop["ok"],
+            "crop_bad": sum(v for k, v in crop.items() if k not in ("ok", "stale")),
+            "can_rx": lc.rx_frames,
+            "can_bad": lc.rx_foreign + lc.rx_malformed,
+            "cmd_tx": lc.tx_commands,
+            "tx_err": lc.tx_errors,
+        }
+        if self.session is not None:
+            out["log_err"] = self.session.errors
+        return out
+
+    def _row(self, now: float) -> StateRow:
+        ecu, s = self.link.ecu, self.snapshot
+        return state_row(
+            now,
+            status=ecu.status,
+            diag=ecu.diag,
+            speeds=ecu.speeds,
+            targets=ecu.targets,
+            position=(s.lat, s.lon) if s.lat is not None and s.lon is not None else None,
+            ndvi=s.ndvi,
+            rates_kg_ha=s.rate_kg_ha,
+        )
+
+    # ---- events and the transmit tap ----------------------------------------------------------
+    def _log_tx(self, msg: can.Message) -> None:
+        if self.session is not None:
+            self.session.raw("can_tx", self.clock(), (msg.arbitration_id, bytes(msg.data)))
+
+    def _event(self, text: str) -> None:
+        self._last_event = text
+        self.counters["events"] += 1
+        log.info("%s", text)
+        if self._on_event is not None:
+            self._on_event(text)

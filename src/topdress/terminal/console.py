@@ -1,0 +1,110 @@
+"""Live status of the terminal in a console: plain ANSI on a TTY, a line per second otherwise.
+
+No curses: on a TTY the block of lines is redrawn in place (cursor up, clear line); when stdout is
+a pipe or a file, one compact line is printed per `line_period_s` so a log stays readable.
+"""
+
+from __future__ import annotations
+
+from typing import TextIO
+
+from topdress.terminal.app import Snapshot
+
+#: Fault word bits of the ECU (ecu/include/td_common.h).
+FAULT_NAMES = (
+    "CMD_TIMEOUT",
+    "GNSS_LOST",
+    "WHEEL_ENCODER",
+    "UPPER_BLOCKED",
+    "LOWER_BLOCKED",
+    "UPPER_FAN_LOW",
+    "LOWER_FAN_LOW",
+    "NO_SPEED",
+)
+
+
+def fault_names(word: int) -> list[str]:
+    """Names of the bits set in an ECU fault word (unknown bits as BITn)."""
+    names = [name for bit, name in enumerate(FAULT_NAMES) if word & (1 << bit)]
+    names += [f"BIT{bit}" for bit in range(len(FAULT_NAMES), 16) if word & (1 << bit)]
+    return names
+
+
+def _num(value: float | None, fmt: str) -> str:
+    return "--" if value is None else format(value, fmt)
+
+
+def render_lines(s: Snapshot) -> list[str]:
+    """The full status block."""
+    faults = ", ".join(fault_names(s.faults)) or "none"
+    cv = _num(s.cv_pct, ".2f")
+    return [
+        f"topdress terminal   t {s.t_s:7.1f} s   ECU {s.ecu_link:<5}  GNSS {s.gnss_link:<7}"
+        f"  {'RUNNING' if s.running else 'stopped'}",
+        f"speed   {s.v_kmh:5.2f} km/h from {s.source:<5}  wheel {s.v_wheel_kmh:5.2f}"
+        f"  GNSS {_num(s.v_gnss_kmh, '5.2f')} km/h   CV {cv} %"
+        f" ({'uniform' if s.uniform else 'varying'})",
+        f"NDVI    sensors {_num(s.ndvi_sensors, '.3f')}  at meters {_num(s.ndvi, '.3f')}"
+        f"   rate upper {s.rate_kg_ha[0]:6.1f}  lower {s.rate_kg_ha[1]:6.1f} kg/ha",
+        f"meters  target {s.target_rpm[0]:6.2f} / {s.target_rpm[1]:6.2f} r/min"
+        f"   actual {s.meter_rpm[0]:6.2f} / {s.meter_rpm[1]:6.2f} r/min",
+        f"fans    {s.fan_rpm[0]:5.0f} / {s.fan_rpm[1]:5.0f} rpm   faults: {faults}",
+        "counts  " + "  ".join(f"{k} {v}" for k, v in s.counters.items()),
+        f"last    {s.last_event or '-'}",
+    ]
+
+
+def render_line(s: Snapshot) -> str:
+    """One compact line, for a log or a pipe."""
+    faults = ",".join(fault_names(s.faults)) or "-"
+    return (
+        f"t={s.t_s:.1f}s v={s.v_kmh:.2f}km/h src={s.source} cv={_num(s.cv_pct, '.2f')}%"
+        f" ndvi={_num(s.ndvi, '.3f')} rate={s.rate_kg_ha[0]:.1f}/{s.rate_kg_ha[1]:.1f}kg/ha"
+        f" target={s.target_rpm[0]:.2f}/{s.target_rpm[1]:.2f} meter={s.meter_rpm[0]:.2f}/"
+        f"{s.meter_rpm[1]:.2f}r/min fan={s.fan_rpm[0]:.0f}/{s.fan_rpm[1]:.0f}rpm faults={faults}"
+        f" ecu={s.ecu_link} gnss={s.gnss_link}"
+    )
+
+
+class Console:
+    """Draws snapshots at most every `period_s` (TTY) or `line_period_s` (not a TTY)."""
+
+    def __init__(
+        self,
+        stream: TextIO,
+        tty: bool | None = None,
+        period_s: float = 0.3,
+        line_period_s: float = 1.0,
+    ) -> None:
+        self._stream = stream
+        self._tty = stream.isatty() if tty is None else tty
+        self._period_s = period_s if self._tty else line_period_s
+        self._last_t: float | None = None
+        self._drawn = 0
+
+    def update(self, snapshot: Snapshot, now: float) -> bool:
+        """Draw if due; returns whether it drew."""
+        if self._last_t is not None and now - self._last_t < self._period_s:
+            return False
+        self._last_t = now
+        self.draw(snapshot)
+        return True
+
+    def draw(self, snapshot: Snapshot) -> None:
+        if not self._tty:
+            self._stream.write(render_line(snapshot) + "\n")
+        else:
+            lines = render_lines(snapshot)
+            # Back to the first line of the previous block, then overwrite each line.
+            up = f"\x1b[{self._drawn}F" if self._drawn else ""
+            self._stream.write(up + "".join(f"\x1b[2K{line}\n" for line in lines))
+            self._drawn = len(lines)
+        self._stream.flush()
+
+    def message(self, text: str) -> None:
+        """A line that stays (an event): printed above the live block."""
+        if self._tty and self._drawn:
+            self._stream.write(f"\x1b[{self._drawn}F\x1b[J")
+            self._drawn = 0
+        self._stream.write(text + "\n")
+        self._stream.flush()

@@ -1,0 +1,198 @@
+"""The terminal's control loop against the simulated machine (World: plant + C ECU core), in
+virtual time: line sources are the fake twins, CAN goes through a python-can virtual bus."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import replace
+from pathlib import Path
+
+import can
+import pytest
+
+from topdress.ecu import meter_target_rpm
+from topdress.log.session import SessionLog, SessionReader
+from topdress.sim.tractor import Drive, Segment
+from topdress.sim.world import World
+from topdress.terminal.app import Snapshot, Terminal
+from topdress.terminal.canlink import open_bus
+from topdress.terminal.config import DEFAULT_TOML, TerminalConfig, loads_config
+from topdress.terminal.rate import build_rate_model, split_layers
+from topdress.terminal.serial_io import FakeLineSource
+
+_channels = itertools.count()
+
+
+class VirtualRig:
+    """Terminal + World on one virtual clock (10 ms steps, terminal tick every 100 ms)."""
+
+    def __init__(self, cfg: TerminalConfig, drive: Drive, session: SessionLog | None = None):
+        channel = f"test-terminal-{next(_channels)}"
+        self.cfg = replace(cfg, can=replace(cfg.can, channel=channel))
+        self.world = World(seed=3, drive=drive)
+        self.gnss = FakeLineSource()
+        self.crop = FakeLineSource()
+        self.pc_bus = open_bus(self.cfg.can)
+        self.ecu_bus = open_bus(self.cfg.can)
+        self.events: list[tuple[float, str]] = []
+        self.term = Terminal(
+            self.cfg,
+            self.gnss,
+            self.crop,
+            self.pc_bus,
+            session,
+            clock=lambda: self.world.t_s,
+            on_event=lambda e: self.events.append((self.world.t_s, e)),
+        )
+        self.term.open()
+        self.snapshots: list[tuple[float, Snapshot]] = []
+        self.ecu_silent = False
+
+    def run(self, until_s: float) -> None:
+        w, term = self.world, self.term
+        while w.t_s < until_s - 1e-9:
+            while (msg := self.ecu_bus.recv(timeout=0)) is not None:
+                w.deliver_can(msg)
+            out = w.step()
+            t = out.t_s
+            for line in out.nmea:
+                self.gnss.emit(t, line.encode())
+            for line in out.crop:
+                self.crop.emit(t, line.encode())
+            if not self.ecu_silent:
+                for frame_id, data in out.can:
+                    term.inbox.put(("can", t, can.Message(arbitration_id=frame_id, data=data)))
+            while not term.inbox.empty():
+                term.handle(*term.inbox.get())
+            if round(t * 100) % 10 == 0:
+                term.tick(t)
+                self.snapshots.append((t, term.snapshot))
+
+    def close(self) -> None:
+        self.term.close()
+        self.pc_bus.shutdown()
+        self.ecu_bus.shutdown()
+
+
+def _drive(speed_kmh: float, length_m: float) -> Drive:
+    return Drive(
+        [
+            Segment("stop", duration_s=2.0),
+            Segment("straight", speed_kmh=speed_kmh, length_m=length_m, hold=True),
+            Segment("stop", duration_s=5.0),
+        ]
+    )
+
+
+def test_closed_loop_rate_follows_ndvi_and_meters_follow_eq4(tmp_path: Path) -> None:
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = VirtualRig(cfg, _drive(8.0, 60.0), session)
+    try:
+        rig.run(30.0)
+    finally:
+        rig.close()
+    term = rig.term
+    assert term.link.params_done
+    snaps = [s for _, s in rig.snapshots]
+    working = [s for s in snaps if s.running and s.v_kmh > 7.5 and s.ndvi is not None]
+    assert len(working) > 50
+    model = build_rate_model(cfg.rate)
+    m = cfg.machine
+    for s in working:
+        # the rate of each layer is the model's for the NDVI at the meters, split 50/50
+        total = model.rate_kg_ha(s.ndvi)
+        want = split_layers(total, cfg.rate.split_upper)
+        assert s.rate_kg_ha == pytest.approx((want.upper_kg_ha, want.lower_kg_ha), abs=0.01)
+    # in steady work the ECU's targets are eq. 4 of the commanded rate and the selected speed,
+    # and the meters turn at their targets
+    steady = working[len(working) // 2 :]
+    for s in steady:
+        eq4 = meter_target_rpm(m.width_m, s.rate_kg_ha[0], s.v_kmh, m.kg_per_rev_upper)
+        assert s.target_rpm[0] == pytest.approx(eq4, rel=0.03, abs=0.05)
+    mean_err = sum(abs(s.meter_rpm[0] - s.target_rpm[0]) for s in steady) / len(steady)
+    assert mean_err < 0.05 * (sum(s.target_rpm[0] for s in steady) / len(steady))
+    # uniform above 6 km/h: the ECU took the GNSS speed
+    assert any(s.source == "gnss" for s in steady)
+    # and every input went to the log, with a state row every 100 ms
+    with SessionReader(session.path) as reader:
+        counts = reader.raw_counts()
+        assert counts["nmea"] == term.nmea.counters["ok"]
+        assert counts["crop"] > 100 and counts["can_rx"] > 1000 and counts["can_tx"] > 50
+        assert reader.count("state") == len(rig.snapshots)
+
+
+def test_gnss_port_lost_forwards_not_available_and_ecu_uses_the_wheel() -> None:
+    rig = VirtualRig(loads_config(""), _drive(8.0, 200.0))
+    try:
+        rig.run(20.0)
+        assert rig.term.snapshot.gnss_link == "ok"
+        assert rig.term.link.command.gnss_kmh is not None
+        rig.gnss.disconnect()
+        rig.run(20.1)
+        # the very next tick forwards "not available"
+        assert rig.term.link.command.gnss_kmh is None
+        assert (20.1, "GNSS lost") in rig.events
+        rig.run(22.0)
+        state = rig.world.ecu.state
+        assert not state.gnss_valid
+        assert str(state.source) == "wheel"
+        assert rig.term.snapshot.gnss_link == "lost"
+        rig.gnss.reconnect()
+        rig.run(23.0)
+        assert rig.term.snapshot.gnss_link == "ok"
+        assert rig.world.ecu.state.gnss_valid
+    finally:
+        rig.close()
+
+
+def test_invalid_fix_is_no_fix() -> None:
+    rig = VirtualRig(loads_config(""), _drive(5.0, 200.0))
+    try:
+        rig.run(5.0)
+        assert rig.term.snapshot.gnss_link == "ok"
+        # from now on the receiver reports status V
+        rig.world.gnss.p = replace(rig.world.gnss.p, outages=((5.0, 100.0),))
+        rig.run(8.0)
+        assert rig.term.snapshot.gnss_link == "no fix"
+        assert rig.term.link.command.gnss_kmh is None
+        assert not rig.world.ecu.state.gnss_valid
+    finally:
+        rig.close()
+
+
+def test_ecu_silent_is_shown_lost_and_the_stop_reaches_the_ecu_on_close() -> None:
+    rig = VirtualRig(loads_config(""), _drive(5.0, 200.0))
+    rig.run(6.0)
+    assert rig.term.snapshot.ecu_link == "ok" and rig.world.ecu.state.running
+    rig.ecu_silent = True
+    rig.run(7.0)
+    assert rig.term.snapshot.ecu_link == "lost"
+    assert any(e.startswith("ECU lost") for _, e in rig.events)
+    rig.ecu_silent = False
+    rig.run(8.0)
+    assert rig.term.snapshot.ecu_link == "ok"
+    rig.term.close()
+    # the stop command sent on close is the ECU's last word from the terminal
+    while (msg := rig.ecu_bus.recv(timeout=0)) is not None:
+        rig.world.deliver_can(msg)
+    rig.world.step()
+    assert not rig.world.ecu.state.running
+    rig.pc_bus.shutdown()
+    rig.ecu_bus.shutdown()
+
+
+def test_bad_lines_are_counted_and_skipped() -> None:
+    rig = VirtualRig(loads_config(""), _drive(5.0, 200.0))
+    try:
+        rig.run(2.0)
+        rig.gnss.emit(2.0, b"$GNRMC,garbage*00")
+        rig.gnss.emit(2.0, b"\x00\xff\xfe binary")
+        rig.crop.emit(2.0, b"9,0.1,0.2,0.3,0.4,0.5")  # sensor 9 of 4
+        rig.crop.emit(2.0, b"1,0.1,0.2")  # truncated
+        rig.run(3.0)
+        c = rig.term.snapshot.counters
+        assert c["nmea_bad"] == 2 and c["crop_bad"] == 2
+        assert c["nmea"] > 20 and c["crop"] > 10
+    finally:
+        rig.close()
