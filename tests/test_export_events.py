@@ -155,6 +155,13 @@ def test_export_command_writes_events_and_csv(
     assert rows[0]["ndvi"] == "0.83" and rows[0]["source"] == "wheel"
 
 
+def test_export_writes_the_session_configuration(tmp_path: Path) -> None:
+    path = make_session(tmp_path)
+    out = tmp_path / "session.toml"
+    assert main(["log", "export", str(path), "--config", str(out)]) == 0
+    assert out.read_text() == "[machine]\nwidth_m = 3.6\n"
+
+
 def test_export_errors_are_clear(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["log", "export", str(tmp_path / "none.sqlite"), "--events", "x"]) == 2
     assert "no such session file" in capsys.readouterr().err

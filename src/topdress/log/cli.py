@@ -20,6 +20,12 @@ def register(sub: Any) -> None:
     export.add_argument("session", type=Path, help="session file (.sqlite)")
     export.add_argument("--events", type=Path, metavar="OUT.ndjson", help="write the events")
     export.add_argument("--csv", type=Path, metavar="OUT.csv", help="write the decoded state")
+    export.add_argument(
+        "--config",
+        type=Path,
+        metavar="OUT.toml",
+        help="write the configuration the session ran with",
+    )
     export.set_defaults(func=_export)
 
     summary = log_sub.add_parser("summary", help="duration, distance, area, fertilizer, faults")
@@ -52,8 +58,10 @@ def _export(args: argparse.Namespace) -> int:
     from topdress.log.export import ExportStats, session_events, write_state_csv
     from topdress.log.session import SessionReader
 
-    if args.events is None and args.csv is None:
-        raise LogError("nothing to do: give --events OUT.ndjson and/or --csv OUT.csv")
+    if args.events is None and args.csv is None and args.config is None:
+        raise LogError(
+            "nothing to do: give --events OUT.ndjson, --csv OUT.csv or --config OUT.toml"
+        )
     with SessionReader(args.session) as reader:
         if args.events is not None:
             stats = ExportStats()
@@ -67,6 +75,10 @@ def _export(args: argparse.Namespace) -> int:
             with _open_out(args.csv) as out:
                 rows = write_state_csv(reader, out)
             print(f"{args.csv}: {rows} state rows")
+        if args.config is not None:
+            with _open_out(args.config) as out:
+                out.write(reader.config_toml)
+            print(f"{args.config}: the session's configuration")
     return 0
 
 
