@@ -138,7 +138,11 @@ class Sil:
         self.nmea_lines = 0
         self.crop_lines = 0
         self._pending_to_ecu = 0
-        self._push_params()
+        try:
+            self._push_params()
+        except EcuParamError:
+            self.close()
+            raise
 
     def close(self) -> None:
         self.ecu_bus.shutdown()

@@ -14,14 +14,18 @@ class TractorParams:
     """Longitudinal dynamics of a loaded tractor with the topdresser.
 
     The launch acceleration grows with the target speed (a higher gear and more throttle
-    for a faster pass): accel = accel_base_ms2 + accel_per_kmh * target_kmh. The clutch
-    engages gradually (jerk limit), which makes the first half-metre slow.
+    for a faster pass): accel = accel_base_ms2 + accel_per_kmh * target_kmh. Starting from
+    rest the clutch engages gradually, longer in a higher gear: the acceleration ramps up
+    over clutch_base_s + clutch_per_kmh * target_kmh, which makes the first half-metre slow.
+    Otherwise the acceleration changes at most by jerk_ms3.
     """
 
     accel_base_ms2: float = 0.10
     accel_per_kmh: float = 0.060
     decel_ms2: float = 0.80
     jerk_ms3: float = 0.60
+    clutch_base_s: float = 0.3
+    clutch_per_kmh: float = 0.1
     speed_tau_s: float = 0.6
     ripple_sd: float = 0.004  # relative speed ripple in steady motion (engine, terrain)
     ripple_tau_s: float = 1.0
@@ -180,6 +184,7 @@ class Tractor:
     _vb: float = 0.0  # speed without ripple
     _accel_limit: float = 0.0
     _target: float = -1.0
+    _jerk: float = 0.0
 
     def __post_init__(self) -> None:
         self._rng = random.Random(self.seed)
@@ -190,12 +195,19 @@ class Tractor:
         if v_target != self._target:
             # the driver picks gear and throttle for the new target speed
             self._target = v_target
-            self._accel_limit = p.accel_base_ms2 + p.accel_per_kmh * v_target * 3.6
+            self._accel_limit = max(0.05, p.accel_base_ms2 + p.accel_per_kmh * v_target * 3.6)
+            if self._vb <= 0.0:
+                clutch_s = p.clutch_base_s + p.clutch_per_kmh * v_target * 3.6
+                self._jerk = self._accel_limit / max(clutch_s, 1e-3)
+            else:
+                self._jerk = p.jerk_ms3
         if 0.0 <= p.stall_at_s <= self.t:
             v_target = 0.0
         a_des = (v_target - self._vb) / p.speed_tau_s
         a_des = min(self._accel_limit, max(-p.decel_ms2, a_des))
-        da = p.jerk_ms3 * dt
+        if self.a >= self._accel_limit - 1e-9 or a_des < self.a:
+            self._jerk = p.jerk_ms3  # the clutch is in
+        da = self._jerk * dt
         self.a += min(da, max(-da, a_des - self.a))
         self._vb += self.a * dt
         if v_target <= 0.0 and self._vb < 0.02:
