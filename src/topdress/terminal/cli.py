@@ -1,14 +1,60 @@
-"""Subcommands of this subsystem (registered by topdress.cli)."""
+"""`topdress demo` and `topdress run` (registered by topdress.cli)."""
 
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 from typing import Any
+
+from topdress.terminal.config import load_config
 
 
 def register(sub: Any) -> None:
-    """Add this subsystem's subcommands to the top-level parser."""
-    del sub
+    """Add `demo` and `run` to the top-level parser."""
+    demo = sub.add_parser(
+        "demo", help="the terminal against the simulated machine (ptys + CAN), live status"
+    )
+    demo.add_argument(
+        "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
+    )
+    demo.add_argument(
+        "--out",
+        type=Path,
+        default=Path("topdress-sessions"),
+        metavar="DIR",
+        help="where the session log goes (default: ./topdress-sessions)",
+    )
+    demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
+    demo.set_defaults(func=_demo)
+
+    run = sub.add_parser("run", help="the terminal against real devices (serial ports, CAN)")
+    run.add_argument("--config", type=Path, required=True, metavar="FILE", help="TOML file")
+    run.add_argument(
+        "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
+    )
+    run.set_defaults(func=_run)
 
 
-_ = argparse
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0 seconds, not {text}")
+    return value
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from topdress.terminal.demo import run_demo
+
+    return run_demo(args.duration, args.out, seed=args.seed)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from topdress.terminal.demo import run_terminal
+
+    cfg = load_config(args.config)
+    run_terminal(cfg, args.config.read_text(encoding="utf-8"), args.duration, sys.stdout)
+    return 0

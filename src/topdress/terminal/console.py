@@ -84,9 +84,13 @@ class Console:
 
     def update(self, snapshot: Snapshot, now: float) -> bool:
         """Draw if due; returns whether it drew."""
-        if self._last_t is not None and now - self._last_t < self._period_s:
+        if self._last_t is not None and now < self._last_t + self._period_s - 1e-3:
             return False
-        self._last_t = now
+        # On a grid, so a 10 Hz caller gets exactly one line per second, not one per 1.1 s.
+        last = self._last_t
+        self._last_t = (
+            now if last is None or now - last > 2 * self._period_s else last + self._period_s
+        )
         self.draw(snapshot)
         return True
 

@@ -1,0 +1,137 @@
+"""`topdress demo` and `topdress run`: the terminal against the simulated or the real machine.
+
+The demo is the real terminal, unchanged, against the simulated machine of `topdress.sim.live`:
+NMEA and crop sensor lines through pseudo-terminals opened with pyserial, the ECU core on a
+python-can virtual bus, the World paced to the wall clock in another thread. Only the
+configuration is embedded (ports and bus point at the simulation).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from topdress.errors import DeviceError
+from topdress.log.session import SessionLog
+from topdress.sim.live import LiveMachine
+from topdress.sim.tractor import Drive
+from topdress.sim.world import SimConfig, World
+from topdress.terminal.app import Snapshot, Terminal
+from topdress.terminal.canlink import open_bus
+from topdress.terminal.config import TerminalConfig, loads_config
+from topdress.terminal.console import Console
+from topdress.terminal.serial_io import open_line_source
+
+#: The demo's field work: passes of 40 m at 8 km/h (GNSS territory in uniform motion) with a
+#: stop and a turn at each headland (wheel territory), as many as any sensible duration needs.
+DEMO_PASSES = 30
+DEMO_PASS_M = 40.0
+DEMO_SPEED_KMH = 8.0
+
+
+def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path) -> str:
+    """The demo's configuration: the defaults, with ports and bus pointing at the simulation."""
+    return (
+        "# topdress demo: the terminal's defaults, wired to the simulated machine\n"
+        f'[gnss]\nsource = "serial"\nport = "{gnss_port}"\nbaud = 115200\n'
+        f'[crop]\nsource = "serial"\nport = "{crop_port}"\nbaud = 115200\n'
+        f'[can]\ninterface = "virtual"\nchannel = "{channel}"\n'
+        f'[log]\ndir = "{log_dir}"\n'
+    )
+
+
+@dataclass(frozen=True)
+class RunResult:
+    session_path: Path | None  # None when the log could not be written
+    ticks: int
+    last: Snapshot
+
+
+def run_terminal(
+    cfg: TerminalConfig,
+    config_toml: str,
+    duration_s: float | None,
+    out: TextIO,
+    machine: LiveMachine | None = None,
+) -> RunResult:
+    """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
+    console = Console(out, period_s=max(0.2, min(cfg.display.refresh_s, 0.5)))
+    session = SessionLog.create(cfg.log.dir, config_toml)
+    opened = session.ok  # `ok` turns False once closed
+    if not opened:
+        console.message(f"warning: session log not written: {session.last_error}")
+    bus = open_bus(cfg.can)
+    term = Terminal(
+        cfg,
+        open_line_source(cfg.gnss),
+        open_line_source(cfg.crop),
+        bus,
+        session,
+        on_event=console.message,
+    )
+    rows = 0
+
+    def on_tick(snapshot: Snapshot, now: float) -> None:
+        nonlocal rows
+        rows += 1
+        console.update(snapshot, now)
+        if machine is not None and machine.error is not None:
+            raise DeviceError(f"the simulated machine failed: {machine.error}")
+
+    try:
+        term.run(duration_s, on_tick=on_tick)
+    except KeyboardInterrupt:
+        console.message("stopped by the operator (Ctrl-C)")
+    finally:
+        bus.shutdown()
+    console.draw(term.snapshot)
+    path = session.path if opened else None
+    _report(out, path, session.errors + session.dropped + session.lost)
+    return RunResult(path, rows, term.snapshot)
+
+
+def _report(out: TextIO, path: Path | None, errors: int) -> None:
+    if path is None:
+        out.write("no session log was written (see the warning above)\n")
+        return
+    out.write(
+        f"\nsession log: {path}"
+        + (f"  ({errors} write errors or rows lost)" if errors else "")
+        + "\n"
+        + f"  summary:  topdress log summary {path}\n"
+        + f"  export:   topdress log export {path} --events events.ndjson --csv state.csv\n"
+        + "  replay:   topdress replay events.ndjson --speed-mode paper --out replay.csv\n"
+    )
+    out.flush()
+
+
+def run_demo(
+    duration_s: float | None, out_dir: Path, seed: int = 1, out: TextIO = sys.stdout
+) -> int:
+    """The simulated machine in a thread, the terminal in front of it; returns the exit code."""
+    drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
+    world = World(SimConfig(), seed=seed, drive=drive)
+    channel = f"topdress-demo-{os.getpid()}"
+    sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
+    machine = LiveMachine(world, sim_bus)
+    try:
+        text = demo_config_toml(machine.gnss_port.path, machine.crop_port.path, channel, out_dir)
+        cfg = loads_config(text)
+        out.write(
+            f"topdress demo: simulated machine on {machine.gnss_port.path} (GNSS NMEA), "
+            f"{machine.crop_port.path} (crop sensors), CAN virtual:{channel}\n"
+        )
+        machine.start()
+        run_terminal(cfg, text, duration_s, out, machine)
+    finally:
+        machine.stop()
+        sim_bus.shutdown()
+    truth = world.truth
+    out.write(
+        f"simulated machine: {truth.t_s:.1f} s, {truth.odometer_m:.1f} m driven, "
+        f"{truth.applied_kg[0] + truth.applied_kg[1]:.2f} kg applied\n"
+    )
+    return 0
