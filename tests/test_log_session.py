@@ -6,6 +6,7 @@ import sqlite3
 import time
 from pathlib import Path
 
+import can
 import pytest
 
 from topdress.errors import LogError
@@ -105,13 +106,24 @@ def test_unwritable_path_is_reported_not_raised(tmp_path: Path) -> None:
     log.close()
 
 
+def test_can_message_payload_is_taken(tmp_path: Path) -> None:
+    msg = can.Message(arbitration_id=0x0A5C6465, data=bytes.fromhex("0ab80b983a000037"))
+    with SessionLog.create(tmp_path, CONFIG) as log:
+        log.raw("can_tx", 2.0, msg)
+    with SessionReader(log.path) as reader:
+        (rec,) = reader.raw()
+    assert (rec.kind, rec.can_id, rec.data) == ("can_tx", 0x0A5C6465, bytes(msg.data))
+
+
 def test_bad_kind_is_counted_and_not_raised(tmp_path: Path) -> None:
     with SessionLog.create(tmp_path, CONFIG) as log:
         log.raw("gps", 1.0, RMC)
         log.raw("nmea", 1.0, (1, b"\x00"))
         log.raw("can_rx", 1.0, "00")
+        log.raw("can_rx", 1.0, ("0x185C6465", b"\x00"))
+        log.raw("can_tx", 1.0, (1, 2, 3))
         log.raw("nmea", 1.1, RMC)
-    assert log.dropped == 3 and log.errors == 3
+    assert log.dropped == 5 and log.errors == 5
     with SessionReader(log.path) as reader:
         assert reader.count("raw") == 1
 

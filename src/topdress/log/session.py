@@ -20,7 +20,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 from topdress import __version__
 from topdress.errors import LogError
@@ -109,6 +109,7 @@ class SessionLog:
         self.errors = 0  # write failures (open, commit)
         self.last_error: str | None = None
         self._commit_failing = False
+        self._count_lock = threading.Lock()
         self.commit_period_s = commit_period_s
         self._conn = conn
         self._queue: queue.Queue[object] = queue.Queue(maxsize=queue_size)
@@ -156,14 +157,12 @@ class SessionLog:
         """True while the log is open and its last write succeeded."""
         return self._thread is not None and not self._closed and self.last_error is None
 
-    def raw(self, kind: str, t: float, payload: str | tuple[int, bytes]) -> None:
-        """Enqueue one raw input: a line (kind nmea/crop) or a CAN frame (can_rx/can_tx)."""
-        if kind in LINE_KINDS and isinstance(payload, str):
-            rec: _RawRec = (t, kind, payload, None, None)
-        elif kind in CAN_KINDS and isinstance(payload, tuple):
-            rec = (t, kind, None, int(payload[0]), bytes(payload[1]))
-        else:
-            self.dropped += 1
+    def raw(self, kind: str, t: float, payload: str | tuple[int, bytes] | Any) -> None:
+        """Enqueue one raw input: a line (kind nmea/crop) or a CAN frame (can_rx/can_tx) as
+        `(arbitration_id, data)` or a can.Message."""
+        rec = _raw_record(kind, t, payload)
+        if rec is None:
+            self._drop()
             self._fail(f"raw input of kind {kind!r} with a {type(payload).__name__} payload")
             return
         self._put(("raw", rec))
@@ -197,17 +196,25 @@ class SessionLog:
 
     def _put(self, item: tuple[str, object]) -> None:
         if self._closed or self._thread is None:
-            self.dropped += 1
+            self._drop()
             return
         try:
             self._queue.put_nowait(item)
         except queue.Full:
+            self._drop()
+
+    def _drop(self) -> None:
+        # Several input threads may log at once.
+        with self._count_lock:
             self.dropped += 1
 
     def _fail(self, message: str) -> None:
-        self.errors += 1
-        if self.last_error is None or self.errors in (10, 100) or self.errors % 1000 == 0:
-            _log.error("session log %s: %s (%d errors)", self.path, message, self.errors)
+        with self._count_lock:
+            self.errors += 1
+            errors = self.errors
+        # The first failure, then sparingly: a full disk fails every half second.
+        if self.last_error is None or errors in (10, 100) or errors % 1000 == 0:
+            _log.error("session log %s: %s (%d errors)", self.path, message, errors)
         self.last_error = message
 
     # ---- writer thread ----
@@ -277,6 +284,21 @@ class SessionLog:
             self._fail(f"closing failed: {exc}")
         finally:
             self._conn.close()
+
+
+def _raw_record(kind: str, t: float, payload: Any) -> _RawRec | None:
+    """The row for one raw input, or None when the payload does not fit the kind."""
+    if kind in LINE_KINDS:
+        return (float(t), kind, payload, None, None) if isinstance(payload, str) else None
+    if kind not in CAN_KINDS:
+        return None
+    if hasattr(payload, "arbitration_id"):  # a can.Message
+        payload = (payload.arbitration_id, payload.data)
+    try:
+        can_id, data = payload
+        return (float(t), kind, None, int(can_id), bytes(data))
+    except (TypeError, ValueError):
+        return None
 
 
 def _init_schema(conn: sqlite3.Connection, config_toml: str) -> None:
