@@ -81,15 +81,16 @@ def run_terminal(
         if machine is not None and machine.error is not None:
             raise DeviceError(f"the simulated machine failed: {machine.error}")
 
+    path = session.path if opened else None
     try:
         term.run(duration_s, on_tick=on_tick)
     except KeyboardInterrupt:
         console.message("stopped by the operator (Ctrl-C)")
     finally:
+        # Also after an error: the operator needs to know where the data went.
         bus.shutdown()
-    console.draw(term.snapshot)
-    path = session.path if opened else None
-    _report(out, path, session.errors + session.dropped + session.lost)
+        console.draw(term.snapshot)
+        _report(out, path, session.errors + session.dropped + session.lost)
     return RunResult(path, rows, term.snapshot)
 
 

@@ -1,0 +1,82 @@
+"""`topdress demo` end to end in real time: the simulated machine on real pseudo-terminals (read
+with pyserial) and a virtual CAN bus, the terminal in front of it, the session log behind it."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+
+from topdress.cli import main
+from topdress.ecu import meter_target_rpm
+from topdress.log.session import SessionReader
+from topdress.terminal.config import default_config
+from topdress.terminal.demo import run_demo
+
+
+def test_demo_runs_meters_at_eq4_targets_and_logs(tmp_path: Path) -> None:
+    out = io.StringIO()
+    assert run_demo(11.0, tmp_path, out=out) == 0
+    text = out.getvalue()
+    sessions = list(tmp_path.glob("*.sqlite"))
+    assert len(sessions) == 1
+    assert f"session log: {sessions[0]}" in text
+    assert f"topdress log summary {sessions[0]}" in text
+    m = default_config().machine
+    with SessionReader(sessions[0]) as reader:
+        rows = list(reader.states())
+        counts = reader.raw_counts()
+    # 10 Hz rows over 11 s of wall time (a loaded machine may lose a few ticks, never gain)
+    assert 90 <= len(rows) <= 111
+    # NMEA (RMC+VTG+GGA at 5 Hz) and four crop sensors at 2 Hz came through the ptys
+    assert counts["nmea"] > 100 and counts["crop"] > 60
+    assert counts["can_rx"] > 300 and counts["can_tx"] > 27  # 27 parameters, then commands
+    moving = [r for r in rows if r.v_kmh > 2.0 and r.rate_kg_ha_upper > 0]
+    assert len(moving) > 20, "the drive leaves the headland after 3 s"
+    for r in moving:
+        # eq. 4 with the rate the terminal commanded and the speed the ECU selected; the rate
+        # may have moved by a few tenths of a kg/ha between a command and the row
+        eq4 = meter_target_rpm(m.width_m, r.rate_kg_ha_upper, r.v_kmh, m.kg_per_rev_upper)
+        assert r.target_rpm_upper == pytest.approx(eq4, rel=0.02, abs=0.05)
+    # the metering motor follows its target once up to speed (last second of the run)
+    tail = moving[-10:]
+    err = sum(abs(r.meter_rpm_upper - r.target_rpm_upper) for r in tail) / len(tail)
+    assert err < 0.15 * sum(r.target_rpm_upper for r in tail) / len(tail)
+    assert any(r.ndvi is not None and 0.3 < r.ndvi < 0.95 for r in rows)
+
+
+def test_run_with_an_invalid_config_names_the_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[can]\ncommand_period_s = 0\n")
+    assert main(["run", "--config", str(cfg), "--duration", "1"]) == 2
+    assert "can.command_period_s" in capsys.readouterr().err
+
+
+def test_run_without_an_ecu_fails_naming_the_parameter_and_keeps_the_log(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(
+        '[gnss]\nport = "/dev/nonexistent-gnss"\n[crop]\nport = "/dev/nonexistent-crop"\n'
+        f'[can]\nchannel = "test-demo-no-ecu"\n[log]\ndir = "{tmp_path}"\n'
+    )
+    assert main(["run", "--config", str(cfg), "--duration", "5"]) == 2
+    assert "WorkingWidth = 3.6: no acknowledgement from the ECU after 4 tries" in (
+        capsys.readouterr().err
+    )
+    (session,) = tmp_path.glob("*.sqlite")
+    with SessionReader(session) as reader:
+        rows = list(reader.states())
+        counts = reader.raw_counts()
+    assert counts["can_tx"] == 4  # the four tries of the first parameter
+    # GNSS and crop ports missing: nothing is invented while it waited
+    assert rows and all(r.v_gnss_kmh is None and r.source == "none" for r in rows)
+
+
+def test_demo_duration_must_be_positive(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["demo", "--duration", "-3"])
+    assert "must be > 0" in capsys.readouterr().err
