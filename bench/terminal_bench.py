@@ -1,0 +1,201 @@
+"""Terminal benchmark: NMEA-to-command latency and the terminal's CPU use.
+
+    .venv/bin/python bench/terminal_bench.py [--duration 22]
+
+This process plays the machine: it writes 10 Hz GNSS (RMC + GGA) to one pseudo-terminal and
+four crop sensors at 10 Hz each to another, and runs the ECU's twin (the C core) on a
+udp_multicast CAN bus. The terminal runs in a child process (`topdress run` code, send_on_gnss
+enabled, session log on), exactly as in the cab. Each RMC carries a new speed; the latency is
+from writing its line to the pty to receiving the PcCommand carrying that speed on the bus.
+The child measures its own CPU time with time.process_time over the whole run.
+
+Prints:
+    nmea_to_command_p50_ms: X
+    nmea_to_command_p99_ms: X
+    terminal_cpu_pct_of_core: X
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+
+from topdress import protocol
+from topdress.sim import nmea
+from topdress.sim.live import PtyPort
+from topdress.terminal.canlink import SimulatedEcu
+
+GNSS_HZ = 10.0
+CROP_HZ = 10.0
+SENSORS = 4
+WARMUP_S = 3.0  # parameter push and first commands; latencies counted after it
+
+
+def child(config: Path, duration_s: float) -> None:
+    """The terminal, as `topdress run` runs it, without the console; prints its CPU use."""
+    from topdress.log.session import SessionLog
+    from topdress.terminal.app import Terminal
+    from topdress.terminal.canlink import open_bus
+    from topdress.terminal.config import load_config
+    from topdress.terminal.serial_io import open_line_source
+
+    cfg = load_config(config)
+    session = SessionLog.create(cfg.log.dir, config.read_text())
+    bus = open_bus(cfg.can)
+    term = Terminal(cfg, open_line_source(cfg.gnss), open_line_source(cfg.crop), bus, session)
+    cpu0, wall0 = time.process_time(), time.monotonic()
+    term.run(duration_s)
+    cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+    bus.shutdown()
+    print(json.dumps({"cpu_s": cpu, "wall_s": wall, "counters": term.snapshot.counters}))
+
+
+class Machine:
+    """Pty writers, the ECU twin and a command spy, in this process."""
+
+    def __init__(self, group: str) -> None:
+        self.gnss = PtyPort()
+        self.crop = PtyPort()
+        self.ecu_bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
+        self.spy = can.Bus(interface="udp_multicast", channel=group, fd=False)
+        self.twin = SimulatedEcu(self.ecu_bus, now=time.monotonic())
+        self.stop = threading.Event()
+        self.written: dict[int, float] = {}  # speed in 0.1 km/h -> time its RMC was written
+        self.latencies_s: list[float] = []
+        self.measure_after = float("inf")
+        self.lock = threading.Lock()
+
+    def run_ecu(self) -> None:
+        while not self.stop.wait(0.01):
+            self.twin.pump(time.monotonic())
+
+    def run_spy(self) -> None:
+        ids = protocol.DEFAULT_IDS
+        while not self.stop.is_set():
+            msg = self.spy.recv(timeout=0.1)
+            t = time.perf_counter()
+            if msg is None or msg.arbitration_id != ids.command:
+                continue
+            cmd = protocol.decode(msg)
+            assert isinstance(cmd, protocol.PcCommand)
+            if cmd.gnss_kmh is None:
+                continue
+            with self.lock:
+                t_w = self.written.pop(round(cmd.gnss_kmh * 10), None)
+            if t_w is not None and t_w >= self.measure_after:
+                self.latencies_s.append(t - t_w)
+
+    def run_gnss(self, duration_s: float) -> None:
+        t0 = time.monotonic()
+        k = 0
+        while not self.stop.is_set() and time.monotonic() - t0 < duration_s:
+            k += 1
+            v_kmh = 5.0 + (k % 40) / 10.0  # a new speed every epoch, 5.0..8.9 km/h
+            t_utc = 36000.0 + k / GNSS_HZ
+            lat, lon = 43.8853 + k * 1e-7, 125.3245
+            rmc = nmea.rmc("GN", t_utc, True, lat, lon, v_kmh / 3.6, 90.0, "210526")
+            gga = nmea.gga("GN", t_utc, True, lat, lon, 12, 1.1, 210.0)
+            with self.lock:
+                self.written[round(v_kmh * 10)] = time.perf_counter()
+            self.gnss.write(rmc.encode())
+            self.gnss.write(gga.encode())
+            self._sleep_until(t0 + k / GNSS_HZ)
+
+    def run_crop(self, duration_s: float) -> None:
+        t0 = time.monotonic()
+        rng = random.Random(1)
+        k = 0
+        while not self.stop.is_set() and time.monotonic() - t0 < duration_s:
+            k += 1
+            lines = []
+            for sid in range(1, SENSORS + 1):
+                red, edge, nir = 0.04 + rng.random() * 0.01, 0.21, 0.44
+                ndvi = (nir - red) / (nir + red)
+                lines.append(f"{sid},{red:.4f},{edge:.4f},{nir:.4f},0.3541,{ndvi:.4f}\r\n")
+            self.crop.write("".join(lines).encode())
+            self._sleep_until(t0 + k / CROP_HZ)
+
+    def _sleep_until(self, t: float) -> None:
+        self.stop.wait(max(0.0, t - time.monotonic()))
+
+    def close(self) -> None:
+        self.stop.set()
+        self.ecu_bus.shutdown()
+        self.spy.shutdown()
+        self.gnss.close()
+        self.crop.close()
+
+
+def parent(duration_s: float) -> int:
+    group = f"239.74.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
+    m = Machine(group)
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "terminal.toml"
+        cfg.write_text(
+            f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
+            f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
+            f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\nsend_on_gnss = true\n'
+            f'[log]\ndir = "{tmp}"\n'
+        )
+        threads = [
+            threading.Thread(target=m.run_ecu, daemon=True),
+            threading.Thread(target=m.run_spy, daemon=True),
+        ]
+        for th in threads:
+            th.start()
+        proc = subprocess.Popen(
+            [sys.executable, __file__, "--child", str(cfg), "--duration", str(duration_s)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        time.sleep(0.5)  # the child opens its ports
+        m.measure_after = time.perf_counter() + WARMUP_S
+        feeders = [
+            threading.Thread(target=m.run_gnss, args=(duration_s,), daemon=True),
+            threading.Thread(target=m.run_crop, args=(duration_s,), daemon=True),
+        ]
+        for th in feeders:
+            th.start()
+        out, _ = proc.communicate(timeout=duration_s + 60)
+        m.close()
+    if proc.returncode != 0:
+        print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
+        return 1
+    result = json.loads(out.strip().splitlines()[-1])
+    lat_ms = np.array(m.latencies_s) * 1e3
+    if lat_ms.size < 50:
+        print(f"only {lat_ms.size} latencies measured", file=sys.stderr)
+        return 1
+    print(f"nmea_to_command_p50_ms: {np.percentile(lat_ms, 50):.2f}")
+    print(f"nmea_to_command_p99_ms: {np.percentile(lat_ms, 99):.2f}")
+    print(f"terminal_cpu_pct_of_core: {100.0 * result['cpu_s'] / result['wall_s']:.2f}")
+    print(
+        f"# {lat_ms.size} latencies; terminal counters {result['counters']}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--duration", type=float, default=22.0, help="seconds (>= 20 for the CPU)")
+    ap.add_argument("--child", type=Path, metavar="CONFIG", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child is not None:
+        child(args.child, args.duration)
+        return 0
+    return parent(args.duration)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
