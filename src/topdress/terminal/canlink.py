@@ -279,6 +279,7 @@ class CanLink:
                 log.debug("malformed frame: %s", exc)
             else:
                 self.counters.rx_foreign += 1
+                log.debug("foreign frame 0x%08X", msg.arbitration_id)
             return
         if isinstance(decoded, protocol.EcuStatus):
             self.ecu = replace(self.ecu, status=decoded, status_t=now)
