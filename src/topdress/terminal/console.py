@@ -31,7 +31,8 @@ def fault_names(word: int) -> list[str]:
 
 
 def _num(value: float | None, fmt: str) -> str:
-    return "--" if value is None else format(value, fmt)
+    """The value formatted, or "--" as wide, so the columns stay put."""
+    return "--".rjust(len(format(0.0, fmt))) if value is None else format(value, fmt)
 
 
 def render_lines(s: Snapshot) -> list[str]:
