@@ -31,21 +31,25 @@ def fault_names(word: int) -> list[str]:
 
 
 def _num(value: float | None, fmt: str) -> str:
-    """The value formatted, or "--" as wide, so the columns stay put."""
-    return "--".rjust(len(format(0.0, fmt))) if value is None else format(value, fmt)
+    return "--" if value is None else format(value, fmt)
+
+
+def _col(value: float | None, fmt: str) -> str:
+    """The value formatted, or "--" as wide, so the columns of the block stay put."""
+    return _num(value, fmt).rjust(len(format(0.0, fmt)))
 
 
 def render_lines(s: Snapshot) -> list[str]:
     """The full status block."""
     faults = ", ".join(fault_names(s.faults)) or "none"
-    cv = _num(s.cv_pct, ".2f")
+    cv = _col(s.cv_pct, ".2f")
     return [
         f"topdress terminal   t {s.t_s:7.1f} s   ECU {s.ecu_link:<5}  GNSS {s.gnss_link:<7}"
         f"  {'RUNNING' if s.running else 'stopped'}",
         f"speed   {s.v_kmh:5.2f} km/h from {s.source:<5}  wheel {s.v_wheel_kmh:5.2f}"
-        f"  GNSS {_num(s.v_gnss_kmh, '5.2f')} km/h   CV {cv} %"
+        f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h   CV {cv} %"
         f" ({'uniform' if s.uniform else 'varying'})",
-        f"NDVI    sensors {_num(s.ndvi_sensors, '.3f')}  at meters {_num(s.ndvi, '.3f')}"
+        f"NDVI    sensors {_col(s.ndvi_sensors, '.3f')}  at meters {_col(s.ndvi, '.3f')}"
         f"   rate upper {s.rate_kg_ha[0]:6.1f}  lower {s.rate_kg_ha[1]:6.1f} kg/ha",
         f"meters  target {s.target_rpm[0]:6.2f} / {s.target_rpm[1]:6.2f} r/min"
         f"   actual {s.meter_rpm[0]:6.2f} / {s.meter_rpm[1]:6.2f} r/min",
