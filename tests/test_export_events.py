@@ -87,19 +87,19 @@ def test_malformed_lines_are_reported_with_their_number_and_skipped() -> None:
         '{"t": 2.0, "can": {"id": 1, "data": "zz"}}',  # 11
         '{"t": 2.0, "can": {"id": 1, "data": "000000000000000000"}}',  # 12 9 bytes
         "",  # 13 blank: skipped silently
-        '{"t": 0.5, "crop": "' + CROP + '"}',  # 14 goes back in time
+        '{"t": 0.5, "crop": "' + CROP + '"}',  # 14 ok: earlier than line 1 (replay sorts)
         '{"t": 2.0, "wheel_count": 40, "extra": {"a": 1}}',  # 15 ok (unknown key)
         '{"t": 2.0, "can": {"id": 1, "data": "00", "dir": "up"}}',  # 16
         '{"t": NaN, "nmea": "x"}',  # 17
     ]
     result = read_lines(lines)
-    assert result.events == [NmeaEvent(1.0, RMC), WheelEvent(2.0, 40)]
+    assert result.events == [NmeaEvent(1.0, RMC), CropEvent(0.5, CROP), WheelEvent(2.0, 40)]
     numbers = [n for n, _ in result.bad]
-    assert numbers == [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 14, 16, 17]
+    assert numbers == [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 16, 17]
     reasons = dict(result.bad)
     assert "not JSON" in reasons[2]
     assert "exactly one" in reasons[6] and "nmea, crop" in reasons[6]
-    assert "goes back" in reasons[14]
+    assert "0x1FFFFFFF" in reasons[10] and "at most 8" in reasons[12]
 
 
 def test_unwrap_counts_forward_across_the_24_bit_wrap() -> None:
@@ -153,6 +153,21 @@ def test_export_command_writes_events_and_csv(
     assert len(rows) == 1
     assert rows[0]["lat"] == "45.5" and rows[0]["v_gnss_kmh"] == "" and rows[0]["faults"] == "2"
     assert rows[0]["ndvi"] == "0.83" and rows[0]["source"] == "wheel"
+
+
+def test_export_is_in_time_order_when_threads_logged_out_of_order(tmp_path: Path) -> None:
+    # A serial reader thread stamps its line, then the CAN thread logs a later frame first.
+    with SessionLog.create(tmp_path, "") as log:
+        log.raw("can_rx", 10.2502, (0x123, b"\x01"))
+        log.raw("nmea", 10.2500, RMC)
+        log.raw("crop", 10.2502, CROP)
+    with SessionReader(log.path) as reader:
+        events = list(session_events(reader))
+    assert events == [
+        NmeaEvent(10.25, RMC),
+        CanEvent(10.2502, 0x123, b"\x01", "rx"),
+        CropEvent(10.2502, CROP),
+    ]
 
 
 def test_export_writes_the_session_configuration(tmp_path: Path) -> None:

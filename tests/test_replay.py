@@ -186,6 +186,17 @@ def test_replay_cli_is_deterministic_and_reports_bad_lines(
     assert rows[-1]["v_gnss_kmh"] == "8.000"
 
 
+def test_events_out_of_file_order_replay_as_in_time_order() -> None:
+    events = drive_events(10.0)
+    # Swap neighbours with distinct times, as lines of two input threads can interleave.
+    shuffled = list(events)
+    for i in range(0, len(shuffled) - 3, 7):
+        if shuffled[i].t != shuffled[i + 2].t:
+            shuffled[i], shuffled[i + 2] = shuffled[i + 2], shuffled[i]
+    assert shuffled != events
+    assert replay(shuffled, default_config()) == replay(events, default_config())
+
+
 def test_replay_cli_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["replay", str(tmp_path / "none.ndjson"), "--out", str(tmp_path / "o.csv")]) == 2
     assert "cannot read events" in capsys.readouterr().err

@@ -118,10 +118,12 @@ def replay(
     speed_mode: str = "paper",
     stats: ReplayStats | None = None,
 ) -> list[ReplayRow]:
-    """Run `events` (in time order) through a fresh ECU core; rows at each speed update."""
+    """Run `events` through a fresh ECU core; rows at each speed update. Events are taken in
+    time order (a stable sort: equal times keep their order)."""
     if not events:
         return []
-    return _Replayer(events, cfg, speed_mode, stats or ReplayStats()).run()
+    ordered = sorted(events, key=lambda e: e.t)
+    return _Replayer(ordered, cfg, speed_mode, stats or ReplayStats()).run()
 
 
 class _Replayer:

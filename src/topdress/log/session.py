@@ -351,8 +351,9 @@ class SessionReader:
         return self.meta.get("config_toml", "")
 
     def raw(self) -> Iterator[RawRecord]:
-        """Raw inputs in the order they were logged."""
-        cur = self._conn.execute("SELECT t, kind, line, can_id, data FROM raw ORDER BY id")
+        """Raw inputs in time order. Inputs logged from several threads may reach the log a
+        little out of order; equal times keep their logged order."""
+        cur = self._conn.execute("SELECT t, kind, line, can_id, data FROM raw ORDER BY t, id")
         for t, kind, line, can_id, data in cur:
             yield RawRecord(t, kind, line, can_id, data)
 
