@@ -23,7 +23,10 @@ REGISTRARS = (
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="topdress",
-        description="Variable-rate topdressing with dual speed measurement: ECU core, cab terminal, simulator.",
+        description=(
+            "Variable-rate topdressing with dual speed measurement: "
+            "ECU core, cab terminal, simulator."
+        ),
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

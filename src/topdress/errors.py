@@ -1,4 +1,7 @@
-"""The one error hierarchy of topdress. Every error a user or a device can cause derives from TopdressError."""
+"""The one error hierarchy of topdress.
+
+Every error a user or a device can cause derives from TopdressError.
+"""
 
 
 class TopdressError(Exception):
