@@ -50,7 +50,7 @@ def test_wheel_faults_stop_the_pulses() -> None:
 
 @pytest.mark.parametrize("duty", [0.2, 0.35, 0.6, 1.0, 1.7])
 def test_meter_motor_steady_state_vs_duty(duty: float) -> None:
-    p = MeterParams()
+    p = MeterParams(load_ripple=0.0)
     m = MeterMotor(p, DT)
     for i in range(300):
         m.step(i * DT, DT, duty)
@@ -77,11 +77,25 @@ def test_meter_static_friction_and_jam() -> None:
 
 
 def test_meter_time_constant() -> None:
-    p = MeterParams()
+    p = MeterParams(load_ripple=0.0)
     m = MeterMotor(p, DT)
     for i in range(round(p.tau_s / DT)):
         m.step(i * DT, DT, 0.5)
     assert m.rpm == pytest.approx(m.steady_rpm(0.5) * (1 - math.exp(-1)), rel=0.01)
+
+
+def test_meter_load_ripple_averages_out() -> None:
+    p = MeterParams(load_duty=0.05, load_ripple=0.8)
+    m = MeterMotor(p, DT)
+    for i in range(300):
+        m.step(i * DT, DT, 0.5)
+    rev0, rpms = m.revolutions, []
+    for i in range(300, 900):
+        m.step(i * DT, DT, 0.5)
+        rpms.append(m.rpm)
+    mean_rpm = (m.revolutions - rev0) / 6.0 * 60.0
+    assert mean_rpm == pytest.approx(m.steady_rpm(0.5), rel=0.02)
+    assert max(rpms) - min(rpms) > 0.3  # the flutes make the speed pulse
 
 
 def test_fan_first_order_and_tach() -> None:
@@ -97,7 +111,7 @@ def test_fan_first_order_and_tach() -> None:
 
 
 def test_airline_transport_delay_and_mass() -> None:
-    p = AirLineParams()
+    p = AirLineParams(release_rev=0.05)
     line = AirLine(p)
     delay = p.drop_s + p.line_length_m / p.air_speed_ms
     assert line.delay_s(3000.0) == pytest.approx(delay)
@@ -116,7 +130,8 @@ def test_airline_transport_delay_and_mass() -> None:
 
 
 def test_nmea_sentences_parse_back_with_checksums() -> None:
-    rx = GnssReceiver(GnssParams(talker="BD", speed_sd_ms=0.0, pos_sd_m=0.0), seed=4)
+    p = GnssParams(talker="BD", speed_sd_ms=0.0, pos_sd_m=0.0, filter_tau_s=0.2)
+    rx = GnssReceiver(p, seed=4)
     lines: list[str] = []
     for i in range(1, 400):
         lines += rx.step(i * DT, 0.0, 1.5 * i * DT, 1.5, 0.0)
@@ -152,7 +167,7 @@ def test_nmea_bad_checksum_and_outage() -> None:
 
 
 def test_gnss_static_hold_reports_zero_until_threshold() -> None:
-    p = GnssParams(speed_sd_ms=0.0, pos_sd_m=0.0)
+    p = GnssParams(speed_sd_ms=0.0, pos_sd_m=0.0, hold_ms=0.4, filter_tau_s=0.35)
     rx = GnssReceiver(p, seed=6)
     speeds: list[tuple[float, float]] = []
     v = 0.0

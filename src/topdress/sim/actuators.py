@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+_TWO_PI = 2.0 * math.pi
+
 
 @dataclass(frozen=True)
 class MeterParams:
@@ -14,14 +16,18 @@ class MeterParams:
     tau_s * dw/dt = max_rpm * (duty - friction_duty - load_duty) - w while turning.
     From standstill it breaks away only when duty exceeds breakaway_duty + load_duty
     (static friction). PWM duty saturates to 0..1. max_rpm is the no-load shaft speed at
-    full duty after the gearbox. Encoder: counts_per_rev at the metering shaft.
+    full duty after the gearbox. Encoder: counts_per_rev at the metering shaft. The load
+    pulses as each of the `flutes` grooves of the metering wheel fills and empties:
+    load_duty * (1 + load_ripple * sin(2*pi*flutes*revolutions)).
     """
 
-    max_rpm: float = 80.0
-    tau_s: float = 0.12
-    breakaway_duty: float = 0.06
-    friction_duty: float = 0.03
-    load_duty: float = 0.04  # fertilizer in the box drags the metering wheel
+    max_rpm: float = 66.0
+    tau_s: float = 0.15
+    breakaway_duty: float = 0.03
+    friction_duty: float = 0.02
+    load_duty: float = 0.02  # fertilizer in the box drags the metering wheel
+    flutes: int = 12
+    load_ripple: float = 0.5
     counts_per_rev: int = 6400
     jammed_at_s: float = -1.0  # fault knob: metering wheel blocked; < 0 never
     encoder_dead_at_s: float = -1.0  # fault knob: encoder stops counting; < 0 never
@@ -44,7 +50,10 @@ class MeterMotor:
             return self.count
         if self.rpm <= 0.0 and duty <= p.breakaway_duty + p.load_duty:
             return self.count
-        w_ss = p.max_rpm * (duty - p.friction_duty - p.load_duty)
+        load = p.load_duty
+        if p.load_ripple:
+            load *= 1.0 + p.load_ripple * math.sin(_TWO_PI * p.flutes * self.revolutions)
+        w_ss = p.max_rpm * (duty - p.friction_duty - load)
         w = w_ss + (self.rpm - w_ss) * self._decay
         if w <= 0.0:
             w = 0.0  # friction holds the shaft; it does not turn backwards

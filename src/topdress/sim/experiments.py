@@ -56,6 +56,8 @@ PAPER_TABLE5 = (
 )
 PAPER_SLIP = (0.167, -0.296, 0.773, 0.9826, 6.0)
 PAPER_CV_THRESHOLD = 4.2
+# a queue 'fluctuates' when its largest uniform CV exceeds the longest queue's by more
+FLUCTUATION_RATIO = 1.2
 
 
 @dataclass(frozen=True)
@@ -249,7 +251,7 @@ def cv_experiment(lab: Lab, targets: Iterable[float] = TARGETS_KMH, reps: int = 
     """The paper's analysis: CV in uniform motion per N; N and the threshold chosen from it.
 
     N is the shortest queue whose uniform-motion CV does not fluctuate: its largest uniform CV
-    is within 25 % of the longest queue's. The threshold is that N's largest uniform CV.
+    is within 20 % of the longest queue's. The threshold is that N's largest uniform CV.
     """
     series = []
     items = [(v, r) for v in targets for r in range(reps)]
@@ -266,7 +268,7 @@ def cv_experiment(lab: Lab, targets: Iterable[float] = TARGETS_KMH, reps: int = 
         by_target[n] = per
         max_uni[n] = max(per.values()) if per else math.nan
     longest = max_uni[max(CV_QUEUES)]
-    chosen = next(n for n in CV_QUEUES if max_uni[n] <= 1.25 * longest)
+    chosen = next(n for n in CV_QUEUES if max_uni[n] <= FLUCTUATION_RATIO * longest)
     detect = {}
     for n in CV_QUEUES:
         d = [decel_detect_s(s, n, max_uni[n]) for s in series]
@@ -438,7 +440,12 @@ def step_response(
     ss = float(np.mean(np.abs(meas[last] - target[last])))
     t_cmd = float(t[np.argmax(np.abs(target - target[0]) > 0.5 * jump_rpm)])
     outside = np.nonzero(np.abs(meas - r1) > 0.05 * r1)[0]
-    settle = float(t[outside[-1] + 1]) - t_cmd if outside.size else 0.0
+    if outside.size == 0:
+        settle = 0.0
+    elif outside[-1] + 1 < t.size:
+        settle = float(t[outside[-1] + 1]) - t_cmd
+    else:
+        settle = math.nan  # never settled within the window
     return StepResponse(jump_rpm, 100.0 * under / jump_rpm, ss, settle, t, meas, target)
 
 

@@ -25,9 +25,9 @@ class GnssParams:
 
     rate_hz: float = 5.0
     latency_s: float = 0.10
-    filter_tau_s: float = 0.35
+    filter_tau_s: float = 1.4
     speed_sd_ms: float = 0.05
-    hold_ms: float = 0.40
+    hold_ms: float = 0.10
     pos_sd_m: float = 0.8
     pos_tau_s: float = 60.0
     talker: str = "GN"

@@ -153,7 +153,8 @@ def write_cv(out: Path, res: ex.CvResult) -> Path:
     )
     md += (
         f"\nChosen by the paper's reasoning (shortest queue whose uniform CV does not fluctuate, "
-        f"i.e. stays within 25 % of the N = 7 value): **N = {res.chosen_n}**, threshold = its "
+        f"i.e. stays within {ex.FLUCTUATION_RATIO - 1:.0%} of the N = 7 value): "
+        f"**N = {res.chosen_n}**, threshold = its "
         f"largest uniform CV = **{res.threshold_pct:.2f} %** (paper: N = 5, "
         f"{ex.PAPER_CV_THRESHOLD} %).\n\n"
     )

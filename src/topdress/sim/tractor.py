@@ -20,12 +20,12 @@ class TractorParams:
     Otherwise the acceleration changes at most by jerk_ms3.
     """
 
-    accel_base_ms2: float = 0.10
-    accel_per_kmh: float = 0.060
+    accel_base_ms2: float = -0.21
+    accel_per_kmh: float = 0.11
     decel_ms2: float = 0.80
     jerk_ms3: float = 0.60
-    clutch_base_s: float = 0.3
-    clutch_per_kmh: float = 0.1
+    clutch_base_s: float = 0.25
+    clutch_per_kmh: float = 0.26
     speed_tau_s: float = 0.6
     ripple_sd: float = 0.004  # relative speed ripple in steady motion (engine, terrain)
     ripple_tau_s: float = 1.0

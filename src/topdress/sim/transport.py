@@ -16,12 +16,12 @@ class AirLineParams:
     release_rev (one flute).
     """
 
-    line_length_m: float = 2.2
+    line_length_m: float = 1.5
     air_speed_ms: float = 11.0
     nominal_fan_rpm: float = 3000.0
     min_fan_rpm: float = 1200.0
-    drop_s: float = 0.10
-    release_rev: float = 0.05
+    drop_s: float = 0.05
+    release_rev: float = 0.005
     blocked: bool = False  # fault knob: clogged line, nothing arrives
 
 

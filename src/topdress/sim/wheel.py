@@ -23,7 +23,7 @@ class WheelParams:
     slip_b: float = -0.296
     slip_c: float = 0.773
     slip_sd_pct: float = 0.25  # run-to-run variation of the slip (soil, straw), in % points
-    bounce_sd: float = 0.045
+    bounce_sd: float = 0.036
     bounce_tau_s: float = 0.10
     encoder_dead_at_s: float = -1.0  # fault knob: encoder stops counting; < 0 never
     lifted_at_s: float = -1.0  # fault knob: wheel lifted off the ground; < 0 never
