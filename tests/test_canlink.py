@@ -135,6 +135,40 @@ def test_running_ecu_is_stopped_before_parameters_are_written(rig: Rig) -> None:
     assert not rig.twin.ecu.state.running
 
 
+def test_restart_with_the_values_in_force_does_not_stop_the_ecu(rig: Rig) -> None:
+    params = default_config().ecu_params()
+    rig.link.begin(params, 0.0)
+    rig.link.set_command(True, 3000, 200, 100)
+    rig.run(1.0)
+    assert rig.twin.ecu.state.running
+    link2 = CanLink(rig.pc_bus, rig.cfg)
+    rig.link = link2
+    link2.begin(params, rig.t)
+    link2.set_command(True, 3000, 200, 100)
+    rig.run(2.0)
+    # every parameter answered Busy with the value already in force: accepted, no stop sent
+    assert link2.params_done
+    assert rig.twin.ecu.state.running
+    assert all(c.start for _, c in rig.commands())
+
+
+def test_ecu_rebooted_while_lost_gets_the_parameters_again(rig: Rig) -> None:
+    rig.link.begin({1: 4.2, 6: 7}, 0.0)
+    rig.run(1.0)
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(4.2)
+    rig.twin.mute = True
+    rig.run(2.0)
+    # power cycle: a fresh ECU on its defaults
+    rig.twin = SimulatedEcu(rig.ecu_bus, now=rig.t)
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(3.6)
+    rig.run(3.0)
+    assert [e for _, e in rig.events][-1] == "ECU back"
+    assert rig.link.params_done
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(4.2)
+    assert rig.twin.ecu.params.queue_len == 7
+    assert rig.link.counters.tx_params == 4
+
+
 def test_value_the_frame_cannot_carry_is_refused_before_sending(rig: Rig) -> None:
     with pytest.raises(ProtocolError, match="WorkingWidth"):
         rig.link.begin({1: 31.0}, 0.0)

@@ -10,7 +10,8 @@ seconds on any monotonic clock (virtual in tests). It
 - sends the paper's PcCommand every `command_period_s`, and at once on a new GNSS speed when
   `send_on_gnss` is set;
 - decodes EcuStatus, EcuDiag, EcuSpeeds and EcuTargets, counting foreign and malformed frames;
-- tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back".
+- tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
+  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
 
 `SimulatedEcu` is the twin of the real ECU on the other end of a bus: the C core through the
 binding, on virtual time, with fault knobs (mute, deaf to parameters).
@@ -137,6 +138,7 @@ class CanLink:
         self.command = Command(fan_rpm=_clamp(fan_rpm, MAX_FAN_RPM))
         self.ecu = EcuView()
         self._push: _ParamPush | None = None
+        self._params: list[tuple[int, float]] = []
         self._next_cmd_t: float | None = None
         self._alive = False
         self._lost = False
@@ -150,7 +152,8 @@ class CanLink:
         for param_id, value in params.items():
             protocol.param(param_id).check(value)
         self._started_t = now
-        self._push = _ParamPush(sorted(params.items()))
+        self._params = sorted(params.items())
+        self._push = _ParamPush(list(self._params))
         self._send_param(now)
 
     @property
@@ -174,13 +177,14 @@ class CanLink:
         param_id, value = push.items[push.index]
         if ack.param_id != param_id:
             return  # a late answer to an earlier parameter
-        if ack.result is AckResult.BUSY:
-            # The ECU is running (the terminal restarted mid-field): stop it, then write again.
+        if ack.result is AckResult.BUSY and ack.raw != protocol.param(param_id).to_raw(value):
+            # Running with another value (the terminal restarted mid-field with a new file):
+            # stop it, then write again. Busy with the value already in force is as good as Ok.
             self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
             push.tries = 0
             self._send_param(now)
             return
-        if ack.result is not AckResult.OK:
+        if ack.result not in (AckResult.OK, AckResult.BUSY):
             reason = ack.result.name.lower().replace("_", " ")
             raise EcuParamError(
                 protocol.param_name(param_id), value, f"refused by the ECU: {reason}"
@@ -287,6 +291,9 @@ class CanLink:
             if self._lost:
                 self._lost = False
                 self._event("ECU back")
+                if self.params_done:
+                    self._push = _ParamPush(list(self._params))
+                    self._send_param(now)
         elif isinstance(decoded, protocol.EcuDiag):
             self.ecu = replace(self.ecu, diag=decoded)
         elif isinstance(decoded, protocol.EcuSpeeds):
