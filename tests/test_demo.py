@@ -11,6 +11,7 @@ import pytest
 from topdress.cli import main
 from topdress.ecu import meter_target_rpm
 from topdress.log.session import SessionReader
+from topdress.sim.live import PtyPort
 from topdress.terminal.config import default_config
 from topdress.terminal.demo import run_demo
 
@@ -80,3 +81,16 @@ def test_demo_duration_must_be_positive(capsys: pytest.CaptureFixture[str]) -> N
     with pytest.raises(SystemExit):
         main(["demo", "--duration", "-3"])
     assert "must be > 0" in capsys.readouterr().err
+
+
+def test_pty_nobody_reads_drops_and_counts_instead_of_blocking() -> None:
+    port = PtyPort()
+    try:
+        line = b"$GNRMC,000000.00,V,,,,,,,210526,,,N*5F\r\n"
+        dropped = sum(port.write(line) for _ in range(20_000))  # ~840 kB, far over the buffer
+        assert 0 < dropped < 20_000 * len(line)
+        # what did fit is there, intact, for a reader that comes late
+        with open(port.path, "rb", buffering=0) as reader:
+            assert reader.read(len(line)) == line
+    finally:
+        port.close()

@@ -312,6 +312,8 @@ class Terminal:
         }
         if self.session is not None:
             out["log_err"] = self.session.errors
+        # The loop's own anomalies (no NDVI, CAN receive errors) only when they happen.
+        out.update((k, v) for k, v in self.counters.items() if k != "events" and v)
         return out
 
     def _row(self, now: float) -> StateRow:

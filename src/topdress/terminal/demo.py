@@ -133,6 +133,8 @@ def run_demo(
     truth = world.truth
     out.write(
         f"simulated machine: {truth.t_s:.1f} s, {truth.odometer_m:.1f} m driven, "
-        f"{truth.applied_kg[0] + truth.applied_kg[1]:.2f} kg applied\n"
+        f"{truth.applied_kg[0] + truth.applied_kg[1]:.2f} kg applied"
+        + "".join(f", {k} {v}" for k, v in sorted(machine.counters.items()) if v)
+        + "\n"
     )
     return 0
