@@ -9,6 +9,7 @@ and the spade: travelled distance, where the fertilizer landed).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -103,7 +104,7 @@ class Lab:
         params = self.pc.ecu_params
         if mode is not SpeedMode.DUAL:
             params = (*params, ("SpeedMode", float(mode.code)))
-        with Sil(world, PcParams(**{**self.pc.__dict__, "ecu_params": params})) as sil:
+        with Sil(world, dataclasses.replace(self.pc, ecu_params=params)) as sil:
             sil.run_until_done(max_s=hold_m / (target_kmh / 3.6) + 60.0)
             assert sil.record is not None
             trace = sil.record.arrays()
