@@ -153,35 +153,40 @@ class Terminal:
         self,
         duration_s: float | None = None,
         on_tick: Callable[[Snapshot, float], None] | None = None,
-        stop: threading.Event | None = None,
     ) -> None:
-        """Open, loop until `duration_s` has passed or `stop` is set, close (always)."""
-        self.open()
-        self._can_thread = threading.Thread(target=self._can_reader, name="can-rx", daemon=True)
-        self._can_thread.start()
-        assert self._t0 is not None
-        end = None if duration_s is None else self._t0 + duration_s
-        next_tick = self._t0
+        """Open, loop until `duration_s` has passed (or Ctrl-C), close (always)."""
         try:
-            while stop is None or not stop.is_set():
-                now = self.clock()
-                if end is not None and now >= end:
-                    break
-                try:
-                    kind, t, payload = self.inbox.get(timeout=max(0.0, next_tick - now))
-                except queue.Empty:
-                    pass
-                else:
-                    self.handle(kind, t, payload)
-                now = self.clock()
-                if now >= next_tick:
-                    self.tick(now)
-                    # Keep the 10 Hz grid; after a stall, restart it rather than burst.
-                    next_tick = next_tick + TICK_S if now - next_tick < TICK_S else now + TICK_S
-                    if on_tick is not None:
-                        on_tick(self.snapshot, now)
+            self.open()
+            self._can_thread = threading.Thread(target=self._can_reader, name="can-rx", daemon=True)
+            self._can_thread.start()
+            assert self._t0 is not None
+            self._loop(self._t0, duration_s, on_tick)
         finally:
             self.close()
+
+    def _loop(
+        self,
+        t0: float,
+        duration_s: float | None,
+        on_tick: Callable[[Snapshot, float], None] | None,
+    ) -> None:
+        end = None if duration_s is None else t0 + duration_s
+        next_tick = t0
+        while end is None or self.clock() < end:
+            now = self.clock()
+            try:
+                kind, t, payload = self.inbox.get(timeout=max(0.0, next_tick - now))
+            except queue.Empty:
+                pass
+            else:
+                self.handle(kind, t, payload)
+            now = self.clock()
+            if now >= next_tick:
+                self.tick(now)
+                # Keep the 10 Hz grid; after a stall, restart it rather than burst.
+                next_tick = next_tick + TICK_S if now - next_tick < TICK_S else now + TICK_S
+                if on_tick is not None:
+                    on_tick(self.snapshot, now)
 
     # ---- inputs -------------------------------------------------------------------------------
     def handle(self, kind: str, t: float, payload: Any) -> None:
