@@ -39,8 +39,10 @@ pytest: $(STAMP)
 
 test: ctest lint pytest
 
-bench: $(STAMP) sysdeps
+bench: $(STAMP)
 	$(BIN)/python bench/ecu_bench.py
+	$(BIN)/python bench/sim_bench.py
+	$(BIN)/python bench/terminal_bench.py
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c
