@@ -11,6 +11,7 @@ DURATION ?= 30
 .PHONY: demo test ctest pytest lint bench sysdeps clean
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
+	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
@@ -19,7 +20,7 @@ demo: $(STAMP)
 	$(BIN)/topdress demo --duration $(DURATION)
 
 sysdeps:
-	bash scripts/sysdeps.sh
+	bash scripts/sysdeps.sh ctest
 
 ctest: sysdeps
 	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null

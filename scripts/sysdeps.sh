@@ -1,12 +1,35 @@
 #!/usr/bin/env bash
-# System packages the C tests need (cmocka). Installs them with apt-get when missing and root.
+# System packages topdress needs, installed with apt-get when missing (as root).
+#   sysdeps.sh python   - what building the venv needs: venv/ensurepip and Python headers (cffi)
+#   sysdeps.sh ctest    - what the C tests need: cmocka and pkg-config
 set -euo pipefail
+what=${1:-ctest}
+python=${PYTHON:-python3}
 missing=()
-[ -f /usr/include/cmocka.h ] || missing+=(libcmocka-dev)
-command -v pkg-config >/dev/null || missing+=(pkg-config)
+case "$what" in
+python)
+    command -v "$python" >/dev/null || { echo "topdress: $python not found (Python >= 3.11 is needed)" >&2; exit 1; }
+    ver=$("$python" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+    "$python" -c 'import sys; sys.exit(sys.version_info < (3, 11))' \
+        || { echo "topdress: Python >= 3.11 is needed, $python is $ver" >&2; exit 1; }
+    "$python" -c 'import ensurepip, venv' 2>/dev/null || missing+=("python$ver-venv")
+    inc=$("$python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+    [ -f "$inc/Python.h" ] || missing+=("python$ver-dev")
+    command -v cc >/dev/null || missing+=(gcc)
+    ;;
+ctest)
+    [ -f /usr/include/cmocka.h ] || missing+=(libcmocka-dev)
+    command -v pkg-config >/dev/null || missing+=(pkg-config)
+    command -v cmake >/dev/null || missing+=(cmake)
+    ;;
+*)
+    echo "usage: $0 python|ctest" >&2
+    exit 2
+    ;;
+esac
 if [ ${#missing[@]} -eq 0 ]; then exit 0; fi
-if [ "$(id -u)" -ne 0 ]; then
-    echo "topdress: missing system packages: ${missing[*]} (run: sudo apt-get install ${missing[*]})" >&2
+if [ "$(id -u)" -ne 0 ] || ! command -v apt-get >/dev/null; then
+    echo "topdress: missing system packages: ${missing[*]} (install them, e.g. sudo apt-get install ${missing[*]})" >&2
     exit 1
 fi
 echo "topdress: installing ${missing[*]}" >&2
