@@ -80,6 +80,8 @@ class Pc:
     rates: tuple[float, float] = (200.0, 150.0)
     gnss: bool = True
     sending: bool = True
+    gnss_jitter_kmh: float = 0.0  # added to every other GNSS speed: a live receiver's noise
+    gnss_frozen_kmh: float | None = None  # a frozen receiver: this speed whatever the motion
 
 
 class Loop:
@@ -94,9 +96,13 @@ class Loop:
         self.duties = (0.0, 0.0, 0.0, 0.0)
         self.last_cmd_us = self.t_us
         self._steps = 0
+        self._commands = 0
 
     def command(self) -> None:
-        gnss = round(self.plant.v_kmh, 1) if self.pc.gnss else None
+        jitter = self.pc.gnss_jitter_kmh if self._commands % 2 else 0.0
+        self._commands += 1
+        v = self.plant.v_kmh if self.pc.gnss_frozen_kmh is None else self.pc.gnss_frozen_kmh
+        gnss = round(v + jitter, 1) if self.pc.gnss else None
         msg = encode_command(self.pc.start, self.pc.fan_rpm, *self.pc.rates, gnss)
         assert self.ecu.rx(msg, self.t_us) == 0
         self.last_cmd_us = self.t_us
@@ -258,6 +264,7 @@ def test_gnss_not_available_uses_the_wheel() -> None:
 def test_wheel_encoder_fault_switches_to_gnss_latched_until_stop() -> None:
     loop = Loop()
     loop.drive(4.0, hold_s=5.0)
+    loop.pc.gnss_jitter_kmh = 0.1  # a live receiver
     loop.plant.wheel_ok = False  # the encoder cable is cut
     seen: list[tuple[int, Fault, Source]] = []
     loop.run(4.0, lambda lp: seen.append((lp.t_us, lp.ecu.state.faults, lp.ecu.state.source)))
@@ -266,7 +273,8 @@ def test_wheel_encoder_fault_switches_to_gnss_latched_until_stop() -> None:
     assert 2.0 < hit / 100 <= 2.6
     assert seen[hit][2] is Source.GNSS and seen[hit - 1][2] is Source.WHEEL
     st = loop.ecu.state
-    assert st.target_rpm[0] == pytest.approx(meter_target_rpm(3.6, 200.0, 4.0, 0.3))
+    assert st.target_rpm[0] == pytest.approx(meter_target_rpm(3.6, 200.0, st.v_gnss_kmh, 0.3))
+    assert st.v_gnss_kmh == pytest.approx(4.05, abs=0.051)
     # latched: the wheel coming back does not clear it; a stop command does
     loop.plant.wheel_ok = True
     loop.run(2.0)
@@ -280,6 +288,7 @@ def test_wheel_encoder_fault_switches_to_gnss_latched_until_stop() -> None:
 def test_no_usable_speed_holds_the_meters() -> None:
     loop = Loop()
     loop.drive(4.0, hold_s=5.0)
+    loop.pc.gnss_jitter_kmh = 0.1
     loop.plant.wheel_ok = False
     loop.run(4.0)
     assert Fault.WHEEL_ENCODER in loop.ecu.state.faults
@@ -288,6 +297,26 @@ def test_no_usable_speed_holds_the_meters() -> None:
     st = loop.ecu.state
     assert st.source is Source.NONE and Fault.NO_SPEED in st.faults
     assert st.target_rpm == (0.0, 0.0) and st.meter_duty == (0.0, 0.0)
+
+
+def test_frozen_gnss_receiver_never_meters_a_standing_machine() -> None:
+    loop = Loop()
+    loop.drive(8.0, hold_s=6.0)
+    assert loop.ecu.state.source is Source.GNSS
+    loop.pc.gnss_frozen_kmh = 8.0  # the receiver repeats its last speed from here on
+    loop.drive(0.0, ramp_s=4.0, hold_s=2.0)
+    duties: list[float] = []
+    loop.run(8.0, lambda lp: duties.append(lp.duties[0] + lp.duties[1]))
+    # standing: queue G is all zeros (CV 0, uniform) and GNSS says 8 km/h, yet no metering
+    assert duties == [0.0] * 800
+    st = loop.ecu.state
+    assert st.uniform and st.gnss_valid and st.v_wheel_kmh == 0.0
+    assert st.source is Source.WHEEL
+    assert Fault.GNSS_FROZEN in st.faults and Fault.WHEEL_ENCODER not in st.faults
+    assert Fault.GNSS_FROZEN.value & int(loop.last(DEFAULT_IDS.diag)["FaultWord"])
+    loop.pc.gnss_frozen_kmh = None  # the receiver recovers: 0 km/h
+    loop.run(0.6)
+    assert loop.ecu.state.faults == Fault(0)
 
 
 @pytest.mark.parametrize("layer", [0, 1])

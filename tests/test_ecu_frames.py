@@ -249,6 +249,7 @@ def test_constants_agree() -> None:
         "UPPER_FAN_LOW": lib.TD_FAULT_UPPER_FAN_LOW,
         "LOWER_FAN_LOW": lib.TD_FAULT_LOWER_FAN_LOW,
         "NO_SPEED": lib.TD_FAULT_NO_SPEED,
+        "GNSS_FROZEN": lib.TD_FAULT_GNSS_FROZEN,
     }
     assert LATCHED_FAULTS == lib.TD_FAULT_LATCHED_MASK
     assert [s.code for s in Source] == [lib.TD_SRC_WHEEL, lib.TD_SRC_GNSS, lib.TD_SRC_NONE]

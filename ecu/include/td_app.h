@@ -10,6 +10,12 @@
  * Metering is allowed for a layer only when: running (last command was start), no
  * command timeout, a usable speed >= min_work_speed_kmh, the layer's fan >= fan_min_rpm
  * and the layer's motor not latched as blocked. Otherwise its target is 0 and its PID is reset.
+ *
+ * Source: td_speedsel_rule() every wheel update, on GNSS validity changes, on encoder-fault and
+ * GNSS_FROZEN changes and on parameter writes. On top of the rule: while the wheel reads ~0 and
+ * GNSS says > enc_fault_gnss_kmh, the dual mode keeps the wheel until the encoder check decides
+ * (GNSS value changed meanwhile -> WHEEL_ENCODER, GNSS used; never changed -> GNSS_FROZEN,
+ * GNSS not used).
  */
 #ifndef TD_APP_H
 #define TD_APP_H
@@ -24,7 +30,7 @@
 #include "td_speedq.h"
 #include "td_wheel.h"
 
-#define TD_TXQ_LEN 16u
+#define TD_TXQ_LEN 16u       /**< transmit queue length, frames; a full queue drops the newest (cnt.tx_dropped) */
 #define TD_RATE_WINDOW 10u   /**< control steps in the metering/fan speed window */
 
 /** Everything a port, the simulator or a test may want to see; read-only for them. */
@@ -49,13 +55,14 @@ typedef struct {
     uint32_t wheel_pulses;     /**< cumulative wheel pulses seen */
 } td_state_t;
 
+/** Frame counters, wrapping. Every received frame lands in exactly one of the rx_* counters. */
 typedef struct {
-    uint32_t rx_ok;
-    uint32_t rx_unknown_id;
-    uint32_t rx_bad_length;
-    uint32_t rx_out_of_range;
-    uint32_t rx_param_rejected;
-    uint32_t tx_dropped;
+    uint32_t rx_ok;              /**< acted on: a PcCommand, or a PcParamSet that was accepted */
+    uint32_t rx_unknown_id;      /**< an identifier the ECU does not take (also 11-bit frames) */
+    uint32_t rx_bad_length;      /**< a known identifier with DLC != 8 */
+    uint32_t rx_out_of_range;    /**< a PcCommand with a value outside its range or an undefined enum */
+    uint32_t rx_param_rejected;  /**< a PcParamSet refused: unknown id, range, busy, inconsistent */
+    uint32_t tx_dropped;         /**< frames dropped because the transmit queue was full */
 } td_counters_t;
 
 typedef struct {
@@ -75,6 +82,8 @@ typedef struct {
     uint32_t enc_fault_since_us;
     uint32_t blocked_since_us[2];
     bool have_cmd, have_gnss, stepped, enc_suspect, blocked_suspect[2];
+    bool spun_up;              /**< the fan spin-up grace after the last start is over */
+    bool gnss_moved;           /**< the GNSS value changed since the wheel/GNSS conflict began */
     /* metering/fan speed windows (ring of counts over TD_RATE_WINDOW steps) */
     uint32_t meter_hist[TD_RATE_WINDOW][2];
     uint32_t fan_hist[TD_RATE_WINDOW][2];
@@ -93,6 +102,8 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
  * Take one received frame. Returns TD_OK when acted on, TD_E_UNKNOWN_ID, TD_E_LENGTH or
  * TD_E_RANGE when rejected (counted in cnt, never acted on). PcParamSet is always
  * answered with an EcuParamAck, and returns the parameter error (TD_E_BUSY, ...) if refused.
+ * `now_us` is the reception time; it may be up to 35 min ahead of the next step's time (taken
+ * as age 0), so an interrupt may stamp frames with a fresh clock read.
  */
 int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
 

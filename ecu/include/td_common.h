@@ -34,6 +34,7 @@
 #define TD_FAULT_UPPER_FAN_LOW (1u << 5) /**< upper fan below fan_min_rpm after the spin-up grace: upper meter held at zero; clears when the fan is up */
 #define TD_FAULT_LOWER_FAN_LOW (1u << 6) /**< same, lower fan */
 #define TD_FAULT_NO_SPEED (1u << 7)      /**< neither speed source usable: meters held at zero */
+#define TD_FAULT_GNSS_FROZEN (1u << 8)   /**< running, wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms and the GNSS value never changed meanwhile (frozen receiver): GNSS not used; clears when the wheel turns or GNSS drops below enc_fault_gnss_kmh (a GNSS value that changes while the wheel still reads ~0 latches WHEEL_ENCODER instead) */
 
 /** Latched faults: cleared only by a stop command (operator acknowledgement). */
 #define TD_FAULT_LATCHED_MASK (TD_FAULT_WHEEL_ENCODER | TD_FAULT_UPPER_BLOCKED | TD_FAULT_LOWER_BLOCKED)
@@ -53,6 +54,17 @@ typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
 /** Elapsed microseconds from `then_us` to `now_us`, correct across the 2^32 wrap. */
 static inline uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us) {
     return (uint32_t)(now_us - then_us);
+}
+
+/**
+ * Age in microseconds at `now_us` of an event stamped `then_us`, for stamps that come from
+ * td_app_rx(): a frame may be stamped after the port read the time of the step that follows
+ * (a receive interrupt between the two), so a stamp up to 35 min ahead of now is age 0, not
+ * 71 minutes old.
+ */
+static inline uint32_t td_age_us(uint32_t now_us, uint32_t then_us) {
+    const uint32_t d = (uint32_t)(now_us - then_us);
+    return d >= 0x80000000u ? 0u : d;
 }
 
 #endif /* TD_COMMON_H */

@@ -56,11 +56,34 @@ static void set_fault(td_app_t *app, uint16_t bit, bool on) {
     }
 }
 
+/* The wheel reads ~0 while a valid GNSS speed says the machine moves, and no encoder fault
+ * has decided yet which of the two is wrong (a cut encoder cable or a frozen receiver). */
+static bool speed_conflict(const td_app_t *app) {
+    const td_state_t *st = &app->st;
+    return st->gnss_valid && st->v_gnss_kmh > app->p.enc_fault_gnss_kmh && st->v_wheel_kmh < TD_ENC_FAULT_WHEEL_KMH &&
+           (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
+}
+
 static void decide_source(td_app_t *app) {
     td_state_t *st = &app->st;
-    st->source = td_speedsel_rule((td_speed_mode_t)app->p.speed_mode, (td_compare_t)app->p.switch_compare,
-                                  st->cv_pct, app->p.cv_threshold_pct, app->p.switch_speed_kmh, st->v_wheel_kmh,
-                                  st->v_gnss_kmh, st->gnss_valid, (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u);
+    const td_speed_mode_t mode = (td_speed_mode_t)app->p.speed_mode;
+    const bool gnss_usable = st->gnss_valid && (st->faults & TD_FAULT_GNSS_FROZEN) == 0u;
+    st->source = td_speedsel_rule(mode, (td_compare_t)app->p.switch_compare, st->cv_pct, app->p.cv_threshold_pct,
+                                  app->p.switch_speed_kmh, st->v_wheel_kmh, st->v_gnss_kmh, gnss_usable,
+                                  (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u);
+    /* A standing wheel is "uniform" (CV 0): the dual rule alone would meter at a frozen GNSS
+     * speed while the machine stands. Until the encoder check settles the conflict, the wheel. */
+    if (st->source == TD_SRC_GNSS && mode == TD_MODE_DUAL && speed_conflict(app)) {
+        st->source = TD_SRC_WHEEL;
+    }
+}
+
+/* After the queue or the rule's parameters changed: CV and source from what queue G holds now. */
+static void refresh_cv_and_source(td_app_t *app) {
+    td_state_t *st = &app->st;
+    st->cv_pct = td_speedq_cv_pct(&app->q, app->p.cv_window);
+    st->uniform = st->cv_pct >= 0.0f && st->cv_pct < app->p.cv_threshold_pct;
+    decide_source(app);
 }
 
 int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
@@ -144,6 +167,9 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
     st->rate_kg_ha[TD_LOWER] = c.rate_kg_ha[TD_LOWER];
     st->fan_target_rpm = c.fan_rpm;
     if (c.gnss_valid) {
+        if (c.gnss_kmh != st->v_gnss_kmh) {
+            app->gnss_moved = true;
+        }
         st->v_gnss_kmh = c.gnss_kmh;
         app->have_gnss = true;
         app->last_gnss_us = now_us;
@@ -154,6 +180,7 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
     if (c.start && !st->running) {
         st->running = true;
         app->start_us = now_us;
+        app->spun_up = false;
     } else if (!c.start) {
         const bool had_latched = (st->faults & TD_FAULT_LATCHED_MASK) != 0u;
         stop(app);
@@ -207,6 +234,8 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
             if (id == 4u || id == 5u || id == 6u || id == 19u || id == 20u) {
                 init_speed_chain(app);
             }
+            /* n, threshold, switch speed, mode, compare act at once, not at the next wheel update */
+            refresh_cv_and_source(app);
         } else {
             app->cnt.rx_param_rejected++;
         }
@@ -276,31 +305,46 @@ static void update_wheel(td_app_t *app, uint32_t now_us, uint32_t wheel_count) {
     }
 }
 
-/* Encoder fault: the wheel reads ~0 while GNSS says we move; latched (cleared by a stop). */
+/* The wheel reads ~0 while GNSS says we move, for longer than enc_fault_time_ms. If the GNSS
+ * value changed meanwhile, the receiver is alive and the encoder is broken: WHEEL_ENCODER,
+ * latched until a stop. If it never changed, the receiver is as likely frozen while the
+ * machine stands: GNSS_FROZEN, GNSS not used, the meters stay stopped on the wheel. */
 static void check_encoder(td_app_t *app, uint32_t now_us) {
-    const td_state_t *st = &app->st;
-    const bool suspect = st->running && st->gnss_valid && st->v_gnss_kmh > app->p.enc_fault_gnss_kmh &&
-                         st->v_wheel_kmh < TD_ENC_FAULT_WHEEL_KMH && (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
-    if (!suspect) {
+    td_state_t *st = &app->st;
+    const uint16_t before = st->faults;
+    if (!(st->running && speed_conflict(app))) {
         app->enc_suspect = false;
-        return;
-    }
-    if (!app->enc_suspect) {
+        set_fault(app, TD_FAULT_GNSS_FROZEN, false);
+    } else if (!app->enc_suspect) {
         app->enc_suspect = true;
         app->enc_fault_since_us = now_us;
+        app->gnss_moved = false;
     } else if (td_elapsed_us(now_us, app->enc_fault_since_us) > (uint32_t)app->p.enc_fault_time_ms * 1000u) {
-        app->st.faults |= TD_FAULT_WHEEL_ENCODER;
+        if (app->gnss_moved) {
+            st->faults |= TD_FAULT_WHEEL_ENCODER;
+            set_fault(app, TD_FAULT_GNSS_FROZEN, false);
+        } else {
+            st->faults |= TD_FAULT_GNSS_FROZEN;
+        }
+    }
+    if (st->faults != before) {
         decide_source(app);
     }
 }
 
 static void control_fans(td_app_t *app, uint32_t now_us, float dt_s, td_io_out_t *out) {
     td_state_t *st = &app->st;
-    const bool spun_up = td_elapsed_us(now_us, app->start_us) > (uint32_t)app->p.fan_spinup_ms * 1000u;
+    /* latched: after 71.6 min of running the wrapped clock must not reopen the grace */
+    if (st->running && td_age_us(now_us, app->start_us) > (uint32_t)app->p.fan_spinup_ms * 1000u) {
+        app->spun_up = true;
+    }
+    const bool spun_up = app->spun_up;
     const float target = st->running ? st->fan_target_rpm : 0.0f;
     for (unsigned l = 0u; l < TD_LAYERS; l++) {
         if (target > 0.0f) {
-            st->fan_duty[l] = td_pid_step(&app->fan_pid[l], target, st->fan_rpm[l], dt_s);
+            if (dt_s > 0.0f) { /* a repeated timestamp holds the duty: nothing to integrate */
+                st->fan_duty[l] = td_pid_step(&app->fan_pid[l], target, st->fan_rpm[l], dt_s);
+            }
         } else {
             td_pid_reset(&app->fan_pid[l]);
             st->fan_duty[l] = 0.0f;
@@ -342,7 +386,9 @@ static void control_meters(td_app_t *app, uint32_t now_us, float dt_s, td_io_out
                                                           app->p.kg_per_rev[l], app->p.min_work_speed_kmh)
                                     : 0.0f;
         if (st->target_rpm[l] > 0.0f) {
-            st->meter_duty[l] = td_pid_step(&app->meter_pid[l], st->target_rpm[l], st->meter_rpm[l], dt_s);
+            if (dt_s > 0.0f) { /* a repeated timestamp holds the duty: nothing to integrate */
+                st->meter_duty[l] = td_pid_step(&app->meter_pid[l], st->target_rpm[l], st->meter_rpm[l], dt_s);
+            }
             check_blocked(app, l, now_us);
         } else {
             td_pid_reset(&app->meter_pid[l]);
@@ -400,12 +446,15 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
     app->stepped = true;
 
     /* command timeout: strictly longer than cmd_timeout_ms without a valid PcCommand */
-    if (td_elapsed_us(now_us, app->last_cmd_us) > (uint32_t)app->p.cmd_timeout_ms * 1000u) {
+    if (td_age_us(now_us, app->last_cmd_us) > (uint32_t)app->p.cmd_timeout_ms * 1000u) {
         st->faults |= TD_FAULT_CMD_TIMEOUT;
     }
-    /* GNSS: missing (0xFF) or stale; re-decide at once when it comes or goes */
-    const bool gnss_valid =
-        app->have_gnss && td_elapsed_us(now_us, app->last_gnss_us) <= (uint32_t)app->p.gnss_timeout_ms * 1000u;
+    /* GNSS: missing (0xFF) or stale; a stale value is dropped for good, so that the clock
+     * wrapping 71.6 min later cannot make it fresh again; re-decide at once when it comes or goes */
+    if (app->have_gnss && td_age_us(now_us, app->last_gnss_us) > (uint32_t)app->p.gnss_timeout_ms * 1000u) {
+        app->have_gnss = false;
+    }
+    const bool gnss_valid = app->have_gnss;
     set_fault(app, TD_FAULT_GNSS_LOST, !gnss_valid);
     if (gnss_valid != st->gnss_valid) {
         st->gnss_valid = gnss_valid;
@@ -416,16 +465,10 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
     set_fault(app, TD_FAULT_NO_SPEED, st->source == TD_SRC_NONE);
     st->v_kmh = st->source == TD_SRC_GNSS ? st->v_gnss_kmh : st->source == TD_SRC_WHEEL ? st->v_wheel_kmh : 0.0f;
 
-    if (dt_s > 0.0f) {
-        control_fans(app, now_us, dt_s, out);
-        control_meters(app, now_us, dt_s, out);
-    } else {
-        /* a repeated timestamp: hold the last outputs, nothing to integrate */
-        for (unsigned l = 0u; l < TD_LAYERS; l++) {
-            out->meter_duty[l] = st->meter_duty[l];
-            out->fan_duty[l] = st->fan_duty[l];
-        }
-    }
+    /* also on a repeated timestamp: a stop or a fault between two steps of the same time
+     * must still zero the outputs it gates */
+    control_fans(app, now_us, dt_s, out);
+    control_meters(app, now_us, dt_s, out);
 
     const uint32_t period_us = (uint32_t)app->p.status_period_ms * 1000u;
     if (td_elapsed_us(now_us, app->last_status_us) >= period_us) {

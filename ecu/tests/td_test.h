@@ -45,6 +45,8 @@ typedef struct {
     /* the PC */
     bool pc_start;
     double pc_gnss_kmh;        /* < 0: send 0xFF */
+    double pc_gnss_jitter_kmh; /* added to every other GNSS speed: a live receiver's noise */
+    uint32_t cmds_sent;
     double pc_rate[2];
     double pc_fan_rpm;
     bool pc_sending;
@@ -85,7 +87,9 @@ static inline td_can_frame_t rig_command_frame(bool start, double fan, double up
 }
 
 static inline void rig_send_command(rig_t *r) {
-    const td_can_frame_t f = rig_command_frame(r->pc_start, r->pc_fan_rpm, r->pc_rate[0], r->pc_rate[1], r->pc_gnss_kmh);
+    const double jitter = (r->cmds_sent++ % 2u == 1u && r->pc_gnss_kmh >= 0.0) ? r->pc_gnss_jitter_kmh : 0.0;
+    const td_can_frame_t f =
+        rig_command_frame(r->pc_start, r->pc_fan_rpm, r->pc_rate[0], r->pc_rate[1], r->pc_gnss_kmh + jitter);
     assert_int_equal(td_app_rx(&r->app, &f, r->now_us), TD_OK);
 }
 

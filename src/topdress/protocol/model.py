@@ -76,6 +76,7 @@ class Fault(IntFlag):
     UPPER_FAN_LOW = 1 << 5
     LOWER_FAN_LOW = 1 << 6
     NO_SPEED = 1 << 7
+    GNSS_FROZEN = 1 << 8
 
 
 # Cleared only by a stop command (operator acknowledgement).

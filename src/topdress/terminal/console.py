@@ -20,6 +20,7 @@ FAULT_NAMES = (
     "UPPER_FAN_LOW",
     "LOWER_FAN_LOW",
     "NO_SPEED",
+    "GNSS_FROZEN",
 )
 
 
