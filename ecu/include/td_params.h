@@ -44,10 +44,10 @@ typedef struct {
     uint16_t blocked_time_ms;       /**< (26) 100..30000, default 1000 */
     uint16_t status_period_ms;      /**< (27) 20..1000, default 100 */
     /* not on CAN: fixed properties of the build */
-    float fan_rpm_at_full_duty;     /**< fan feed-forward scale, default 4000 rpm */
+    float fan_rpm_at_full_duty;     /**< fan feed-forward scale, rpm, (0, 60000], default 4000 */
     uint16_t fan_spinup_ms;         /**< grace after start before FAN_LOW is flagged, default 3000 */
-    uint32_t status_id;             /**< EcuStatus identifier, default 0x185C6465 */
-    uint32_t command_id;            /**< PcCommand identifier, default 0x0A5C6465 */
+    uint32_t status_id;             /**< EcuStatus identifier, 29-bit, default 0x185C6465 */
+    uint32_t command_id;            /**< PcCommand identifier, 29-bit, default 0x0A5C6465; the two differ and take no other frame's id */
 } td_params_t;
 
 /** Number of the highest parameter id. */

@@ -5,7 +5,7 @@
 #ifndef TD_SLIP_H
 #define TD_SLIP_H
 
-/** Eq. 3: |2*pi*r*n - L| / L * 100, in %. revolutions n, radius r_m, real distance L_m (> 0). Negative L -> -1. */
+/** Eq. 3: |2*pi*r*n - L| / L * 100, in %. revolutions n, radius r_m, real distance L_m (> 0); L <= 0 -> -1. */
 float td_slip_measured_pct(float revolutions, float radius_m, float distance_m);
 /** Eq. 5: 0.167 v^2 - 0.296 v + 0.773, in %, v in km/h (wheat stubble). */
 float td_slip_model_pct(float v_kmh);

@@ -5,6 +5,7 @@
 #include "td_params.h"
 
 #include <stddef.h>
+#include "td_proto.h"
 
 typedef enum { F32, U8, U16 } td_ptype_t;
 
@@ -51,6 +52,13 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
 
 /* Float rounding of a value that went through raw * scale stays well inside this many raw units. */
 #define TD_RAW_TOL 0.05f
+#define TD_FAN_RPM_FULL_MAX 60000.0f
+
+/* A configurable identifier must not be that of another frame of the protocol. */
+static bool id_taken(uint32_t id) {
+    return id == TD_ID_ECU_DIAG || id == TD_ID_ECU_SPEEDS || id == TD_ID_ECU_TARGETS || id == TD_ID_PC_PARAM_SET ||
+           id == TD_ID_ECU_PARAM_ACK;
+}
 
 void td_params_default(td_params_t *p) {
     if (p == NULL) {
@@ -135,10 +143,12 @@ int td_params_validate(const td_params_t *p) {
             return TD_E_RANGE;
         }
     }
-    if (!(p->fan_rpm_at_full_duty > 0.0f) || p->status_id > 0x1FFFFFFFu || p->command_id > 0x1FFFFFFFu) {
+    if (!(p->fan_rpm_at_full_duty > 0.0f && p->fan_rpm_at_full_duty <= TD_FAN_RPM_FULL_MAX) ||
+        p->status_id > 0x1FFFFFFFu || p->command_id > 0x1FFFFFFFu) {
         return TD_E_RANGE;
     }
-    if (p->cv_window > p->queue_len || p->status_id == p->command_id) {
+    if (p->cv_window > p->queue_len || p->status_id == p->command_id || id_taken(p->status_id) ||
+        id_taken(p->command_id)) {
         return TD_E_INCONSISTENT;
     }
     return TD_OK;

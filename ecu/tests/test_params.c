@@ -83,9 +83,23 @@ static void test_cv_window_not_above_queue_length(void **state) {
     td_params_default(&p);
     p.command_id = p.status_id;
     assert_int_equal(td_params_validate(&p), TD_E_INCONSISTENT);
+    /* a PcParamSet would be taken for a command; a status would look like a diagnostic frame */
+    td_params_default(&p);
+    p.command_id = TD_ID_PC_PARAM_SET;
+    assert_int_equal(td_params_validate(&p), TD_E_INCONSISTENT);
+    td_params_default(&p);
+    p.status_id = TD_ID_ECU_DIAG;
+    assert_int_equal(td_params_validate(&p), TD_E_INCONSISTENT);
+    td_params_default(&p);
+    p.command_id = 0x20000000u;
+    assert_int_equal(td_params_validate(&p), TD_E_RANGE);
     td_params_default(&p);
     p.fan_rpm_at_full_duty = 0.0f;
     assert_int_equal(td_params_validate(&p), TD_E_RANGE);
+    p.fan_rpm_at_full_duty = INFINITY;
+    assert_int_equal(td_params_validate(&p), TD_E_RANGE);
+    p.fan_rpm_at_full_duty = 60000.0f;
+    assert_int_equal(td_params_validate(&p), TD_OK);
 }
 
 typedef bool (*in_range_fn)(uint32_t);
