@@ -130,7 +130,7 @@ def test_airline_transport_delay_and_mass() -> None:
 
 
 def test_nmea_sentences_parse_back_with_checksums() -> None:
-    p = GnssParams(talker="BD", speed_sd_ms=0.0, pos_sd_m=0.0, filter_tau_s=0.2)
+    p = GnssParams(talker="BD", speed_sd_ms=0.0, pos_sd_m=0.0, filter_tau_s=0.2, latency_s=0.1)
     rx = GnssReceiver(p, seed=4)
     lines: list[str] = []
     for i in range(1, 400):

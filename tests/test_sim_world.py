@@ -27,7 +27,7 @@ def test_world_outputs_nmea_crop_and_ecu_frames_at_their_rates() -> None:
         crop += out.crop
         frames += out.can
     assert w.t_s == pytest.approx(2.0)
-    assert len(nmea) == 3 * 9  # 5 Hz, the fix at 2.0 s still inside the receiver latency
+    assert len(nmea) == 3 * 8  # 5 Hz; the fixes of 1.8 and 2.0 s are inside the 0.3 s latency
     assert sorted({ln[3:6] for ln in nmea}) == ["GGA", "RMC", "VTG"]
     assert len(crop) == 4 * 4  # four sensors at 2 Hz
     assert sorted({int(ln.split(",")[0]) for ln in crop}) == [1, 2, 3, 4]

@@ -17,15 +17,16 @@ class GnssParams:
     """A Beidou single-point receiver of the 0.1 m/s speed class.
 
     Speed is measured with white noise speed_sd_ms per axis and smoothed by the receiver's
-    own first-order filter (filter_tau_s); the solution leaves the receiver latency_s after
-    its epoch. Static hold: while the filtered speed is below hold_ms the receiver reports
-    speed 0 and freezes its position (as most single-point receivers do at rest), and
-    releases only above hold_ms.
+    own first-order filter (filter_tau_s); the solution reaches the PC's serial port latency_s
+    after its epoch (the receiver's computation plus the data logger that forwards the NMEA).
+    Static hold: while the filtered speed is below hold_ms the receiver reports speed 0 and
+    freezes its position (as most single-point receivers do at rest), and releases only
+    above hold_ms.
     """
 
     rate_hz: float = 5.0
-    latency_s: float = 0.10
-    filter_tau_s: float = 1.4
+    latency_s: float = 0.30
+    filter_tau_s: float = 1.0
     speed_sd_ms: float = 0.05
     hold_ms: float = 0.10
     pos_sd_m: float = 0.8

@@ -41,25 +41,24 @@ def _save(fig: Figure, path: Path) -> None:
 # ---------------------------------------------------------------- Table 2
 
 
-def write_table2(out: Path, rows: list[ex.Table2Row]) -> Path:
-    (out / "table2.json").write_text(
-        json.dumps(
-            {
-                "rows": [
-                    {
-                        "target_kmh": r.target_kmh,
-                        "accel_earlier_s": round(r.accel_earlier_s, 3),
-                        "decel_earlier_s": round(r.decel_earlier_s, 3),
-                        "dual_delay_m": round(r.dual_delay_m, 3),
-                        "gnss_delay_m": round(r.gnss_delay_m, 3),
-                    }
-                    for r in rows
-                ]
-            },
-            indent=2,
-        )
-        + "\n"
-    )
+def _table2_json(r: ex.Table2Row, tuned: bool) -> dict[str, float]:
+    d = {
+        "target_kmh": r.target_kmh,
+        "accel_earlier_s": round(r.accel_earlier_s, 3),
+        "decel_earlier_s": round(r.decel_earlier_s, 3),
+        "dual_delay_m": round(r.dual_delay_m, 3),
+        "gnss_delay_m": round(r.gnss_delay_m, 3),
+    }
+    if tuned:
+        d["tuned_accel_earlier_s"] = round(r.tuned_accel_earlier_s, 3)
+        d["tuned_decel_earlier_s"] = round(r.tuned_decel_earlier_s, 3)
+        d["tuned_delay_m"] = round(r.tuned_delay_m, 3)
+    return d
+
+
+def write_table2(out: Path, rows: list[ex.Table2Row], faster: ex.FasterCheck | None = None) -> Path:
+    doc = {"rows": [_table2_json(r, faster is not None) for r in rows]}
+    (out / "table2.json").write_text(json.dumps(doc, indent=2) + "\n")
     body = []
     for r in rows:
         p = ex.PAPER_TABLE2.get(r.target_kmh, (math.nan,) * 4)
@@ -105,11 +104,15 @@ def write_table2(out: Path, rows: list[ex.Table2Row]) -> Path:
         ),
         body,
     )
+    if faster is not None:
+        md += _faster_section(rows, faster)
     md += "\n![delay distances](table2.png)\n"
     fig, ax = plt.subplots(figsize=(6, 3.5))
     x = np.arange(len(rows))
     ax.bar(x - 0.2, [r.dual_delay_m for r in rows], 0.2, label="dual (sim)")
     ax.bar(x, [r.gnss_delay_m for r in rows], 0.2, label="GNSS only (sim)")
+    if faster is not None:
+        ax.bar(x + 0.2, [r.tuned_delay_m for r in rows], 0.2, label="dual, faster setting (sim)")
     pd = [ex.PAPER_TABLE2.get(r.target_kmh, (0, 0, math.nan, math.nan)) for r in rows]
     ax.plot(x - 0.2, [p[2] for p in pd], "k_", ms=14, mew=2, label="paper")
     ax.plot(x, [p[3] for p in pd], "k_", ms=14, mew=2)
@@ -123,6 +126,45 @@ def write_table2(out: Path, rows: list[ex.Table2Row]) -> Path:
 
 
 _T2_KEYS = ("accel_earlier_s", "decel_earlier_s", "dual_delay_m", "gnss_delay_m")
+
+
+def _faster_section(rows: list[ex.Table2Row], fc: ex.FasterCheck) -> str:
+    settings = ", ".join(f"{k} = {v:g}" for k, v in ex.FASTER)
+    n = fc.queue_len
+    verdict = "below" if fc.separates else "NOT below"
+    md = "\n## Faster than the paper, through ECU parameters only\n\n"
+    md += (
+        f"The same C core, dual mode, with **{settings}** written by PcParamSet (everything "
+        "else at the defaults); same seeds, so the tractor moves as in the runs above. "
+        "Earlier = against the same GNSS-only runs. The CV analysis rerun on these runs: "
+        f"largest uniform CV with N = {n} is {_f(fc.max_uniform_pct)} %, {verdict} the "
+        f"threshold {fc.threshold_pct:g} % (SD {_f(fc.cv.sd_uniform[n])} %; the paper's rule "
+        f"would pick N = {fc.cv.chosen_n}); the CV crosses the threshold "
+        f"{_f(fc.decel_flag_s)} s after the braking begins.\n\n"
+    )
+    body = []
+    for r in rows:
+        p = ex.PAPER_TABLE2.get(r.target_kmh, (math.nan,) * 4)
+        body.append(
+            (
+                f"{r.target_kmh:.1f}",
+                f"{_f(r.accel_earlier_s, 1)} / {_f(r.tuned_accel_earlier_s, 1)} ({p[0]})",
+                f"{_f(r.decel_earlier_s, 1)} / {_f(r.tuned_decel_earlier_s, 1)} ({p[1]})",
+                f"{_f(r.dual_delay_m)} / {_f(r.tuned_delay_m)} ({p[2]})",
+                _pct(r.tuned_delay_m, r.dual_delay_m),
+            )
+        )
+    md += _table(
+        (
+            "target km/h",
+            "earlier accel s, dual / faster (paper dual)",
+            "earlier decel s, dual / faster (paper dual)",
+            "delay m, dual / faster (paper dual)",
+            "faster vs dual delay",
+        ),
+        body,
+    )
+    return md
 
 
 # ---------------------------------------------------------------- CV
@@ -144,16 +186,24 @@ def write_cv(out: Path, res: ex.CvResult) -> Path:
                 str(n),
                 *[_f(per.get(v, math.nan)) for v in targets],
                 _f(res.max_uniform[n]),
+                _f(res.sd_uniform[n]),
                 _f(res.decel_detect[n]),
             )
         )
     md += _table(
-        ("N", *[f"max uniform CV % at {v}" for v in targets], "max %", "decel flagged after s"),
+        (
+            "N",
+            *[f"max uniform CV % at {v}" for v in targets],
+            "max %",
+            "SD of uniform CV %",
+            "decel flagged after s",
+        ),
         rows,
     )
     md += (
         f"\nChosen by the paper's reasoning (shortest queue whose uniform CV does not fluctuate, "
-        f"i.e. stays within {ex.FLUCTUATION_RATIO - 1:.0%} of the N = 7 value): "
+        f"i.e. its SD in uniform motion is within {ex.FLUCTUATION_RATIO - 1:.0%} of the N = 7 "
+        "value): "
         f"**N = {res.chosen_n}**, threshold = its "
         f"largest uniform CV = **{res.threshold_pct:.2f} %** (paper: N = 5, "
         f"{ex.PAPER_CV_THRESHOLD} %).\n\n"

@@ -155,7 +155,9 @@ class Sil:
         self.close()
 
     def _push_params(self) -> None:
-        """Write the PC's parameters while the ECU is stopped, each acknowledged."""
+        """Write the PC's parameters while the ECU is stopped, each acknowledged; the PC
+        commands stop meanwhile (the ECU refuses parameters while running)."""
+        self.pc.start = False
         for key, value in self.pc.p.ecu_params:
             self.pc_bus.send(protocol.encode_param_set(key, value))
             self._pending_to_ecu += 1
@@ -164,6 +166,7 @@ class Sil:
             if ack is None or ack.result != protocol.AckResult.OK:
                 result = "no answer" if ack is None else ack.result.name
                 raise EcuParamError(key, value, f"refused by the ECU: {result}")
+        self.pc.start = True
 
     def step(self) -> None:
         w = self.world

@@ -13,19 +13,20 @@ KMH = 1.0 / 3.6
 class TractorParams:
     """Longitudinal dynamics of a loaded tractor with the topdresser.
 
-    The launch acceleration grows with the target speed (a higher gear and more throttle
-    for a faster pass): accel = accel_base_ms2 + accel_per_kmh * target_kmh. Starting from
-    rest the clutch engages gradually, longer in a higher gear: the acceleration ramps up
-    over clutch_base_s + clutch_per_kmh * target_kmh, which makes the first half-metre slow.
-    Otherwise the acceleration changes at most by jerk_ms3.
+    The driver brings the machine to the target speed over about the same run-up whatever
+    the target (gear and hand throttle chosen for the pass): from rest the acceleration limit
+    is target^2 / (2 * runup_m), within accel_min_ms2..accel_max_ms2, so a slow pass creeps
+    off (0.14 m/s^2 at 3.5 km/h) and a fast one pulls away (0.71 m/s^2 at 8.0 km/h). The
+    clutch takes clutch_s to engage: the acceleration ramps up over that time. Otherwise the
+    acceleration changes at most by jerk_ms3.
     """
 
-    accel_base_ms2: float = -0.21
-    accel_per_kmh: float = 0.11
+    runup_m: float = 3.5
+    accel_min_ms2: float = 0.05
+    accel_max_ms2: float = 0.8  # traction and engine power of the loaded tractor
+    clutch_s: float = 0.3
     decel_ms2: float = 0.80
     jerk_ms3: float = 0.60
-    clutch_base_s: float = 0.25
-    clutch_per_kmh: float = 0.26
     speed_tau_s: float = 0.6
     ripple_sd: float = 0.004  # relative speed ripple in steady motion (engine, terrain)
     ripple_tau_s: float = 1.0
@@ -195,10 +196,10 @@ class Tractor:
         if v_target != self._target:
             # the driver picks gear and throttle for the new target speed
             self._target = v_target
-            self._accel_limit = max(0.05, p.accel_base_ms2 + p.accel_per_kmh * v_target * 3.6)
+            a = v_target * v_target / (2.0 * p.runup_m)
+            self._accel_limit = min(p.accel_max_ms2, max(p.accel_min_ms2, a))
             if self._vb <= 0.0:
-                clutch_s = p.clutch_base_s + p.clutch_per_kmh * v_target * 3.6
-                self._jerk = self._accel_limit / max(clutch_s, 1e-3)
+                self._jerk = self._accel_limit / max(p.clutch_s, 1e-3)
             else:
                 self._jerk = p.jerk_ms3
         if 0.0 <= p.stall_at_s <= self.t:

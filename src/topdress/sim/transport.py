@@ -13,7 +13,7 @@ class AirLineParams:
     The air speed scales with the fan speed (nominal at nominal_fan_rpm); below
     min_fan_rpm the air cannot carry the granules and they pile up in the line until the
     fan is back. The first granules leave the metering wheel after it has turned
-    release_rev (one flute).
+    release_rev (the granules heaped on the outlet lip fall within the first degrees).
     """
 
     line_length_m: float = 1.5
@@ -21,7 +21,7 @@ class AirLineParams:
     nominal_fan_rpm: float = 3000.0
     min_fan_rpm: float = 1200.0
     drop_s: float = 0.05
-    release_rev: float = 0.005
+    release_rev: float = 0.0035
     blocked: bool = False  # fault knob: clogged line, nothing arrives
 
 
