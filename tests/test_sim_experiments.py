@@ -20,7 +20,7 @@ def lab() -> ex.Lab:
 
 @pytest.fixture(scope="module")
 def t2(lab: ex.Lab) -> list[ex.Table2Row]:
-    return ex.table2(lab, ex.TARGETS_KMH, reps=2)
+    return ex.table2(lab, ex.TARGETS_KMH, reps=2, tuned=ex.FASTER)
 
 
 def test_dual_mode_responds_earlier_at_every_target(t2: list[ex.Table2Row]) -> None:
@@ -33,6 +33,36 @@ def test_dual_mode_responds_earlier_at_every_target(t2: list[ex.Table2Row]) -> N
 def test_dual_mode_delay_distance_shorter_at_every_target(t2: list[ex.Table2Row]) -> None:
     for r in t2:
         assert 0.0 < r.dual_delay_m < r.gnss_delay_m, r
+
+
+def test_calibration_direction_gnss_delay_grows_steeply_with_speed(
+    t2: list[ex.Table2Row],
+) -> None:
+    # the paper's GNSS-only delay grows 2.3 times from 3.5 to 8 km/h, its dual delay 1.5 times:
+    # a fixed GNSS lag in time covers more ground the harder the tractor pulls away
+    by = {r.target_kmh: r for r in t2}
+    assert by[8.0].gnss_delay_m > 1.6 * by[3.5].gnss_delay_m
+    assert by[8.0].dual_delay_m < 1.5 * by[3.5].dual_delay_m
+    assert by[8.0].gnss_delay_m - by[8.0].dual_delay_m > 1.8 * (
+        by[3.5].gnss_delay_m - by[3.5].dual_delay_m
+    )
+
+
+def test_faster_setting_meters_sooner_and_its_threshold_separates(
+    lab: ex.Lab, t2: list[ex.Table2Row]
+) -> None:
+    for r in t2:
+        assert 0.0 < r.tuned_delay_m < 0.85 * r.dual_delay_m, r
+        assert r.tuned_accel_earlier_s >= r.accel_earlier_s, r
+        assert r.tuned_decel_earlier_s > 0.0, r
+    fc = ex.faster_check(lab, ex.TARGETS_KMH, reps=2)  # the runs of t2, from the cache
+    assert fc.separates and 4.0 < fc.max_uniform_pct < fc.threshold_pct == 5.6
+    assert fc.cv.chosen_n == fc.queue_len == 5
+    # on the faster setting GNSS still carries only uniform motion above 6 km/h
+    run = lab.paper_run(8.0, 0, SpeedMode.DUAL, settings=ex.FASTER)
+    assert ex.rule_violations(run, 5.6, 6.0) == 0
+    before, after = ex.gnss_outside_uniform_s(run)
+    assert before <= 0.6 and after <= 2.5
 
 
 def test_gnss_is_used_only_in_uniform_motion_above_6_kmh(lab: ex.Lab) -> None:

@@ -202,6 +202,25 @@ def test_tractor_paper_run_holds_40_m() -> None:
     assert tr.y == pytest.approx(tr.odometer)
 
 
+@pytest.mark.parametrize(
+    ("target_kmh", "accel_ms2"),
+    # the same 3.5 m run-up for every target: (v/3.6)^2 / 7; 12 km/h capped at 0.8 m/s^2
+    [(3.5, 0.1350), (8.0, 0.7055), (12.0, 0.8)],
+)
+def test_tractor_launch_acceleration_grows_with_the_square_of_the_target(
+    target_kmh: float, accel_ms2: float
+) -> None:
+    tr = Tractor(TractorParams(ripple_sd=0.0))
+    accel = []
+    for _ in range(300):
+        tr.step(DT, target_kmh / 3.6, 0.0)
+        accel.append(tr.a)
+    assert max(accel) == pytest.approx(accel_ms2, rel=1e-3)
+    # the clutch engages over 0.3 s: half the acceleration after 0.15 s, all of it at 0.3 s
+    assert accel[14] == pytest.approx(accel_ms2 / 2, rel=1e-3)
+    assert accel[29] == pytest.approx(accel_ms2, rel=1e-3)
+
+
 def test_field_passes_turn_back() -> None:
     tr = Tractor(TractorParams(ripple_sd=0.0))
     drive = Drive.field_passes(2, 30.0, 8.0)
