@@ -112,6 +112,37 @@ def test_other_sentences_are_accepted_without_a_fix() -> None:
             "malformed",
         ),
         (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,ten,K,A"), "malformed"),
+        # numbers a checksum cannot vouch for: NaN, infinite or negative speed, latitude 99
+        (
+            make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,nan,87.5,210526,,,A"),
+            "out_of_range",
+        ),
+        (
+            make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,1e999,87.5,210526,,,A"),
+            "out_of_range",
+        ),
+        (
+            make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,-3.2,87.5,210526,,,A"),
+            "out_of_range",
+        ),
+        (
+            make_sentence("GPRMC,081836.00,A,9904.5678,N,12534.1234,E,3.24,87.5,210526,,,A"),
+            "out_of_range",
+        ),
+        (
+            make_sentence("GPRMC,081836.00,A,4304.5678,N,18534.1234,E,3.24,87.5,210526,,,A"),
+            "out_of_range",
+        ),
+        (
+            make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,400.0,210526,,,A"),
+            "out_of_range",
+        ),
+        (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,-10.2,K,A"), "out_of_range"),
+        (make_sentence("GPVTG,nan,T,034.4,M,005.5,N,10.2,K,A"), "out_of_range"),
+        (
+            make_sentence("GPGGA,081836.00,9104.5678,S,12534.1234,E,1,08,1.0,100,M,0,M,,"),
+            "out_of_range",
+        ),
         (make_sentence("gprmc,1"), "malformed"),
         (make_sentence(",,,"), "malformed"),
     ],

@@ -17,6 +17,7 @@ from topdress.sim.world import World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
 from topdress.terminal.config import DEFAULT_TOML, TerminalConfig, loads_config
+from topdress.terminal.nmea import make_sentence
 from topdress.terminal.rate import build_rate_model, split_layers
 from topdress.terminal.serial_io import FakeLineSource
 
@@ -194,5 +195,56 @@ def test_bad_lines_are_counted_and_skipped() -> None:
         c = rig.term.snapshot.counters
         assert c["nmea_bad"] == 2 and c["crop_bad"] == 2
         assert c["nmea"] > 20 and c["crop"] > 10
+    finally:
+        rig.close()
+
+
+def test_a_nan_speed_with_a_good_checksum_is_skipped_not_fatal() -> None:
+    cfg = loads_config("[can]\nsend_on_gnss = true\n")
+    rig = VirtualRig(cfg, _drive(8.0, 200.0))
+    try:
+        rig.run(3.0)
+        assert rig.term.link.params_done
+        sent = rig.term.link.counters.tx_commands
+        # sent at once with send_on_gnss: a NaN here used to stop the terminal
+        rig.gnss.emit(3.0, make_sentence("GNRMC,000003.00,A,4500.0,N,12600.0,E,nan,0.0,010126,,,A"))
+        rig.run(4.0)
+        assert rig.term.link.counters.tx_commands > sent
+        assert rig.term.nmea.counters["out_of_range"] == 1
+        assert rig.term.snapshot.counters["nmea_bad"] == 1
+    finally:
+        rig.close()
+
+
+def test_gnss_stale_s_of_the_config_is_applied() -> None:
+    cfg = loads_config("[gnss]\nstale_s = 0.5\n")
+    bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
+    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, clock=lambda: 0.0)
+    try:
+        term.open()
+        term.handle(
+            "nmea", 0.0, make_sentence("GNRMC,000000.00,A,4500.0,N,12600.0,E,4.0,0.0,010126,,,A")
+        )
+        term.tick(0.4)
+        assert term.link.command.gnss_kmh == pytest.approx(4.0 * 1.852)
+        term.tick(0.6)  # 0.6 s after the last RMC: stale by the file's 0.5 s (default 2 s)
+        assert term.link.command.gnss_kmh is None
+        assert term.snapshot.gnss_link == "lost"  # the receiver fell silent
+    finally:
+        term.close()
+        bus.shutdown()
+
+
+def test_gnss_lost_reaches_the_ecu_at_once_not_at_the_next_period() -> None:
+    # a 1 s period (under the ECU's GNSS timeout): only a send on the loss tells it in 0.2 s
+    rig = VirtualRig(loads_config("[can]\ncommand_period_s = 1.0\n"), _drive(8.0, 200.0))
+    try:
+        rig.run(20.5)
+        assert rig.world.ecu.state.gnss_valid
+        sent = rig.term.link.counters.tx_commands
+        rig.gnss.disconnect()
+        rig.run(20.7)
+        assert rig.term.link.counters.tx_commands == sent + 1
+        assert not rig.world.ecu.state.gnss_valid
     finally:
         rig.close()

@@ -104,7 +104,7 @@ class Terminal:
             on_event=self._event,
         )
         self.nmea = NmeaDecoder()
-        self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s)
+        self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop)
         self.model = build_rate_model(cfg.rate)
         self.counters: Counter[str] = Counter()
@@ -227,8 +227,11 @@ class Terminal:
         """10 Hz: GNSS state, NDVI at the meters, rates, command, state row, snapshot."""
         gnss_kmh = self.tracker.current(now, self.gnss.connected)
         if gnss_kmh is None and self.link.command.gnss_kmh is not None:
-            self.link.set_gnss(None, now)  # lost: the ECU falls back to the wheel at once
-        self._track_gnss_state(gnss_kmh)
+            # Lost: sent at once (not at the next period), so the ECU falls back to the wheel.
+            self.link.set_gnss(None, now)
+            if not self.cfg.can.send_on_gnss:  # else set_gnss has sent it
+                self.link.send_now()
+        self._track_gnss_state(gnss_kmh, now)
         ecu = self.link.ecu
         v_sel = ecu.speeds.selected_kmh if ecu.speeds is not None and self.link.ecu_alive else 0.0
         ndvi_sensors = self.ndvi.sensors.mean_ndvi(now)
@@ -250,15 +253,17 @@ class Terminal:
         if self.session is not None:
             self.session.state(self._row(now))
 
-    def _track_gnss_state(self, gnss_kmh: float | None) -> None:
+    def _track_gnss_state(self, gnss_kmh: float | None, now: float) -> None:
         if gnss_kmh is not None:
             state = "ok"
         elif not self.gnss.connected:
             state = "lost"
         elif not self._gnss_seen:
             state = "wait"
-        else:
+        elif self.tracker.heard(now):
             state = "no fix"
+        else:
+            state = "lost"  # the port is open but the receiver fell silent
         if state != self._gnss_state:
             if self._gnss_state != "wait" or state != "ok":
                 self._event(f"GNSS {state}")

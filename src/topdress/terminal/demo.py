@@ -59,19 +59,18 @@ def run_terminal(
 ) -> RunResult:
     """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
     console = Console(out, period_s=max(0.2, min(cfg.display.refresh_s, 0.5)))
+    # Devices first: one that cannot be opened stops here, before a session file is made.
+    bus = open_bus(cfg.can)
+    try:
+        gnss, crop = open_line_source(cfg.gnss), open_line_source(cfg.crop)
+    except DeviceError:
+        bus.shutdown()
+        raise
     session = SessionLog.create(cfg.log.dir, config_toml)
     opened = session.ok  # `ok` turns False once closed
     if not opened:
         console.message(f"warning: session log not written: {session.last_error}")
-    bus = open_bus(cfg.can)
-    term = Terminal(
-        cfg,
-        open_line_source(cfg.gnss),
-        open_line_source(cfg.crop),
-        bus,
-        session,
-        on_event=console.message,
-    )
+    term = Terminal(cfg, gnss, crop, bus, session, on_event=console.message)
     rows = 0
 
     def on_tick(snapshot: Snapshot, now: float) -> None:

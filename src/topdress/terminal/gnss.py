@@ -60,5 +60,10 @@ class GnssSpeedTracker:
             return None
         return latest.speed_kmh
 
+    def heard(self, t: float) -> bool:
+        """Whether a speed sample, valid or not, came within stale_s (the receiver talks)."""
+        latest = self._latest
+        return latest is not None and t - latest.t <= self.stale_s
+
     def _vtg_allowed(self, t: float) -> bool:
         return self._last_rmc_t is None or t - self._last_rmc_t > self.rmc_timeout_s

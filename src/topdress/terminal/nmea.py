@@ -9,6 +9,7 @@ accepted (`ok=True`) and carry no fix.
 from __future__ import annotations
 
 import datetime as dt
+import math
 import re
 from collections import Counter
 from dataclasses import dataclass
@@ -26,6 +27,19 @@ _CHECKED = {
     "RMC": {"time": 0, "lat": 2, "lon": 4, "spd": 6, "cog": 7, "date": 8},
     "VTG": {"cogt": 0, "sogn": 4, "sogk": 6},
     "GGA": {"time": 0, "lat": 1, "lon": 3, "quality": 5},
+}
+# Physical limits of the numbers parsed: a NaN, an infinite or negative speed, latitude 99 or a
+# course of 400 pass the checksum when the receiver (or a relay) wrote them, and must not travel
+# on as a valid fix (a NaN speed cannot even be put in the command frame).
+_LIMITS = {
+    "RMC": {
+        "lat": (-90.0, 90.0),
+        "lon": (-180.0, 180.0),
+        "spd": (0.0, math.inf),
+        "cog": (0.0, 360.0),
+    },
+    "VTG": {"cogt": (0.0, 360.0), "sogn": (0.0, math.inf), "sogk": (0.0, math.inf)},
+    "GGA": {"lat": (-90.0, 90.0), "lon": (-180.0, 180.0)},
 }
 _ADDRESS = re.compile(rb"^[A-Z][A-Z0-9]{2,9}$")
 _HEX2 = re.compile(rb"^[0-9A-Fa-f]{2}$")
@@ -64,7 +78,8 @@ def make_sentence(body: str) -> bytes:
 
 class NmeaDecoder:
     """Decodes NMEA lines. `counters` counts 'ok' and each error reason:
-    empty, binary, no_start, no_checksum, truncated, bad_checksum, malformed; and 'resync'
+    empty, binary, no_start, no_checksum, truncated, bad_checksum, malformed, out_of_range;
+    and 'resync'
     for a sentence found after garbage on its line (decoded normally)."""
 
     def __init__(self) -> None:
@@ -141,6 +156,11 @@ def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
         if fields[index] and getattr(msg, attr, "") == "":
             text = fields[index].decode()
             return _bad("malformed", f"{kind} field {attr}={text!r}", talker, kind)
+    for attr, (lo, hi) in _LIMITS[kind].items():
+        value = getattr(msg, attr, "")
+        if isinstance(value, int | float) and not (math.isfinite(value) and lo <= value <= hi):
+            msg_text = f"{kind} field {attr}={value!r} outside {lo:g}..{hi:g}"
+            return _bad("out_of_range", msg_text, talker, kind)
     return _FIELD_PARSERS[kind](msg, talker)
 
 
