@@ -11,6 +11,7 @@ import pytest
 from topdress.cli import main
 from topdress.protocol import SpeedMode
 from topdress.sim import experiments as ex
+from topdress.sim import report
 
 
 @pytest.fixture(scope="module")
@@ -131,6 +132,31 @@ def test_step_response_settles(lab: ex.Lab) -> None:
     assert r.steady_error_rpm < 1.0
     after = r.t > 2.0
     assert np.median(r.target_rpm[after]) == pytest.approx(r.target_rpm[0] - 7.0, abs=0.6)
+
+
+def test_matched_feed_forward_cuts_the_metering_overshoot(lab: ex.Lab) -> None:
+    # the default feed-forward (1/60 duty per r/min) on a drive of 66 r/min per unit duty
+    # over-steps a jump of the target by 10 %; matched to the drive, the overshoot is smaller
+    default = ex.step_response(lab, 7.0, 1)
+    matched = ex.step_response(lab, 7.0, 1, settings=ex.MATCHED_FF)
+    assert matched.overshoot_pct < default.overshoot_pct - 2.0
+    assert matched.steady_error_rpm < 1.0 and 0.0 < matched.response_s < 3.0
+
+
+def test_index_counts_the_calibration_targets(tmp_path: Path) -> None:
+    # dual delays at paper + 20 % (one at + 40 %), GNSS delays at paper - 10 %
+    rows = [
+        {
+            "target_kmh": v,
+            "dual_delay_m": p[2] * (1.4 if v == 8.0 else 1.2),
+            "gnss_delay_m": p[3] * 0.9,
+        }
+        for v, p in ex.PAPER_TABLE2.items()
+    ]
+    (tmp_path / "table2.json").write_text(json.dumps({"rows": rows}))
+    md = report.write_index(tmp_path, [tmp_path / "table2.md"], 5, 0).read_text()
+    # 7 of 8 cells within 30 %; dual mean + 25 % (out), GNSS mean - 10 % (in)
+    assert "7 of 8 delay distances" in md and "1 of 2 column means" in md
 
 
 def test_cli_writes_table2_json_and_report(tmp_path: Path) -> None:

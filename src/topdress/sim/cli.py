@@ -61,7 +61,9 @@ def run(args: argparse.Namespace) -> int:
         "slip": lambda: report.write_slip(out, ex.slip_experiment(lab, slip_speeds, reps)),
         "table2": lambda: _table2(out, lab, reps),
         "table34": lambda: report.write_table34(out, ex.table34(lab, targets, reps)),
-        "table5": lambda: report.write_table5(out, ex.table5(lab, jumps)),
+        "table5": lambda: report.write_table5(
+            out, ex.table5(lab, jumps), ex.table5(lab, jumps, ex.MATCHED_FF)
+        ),
         "fig10": lambda: report.write_fig10(out, lab, targets),
     }
     names = list(jobs) if args.name == "all" else [args.name]

@@ -334,15 +334,7 @@ _T34_KEYS = ("wheel_kmh", "gnss_kmh", "dv_kmh", "dr_theory_rpm", "dr_measured_rp
 # ---------------------------------------------------------------- Table 5
 
 
-def write_table5(out: Path, res: list[ex.StepResponse]) -> Path:
-    md = "# Table 5 — metering motor response to a downward jump of its target\n\n"
-    md += (
-        "At 8 km/h in uniform motion the PC lowers the rate so that the ECU's target metering "
-        "speed drops by the paper's jump sizes. Overshoot = how far the measured speed "
-        "undershoots the new target, % of the jump; steady-state error = mean |error| over the "
-        "last second; response = time from the target jump until the speed stays within 5 % "
-        "of the new target. Paper values in parentheses.\n\n"
-    )
+def _table5_rows(res: list[ex.StepResponse]) -> str:
     rows = []
     for r, p in zip(res, ex.PAPER_TABLE5, strict=False):
         rows.append(
@@ -362,7 +354,29 @@ def write_table5(out: Path, res: list[ex.StepResponse]) -> Path:
                 f"{np.mean([r.response_s for r in res]):.2f} (1.3)",
             )
         )
-    md += _table(("jump r/min", "overshoot %", "steady-state error r/min", "response s"), rows)
+    return _table(("jump r/min", "overshoot %", "steady-state error r/min", "response s"), rows)
+
+
+def write_table5(
+    out: Path, res: list[ex.StepResponse], matched: list[ex.StepResponse] | None = None
+) -> Path:
+    md = "# Table 5 — metering motor response to a downward jump of its target\n\n"
+    md += (
+        "At 8 km/h in uniform motion the PC lowers the rate so that the ECU's target metering "
+        "speed drops by the paper's jump sizes. Overshoot = how far the measured speed "
+        "undershoots the new target, % of the jump; steady-state error = mean |error| over the "
+        "last second; response = time from the target jump until the speed stays within 5 % "
+        "of the new target. Paper values in parentheses.\n\n"
+    )
+    md += _table5_rows(res)
+    if matched is not None:
+        settings = ", ".join(f"{k} = {v:g}" for k, v in ex.MATCHED_FF)
+        md += (
+            f"\nWith **{settings}** (PcParamSet), the feed-forward matched to the simulated "
+            "drive's 66 r/min per unit duty instead of the default 1/60 (same runs otherwise; "
+            "docs/experiments.md explains where the overshoot comes from):\n\n"
+        )
+        md += _table5_rows(matched)
     md += "\n![step responses](table5.png)\n"
     fig, ax = plt.subplots(figsize=(7, 3.5))
     for r in res:
@@ -438,15 +452,22 @@ def write_index(out: Path, written: Sequence[Path], reps: int, seed: int) -> Pat
     if t2.exists():
         rows = json.loads(t2.read_text())["rows"]
         ok = []
-        for r in rows:
-            ref2 = ex.PAPER_TABLE2.get(r["target_kmh"])
-            if ref2 is None:
-                continue
-            for key, ref in (("dual_delay_m", ref2[2]), ("gnss_delay_m", ref2[3])):
-                ok.append(abs(r[key] - ref) / ref <= 0.30)
+        means = []
+        for col, i in (("dual_delay_m", 2), ("gnss_delay_m", 3)):
+            pairs = [
+                (r[col], ex.PAPER_TABLE2[r["target_kmh"]][i])
+                for r in rows
+                if r["target_kmh"] in ex.PAPER_TABLE2 and not math.isnan(r[col])
+            ]
+            ok += [abs(ours - ref) / ref <= 0.30 for ours, ref in pairs]
+            if pairs:
+                ours_m = float(np.mean([o for o, _ in pairs]))
+                ref_m = float(np.mean([r for _, r in pairs]))
+                means.append(abs(ours_m - ref_m) / ref_m <= 0.15)
         md += (
             f"\nCalibration: {sum(ok)} of {len(ok)} delay distances of Table 2 within ±30 % "
-            "of the paper (details in table2.md).\n"
+            f"of the paper, {sum(means)} of {len(means)} column means within ±15 % (details "
+            "in table2.md).\n"
         )
     path = out / "index.md"
     path.write_text(md)
