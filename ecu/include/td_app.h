@@ -33,24 +33,25 @@
 #define TD_TXQ_LEN 16u       /**< transmit queue length, frames; a full queue drops the newest (cnt.tx_dropped) */
 #define TD_RATE_WINDOW 10u   /**< control steps in the metering/fan speed window */
 
-/** Everything a port, the simulator or a test may want to see; read-only for them. */
+/** Everything a port, the simulator or a test may want to see; read-only for them.
+ *  Per-layer arrays are [TD_UPPER, TD_LOWER]. Updated by td_app_step() unless said otherwise. */
 typedef struct {
-    bool running;
-    td_source_t source;
-    float cv_pct;              /**< < 0: undefined */
-    bool uniform;
-    float v_wheel_kmh;
-    float v_gnss_kmh;
-    bool gnss_valid;
-    float v_kmh;               /**< the selected speed that drives eq. 4 */
-    float rate_kg_ha[2];
-    float target_rpm[2];
-    float meter_rpm[2];        /**< measured */
-    float fan_rpm[2];          /**< measured */
-    float fan_target_rpm;
-    float meter_duty[2];
-    float fan_duty[2];
-    uint16_t faults;
+    bool running;              /**< the last valid PcCommand said start (set by td_app_rx) */
+    td_source_t source;        /**< the speed that drives eq. 4 */
+    float cv_pct;              /**< CV of the last n values of queue G, %, >= 0; < 0: undefined; every wheel update */
+    bool uniform;              /**< CV defined and below cv_threshold_pct */
+    float v_wheel_kmh;         /**< fed-back wheel speed (eq. 1), km/h, every wheel_update_ms */
+    float v_gnss_kmh;          /**< last GNSS speed of a PcCommand, km/h, 0..25 */
+    bool gnss_valid;           /**< a GNSS speed arrived within gnss_timeout_ms and was not 0xFF */
+    float v_kmh;               /**< the selected speed that drives eq. 4, km/h; 0 with no source */
+    float rate_kg_ha[2];       /**< commanded rate, kg/ha, 0..600 (set by td_app_rx) */
+    float target_rpm[2];       /**< eq. 4 target of the metering shaft, r/min; 0 when not allowed */
+    float meter_rpm[2];        /**< measured metering shaft speed, r/min, over the last TD_RATE_WINDOW steps */
+    float fan_rpm[2];          /**< measured fan speed, rpm, same window */
+    float fan_target_rpm;      /**< commanded fan speed, rpm, 0..6000 (set by td_app_rx) */
+    float meter_duty[2];       /**< metering motor PWM duty applied, 0..1 */
+    float fan_duty[2];         /**< fan PWM duty applied, 0..1 */
+    uint16_t faults;           /**< fault word, TD_FAULT_* bits */
     uint32_t wheel_updates;    /**< count of wheel-speed updates (each one a source decision) */
     uint32_t wheel_pulses;     /**< cumulative wheel pulses seen */
 } td_state_t;

@@ -23,10 +23,15 @@ typedef struct {
     bool primed;          /**< false until the first update */
 } td_pid_t;
 
+/**
+ * Gains in output units per unit of the controlled quantity (for the metering motors: duty per
+ * r/min; ki per second, kd times seconds, kff per unit of setpoint); output clamped to
+ * [out_min, out_max].
+ */
 void td_pid_init(td_pid_t *pid, float kp, float ki, float kd, float kff, float out_min, float out_max);
 /** Clear integral and derivative memory (e.g. when the motor is stopped). */
 void td_pid_reset(td_pid_t *pid);
-/** One update over dt_s (> 0) seconds. Returns the clamped output. */
+/** One update over dt_s (> 0) seconds. Returns the clamped output; out_min, state untouched, if dt_s <= 0 or NaN. */
 float td_pid_step(td_pid_t *pid, float setpoint, float measured, float dt_s);
 
 #endif /* TD_PID_H */
