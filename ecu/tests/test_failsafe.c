@@ -298,6 +298,28 @@ static void test_stop_while_a_meter_is_blocked(void **state) {
     assert_true(r.app.blocked_suspect[TD_UPPER]);
 }
 
+static void test_blocked_meter_at_a_small_target_latches_once_the_duty_is_up(void **state) {
+    (void)state;
+    rig_t r;
+    rig_init(&r, NULL, 0u);
+    r.pc_start = true;
+    r.pc_gnss_kmh = 4.0;
+    r.wheel_kmh = 4.0;
+    r.pc_rate[TD_UPPER] = 30.0; /* 2.4 r/min: feed-forward duty 0.04 */
+    rig_run_ms(&r, 5000);
+    assert_float_equal(rig_st(&r)->target_rpm[TD_UPPER], 3.6 * 30 * 4.0 / 180.0, 0.05);
+    r.meter_blocked[TD_UPPER] = true;
+    uint32_t ms = 0u;
+    while ((rig_st(&r)->faults & TD_FAULT_UPPER_BLOCKED) == 0u) {
+        step_drained(&r);
+        ms += 10u;
+        assert_true(ms < 20000u);
+    }
+    /* the integral raises the duty to 0.3 (about 9 s), then 1 s more */
+    assert_true(ms > 5000u && ms < 15000u);
+    assert_float_equal(r.out.meter_duty[TD_UPPER], 0.0, 0.0);
+}
+
 static void test_fans_below_minimum_while_starting(void **state) {
     (void)state;
     rig_t r;
@@ -357,6 +379,7 @@ int main(void) {
         cmocka_unit_test(test_stale_gnss_stays_lost_through_the_clock_wrap),
         cmocka_unit_test(test_parameter_writes_to_n_and_N_with_data_in_queue_g),
         cmocka_unit_test(test_stop_while_a_meter_is_blocked),
+        cmocka_unit_test(test_blocked_meter_at_a_small_target_latches_once_the_duty_is_up),
         cmocka_unit_test(test_fans_below_minimum_while_starting),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
