@@ -69,9 +69,11 @@ def test_run_without_an_ecu_fails_naming_the_parameter_and_keeps_the_log(
         f'[can]\nchannel = "test-demo-no-ecu"\n[log]\ndir = "{tmp_path}"\n'
     )
     assert main(["run", "--config", str(cfg), "--duration", "5"]) == 2
-    assert "WorkingWidth = 3.6: no acknowledgement from the ECU after 4 tries" in (
-        capsys.readouterr().err
-    )
+    out, err = capsys.readouterr()
+    assert "WorkingWidth = 3.6: no acknowledgement from the ECU after 4 tries" in err
+    # the ports that cannot be opened are named, with the reason
+    assert "GNSS lost (serial:/dev/nonexistent-gnss: [Errno 2] could not open port" in out
+    assert "crop sensors lost (serial:/dev/nonexistent-crop: [Errno 2] could not open port" in out
     (session,) = tmp_path.glob("*.sqlite")
     with SessionReader(session) as reader:
         rows = list(reader.states())

@@ -133,7 +133,7 @@ def test_gnss_port_lost_forwards_not_available_and_ecu_uses_the_wheel() -> None:
         rig.run(20.1)
         # the very next tick forwards "not available"
         assert rig.term.link.command.gnss_kmh is None
-        assert (20.1, "GNSS lost") in rig.events
+        assert (20.1, "GNSS lost (fake: disconnected)") in rig.events
         rig.run(22.0)
         state = rig.world.ecu.state
         assert not state.gnss_valid
@@ -248,3 +248,46 @@ def test_gnss_lost_reaches_the_ecu_at_once_not_at_the_next_period() -> None:
         assert not rig.world.ecu.state.gnss_valid
     finally:
         rig.close()
+
+
+def _crop_line(sensor: int) -> bytes:
+    return f"{sensor},0.0412,0.2104,0.4419,0.3541,0.8295".encode()
+
+
+def test_crop_sensors_falling_silent_or_lost_are_reported() -> None:
+    cfg = loads_config("")
+    bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
+    crop = FakeLineSource()
+    events: list[str] = []
+    term = Terminal(cfg, FakeLineSource(), crop, bus, clock=lambda: 0.0, on_event=events.append)
+    try:  # not opened: no parameter push, so no ECU is needed for the loop's own logic
+        term.tick(0.0)
+        assert term.snapshot.crop_link == "wait"
+        for sensor in (1, 2):  # sensors come up one by one: no event yet
+            term.handle("crop", 0.0, _crop_line(sensor))
+            term.tick(0.0)
+        assert term.snapshot.crop_link == "2/4" and events == []
+        for sensor in (3, 4):
+            term.handle("crop", 0.0, _crop_line(sensor))
+        term.tick(0.1)
+        assert term.snapshot.crop_link == "ok"
+        for t in (0.5, 1.0, 1.5):  # sensor 4 falls silent (stale after crop.stale_s = 1 s)
+            for sensor in (1, 2, 3):
+                term.handle("crop", t, _crop_line(sensor))
+        term.tick(1.6)
+        assert term.snapshot.crop_link == "3/4"
+        assert events[-1] == "crop sensors: 3 of 4 fresh"
+        term.tick(2.6)  # all silent: no NDVI, so no fertilizer; the operator must know
+        assert term.snapshot.crop_link == "silent" and term.snapshot.rate_kg_ha == (0.0, 0.0)
+        assert events[-1] == "crop sensors silent: no NDVI, rate 0"
+        crop.disconnect()
+        term.tick(2.7)
+        assert events[-1] == "crop sensors lost (fake: disconnected)"
+        crop.reconnect()
+        for sensor in (1, 2, 3, 4):
+            term.handle("crop", 2.8, _crop_line(sensor))
+        term.tick(2.8)
+        assert term.snapshot.crop_link == "ok" and events[-1] == "crop sensors ok"
+    finally:
+        term.close()
+        bus.shutdown()

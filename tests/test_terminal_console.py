@@ -26,6 +26,7 @@ WORKING = Snapshot(
     faults=int(Fault.UPPER_FAN_LOW | Fault.GNSS_LOST),
     ecu_link="ok",
     gnss_link="ok",
+    crop_link="3/4",
     counters={"nmea": 120, "nmea_bad": 2},
     last_event="GNSS ok",
 )
@@ -54,6 +55,7 @@ def test_status_block_shows_every_figure() -> None:
         "faults: GNSS_LOST, UPPER_FAN_LOW",
         "ECU ok",
         "GNSS ok",
+        "CROP 3/4",
         "RUNNING",
         "nmea 120  nmea_bad 2",
         "last    GNSS ok",
@@ -63,7 +65,7 @@ def test_status_block_shows_every_figure() -> None:
 
 def test_unknown_values_show_as_dashes() -> None:
     line = render_line(Snapshot())
-    assert "cv=--%" in line and "ndvi=--" in line and "ecu=wait" in line
+    assert "cv=--%" in line and "ndvi=--" in line and "ecu=wait" in line and "crop=wait" in line
     # as wide as a number, so the columns do not jump when GNSS comes and goes
     assert "GNSS    -- km/h" in render_lines(Snapshot())[1]
     assert "GNSS  8.00 km/h" in render_lines(WORKING)[1]

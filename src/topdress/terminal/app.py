@@ -66,6 +66,7 @@ class Snapshot:
     faults: int = 0
     ecu_link: str = "wait"  # wait (never heard), ok, lost
     gnss_link: str = "wait"  # wait, ok, no fix, lost
+    crop_link: str = "wait"  # wait, ok, "3/4" (fresh of configured), silent, lost
     lat: float | None = None
     lon: float | None = None
     distance_m: float = 0.0
@@ -112,6 +113,8 @@ class Terminal:
         self._t0: float | None = None
         self._gnss_state = "wait"
         self._gnss_seen = False
+        self._crop_state = "wait"
+        self._crop_ok_once = False
         self._last_event: str | None = None
         self._stop = threading.Event()
         self._can_thread: threading.Thread | None = None
@@ -232,6 +235,7 @@ class Terminal:
             if not self.cfg.can.send_on_gnss:  # else set_gnss has sent it
                 self.link.send_now()
         self._track_gnss_state(gnss_kmh, now)
+        self._track_crop_state(now)
         ecu = self.link.ecu
         v_sel = ecu.speeds.selected_kmh if ecu.speeds is not None and self.link.ecu_alive else 0.0
         ndvi_sensors = self.ndvi.sensors.mean_ndvi(now)
@@ -257,7 +261,8 @@ class Terminal:
         if gnss_kmh is not None:
             state = "ok"
         elif not self.gnss.connected:
-            state = "lost"
+            # Before the first attempt to open the port has failed, it is still "wait".
+            state = "lost" if self._gnss_seen or self.gnss.last_error is not None else "wait"
         elif not self._gnss_seen:
             state = "wait"
         elif self.tracker.heard(now):
@@ -266,8 +271,33 @@ class Terminal:
             state = "lost"  # the port is open but the receiver fell silent
         if state != self._gnss_state:
             if self._gnss_state != "wait" or state != "ok":
-                self._event(f"GNSS {state}")
+                why = f"no speed sentence for {self.tracker.stale_s:g} s"
+                if not self.gnss.connected:
+                    why = _why(self.gnss)
+                self._event(f"GNSS {state}" + (f" ({why})" if state == "lost" else ""))
             self._gnss_state = state
+
+    def _track_crop_state(self, now: float) -> None:
+        n, fresh = self.cfg.crop.sensors, len(self.ndvi.sensors.fresh(now))
+        heard = self.ndvi.sensors.counters["ok"] > 0
+        if not self.crop.connected and (heard or self.crop.last_error is not None):
+            state = "lost"
+        elif fresh == n:
+            state = "ok"
+        elif fresh:
+            state = f"{fresh}/{n}"
+        else:
+            state = "silent" if heard else "wait"
+        if state == self._crop_state:
+            return
+        self._crop_state = state
+        self._crop_ok_once |= state == "ok"
+        # Sensors come up one by one at start: report changes once all were there, or a loss.
+        if state == "lost":
+            self._event(f"crop sensors lost ({_why(self.crop)})")
+        elif self._crop_ok_once:
+            text = {"ok": "crop sensors ok", "silent": "crop sensors silent: no NDVI, rate 0"}
+            self._event(text.get(state, f"crop sensors: {fresh} of {n} fresh"))
 
     def _snapshot(
         self,
@@ -299,6 +329,7 @@ class Terminal:
             faults=int(diag.faults) if diag is not None else 0,
             ecu_link=ecu_link,
             gnss_link=self._gnss_state,
+            crop_link=self._crop_state,
             lat=pos.lat if pos else None,
             lon=pos.lon if pos else None,
             distance_m=self.ndvi.odometer.distance_m,
@@ -350,3 +381,7 @@ class Terminal:
         log.info("%s", text)
         if self._on_event is not None:
             self._on_event(text)
+
+
+def _why(source: LineSource) -> str:
+    return f"{source.name}: {source.last_error or 'disconnected'}"

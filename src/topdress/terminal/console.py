@@ -46,7 +46,7 @@ def render_lines(s: Snapshot) -> list[str]:
     cv = _col(s.cv_pct, ".2f")
     return [
         f"topdress terminal   t {s.t_s:7.1f} s   ECU {s.ecu_link:<5}  GNSS {s.gnss_link:<7}"
-        f"  {'RUNNING' if s.running else 'stopped'}",
+        f"  CROP {s.crop_link:<6}  {'RUNNING' if s.running else 'stopped'}",
         f"speed   {s.v_kmh:5.2f} km/h from {s.source:<5}  wheel {s.v_wheel_kmh:5.2f}"
         f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h   CV {cv} %"
         f" ({'uniform' if s.uniform else 'varying'})",
@@ -68,7 +68,7 @@ def render_line(s: Snapshot) -> str:
         f" ndvi={_num(s.ndvi, '.3f')} rate={s.rate_kg_ha[0]:.1f}/{s.rate_kg_ha[1]:.1f}kg/ha"
         f" target={s.target_rpm[0]:.2f}/{s.target_rpm[1]:.2f} meter={s.meter_rpm[0]:.2f}/"
         f"{s.meter_rpm[1]:.2f}r/min fan={s.fan_rpm[0]:.0f}/{s.fan_rpm[1]:.0f}rpm faults={faults}"
-        f" ecu={s.ecu_link} gnss={s.gnss_link}"
+        f" ecu={s.ecu_link} gnss={s.gnss_link} crop={s.crop_link}"
     )
 
 

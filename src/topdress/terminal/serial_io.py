@@ -31,6 +31,8 @@ class LineSource(Protocol):
     """What the terminal needs of any line source."""
 
     counters: Counter[str]
+    name: str  # for the operator: "serial:/dev/ttyUSB0", "file:...", "stdin"
+    last_error: str | None  # why the device was last lost or could not be opened
 
     @property
     def connected(self) -> bool: ...
@@ -83,6 +85,7 @@ class _ThreadedSource:
         self.clock = clock
         self.splitter = LineSplitter(max_line)
         self.counters = self.splitter.counters
+        self.last_error: str | None = None
         self._connected = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -142,8 +145,9 @@ class SerialLineSource(_ThreadedSource):
                     self.counters["opens"] += 1
                     delay = self.backoff_s
                     self._read(port)
-            except (serial.SerialException, OSError):
+            except (serial.SerialException, OSError) as exc:
                 self.counters["open_failures" if not self._connected else "disconnects"] += 1
+                self.last_error = str(exc)
             self._connected = False
             self._deliver(self.splitter.flush())
             if self._stop.wait(delay):
@@ -186,8 +190,9 @@ class StreamLineSource(_ThreadedSource):
                     if self.interval_s and self._stop.wait(self.interval_s):
                         return
             self._deliver(self.splitter.flush())
-        except OSError:
+        except OSError as exc:
             self.counters["read_errors"] += 1
+            self.last_error = str(exc)
         finally:
             self._connected = False
             self.finished.set()
@@ -221,6 +226,8 @@ class FakeLineSource:
     """
 
     def __init__(self, drop: float = 0.0, corrupt: float = 0.0, seed: int = 0) -> None:
+        self.name = "fake"
+        self.last_error: str | None = None
         self.drop = drop
         self.corrupt = corrupt
         self.counters: Counter[str] = Counter()
@@ -240,6 +247,7 @@ class FakeLineSource:
 
     def disconnect(self) -> None:
         self._connected = False
+        self.last_error = "disconnected"
 
     def reconnect(self) -> None:
         self._connected = True
