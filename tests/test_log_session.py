@@ -175,3 +175,15 @@ def test_reader_rejects_missing_and_foreign_files(tmp_path: Path) -> None:
     junk.write_bytes(b"this is not a database" * 100)
     with pytest.raises(LogError, match="not a readable session log"):
         SessionReader(junk)
+    with pytest.raises(LogError, match="not a file"):
+        SessionReader(tmp_path)
+    # an empty file and another program's database are valid SQLite, but no session
+    empty = tmp_path / "empty.sqlite"
+    empty.write_bytes(b"")
+    other = tmp_path / "other.sqlite"
+    with sqlite3.connect(other) as conn:
+        conn.execute("CREATE TABLE t (x)")
+    conn.close()
+    for path in (empty, other):
+        with pytest.raises(LogError, match="not a topdress session log"):
+            SessionReader(path)

@@ -19,7 +19,7 @@ from topdress.cli import main
 from topdress.ecu import Ecu
 from topdress.log.events import Event, NmeaEvent, WheelEvent, read_file, write
 from topdress.log.export import session_events
-from topdress.log.replay import ReplayRow, ReplayStats, ecu_params, replay
+from topdress.log.replay import MAX_IDLE_S, ReplayRow, ReplayStats, ecu_params, replay
 from topdress.log.session import SessionLog, SessionReader
 from topdress.terminal.config import default_config, loads_config
 from topdress.terminal.gnss import GnssSpeedTracker
@@ -254,3 +254,46 @@ def test_round_trip_log_export_replay(tmp_path: Path) -> None:
         assert b.v_gnss_kmh == pytest.approx(a.v_gnss_kmh)
         assert b.source == a.source
         assert b.v_kmh == pytest.approx(a.v_kmh, abs=0.02)
+
+
+def test_a_long_pause_between_events_is_cut_not_stepped_through() -> None:
+    # Two drives an hour apart in one file (two sessions pasted together): the hour of nothing
+    # is replayed as MAX_IDLE_S; the rows keep the events' times.
+    first = drive_events(40.0)
+    last_count = pulses(40.0)
+    second: list[Event] = [
+        WheelEvent(e.t + 3600.0, e.wheel_count + last_count)
+        if isinstance(e, WheelEvent)
+        else NmeaEvent(e.t + 3600.0, e.nmea)
+        for e in first
+        if isinstance(e, WheelEvent | NmeaEvent)
+    ]
+    stats = ReplayStats()
+    rows = replay(first + second, default_config(), "paper", stats)
+    assert stats.gaps_cut == 1
+    assert stats.steps == pytest.approx((40.0 + MAX_IDLE_S + 40.0) / 0.01, abs=2)
+    assert all(r.t - T0 < 40.0 + MAX_IDLE_S or r.t - T0 > 3600.0 for r in rows)
+    # the second drive replays as the first did: 8 km/h on GNSS in its uniform phase
+    again = [r for r in rows if r.t - T0 > 3600.0]
+    assert len(again) == pytest.approx(80, abs=1)
+    uniform = [r for r in again if 10.0 <= r.t - T0 - 3600.0 <= 28.0]
+    assert len(uniform) == 36
+    for r in uniform:
+        assert r.v_wheel_kmh == pytest.approx(8.0, abs=0.02) and r.source == "gnss"
+
+
+def test_a_bogus_time_does_not_hang_the_replay() -> None:
+    events = [*drive_events(5.0), WheelEvent(1e300, pulses(5.0))]
+    stats = ReplayStats()
+    rows = replay(events, default_config(), "wheel", stats)
+    assert stats.gaps_cut == 1 and stats.steps < (5.0 + MAX_IDLE_S) / 0.01 + 2
+    assert rows[-1].t < T0 + 5.0 + MAX_IDLE_S
+
+
+def test_gnss_beyond_the_frame_is_forwarded_as_25_kmh_as_the_terminal_does() -> None:
+    # 30 km/h (road transport): the terminal's CAN link clamps it to the frame's 25 km/h
+    knots = 30.0 / 1.852
+    line = make_sentence(f"GPRMC,120000.00,A,4545.0,N,12630.0,E,{knots:.3f},90.0,211126,,,A")
+    events: list[Event] = [NmeaEvent(T0 + k * 0.2, line.decode().rstrip()) for k in range(20)]
+    rows = replay(events, default_config(), "gnss")
+    assert rows and all(r.v_gnss_kmh == pytest.approx(25.0) for r in rows[1:])

@@ -97,18 +97,20 @@ def _summary(args: argparse.Namespace) -> int:
 
 def _replay(args: argparse.Namespace) -> int:
     from topdress.log.events import read_file
-    from topdress.log.replay import replay, write_csv
+    from topdress.log.replay import MAX_IDLE_S, ReplayStats, replay, write_csv
     from topdress.terminal.config import default_config, load_config
 
     cfg = load_config(args.config) if args.config is not None else default_config()
     read = read_file(args.events)
     for number, reason in read.bad:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
-    rows = replay(read.events, cfg, args.speed_mode)
+    stats = ReplayStats()
+    rows = replay(read.events, cfg, args.speed_mode, stats)
     with _open_out(args.out) as out:
         write_csv(rows, out)
     print(
         f"{args.out}: {len(rows)} speed updates from {len(read.events)} events"
         + (f" ({len(read.bad)} malformed lines skipped)" if read.bad else "")
+        + (f", {stats.gaps_cut} pauses over {MAX_IDLE_S:g} s cut" if stats.gaps_cut else "")
     )
     return 0

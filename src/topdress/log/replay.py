@@ -13,6 +13,9 @@ event due by then is applied (the ECU sees its effect from the next step):
   commands (its GNSS speed is not: that comes from the NMEA). Other frames are ignored.
 - `crop`: ignored (the speeds do not depend on it).
 Output: one row at every ECU speed update (wheel_updates increments).
+A pause longer than MAX_IDLE_S between two events (two sessions in one file, a bogus time) is
+cut to MAX_IDLE_S: every ECU timeout has run out by then, and stepping through hours (or 1e300 s)
+of nothing at 10 ms would take that long. Rows keep the events' own times.
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ from topdress.terminal.nmea import NmeaDecoder
 _log = logging.getLogger(__name__)
 
 STEP_US: Final = 10_000
+MAX_IDLE_S: Final = 60.0  # the longest ECU timeout is 30 s
+_MAX_IDLE_US: Final = round(MAX_IDLE_S * 1e6)
 COLUMNS: Final = ("t", "v_wheel_kmh", "v_gnss_kmh", "v_kmh", "source", "cv_pct")
 
 
@@ -56,6 +61,7 @@ class ReplayStats:
     nmea_rejected: int = 0
     bad_commands: int = 0  # recorded PcCommand frames that did not decode
     ecu_rx_refused: int = 0
+    gaps_cut: int = 0  # pauses between events longer than MAX_IDLE_S, cut to it
 
 
 @dataclass
@@ -136,13 +142,14 @@ class _Replayer:
         self.cfg = cfg
         self.stats = stats
         self.t0 = events[0].t
+        self._cut_gaps()
         self.ids = protocol.FrameIds(**cfg.can.ids)
         # Initialised one period before its first step, as a port's ECU is.
         self.ecu = Ecu(ecu_params(cfg, speed_mode), now_us=-STEP_US & 0xFFFFFFFF)
         self.wheel = _WheelInput()
-        for e in events:
+        for e, t in zip(events, self.times, strict=True):
             if isinstance(e, WheelEvent):
-                self.wheel.times_us.append(_us(e.t, self.t0))
+                self.wheel.times_us.append(_us(t, self.t0))
                 self.wheel.counts.append(e.wheel_count)
         self.decoder = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
@@ -150,13 +157,34 @@ class _Replayer:
         self.period_us = round(cfg.can.command_period_s * 1e6)
         self.last_cmd_us: int | None = None
 
+    def _cut_gaps(self) -> None:
+        """`times`: the events' times on the replay clock, each pause cut to MAX_IDLE_S;
+        `cuts`: (replay time, offset to the events' clock from there on)."""
+        self.times: list[float] = []
+        self.cuts: list[tuple[float, float]] = [(self.t0, 0.0)]
+        offset, prev = 0.0, self.t0
+        for e in self.events:
+            if e.t - prev > MAX_IDLE_S:
+                # Whole steps cut, so the events keep their place on the 10 ms grid.
+                offset += (_us(e.t, prev) - _MAX_IDLE_US) // STEP_US * STEP_US / 1e6
+                self.cuts.append((max(e.t - offset, self.times[-1]), offset))
+                self.stats.gaps_cut += 1
+            self.times.append(max(e.t - offset, self.times[-1]) if self.times else e.t)
+            prev = e.t
+
+    def _event_t(self, now_us: int) -> float:
+        """The events' clock at replay time `now_us`."""
+        t = self.t0 + now_us / 1e6
+        i = bisect.bisect_right(self.cuts, t, key=lambda c: c[0]) - 1
+        return t + self.cuts[max(i, 0)][1]
+
     def run(self) -> list[ReplayRow]:
         # Each period: the ECU steps on the counters of that instant, then the terminal takes
         # the inputs that arrived by then and sends its command, which the ECU acts on from
         # its next step (the order of a port's main loop and of the simulator).
         rows: list[ReplayRow] = []
         updates = self.ecu.state.wheel_updates
-        end_us = _us(self.events[-1].t, self.t0)
+        end_us = _us(self.times[-1], self.t0)
         next_event = 0
         now_us = 0
         while now_us <= end_us:
@@ -166,11 +194,9 @@ class _Replayer:
             state = self.ecu.state
             if state.wheel_updates != updates:
                 updates = state.wheel_updates
-                rows.append(_row(self.t0 + now_us / 1e6, state))
+                rows.append(_row(self._event_t(now_us), state))
             new_fix = False
-            while (
-                next_event < len(self.events) and _us(self.events[next_event].t, self.t0) <= now_us
-            ):
+            while next_event < len(self.events) and _us(self.times[next_event], self.t0) <= now_us:
                 new_fix |= self._take(self.events[next_event])
                 next_event += 1
             due = self.last_cmd_us is None or now_us - self.last_cmd_us >= self.period_us
@@ -192,7 +218,7 @@ class _Replayer:
 
     def _send_command(self, now_us: int) -> None:
         c = self.command
-        gnss = _forwardable(self.tracker.current(self.t0 + now_us / 1e6))
+        gnss = _forwardable(self.tracker.current(self._event_t(now_us)))
         msg = protocol.encode_command(
             c.start, c.fan_rpm, c.rate_upper_kg_ha, c.rate_lower_kg_ha, gnss, ids=self.ids
         )
@@ -214,10 +240,8 @@ def _row(t: float, state: EcuState) -> ReplayRow:
 
 
 def _forwardable(kmh: float | None) -> float | None:
-    # PcCommand carries 0..25 km/h; a faster (bogus) reading is sent as "not available".
-    if kmh is None or not 0.0 <= kmh <= GNSS_MAX_KMH:
-        return None
-    return kmh
+    # As the terminal's CAN link: PcCommand carries 0..25 km/h, a faster reading is sent as 25.
+    return None if kmh is None else min(max(kmh, 0.0), GNSS_MAX_KMH)
 
 
 def _take_command(

@@ -332,11 +332,15 @@ class SessionReader:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        if not self.path.is_file():
+        if not self.path.exists():
             raise LogError(f"{self.path}: no such session file")
+        if not self.path.is_file():
+            raise LogError(f"{self.path}: not a file (give the .sqlite file of a session)")
         try:
             self._conn = sqlite3.connect(self.path)
             version = int(self._conn.execute("PRAGMA user_version").fetchone()[0])
+            if version == 0:  # an empty file, or another program's database
+                raise LogError(f"{self.path}: not a topdress session log (no session schema)")
             if version != SCHEMA_VERSION:
                 raise LogError(
                     f"{self.path}: session schema {version}, this software reads {SCHEMA_VERSION}"
