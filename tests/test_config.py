@@ -139,6 +139,13 @@ command = 0x0A5C6466
         ("[can.ids]\nheartbeat = 1", "can.ids.heartbeat"),
         ("[display]\nrefresh_s = 0", "display.refresh_s"),
         ("[log]\ndir = 5", "log.dir"),
+        # periods against the ECU's timeouts (its defaults: 1500, 1200 and 100 ms)
+        ("[can]\ncommand_period_s = 1.5\nsend_on_gnss = true", "can.command_period_s"),
+        ("[ecu]\ncmd_timeout_ms = 400", "can.command_period_s"),
+        ("[can]\ncommand_period_s = 1.2", "can.command_period_s"),
+        ("[ecu]\ngnss_timeout_ms = 500", "can.command_period_s"),
+        ("[ecu]\nstatus_period_ms = 300", "can.ecu_timeout_s"),
+        ("[can]\necu_timeout_s = 0.15", "can.ecu_timeout_s"),
     ],
 )
 def test_bad_value_names_its_key(text: str, key: str) -> None:
@@ -168,3 +175,11 @@ def test_integers_accepted_for_float_keys() -> None:
     cfg = loads_config("[machine]\nwidth_m = 4\n")
     assert cfg.machine.width_m == 4.0
     assert isinstance(cfg.machine.width_m, float)
+
+
+def test_periods_that_agree_with_the_ecu_timeouts_are_accepted() -> None:
+    # GNSS sent on each fix: a command period up to the command timeout is fine
+    cfg = loads_config("[can]\ncommand_period_s = 1.4\nsend_on_gnss = true")
+    assert cfg.can.command_period_s == 1.4
+    cfg = loads_config("[ecu]\nstatus_period_ms = 250\ngnss_timeout_ms = 600")
+    assert cfg.ecu.overrides == {"status_period_ms": 250, "gnss_timeout_ms": 600}

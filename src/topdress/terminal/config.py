@@ -72,6 +72,8 @@ ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
     "status_period_ms": (27, 20, 1000, True),
 }
 
+# [ecu] keys that the terminal's own periods must agree with (see _check_timing).
+ECU_TIMING = ("cmd_timeout_ms", "gnss_timeout_ms", "status_period_ms")
 SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2}  # td_speed_mode_t
 SWITCH_COMPARE_IDS = {"gnss": 0, "wheel": 1}  # td_compare_t
 
@@ -411,6 +413,36 @@ def _cross_check(cfg: TerminalConfig) -> None:
         raise ConfigError("rate.linear.min_kg_ha", "must not exceed rate.linear.max_kg_ha")
     if not cfg.can.interface:
         raise ConfigError("can.interface", "must name a python-can interface")
+    _check_timing(cfg)
+
+
+def _check_timing(cfg: TerminalConfig) -> None:
+    """The terminal's periods against the ECU's timeouts ([ecu] or the ECU's defaults): a
+    mismatch would stop the meters or drop the ECU between two frames, every time."""
+    from topdress.ecu import EcuParams  # the binding, only for the ECU's defaults
+
+    ecu = EcuParams.defaults()
+    ms = {k: cfg.ecu.overrides.get(k, getattr(ecu, k)) for k in ECU_TIMING}
+    can = cfg.can
+    if can.command_period_s * 1000 >= ms["cmd_timeout_ms"]:
+        raise ConfigError(
+            "can.command_period_s",
+            f"must be shorter than the ECU's command timeout (ecu.cmd_timeout_ms = "
+            f"{ms['cmd_timeout_ms']:g} ms), or the meters stop between two commands",
+        )
+    if not can.send_on_gnss and can.command_period_s * 1000 >= ms["gnss_timeout_ms"]:
+        raise ConfigError(
+            "can.command_period_s",
+            f"must be shorter than the ECU's GNSS timeout (ecu.gnss_timeout_ms = "
+            f"{ms['gnss_timeout_ms']:g} ms), or the GNSS speed goes stale between two commands; "
+            "or set can.send_on_gnss = true",
+        )
+    if can.ecu_timeout_s * 1000 < 2 * ms["status_period_ms"]:
+        raise ConfigError(
+            "can.ecu_timeout_s",
+            f"must be at least two ECU status periods (ecu.status_period_ms = "
+            f"{ms['status_period_ms']:g} ms), or the ECU is reported lost between its frames",
+        )
 
 
 DEFAULT_TOML = """\
