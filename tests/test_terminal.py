@@ -291,3 +291,29 @@ def test_crop_sensors_falling_silent_or_lost_are_reported() -> None:
     finally:
         term.close()
         bus.shutdown()
+
+
+def test_ecu_back_after_a_link_glitch_keeps_the_meters_running(tmp_path: Path) -> None:
+    session = SessionLog.create(tmp_path, "")
+    rig = VirtualRig(loads_config(""), _drive(8.0, 200.0), session)
+    try:
+        rig.run(10.0)
+        assert rig.world.ecu.state.running
+        rig.ecu_silent = True  # the ECU's frames do not reach the terminal for 1 s
+        rig.run(11.0)
+        assert rig.term.snapshot.ecu_link == "lost"
+        rig.ecu_silent = False
+        stopped = []
+        for k in range(1, 301):  # 3 s after it is heard again, step by step
+            rig.run(11.0 + k * 0.01)
+            stopped += [] if rig.world.ecu.state.running else [rig.world.t_s]
+        # the parameters went again (answered Busy with our values) and nothing stopped
+        assert rig.term.link.params_done and rig.term.link.counters.tx_params == 24
+        assert stopped == []
+    finally:
+        rig.close()
+    # rows while the ECU was lost carry no stale ECU values
+    with SessionReader(session.path) as reader:
+        rows = [r for r in reader.states() if 10.5 < r.t < 11.0]
+    assert rows and all(r.source == "none" and r.meter_rpm_upper == 0.0 for r in rows)
+    assert all(r.v_kmh == 0.0 for r in rows)

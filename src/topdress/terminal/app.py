@@ -31,7 +31,7 @@ import can
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
-from topdress.terminal.canlink import CanLink
+from topdress.terminal.canlink import CanLink, EcuView
 from topdress.terminal.config import TerminalConfig
 from topdress.terminal.crop import CompensatedNdvi
 from topdress.terminal.gnss import GnssSpeedTracker
@@ -248,7 +248,9 @@ class Terminal:
         else:
             total = self.model.rate_kg_ha(ndvi)
             rates = split_layers(total, self.cfg.rate.split_upper, self.cfg.machine.layers)
-        start = self.start_requested and self.link.params_done
+        # No command goes out before the parameters are in force anyway; while they are pushed
+        # again (ECU back), a stop here would stop a running ECU for a command period.
+        start = self.start_requested
         self.link.set_command(start, self.cfg.machine.fan_rpm, rates.upper_kg_ha, rates.lower_kg_ha)
         self.link.poll(now)
         self.snapshot = self._snapshot(
@@ -358,7 +360,10 @@ class Terminal:
         return out
 
     def _row(self, now: float) -> StateRow:
-        ecu, s = self.link.ecu, self.snapshot
+        # While the ECU is lost its last frames are history: the row says "unknown" (source
+        # none, zeros), so the summary does not integrate stale meter speeds.
+        ecu = self.link.ecu if self.link.ecu_alive else EcuView()
+        s = self.snapshot
         return state_row(
             now,
             status=ecu.status,
