@@ -4,6 +4,9 @@ with pyserial) and a virtual CAN bus, the terminal in front of it, the session l
 from __future__ import annotations
 
 import io
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -117,3 +120,26 @@ def test_run_with_a_device_that_cannot_open_names_it_and_leaves_no_session(
     assert main(["run", "--config", str(cfg), "--duration", "1"]) == 2
     assert named in capsys.readouterr().err
     assert not list(tmp_path.glob("logs/*"))
+
+
+def test_sigterm_stops_the_demo_cleanly(tmp_path: Path) -> None:
+    # A service stop or the cab PC shutting down: the same clean end as Ctrl-C.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "topdress.cli", "demo", "--duration", "60", "--out", str(tmp_path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    assert proc.stdout is not None
+    lines = [proc.stdout.readline()]  # the banner, events, then a status line per second
+    while lines[-1] and not lines[-1].startswith("t=1."):
+        lines.append(proc.stdout.readline())
+    assert lines[-1], "the demo ended before its second status line"
+    proc.send_signal(signal.SIGTERM)
+    out = "".join(lines) + proc.stdout.read()
+    assert proc.wait(timeout=30) == 0
+    assert "stopped by SIGTERM" in out
+    (session,) = tmp_path.glob("*.sqlite")
+    assert f"session log: {session}" in out
+    with SessionReader(session) as reader:
+        assert "closed_utc" in reader.meta and reader.meta["lost"] == "0"

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -46,15 +49,32 @@ def _seconds(text: str) -> float:
     return value
 
 
+@contextmanager
+def _sigterm_stops() -> Iterator[None]:
+    """SIGTERM (a service stop, the cab PC shutting down) stops the terminal as Ctrl-C does:
+    the stop command to the ECU, the log closed, where the data went."""
+
+    def stop(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt("SIGTERM")
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def _demo(args: argparse.Namespace) -> int:
     from topdress.terminal.demo import run_demo
 
-    return run_demo(args.duration, args.out, seed=args.seed)
+    with _sigterm_stops():
+        return run_demo(args.duration, args.out, seed=args.seed)
 
 
 def _run(args: argparse.Namespace) -> int:
     from topdress.terminal.demo import run_terminal
 
     cfg = load_config(args.config)
-    run_terminal(cfg, args.config.read_text(encoding="utf-8"), args.duration, sys.stdout)
+    with _sigterm_stops():
+        run_terminal(cfg, args.config.read_text(encoding="utf-8"), args.duration, sys.stdout)
     return 0

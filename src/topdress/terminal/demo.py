@@ -83,8 +83,8 @@ def run_terminal(
     path = session.path if opened else None
     try:
         term.run(duration_s, on_tick=on_tick)
-    except KeyboardInterrupt:
-        console.message("stopped by the operator (Ctrl-C)")
+    except KeyboardInterrupt as exc:
+        console.message(f"stopped by {exc}" if exc.args else "stopped by the operator (Ctrl-C)")
     finally:
         # Also after an error: the operator needs to know where the data went.
         bus.shutdown()
