@@ -5,6 +5,9 @@ from __future__ import annotations
 import datetime as dt
 import io
 import json
+import select
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -303,3 +306,47 @@ def test_gnss_decode_reads_stdin(
     rows = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
     assert [(r["line"], r["ok"]) for r in rows] == [(1, True), (2, False)]
     assert rows[1]["error"].startswith("binary:")
+
+
+class _Chunks(io.RawIOBase):
+    """A stream that hands out the given chunks one read at a time, as a pipe does."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        self._chunks = chunks
+
+    def read1(self, size: int = -1) -> bytes:
+        return self._chunks.pop(0) if self._chunks else b""
+
+
+def test_gnss_decode_numbers_lines_across_chunks() -> None:
+    # CRLF split between two reads is one line end; CR alone and LF alone are one each.
+    rmc = TRIMBLE_RMC
+    chunks = [rmc + b"\r", b"\n" + rmc[:20], rmc[20:] + b"\r" + rmc + b"\n\n" + rmc]
+    out = io.StringIO()
+    decode_stream(_Chunks(chunks), out, io.StringIO())  # type: ignore[arg-type]
+    rows = [json.loads(x) for x in out.getvalue().splitlines()]
+    assert [(r["line"], r["ok"]) for r in rows] == [(1, True), (2, True), (3, True), (5, True)]
+
+
+def test_gnss_decode_shows_a_live_receiver_line_by_line() -> None:
+    # `cat /dev/ttyUSB0 | topdress gnss decode -`: each line is printed as it comes, not at EOF
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "topdress.cli", "gnss", "decode", "-"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert proc.stdin is not None and proc.stdout is not None
+    try:
+        proc.stdin.write(TRIMBLE_RMC + b"\r\n")
+        proc.stdin.flush()
+        ready, _, _ = select.select([proc.stdout], [], [], 30.0)  # a bound, not a measurement
+        assert ready, "nothing decoded while the receiver keeps the pipe open"
+        row = json.loads(proc.stdout.readline())
+        assert row["line"] == 1 and row["speed_kmh"] == pytest.approx(6.022704)
+    finally:
+        proc.stdin.close()
+        proc.wait(timeout=30)
+        proc.stdout.close()
+        assert proc.stderr is not None
+        proc.stderr.close()

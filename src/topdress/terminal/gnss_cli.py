@@ -7,7 +7,7 @@ import dataclasses
 import json
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, BinaryIO, TextIO
 
 from topdress.errors import DeviceError
@@ -50,16 +50,35 @@ def _decode_to_stdout(stream: BinaryIO) -> int:
 
 def decode_stream(stream: BinaryIO, out: TextIO, err: TextIO) -> int:
     decoder = NmeaDecoder()
-    for number, line in _numbered_lines(stream):
-        fix = decoder.decode(line)
-        out.write(json.dumps({"line": number, **dataclasses.asdict(fix)}) + "\n")
+    for lines in _numbered_chunks(stream):
+        for number, line in lines:
+            fix = decoder.decode(line)
+            out.write(json.dumps({"line": number, **dataclasses.asdict(fix)}) + "\n")
+        out.flush()  # a live receiver piped in shows each line as it comes
     counts = ", ".join(f"{k}={v}" for k, v in sorted(decoder.counters.items()))
     err.write(f"gnss decode: {counts or 'no lines'}\n")
     return 0
 
 
-def _numbered_lines(stream: BinaryIO) -> Iterator[tuple[int, bytes]]:
-    # splitlines() takes CR, LF and CRLF as terminators, as receivers use all three.
-    for number, line in enumerate(stream.read().splitlines(), start=1):
-        if line.strip() and not line.startswith(b"#"):
-            yield number, line
+def _numbered_chunks(stream: BinaryIO) -> Iterator[list[tuple[int, bytes]]]:
+    """The lines of each chunk read, numbered; a chunk is what the stream has at hand, so a
+    receiver piped in live is decoded as it talks. CR, LF and CRLF each end a line (receivers
+    use all three), also when a chunk ends between the CR and the LF."""
+    read: Callable[[int], bytes] = getattr(stream, "read1", stream.read)
+    number, pending = 0, b""
+    while chunk := read(65536):
+        parts = (pending + chunk).splitlines(keepends=True)
+        # Held back: a line without its end yet, or one ending in CR that an LF may follow.
+        pending = parts.pop() if parts and not parts[-1].endswith(b"\n") else b""
+        numbered = []
+        for part in parts:
+            number += 1
+            numbered.append((number, part))
+        yield _kept(numbered)
+    if pending:
+        yield _kept([(number + 1, pending)])
+
+
+def _kept(numbered: list[tuple[int, bytes]]) -> list[tuple[int, bytes]]:
+    lines = [(n, line.rstrip(b"\r\n")) for n, line in numbered]
+    return [(n, line) for n, line in lines if line.strip() and not line.startswith(b"#")]
