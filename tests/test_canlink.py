@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import can
 import pytest
+import serial
 
 from topdress import protocol
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
@@ -312,3 +313,22 @@ def test_unopenable_interface_is_a_device_error() -> None:
     cfg = replace(CanConfig(), interface="socketcan", channel="nosuchcan9")
     with pytest.raises(DeviceError, match="nosuchcan9"):
         open_bus(cfg)
+
+
+def test_adapter_pulled_send_errors_are_counted_and_reported_once(rig: Rig) -> None:
+    rig.link.begin({}, 0.0)
+    rig.run(0.6)  # commands flowing
+    send = rig.pc_bus.send
+
+    def pulled(msg: can.Message, timeout: float | None = None) -> None:
+        # what pyserial raises under python-can's slcan when the USB adapter is gone
+        raise serial.SerialException("write failed: [Errno 5] Input/output error")
+
+    rig.pc_bus.send = pulled  # type: ignore[method-assign]
+    rig.run(2.0)
+    assert rig.link.counters.tx_errors >= 2
+    failures = [e for _, e in rig.events if e.startswith("CAN send failed")]
+    assert failures == ["CAN send failed: write failed: [Errno 5] Input/output error"]
+    rig.pc_bus.send = send  # type: ignore[method-assign]
+    rig.run(2.6)
+    assert rig.events[-1][1] == "CAN send works again"

@@ -9,7 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import can
 import pytest
+import serial
 
 from topdress.cli import main
 from topdress.ecu import meter_target_rpm
@@ -143,3 +145,34 @@ def test_sigterm_stops_the_demo_cleanly(tmp_path: Path) -> None:
     assert f"session log: {session}" in out
     with SessionReader(session) as reader:
         assert "closed_utc" in reader.meta and reader.meta["lost"] == "0"
+
+
+class _PulledAdapter(can.BusABC):  # type: ignore[misc]
+    """A serial CAN adapter (slcan) pulled out: pyserial's errors come through python-can."""
+
+    def __init__(self) -> None:
+        super().__init__(channel="pulled")
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        raise serial.SerialException("Could not configure port: (5, 'Input/output error')")
+
+    def _recv_internal(self, timeout: float | None) -> tuple[None, bool]:
+        raise can.CanOperationError("Could not read from serial device")
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        raise can.CanOperationError("Could not write to serial device")
+
+
+def test_run_with_the_can_adapter_pulled_fails_cleanly(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("topdress.terminal.demo.open_bus", lambda cfg: _PulledAdapter())
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(f'[gnss]\nport = "/dev/nonexistent"\n[log]\ndir = "{tmp_path}"\n')
+    # no traceback: the error of the parameter push, the send failure named once
+    assert main(["run", "--config", str(cfg), "--duration", "5"]) == 2
+    out, err = capsys.readouterr()
+    assert "no acknowledgement from the ECU after 4 tries" in err
+    assert out.count("CAN send failed: Could not configure port") == 1
+    assert "session log:" in out

@@ -317,3 +317,21 @@ def test_ecu_back_after_a_link_glitch_keeps_the_meters_running(tmp_path: Path) -
         rows = [r for r in reader.states() if 10.5 < r.t < 11.0]
     assert rows and all(r.source == "none" and r.meter_rpm_upper == 0.0 for r in rows)
     assert all(r.v_kmh == 0.0 for r in rows)
+
+
+def test_can_receive_errors_are_counted_and_reported_once_per_spell() -> None:
+    cfg = loads_config("")
+    bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
+    events: list[str] = []
+    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, on_event=events.append)
+    try:
+        for k in range(3):  # the reader retries every 0.5 s while the adapter is gone
+            term.handle("can_error", k * 0.5, "Could not read from serial device")
+        term.handle("can", 1.5, can.Message(arbitration_id=0x123, data=b""))
+        term.handle("can_error", 2.0, "Could not read from serial device")
+        assert events == ["CAN receive error: Could not read from serial device"] * 2
+        term.tick(2.0)
+        assert term.snapshot.counters["can_rx_errors"] == 4
+    finally:
+        term.close()
+        bus.shutdown()

@@ -114,6 +114,7 @@ class Terminal:
         self._gnss_state = "wait"
         self._gnss_seen = False
         self._crop_state = "wait"
+        self._can_failing = False
         self._crop_ok_once = False
         self._last_event: str | None = None
         self._stop = threading.Event()
@@ -199,12 +200,15 @@ class Terminal:
         elif kind == "crop":
             self._on_crop(t, payload)
         elif kind == "can":
+            self._can_failing = False
             if self.session is not None:
                 self.session.raw("can_rx", t, (payload.arbitration_id, bytes(payload.data)))
             self.link.on_frame(payload, t)
         elif kind == "can_error":
             self.counters["can_rx_errors"] += 1
-            self._event(f"CAN receive error: {payload}")
+            if not self._can_failing:  # once per failure spell (the reader retries every 0.5 s)
+                self._can_failing = True
+                self._event(f"CAN receive error: {payload}")
         self.link.poll(t)
 
     def _on_nmea(self, t: float, line: bytes) -> None:

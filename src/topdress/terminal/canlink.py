@@ -143,6 +143,7 @@ class CanLink:
         self._alive = False
         self._lost = False
         self._started_t: float | None = None
+        self._send_failing = False
 
     # ---- start-up: parameters -------------------------------------------------------------
     def begin(self, params: Mapping[int, float], now: float) -> None:
@@ -263,10 +264,16 @@ class CanLink:
     def _send(self, msg: can.Message) -> bool:
         try:
             self._bus.send(msg, timeout=0.01)
-        except can.CanError as exc:
+        # OSError too: a serial adapter (slcan) pulled out raises pyserial's errors as they are.
+        except (can.CanError, OSError) as exc:
             self.counters.tx_errors += 1
-            log.warning("CAN send failed: %s", exc)
+            if not self._send_failing:  # once per failure spell, not twice a second
+                self._send_failing = True
+                self._event(f"CAN send failed: {exc}")
             return False
+        if self._send_failing:
+            self._send_failing = False
+            self._event("CAN send works again")
         if self._on_tx is not None:
             self._on_tx(msg)
         return True

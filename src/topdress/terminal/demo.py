@@ -8,11 +8,14 @@ configuration is embedded (ports and bus point at the simulation).
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
+
+import can
 
 from topdress.errors import DeviceError
 from topdress.log.session import SessionLog
@@ -24,6 +27,8 @@ from topdress.terminal.canlink import open_bus
 from topdress.terminal.config import TerminalConfig, loads_config
 from topdress.terminal.console import Console
 from topdress.terminal.serial_io import open_line_source
+
+log = logging.getLogger(__name__)
 
 #: The demo's field work: passes of 40 m at 8 km/h (GNSS territory in uniform motion) with a
 #: stop and a turn at each headland (wheel territory), as many as any sensible duration needs.
@@ -87,10 +92,17 @@ def run_terminal(
         console.message(f"stopped by {exc}" if exc.args else "stopped by the operator (Ctrl-C)")
     finally:
         # Also after an error: the operator needs to know where the data went.
-        bus.shutdown()
+        _shutdown(bus)
         console.draw(term.snapshot)
         _report(out, path, session.errors + session.dropped + session.lost)
     return RunResult(path, rows, term.snapshot)
+
+
+def _shutdown(bus: can.BusABC) -> None:
+    try:
+        bus.shutdown()
+    except (can.CanError, OSError) as exc:  # the adapter is gone already
+        log.warning("CAN interface did not shut down cleanly: %s", exc)
 
 
 def _report(out: TextIO, path: Path | None, errors: int) -> None:
