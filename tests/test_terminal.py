@@ -335,3 +335,44 @@ def test_can_receive_errors_are_counted_and_reported_once_per_spell() -> None:
     finally:
         term.close()
         bus.shutdown()
+
+
+@pytest.mark.parametrize(
+    ("kind", "line", "hint"),
+    [
+        # a wrong baud rate: bytes, but no sentence decodes
+        (
+            "nmea",
+            b"\xf8\x80x\x00\xe6\x1e\x98",
+            "GNSS: 20 lines, none with a speed: none decodes, check gnss.baud",
+        ),
+        # a receiver set to send GGA only: no speed to forward
+        (
+            "nmea",
+            make_sentence("GNGGA,000000.00,4500.0,N,12600.0,E,1,08,1.0,100,M,0,M,,"),
+            "GNSS: 20 lines, none with a speed: the receiver must send RMC (or VTG)",
+        ),
+        # a logger whose columns are not the configured ones
+        (
+            "crop",
+            b"0.0412,0.2104,0.4419,0.3541,0.8295,2",
+            "crop sensors: 20 lines, none usable (last: sensor_id: '0.0412' is not 1..4): "
+            "check crop.baud and [crop.columns]",
+        ),
+    ],
+)
+def test_input_that_never_gives_what_is_needed_is_explained_once(
+    kind: str, line: bytes, hint: str
+) -> None:
+    cfg = loads_config("")
+    bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
+    events: list[str] = []
+    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, on_event=events.append)
+    try:
+        for k in range(40):
+            term.handle(kind, k * 0.1, line.rstrip(b"\r\n"))
+            term.tick(k * 0.1)
+        assert [e for e in events if e.startswith(hint.split(":")[0] + ":")] == [hint]
+    finally:
+        term.close()
+        bus.shutdown()

@@ -42,6 +42,7 @@ from topdress.terminal.serial_io import LineSource
 log = logging.getLogger(__name__)
 
 TICK_S = 0.1  # control tick and state-row period (10 Hz)
+HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
 _CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
 
 
@@ -115,6 +116,7 @@ class Terminal:
         self._gnss_seen = False
         self._crop_state = "wait"
         self._can_failing = False
+        self._hinted: set[str] = set()
         self._crop_ok_once = False
         self._last_event: str | None = None
         self._stop = threading.Event()
@@ -240,6 +242,7 @@ class Terminal:
                 self.link.send_now()
         self._track_gnss_state(gnss_kmh, now)
         self._track_crop_state(now)
+        self._hint_unusable_input()
         ecu = self.link.ecu
         v_sel = ecu.speeds.selected_kmh if ecu.speeds is not None and self.link.ecu_alive else 0.0
         ndvi_sensors = self.ndvi.sensors.mean_ndvi(now)
@@ -304,6 +307,31 @@ class Terminal:
         elif self._crop_ok_once:
             text = {"ok": "crop sensors ok", "silent": "crop sensors silent: no NDVI, rate 0"}
             self._event(text.get(state, f"crop sensors: {fresh} of {n} fresh"))
+
+    def _hint_unusable_input(self) -> None:
+        """Lines that keep coming and never give what the terminal needs are a setting to fix
+        (baud rate, the receiver's sentences, the column map): said once per input."""
+        nmea, crop = self.nmea.counters, self.ndvi.sensors.counters
+        if "gnss" not in self._hinted and not self._gnss_seen:
+            lines = sum(v for k, v in nmea.items() if k != "resync")
+            if lines >= HINT_LINES:
+                self._hinted.add("gnss")
+                self._event(
+                    f"GNSS: {lines} lines, none with a speed: "
+                    + (
+                        "the receiver must send RMC (or VTG)"
+                        if nmea["ok"]
+                        else "none decodes, check gnss.baud"
+                    )
+                )
+        if "crop" not in self._hinted and crop["ok"] == 0:
+            bad = sum(v for k, v in crop.items() if k != "stale")
+            if bad >= HINT_LINES:
+                self._hinted.add("crop")
+                self._event(
+                    f"crop sensors: {bad} lines, none usable (last: "
+                    f"{self.ndvi.sensors.last_error}): check crop.baud and [crop.columns]"
+                )
 
     def _snapshot(
         self,
