@@ -139,6 +139,8 @@ command = 0x0A5C6466
         ("[can.ids]\nheartbeat = 1", "can.ids.heartbeat"),
         ("[display]\nrefresh_s = 0", "display.refresh_s"),
         ("[log]\ndir = 5", "log.dir"),
+        ("[crop]\nport = '/dev/ttyUSB0'", "crop.port"),  # gnss.port's default
+        ("[can]\ninterface = 'slcan'\nchannel = '/dev/ttyUSB1'", "can.channel"),
         # periods against the ECU's timeouts (its defaults: 1500, 1200 and 100 ms)
         ("[can]\ncommand_period_s = 1.5\nsend_on_gnss = true", "can.command_period_s"),
         ("[ecu]\ncmd_timeout_ms = 400", "can.command_period_s"),
@@ -183,3 +185,10 @@ def test_periods_that_agree_with_the_ecu_timeouts_are_accepted() -> None:
     assert cfg.can.command_period_s == 1.4
     cfg = loads_config("[ecu]\nstatus_period_ms = 250\ngnss_timeout_ms = 600")
     assert cfg.ecu.overrides == {"status_period_ms": 250, "gnss_timeout_ms": 600}
+
+
+def test_one_port_per_device_but_files_may_be_shared() -> None:
+    text = "[gnss]\nsource = 'file'\npath = 'a.log'\n[crop]\nport = '/dev/ttyUSB0'\n"
+    assert loads_config(text).crop.port == "/dev/ttyUSB0"  # gnss reads a file, not the port
+    cfg = loads_config("[can]\ninterface = 'slcan'\nchannel = '/dev/ttyACM0'\n")
+    assert cfg.can.channel == "/dev/ttyACM0"

@@ -406,6 +406,19 @@ def _cross_check(cfg: TerminalConfig) -> None:
             raise ConfigError(f"{section}.port", "is required when source = 'serial'")
     if cfg.gnss.source == "stdin" and cfg.crop.source == "stdin":
         raise ConfigError("crop.source", "gnss already reads stdin")
+    # Two readers of one serial port would each get part of the bytes, and both garble.
+    ports = {
+        f"{name}.port": src.port
+        for name, src in (("gnss", cfg.gnss), ("crop", cfg.crop))
+        if src.source == "serial"
+    }
+    if cfg.can.interface == "slcan":
+        ports["can.channel"] = cfg.can.channel
+    seen: dict[str, str] = {}
+    for key, port in ports.items():
+        if port in seen:
+            raise ConfigError(key, f"{port} is {seen[port]} too: one device per port")
+        seen[port] = key
     lin = cfg.rate.linear
     if lin.ndvi_0 == lin.ndvi_1:
         raise ConfigError("rate.linear.ndvi_1", "must differ from rate.linear.ndvi_0")
