@@ -186,3 +186,9 @@ def test_export_errors_are_clear(tmp_path: Path, capsys: pytest.CaptureFixture[s
     out = tmp_path / "missing-dir" / "e.ndjson"
     assert main(["log", "export", str(path), "--events", str(out)]) == 2
     assert "cannot write" in capsys.readouterr().err
+    # a typo that names the session as the output leaves the session whole
+    size = path.stat().st_size
+    assert main(["log", "export", str(path), "--csv", str(path)]) == 2
+    assert "is the session file itself" in capsys.readouterr().err
+    assert path.stat().st_size == size
+    assert main(["log", "summary", str(path)]) == 0

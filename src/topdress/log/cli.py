@@ -58,10 +58,14 @@ def _export(args: argparse.Namespace) -> int:
     from topdress.log.export import ExportStats, session_events, write_state_csv
     from topdress.log.session import SessionReader
 
-    if args.events is None and args.csv is None and args.config is None:
+    outs = [p for p in (args.events, args.csv, args.config) if p is not None]
+    if not outs:
         raise LogError(
             "nothing to do: give --events OUT.ndjson, --csv OUT.csv or --config OUT.toml"
         )
+    for out_path in outs:  # a typo must not truncate the session it reads
+        if out_path.exists() and args.session.exists() and out_path.samefile(args.session):
+            raise LogError(f"{out_path} is the session file itself: give another output")
     with SessionReader(args.session) as reader:
         if args.events is not None:
             stats = ExportStats()

@@ -194,6 +194,7 @@ class StreamLineSource(_ThreadedSource):
             self.counters["read_errors"] += 1
             self.last_error = str(exc)
         finally:
+            self.last_error = self.last_error or "end of the input"
             self._connected = False
             self.finished.set()
 
