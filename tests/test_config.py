@@ -138,6 +138,7 @@ command = 0x0A5C6466
         ("[can.ids]\ncommand = 0x185C6465", "can.ids"),
         ("[can.ids]\nheartbeat = 1", "can.ids.heartbeat"),
         ("[display]\nrefresh_s = 0", "display.refresh_s"),
+        ("[display]\nrefresh_s = 5.0", "display.refresh_s"),  # was taken, then cut to 0.5
         ("[log]\ndir = 5", "log.dir"),
         ("[crop]\nport = '/dev/ttyUSB0'", "crop.port"),  # gnss.port's default
         ("[can]\ninterface = 'slcan'\nchannel = '/dev/ttyUSB1'", "can.channel"),

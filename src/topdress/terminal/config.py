@@ -189,7 +189,7 @@ class LogConfig:
 
 @dataclass(frozen=True)
 class DisplayConfig:
-    refresh_s: float = _num(0.5, 0.05, 10.0)
+    refresh_s: float = _num(0.5, 0.2, 2.0)  # console redraw period on a TTY
 
 
 @dataclass(frozen=True)
@@ -565,5 +565,5 @@ param_ack = 0x18616465
 dir = "topdress-sessions"  # one SQLite file per session
 
 [display]
-refresh_s = 0.5
+refresh_s = 0.5            # live status redrawn every 0.2..2 s on a terminal (1 line/s to a pipe)
 """

@@ -63,7 +63,7 @@ def run_terminal(
     machine: LiveMachine | None = None,
 ) -> RunResult:
     """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
-    console = Console(out, period_s=max(0.2, min(cfg.display.refresh_s, 0.5)))
+    console = Console(out, period_s=cfg.display.refresh_s)
     # Devices first: one that cannot be opened stops here, before a session file is made.
     bus = open_bus(cfg.can)
     try:
