@@ -463,7 +463,7 @@ DEFAULT_TOML = """\
 
 [machine]
 width_m = 3.6              # working width, m (6 rows x 0.60 m)
-rows = 6
+rows = 6                   # for the record only: width_m is what the rate works with
 layers = 2                 # fertilizer layers (upper, lower), each with its meter and fan
 kg_per_rev_upper = 0.3     # fertilizer per metering-wheel revolution, kg/rev
 kg_per_rev_lower = 0.3
