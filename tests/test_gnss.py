@@ -326,6 +326,12 @@ def test_gnss_decode_numbers_lines_across_chunks() -> None:
     decode_stream(_Chunks(chunks), out, io.StringIO())  # type: ignore[arg-type]
     rows = [json.loads(x) for x in out.getvalue().splitlines()]
     assert [(r["line"], r["ok"]) for r in rows] == [(1, True), (2, True), (3, True), (5, True)]
+    # a long stretch without a line end over many reads is one line
+    out = io.StringIO()
+    chunks = [b"\xb5b" * 40_000] * 5 + [b"\r\n" + rmc + b"\r"]
+    decode_stream(_Chunks(chunks), out, io.StringIO())  # type: ignore[arg-type]
+    rows = [json.loads(x) for x in out.getvalue().splitlines()]
+    assert [(r["line"], r["ok"], r["type"]) for r in rows] == [(1, False, None), (2, True, "RMC")]
 
 
 def test_gnss_decode_shows_a_live_receiver_line_by_line() -> None:

@@ -65,18 +65,21 @@ def _numbered_chunks(stream: BinaryIO) -> Iterator[list[tuple[int, bytes]]]:
     receiver piped in live is decoded as it talks. CR, LF and CRLF each end a line (receivers
     use all three), also when a chunk ends between the CR and the LF."""
     read: Callable[[int], bytes] = getattr(stream, "read1", stream.read)
-    number, pending = 0, b""
+    number, pending = 0, bytearray()
     while chunk := read(65536):
-        parts = (pending + chunk).splitlines(keepends=True)
+        pending += chunk
+        if b"\n" not in chunk and b"\r" not in chunk:
+            continue  # no line end yet: a long stretch without one is read in linear time
+        parts = bytes(pending).splitlines(keepends=True)
         # Held back: a line without its end yet, or one ending in CR that an LF may follow.
-        pending = parts.pop() if parts and not parts[-1].endswith(b"\n") else b""
+        pending = bytearray(parts.pop() if not parts[-1].endswith(b"\n") else b"")
         numbered = []
         for part in parts:
             number += 1
             numbered.append((number, part))
         yield _kept(numbered)
     if pending:
-        yield _kept([(number + 1, pending)])
+        yield _kept([(number + 1, bytes(pending))])
 
 
 def _kept(numbered: list[tuple[int, bytes]]) -> list[tuple[int, bytes]]:
