@@ -270,24 +270,50 @@ def test_crop_sensors_falling_silent_or_lost_are_reported() -> None:
         for sensor in (3, 4):
             term.handle("crop", 0.0, _crop_line(sensor))
         term.tick(0.1)
-        assert term.snapshot.crop_link == "ok"
+        term.tick(0.6)
+        assert term.snapshot.crop_link == "ok" and events == []  # the start is no event
         for t in (0.5, 1.0, 1.5):  # sensor 4 falls silent (stale after crop.stale_s = 1 s)
             for sensor in (1, 2, 3):
                 term.handle("crop", t, _crop_line(sensor))
         term.tick(1.6)
-        assert term.snapshot.crop_link == "3/4"
-        assert events[-1] == "crop sensors: 3 of 4 fresh"
+        assert term.snapshot.crop_link == "3/4" and events == []  # shown at once
+        term.tick(2.1)
+        assert events == ["crop sensors: 3 of 4 fresh"]  # announced once it held 0.5 s
         term.tick(2.6)  # all silent: no NDVI, so no fertilizer; the operator must know
+        term.tick(3.1)
         assert term.snapshot.crop_link == "silent" and term.snapshot.rate_kg_ha == (0.0, 0.0)
         assert events[-1] == "crop sensors silent: no NDVI, rate 0"
         crop.disconnect()
-        term.tick(2.7)
-        assert events[-1] == "crop sensors lost (fake: disconnected)"
+        term.tick(3.2)
+        assert events[-1] == "crop sensors lost (fake: disconnected)"  # at once
         crop.reconnect()
-        for sensor in (1, 2, 3, 4):
-            term.handle("crop", 2.8, _crop_line(sensor))
-        term.tick(2.8)
+        for t in (3.3, 3.8):
+            for sensor in (1, 2, 3, 4):
+                term.handle("crop", t, _crop_line(sensor))
+            term.tick(t)
         assert term.snapshot.crop_link == "ok" and events[-1] == "crop sensors ok"
+    finally:
+        term.close()
+        bus.shutdown()
+
+
+def test_a_sensor_a_moment_late_is_not_announced() -> None:
+    # a logger at 1 Hz per sensor against crop.stale_s = 1 s: now and then one tick late
+    cfg = loads_config("")
+    bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
+    events: list[str] = []
+    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, on_event=events.append)
+    try:
+        for k in range(100):  # 10 s of 10 Hz ticks
+            t = k * 0.1
+            if k % 10 == 0:
+                for sensor in (1, 2, 3):
+                    term.handle("crop", t, _crop_line(sensor))
+            if (k % 10 == 0 and k % 30 != 0) or k % 30 == 2:  # sensor 4 late by 0.2 s at times
+                term.handle("crop", t, _crop_line(4))
+            term.tick(t)
+        assert events == []
+        assert term.ndvi.sensors.counters["stale"] > 0  # it was late, and counted
     finally:
         term.close()
         bus.shutdown()

@@ -42,6 +42,7 @@ from topdress.terminal.serial_io import LineSource
 log = logging.getLogger(__name__)
 
 TICK_S = 0.1  # control tick and state-row period (10 Hz)
+CROP_HOLD_S = 0.5  # a crop sensor state must hold this long to be an event
 HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
 _CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
 
@@ -114,7 +115,8 @@ class Terminal:
         self._t0: float | None = None
         self._gnss_state = "wait"
         self._gnss_seen = False
-        self._crop_state = "wait"
+        self._crop_state = self._crop_reported = "wait"
+        self._crop_since = 0.0
         self._can_failing = False
         self._hinted: set[str] = set()
         self._crop_ok_once = False
@@ -297,14 +299,20 @@ class Terminal:
             state = f"{fresh}/{n}"
         else:
             state = "silent" if heard else "wait"
-        if state == self._crop_state:
+        if state != self._crop_state:
+            self._crop_state, self._crop_since = state, now
+        # A sensor a moment late (a 1 Hz logger against stale_s = 1 s) is shown, not announced:
+        # an event once the state has held CROP_HOLD_S; a loss at once.
+        held = state == "lost" or now - self._crop_since >= CROP_HOLD_S - 1e-9
+        if state == self._crop_reported or not held:
             return
-        self._crop_state = state
+        self._crop_reported = state
+        was_ok = self._crop_ok_once
         self._crop_ok_once |= state == "ok"
         # Sensors come up one by one at start: report changes once all were there, or a loss.
         if state == "lost":
             self._event(f"crop sensors lost ({_why(self.crop)})")
-        elif self._crop_ok_once:
+        elif was_ok:
             text = {"ok": "crop sensors ok", "silent": "crop sensors silent: no NDVI, rate 0"}
             self._event(text.get(state, f"crop sensors: {fresh} of {n} fresh"))
 
