@@ -17,8 +17,8 @@ from topdress.cli import main
 from topdress.ecu import meter_target_rpm
 from topdress.log.session import SessionReader
 from topdress.sim.live import PtyPort
-from topdress.terminal.config import default_config
-from topdress.terminal.demo import run_demo
+from topdress.terminal.config import default_config, loads_config
+from topdress.terminal.demo import demo_config_toml, run_demo
 
 
 def test_demo_runs_meters_at_eq4_targets_and_logs(tmp_path: Path) -> None:
@@ -176,3 +176,22 @@ def test_run_with_the_can_adapter_pulled_fails_cleanly(
     assert "no acknowledgement from the ECU after 4 tries" in err
     assert out.count("CAN send failed: Could not configure port") == 1
     assert "session log:" in out
+
+
+def test_demo_config_keeps_any_log_directory() -> None:
+    odd = Path('runs "north" field\\2026')
+    cfg = loads_config(demo_config_toml("/dev/pts/7", "/dev/pts/8", "ch", odd))
+    assert cfg.log.dir == str(odd) and cfg.gnss.port == "/dev/pts/7"
+
+
+def test_demo_without_pseudo_terminals_fails_naming_them(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    def no_ptys(*args: object) -> None:
+        raise OSError(2, "out of pty devices")
+
+    monkeypatch.setattr("topdress.terminal.demo.LiveMachine", no_ptys)
+    assert main(["demo", "--duration", "1", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "cannot make the simulated machine's pseudo-terminals" in err
+    assert "out of pty devices" in err

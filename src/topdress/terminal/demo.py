@@ -8,6 +8,7 @@ configuration is embedded (ports and bus point at the simulation).
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import sys
@@ -39,13 +40,19 @@ DEMO_SPEED_KMH = 8.0
 
 def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path) -> str:
     """The demo's configuration: the defaults, with ports and bus pointing at the simulation."""
+    q = _toml_str
     return (
         "# topdress demo: the terminal's defaults, wired to the simulated machine\n"
-        f'[gnss]\nsource = "serial"\nport = "{gnss_port}"\nbaud = 115200\n'
-        f'[crop]\nsource = "serial"\nport = "{crop_port}"\nbaud = 115200\n'
-        f'[can]\ninterface = "virtual"\nchannel = "{channel}"\n'
-        f'[log]\ndir = "{log_dir}"\n'
+        f'[gnss]\nsource = "serial"\nport = {q(gnss_port)}\nbaud = 115200\n'
+        f'[crop]\nsource = "serial"\nport = {q(crop_port)}\nbaud = 115200\n'
+        f'[can]\ninterface = "virtual"\nchannel = {q(channel)}\n'
+        f"[log]\ndir = {q(str(log_dir))}\n"
     )
+
+
+def _toml_str(text: str) -> str:
+    # A JSON string is a TOML basic string: quotes and backslashes in a path stay intact.
+    return json.dumps(text)
 
 
 @dataclass(frozen=True)
@@ -128,7 +135,11 @@ def run_demo(
     world = World(SimConfig(), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
     sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
-    machine = LiveMachine(world, sim_bus)
+    try:
+        machine = LiveMachine(world, sim_bus)
+    except OSError as exc:
+        sim_bus.shutdown()
+        raise DeviceError(f"cannot make the simulated machine's pseudo-terminals: {exc}") from exc
     try:
         text = demo_config_toml(machine.gnss_port.path, machine.crop_port.path, channel, out_dir)
         cfg = loads_config(text)
