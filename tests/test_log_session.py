@@ -9,6 +9,7 @@ from pathlib import Path
 import can
 import pytest
 
+from topdress.cli import main
 from topdress.errors import LogError
 from topdress.log.model import StateRow
 from topdress.log.session import SCHEMA_VERSION, SessionLog, SessionReader
@@ -187,3 +188,22 @@ def test_reader_rejects_missing_and_foreign_files(tmp_path: Path) -> None:
     for path in (empty, other):
         with pytest.raises(LogError, match="not a topdress session log"):
             SessionReader(path)
+
+
+def test_damaged_page_is_a_clear_error_when_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with SessionLog.create(tmp_path, CONFIG) as log:
+        for i in range(3000):
+            log.state(state_row(float(i) / 10))
+    data = bytearray(log.path.read_bytes())
+    page = 4096
+    assert len(data) > 20 * page
+    # a worn SD card: pages in the middle of the state table turn to noise
+    noise = bytes((i * 151 + 17) % 256 for i in range(4 * page))
+    data[10 * page : 14 * page] = noise
+    log.path.write_bytes(bytes(data))
+    with SessionReader(log.path) as reader, pytest.raises(LogError, match="damaged session log"):
+        list(reader.states())
+    assert main(["log", "summary", str(log.path)]) == 2
+    assert f"sqlite3 {log.path} .recover" in capsys.readouterr().err

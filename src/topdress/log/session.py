@@ -357,25 +357,35 @@ class SessionReader:
     def raw(self) -> Iterator[RawRecord]:
         """Raw inputs in time order. Inputs logged from several threads may reach the log a
         little out of order; equal times keep their logged order."""
-        cur = self._conn.execute("SELECT t, kind, line, can_id, data FROM raw ORDER BY t, id")
-        for t, kind, line, can_id, data in cur:
+        for t, kind, line, can_id, data in self._select(
+            "SELECT t, kind, line, can_id, data FROM raw ORDER BY t, id"
+        ):
             yield RawRecord(t, kind, line, can_id, data)
 
     def states(self) -> Iterator[StateRow]:
         """State rows in the order they were logged."""
-        cur = self._conn.execute(f"SELECT {', '.join(STATE_COLUMNS)} FROM state ORDER BY id")
-        for values in cur:
+        for values in self._select(f"SELECT {', '.join(STATE_COLUMNS)} FROM state ORDER BY id"):
             yield StateRow(*values)
 
     def raw_counts(self) -> dict[str, int]:
         """Number of raw inputs of each kind."""
-        rows = self._conn.execute("SELECT kind, count(*) FROM raw GROUP BY kind").fetchall()
+        rows = self._select("SELECT kind, count(*) FROM raw GROUP BY kind")
         return {str(kind): int(n) for kind, n in rows}
 
     def count(self, table: str) -> int:
         if table not in ("raw", "state"):
             raise ValueError(table)
-        return int(self._conn.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
+        return int(next(self._select(f"SELECT count(*) FROM {table}"))[0])
+
+    def _select(self, sql: str) -> Iterator[tuple[Any, ...]]:
+        # A damaged page (a worn SD card, a stick pulled while writing) shows only when read.
+        try:
+            yield from self._conn.execute(sql)
+        except sqlite3.Error as exc:
+            raise LogError(
+                f"{self.path}: damaged session log ({exc}); "
+                f"`sqlite3 {self.path} .recover` may save what is left"
+            ) from exc
 
     def close(self) -> None:
         self._conn.close()
