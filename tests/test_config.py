@@ -193,3 +193,9 @@ def test_one_port_per_device_but_files_may_be_shared() -> None:
     assert loads_config(text).crop.port == "/dev/ttyUSB0"  # gnss reads a file, not the port
     cfg = loads_config("[can]\ninterface = 'slcan'\nchannel = '/dev/ttyACM0'\n")
     assert cfg.can.channel == "/dev/ttyACM0"
+
+
+def test_a_file_with_a_byte_order_mark_loads(tmp_path: Path) -> None:
+    path = tmp_path / "notepad.toml"
+    path.write_bytes("\ufeff[machine]\nwidth_m = 4.2\n".encode())
+    assert load_config(path).machine.width_m == 4.2

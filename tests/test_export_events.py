@@ -192,3 +192,12 @@ def test_export_errors_are_clear(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert "is the session file itself" in capsys.readouterr().err
     assert path.stat().st_size == size
     assert main(["log", "summary", str(path)]) == 0
+
+
+def test_a_byte_order_mark_does_not_cost_the_first_event(tmp_path: Path) -> None:
+    path = tmp_path / "edited.ndjson"
+    path.write_bytes(
+        "\ufeff".encode() + b'{"t": 1.0, "wheel_count": 7}\n{"t": 2.0, "wheel_count": 9}\n'
+    )
+    result = read_file(path)
+    assert result.bad == [] and result.events == [WheelEvent(1.0, 7), WheelEvent(2.0, 9)]

@@ -150,7 +150,8 @@ def read_lines(lines: Iterable[str]) -> ReadResult:
 
 def read_file(path: str | Path) -> ReadResult:
     try:
-        with open(path, encoding="utf-8", errors="replace") as f:
+        # utf-8-sig: a file saved by an editor that puts a byte order mark first
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
             return read_lines(f)
     except OSError as exc:
         raise LogError(f"cannot read events {path}: {exc}") from exc

@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from topdress.terminal.config import load_config
+from topdress.terminal.config import load_config, read_config_text
 
 
 def register(sub: Any) -> None:
@@ -76,5 +76,5 @@ def _run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     with _sigterm_stops():
-        run_terminal(cfg, args.config.read_text(encoding="utf-8"), args.duration, sys.stdout)
+        run_terminal(cfg, read_config_text(args.config), args.duration, sys.stdout)
     return 0

@@ -234,10 +234,15 @@ def default_config() -> TerminalConfig:
     return TerminalConfig()
 
 
+def read_config_text(path: str | Path) -> str:
+    """The file's text; a byte order mark (some Windows editors write one) is dropped."""
+    return Path(path).read_text(encoding="utf-8-sig")
+
+
 def load_config(path: str | Path) -> TerminalConfig:
     """Read and validate a TOML file; any problem raises ConfigError."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_config_text(path)
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(str(path), f"cannot read the configuration file: {exc}") from exc
     return loads_config(text, source=str(path))
