@@ -76,6 +76,7 @@ def test_run_without_an_ecu_fails_naming_the_parameter_and_keeps_the_log(
     assert main(["run", "--config", str(cfg), "--duration", "5"]) == 2
     out, err = capsys.readouterr()
     assert "WorkingWidth = 3.6: no acknowledgement from the ECU after 4 tries" in err
+    assert "(is it powered, on CAN virtual channel test-demo-no-ecu?)" in err  # where it looked
     # the ports that cannot be opened are named, with the reason
     assert "GNSS lost (serial:/dev/nonexistent-gnss: [Errno 2] could not open port" in out
     assert "crop sensors lost (serial:/dev/nonexistent-crop: [Errno 2] could not open port" in out

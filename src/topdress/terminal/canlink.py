@@ -205,7 +205,8 @@ class CanLink:
             raise EcuParamError(
                 protocol.param_name(param_id),
                 value,
-                f"no acknowledgement from the ECU after {push.tries} tries",
+                f"no acknowledgement from the ECU after {push.tries} tries (is it powered, "
+                f"on CAN {self.cfg.interface} channel {self.cfg.channel}?)",
             )
         self.counters.param_retries += 1
         self._send_param(now)
