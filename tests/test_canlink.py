@@ -99,15 +99,71 @@ def test_refused_parameter_fails_at_once_naming_it(rig: Rig) -> None:
     assert rig.twin.ecu.params.queue_len == 5
 
 
-def test_silent_ecu_retried_then_error_naming_the_parameter(rig: Rig) -> None:
-    rig.twin.deaf_to_params = True
+def _param_sets(rig: Rig) -> list[tuple[float, int]]:
+    """(time seen, parameter id) of every PcParamSet on the bus."""
+    out = []
+    for t, msg in rig.seen:
+        if msg.arbitration_id == protocol.DEFAULT_IDS.param_set:
+            decoded = protocol.decode(msg)
+            assert isinstance(decoded, protocol.PcParamSet)
+            out.append((t, decoded.param_id))
+    return out
+
+
+def _unplug(twin: SimulatedEcu) -> None:
+    twin.mute = twin.deaf_to_params = True  # neither heard nor listening: not on the bus
+
+
+def test_ecu_not_on_the_bus_is_waited_for_with_a_backoff(rig: Rig) -> None:
+    _unplug(rig.twin)
     rig.link.begin(default_config().ecu_params(), 0.0)
-    with pytest.raises(EcuParamError, match=r"WorkingWidth = 3.6: no acknowledgement .* 4 tries"):
-        rig.run(5.0)
-    # 1 try + 3 retries, 0.2 s apart; raised at the fourth timeout
-    assert rig.link.counters.param_retries == 3
-    assert rig.t == pytest.approx(0.8)
-    assert not rig.link.params_done
+    rig.run(10.0)  # no error: the implement may be hitched later
+    # 4 fast tries 0.2 s apart, then every 1 s for 5 s, then every 2 s; always the first one
+    times = [0.01, 0.2, 0.4, 0.6, 1.6, 2.6, 3.6, 4.6, 5.6, 7.6, 9.6]
+    assert [t for t, _ in _param_sets(rig)] == pytest.approx(times)
+    assert {p for _, p in _param_sets(rig)} == {1}  # WorkingWidth
+    assert rig.link.counters.param_retries == len(times) - 1
+    # said once, with where it listens; an ECU never heard is waited for, not "lost"
+    assert [e for _, e in rig.events] == [
+        f"ECU wait: WorkingWidth unacknowledged after 4 tries on CAN virtual:{rig.cfg.channel};"
+        " still trying (is the ECU powered, on this bus?)"
+    ]
+    assert rig.events[0][0] == pytest.approx(0.8)
+    assert rig.link.state == "wait" and not rig.link.ready and rig.link.counters.ecu_lost == 0
+    assert rig.commands() == []  # nothing is commanded before the parameters are in force
+
+
+def test_ecu_powered_later_gets_the_parameters_at_once_and_works(rig: Rig) -> None:
+    _unplug(rig.twin)
+    params = default_config().ecu_params()
+    rig.link.begin(params, 0.0)
+    rig.link.set_command(True, 3000, 200, 100)
+    rig.run(3.0)  # the last try went at 2.6 s; the next is due at 3.6 s
+    rig.twin = SimulatedEcu(rig.ecu_bus, now=rig.t)  # powered at 3.0 s
+    rig.run(5.0)
+    heard = min(t for t, msg in rig.seen if msg.arbitration_id == protocol.DEFAULT_IDS.status)
+    sets = [t for t, _ in _param_sets(rig) if t > 3.0]
+    # the push goes on as soon as the ECU's first status is heard, not at the next backoff
+    assert sets[0] == pytest.approx(heard, abs=0.011) and sets[0] < 3.2
+    assert len(sets) == len(params) and rig.link.ready and rig.link.state == "ok"
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(3.6)
+    text = [e for _, e in rig.events]
+    assert text[0].startswith("ECU wait: WorkingWidth") and len(text) == 2
+    assert text[1].startswith("ECU ready: every parameter acknowledged, 3.")
+    # then it works: commands flow and the ECU runs them
+    assert rig.commands()[0][0] >= max(sets)
+    assert rig.twin.ecu.state.running
+
+
+def test_ecu_that_talks_but_never_acknowledges_is_named_so(rig: Rig) -> None:
+    rig.twin.deaf_to_params = True  # e.g. parameter frames on other identifiers
+    rig.link.begin({1: 3.0}, 0.0)
+    rig.run(3.0)
+    assert rig.link.ecu_alive and rig.link.state == "wait" and not rig.link.params_done
+    assert [e for _, e in rig.events] == [
+        f"ECU wait: WorkingWidth unacknowledged after 4 tries on CAN virtual:{rig.cfg.channel};"
+        " the ECU sends status but does not answer (check [can.ids]); still trying"
+    ]
 
 
 def test_ecu_that_wakes_up_during_retries_is_accepted(rig: Rig) -> None:
@@ -254,7 +310,7 @@ def test_ecu_lost_and_back(rig: Rig) -> None:
     assert rig.link.ecu_alive and rig.events == []
     rig.twin.mute = True
     rig.run(4.0)
-    assert not rig.link.ecu_alive
+    assert not rig.link.ecu_alive and rig.link.state == "lost"
     assert len(rig.events) == 1
     t_lost, text = rig.events[0]
     assert text.startswith("ECU lost")
@@ -262,17 +318,17 @@ def test_ecu_lost_and_back(rig: Rig) -> None:
     assert 2.5 < t_lost <= 2.62
     rig.twin.mute = False
     rig.run(5.0)
-    assert rig.link.ecu_alive
+    assert rig.link.ecu_alive and rig.link.state == "ok"
     assert [e for _, e in rig.events] == [rig.events[0][1], "ECU back"]
     assert rig.link.counters.ecu_lost == 1
 
 
-def test_ecu_never_heard_is_reported_lost(rig: Rig) -> None:
+def test_ecu_never_heard_is_waited_for_not_lost(rig: Rig) -> None:
     rig.twin.mute = True
     rig.link.begin({}, 0.0)
     rig.run(1.0)
-    assert rig.link.counters.ecu_lost == 1
-    assert not rig.link.ecu_alive
+    assert rig.link.counters.ecu_lost == 0 and rig.events == []
+    assert not rig.link.ecu_alive and rig.link.state == "wait"
 
 
 def test_bad_frames_counted_and_ignored(rig: Rig) -> None:

@@ -7,16 +7,21 @@ import io
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import can
 import pytest
 import serial
+from can import Message
 
+from topdress import protocol
 from topdress.cli import main
 from topdress.ecu import meter_target_rpm
-from topdress.log.session import SessionReader
+from topdress.log.session import RawRecord, SessionReader
+from topdress.protocol import AckResult
 from topdress.sim.live import PtyPort
+from topdress.terminal.cli import EXIT_NO_ECU
 from topdress.terminal.config import default_config, loads_config
 from topdress.terminal.demo import demo_config_toml, run_demo
 
@@ -65,7 +70,7 @@ def test_run_with_an_invalid_config_names_the_key(
     assert "can.command_period_s" in capsys.readouterr().err
 
 
-def test_run_without_an_ecu_fails_naming_the_parameter_and_keeps_the_log(
+def test_run_without_an_ecu_waits_for_it_for_the_whole_run_and_exits_3(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     cfg = tmp_path / "t.toml"
@@ -73,20 +78,90 @@ def test_run_without_an_ecu_fails_naming_the_parameter_and_keeps_the_log(
         '[gnss]\nport = "/dev/nonexistent-gnss"\n[crop]\nport = "/dev/nonexistent-crop"\n'
         f'[can]\nchannel = "test-demo-no-ecu"\n[log]\ndir = "{tmp_path}"\n'
     )
-    assert main(["run", "--config", str(cfg), "--duration", "5"]) == 2
+    # the implement never hitched: no error, the wait shown, then "nothing was metered"
+    assert main(["run", "--config", str(cfg), "--duration", "2"]) == EXIT_NO_ECU == 3
     out, err = capsys.readouterr()
-    assert "WorkingWidth = 3.6: no acknowledgement from the ECU after 4 tries" in err
-    assert "(is it powered, on CAN virtual channel test-demo-no-ecu?)" in err  # where it looked
+    assert err == ""
+    assert (
+        "ECU wait: WorkingWidth unacknowledged after 4 tries on CAN virtual:test-demo-no-ecu;"
+        " still trying (is the ECU powered, on this bus?)"
+    ) in out
+    assert "ecu=wait(virtual:test-demo-no-ecu)" in out  # the status line says where it listens
+    assert "v=--km/h src=--" in out and "ecu=ok" not in out
+    assert "the ECU never acknowledged its parameters on CAN virtual:test-demo-no-ecu" in out
     # the ports that cannot be opened are named, with the reason
     assert "GNSS lost (serial:/dev/nonexistent-gnss: [Errno 2] could not open port" in out
     assert "crop sensors lost (serial:/dev/nonexistent-crop: [Errno 2] could not open port" in out
     (session,) = tmp_path.glob("*.sqlite")
+    assert f"session log: {session}" in out
     with SessionReader(session) as reader:
         rows = list(reader.states())
-        counts = reader.raw_counts()
-    assert counts["can_tx"] == 4  # the four tries of the first parameter
+        sent = [_decoded(r) for r in reader.raw() if r.kind == "can_tx"]
+    # the tries of the first parameter, over and over; no command (no stop either)
+    assert len(sent) >= 4 and set(sent) == {protocol.PcParamSet(1, 3.6)}
     # GNSS and crop ports missing: nothing is invented while it waited
     assert rows and all(r.v_gnss_kmh is None and r.source == "none" for r in rows)
+
+
+def _decoded(record: RawRecord) -> protocol.Frame:
+    assert record.can_id is not None and record.data is not None
+    return protocol.decode((record.can_id, record.data))
+
+
+class _NarrowFirmwareEcu(threading.Thread):
+    """An ECU whose firmware takes at most 5000 encoder pulses per revolution (the terminal's
+    file allows 10000): it refuses more as out of range, acknowledges everything else."""
+
+    def __init__(self, channel: str) -> None:
+        super().__init__(daemon=True)
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.stop = threading.Event()
+        self.ack = protocol.database().get_message_by_name("EcuParamAck")
+
+    def run(self) -> None:
+        while not self.stop.is_set():
+            msg = self.bus.recv(timeout=0.01)
+            if msg is None or msg.arbitration_id != protocol.DEFAULT_IDS.param_set:
+                continue
+            frame = protocol.decode(msg)
+            assert isinstance(frame, protocol.PcParamSet)
+            spec = frame.spec
+            refused = spec.signal == "WheelPulsesPerRev" and frame.value > 5000
+            signals = {
+                "AckParamId": spec.id,
+                "AckResult": int(AckResult.OUT_OF_RANGE if refused else AckResult.OK),
+                "AckRaw": 5000 if refused else spec.to_raw(frame.value),
+            }
+            data = self.ack.encode(signals)
+            self.bus.send(Message(arbitration_id=protocol.DEFAULT_IDS.param_ack, data=data))
+
+
+def test_run_with_a_parameter_the_ecu_refuses_fails_naming_it_and_keeps_the_log(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(
+        '[gnss]\nport = "/dev/nonexistent-gnss"\n[crop]\nport = "/dev/nonexistent-crop"\n'
+        f'[machine]\nwheel_ppr = 8000\n[can]\nchannel = "test-demo-refused"\n'
+        f'[log]\ndir = "{tmp_path}"\n'
+    )
+    ecu = _NarrowFirmwareEcu("test-demo-refused")
+    ecu.start()
+    try:
+        assert main(["run", "--config", str(cfg), "--duration", "30"]) == 2
+    finally:
+        ecu.stop.set()
+        ecu.join()
+        ecu.bus.shutdown()
+    out, err = capsys.readouterr()
+    assert "ECU parameter WheelPulsesPerRev = 8000: refused by the ECU: out of range" in err
+    (session,) = tmp_path.glob("*.sqlite")
+    assert f"session log: {session}" in out
+    with SessionReader(session) as reader:
+        sent = [_decoded(r) for r in reader.raw() if r.kind == "can_tx"]
+    # the parameters up to the refused one, each once; no command
+    assert [f.param_id for f in sent if isinstance(f, protocol.PcParamSet)] == [1, 2, 3, 4, 5]
+    assert len(sent) == 5
 
 
 def test_demo_duration_must_be_positive(capsys: pytest.CaptureFixture[str]) -> None:
@@ -171,11 +246,13 @@ def test_run_with_the_can_adapter_pulled_fails_cleanly(
     monkeypatch.setattr("topdress.terminal.demo.open_bus", lambda cfg: _PulledAdapter())
     cfg = tmp_path / "t.toml"
     cfg.write_text(f'[gnss]\nport = "/dev/nonexistent"\n[log]\ndir = "{tmp_path}"\n')
-    # no traceback: the error of the parameter push, the send failure named once
-    assert main(["run", "--config", str(cfg), "--duration", "5"]) == 2
+    # no traceback: it waits for the ECU it cannot reach; the send failure named once
+    assert main(["run", "--config", str(cfg), "--duration", "1.5"]) == EXIT_NO_ECU
     out, err = capsys.readouterr()
-    assert "no acknowledgement from the ECU after 4 tries" in err
+    assert err == ""
+    assert "ECU wait: WorkingWidth unacknowledged after 4 tries" in out
     assert out.count("CAN send failed: Could not configure port") == 1
+    assert out.count("CAN receive error: Could not read from serial device") == 1
     assert "session log:" in out
 
 

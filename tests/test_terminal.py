@@ -10,6 +10,7 @@ from pathlib import Path
 import can
 import pytest
 
+from topdress import protocol
 from topdress.ecu import meter_target_rpm
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.tractor import Drive, Segment
@@ -17,6 +18,7 @@ from topdress.sim.world import World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
 from topdress.terminal.config import DEFAULT_TOML, TerminalConfig, loads_config
+from topdress.terminal.console import render_line, render_lines
 from topdress.terminal.nmea import make_sentence
 from topdress.terminal.rate import build_rate_model, split_layers
 from topdress.terminal.serial_io import FakeLineSource
@@ -47,20 +49,22 @@ class VirtualRig:
         )
         self.term.open()
         self.snapshots: list[tuple[float, Snapshot]] = []
-        self.ecu_silent = False
+        self.ecu_silent = False  # its frames do not reach the terminal
+        self.ecu_off = False  # not on the bus at all: hears nothing, says nothing
 
     def run(self, until_s: float) -> None:
         w, term = self.world, self.term
         while w.t_s < until_s - 1e-9:
             while (msg := self.ecu_bus.recv(timeout=0)) is not None:
-                w.deliver_can(msg)
+                if not self.ecu_off:
+                    w.deliver_can(msg)
             out = w.step()
             t = out.t_s
             for line in out.nmea:
                 self.gnss.emit(t, line.encode())
             for line in out.crop:
                 self.crop.emit(t, line.encode())
-            if not self.ecu_silent:
+            if not (self.ecu_silent or self.ecu_off):
                 for frame_id, data in out.can:
                     term.inbox.put(("can", t, can.Message(arbitration_id=frame_id, data=data)))
             while not term.inbox.empty():
@@ -166,10 +170,23 @@ def test_ecu_silent_is_shown_lost_and_the_stop_reaches_the_ecu_on_close() -> Non
     rig = VirtualRig(loads_config(""), _drive(5.0, 200.0))
     rig.run(6.0)
     assert rig.term.snapshot.ecu_link == "ok" and rig.world.ecu.state.running
+    working = render_line(rig.term.snapshot)
+    assert "src=-- " not in working and "meter=--" not in working
     rig.ecu_silent = True
     rig.run(7.0)
-    assert rig.term.snapshot.ecu_link == "lost"
+    lost = rig.term.snapshot
+    assert lost.ecu_link == "lost" and not lost.ecu_live
     assert any(e.startswith("ECU lost") for _, e in rig.events)
+    # its last frames are history: no speed, source, targets or meter speeds shown from them
+    assert (lost.source, lost.v_kmh, lost.meter_rpm, lost.running) == ("none", 0.0, (0, 0), False)
+    line = render_line(lost)
+    assert "v=--km/h src=-- cv=--%" in line
+    assert "target=--/-- meter=--/--r/min fan=--/--rpm faults=-- ecu=lost" in line
+    # what the terminal knows by itself stays: the GNSS speed it reads, the rate it computes
+    assert (
+        lost.v_gnss_kmh is not None
+        and f"GNSS {lost.v_gnss_kmh:5.2f} km/h" in (render_lines(lost)[1])
+    )
     rig.ecu_silent = False
     rig.run(8.0)
     assert rig.term.snapshot.ecu_link == "ok"
@@ -181,6 +198,49 @@ def test_ecu_silent_is_shown_lost_and_the_stop_reaches_the_ecu_on_close() -> Non
     assert not rig.world.ecu.state.running
     rig.pc_bus.shutdown()
     rig.ecu_bus.shutdown()
+
+
+def test_ecu_powered_after_the_terminal_is_waited_for_then_meters(tmp_path: Path) -> None:
+    session = SessionLog.create(tmp_path, "")
+    rig = VirtualRig(loads_config(""), _drive(8.0, 200.0), session)
+    rig.ecu_off = True  # the implement's ECU is switched on 4 s after the terminal
+    try:
+        rig.run(4.0)
+        waiting = [s for t, s in rig.snapshots]
+        assert all(s.ecu_link == "wait" and not s.ecu_live for s in waiting)
+        channel = rig.cfg.can.channel
+        assert [e for _, e in rig.events if e.startswith("ECU")] == [
+            f"ECU wait: WorkingWidth unacknowledged after 4 tries on CAN virtual:{channel};"
+            " still trying (is the ECU powered, on this bus?)"
+        ]
+        # meanwhile the inputs are read: GNSS speed, NDVI and the rate it would command
+        s = rig.term.snapshot
+        assert s.gnss_link == "ok" and s.crop_link == "ok" and s.rate_kg_ha[0] > 0
+        assert f"ecu=wait(virtual:{channel})" in render_line(s)
+        assert f"ECU wait (virtual:{channel})" in render_lines(s)[0]
+        assert not rig.world.ecu.state.running
+        rig.ecu_off = False
+        rig.run(12.0)
+        ready = [(t, e) for t, e in rig.events if e.startswith("ECU ready")]
+        assert len(ready) == 1 and 4.0 < ready[0][0] < 4.5
+        assert ready[0][1].startswith("ECU ready: every parameter acknowledged, 4.")
+        s = rig.term.snapshot
+        assert s.ecu_link == "ok" and s.running and s.source == "gnss"
+        m = rig.cfg.machine
+        eq4 = meter_target_rpm(m.width_m, s.rate_kg_ha[0], s.v_kmh, m.kg_per_rev_upper)
+        assert s.target_rpm[0] == pytest.approx(eq4, rel=0.03)
+        assert s.meter_rpm[0] == pytest.approx(s.target_rpm[0], rel=0.1)
+    finally:
+        rig.close()
+    with SessionReader(session.path) as reader:
+        raw = list(reader.raw())
+        rows = list(reader.states())
+    # the inputs were logged while it waited; to the ECU only parameter tries, no command
+    assert sum(1 for r in raw if r.kind == "nmea" and r.t < 4.0) > 30
+    sent_before = {r.can_id for r in raw if r.kind == "can_tx" and r.t < 4.0}
+    assert sent_before == {protocol.DEFAULT_IDS.param_set}
+    assert all(r.source == "none" and r.meter_rpm_upper == 0.0 for r in rows if r.t < 4.0)
+    assert any(r.meter_rpm_upper > 1.0 for r in rows if r.t > 6.0)
 
 
 def test_bad_lines_are_counted_and_skipped() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 
 from topdress.protocol import Fault
 from topdress.terminal.app import Snapshot
@@ -24,6 +25,7 @@ WORKING = Snapshot(
     meter_rpm=(22.69, 22.5),
     fan_rpm=(3020.0, 3000.0),
     faults=int(Fault.UPPER_FAN_LOW | Fault.GNSS_LOST),
+    ecu_live=True,
     ecu_link="ok",
     gnss_link="ok",
     crop_link="3/4",
@@ -101,3 +103,33 @@ def test_tty_redraws_the_block_in_place() -> None:
     assert out.getvalue().endswith(f"\x1b[{n}F\x1b[JECU lost: no status for 0.6 s\n")
     con.update(WORKING, 0.6)
     assert out.getvalue().split("ECU lost: no status for 0.6 s\n")[1].startswith("\x1b[2K")
+
+
+def test_ecu_values_are_dashes_while_the_ecu_is_lost() -> None:
+    # the last frames of a lost ECU (WORKING's) must not pass for live values
+    lost = replace(WORKING, ecu_live=False, ecu_link="lost")
+    block = "\n".join(render_lines(lost))
+    for stale in ("8.02", "7.61", "2.51", "uniform", "22.09", "22.69", "3020", "RUNNING"):
+        assert stale not in block, stale
+    assert "GNSS_LOST" not in block and "faults: --" in block
+    assert "speed      -- km/h from --     wheel    --" in block
+    assert "target     -- /     -- r/min   actual     -- /     -- r/min" in block
+    # the columns stay put: the figures where they were
+    assert render_lines(lost)[1].index("CV") == render_lines(WORKING)[1].index("CV")
+    assert len(render_lines(lost)[3]) == len(render_lines(WORKING)[3])
+    # what the terminal knows by itself stays: GNSS speed read, NDVI, rates computed
+    for own in ("GNSS  8.00 km/h", "sensors 0.612", "at meters 0.587", "upper  138.9"):
+        assert own in block, own
+    line = render_line(lost)
+    assert line == (
+        "t=12.3s v=--km/h src=-- cv=--% ndvi=0.587 rate=138.9/138.9kg/ha target=--/-- "
+        "meter=--/--r/min fan=--/--rpm faults=-- ecu=lost gnss=ok crop=3/4"
+    )
+
+
+def test_ecu_wait_says_where_the_terminal_listens() -> None:
+    waiting = replace(Snapshot(), ecu_where="socketcan:can0")
+    assert "ECU wait (socketcan:can0)" in render_lines(waiting)[0]
+    assert " ecu=wait(socketcan:can0) " in render_line(waiting)
+    # once it works the place is not repeated
+    assert " ecu=ok " in render_line(replace(WORKING, ecu_where="socketcan:can0"))

@@ -66,7 +66,11 @@ class Snapshot:
     meter_rpm: tuple[float, float] = (0.0, 0.0)
     fan_rpm: tuple[float, float] = (0.0, 0.0)
     faults: int = 0
-    ecu_link: str = "wait"  # wait (never heard), ok, lost
+    # Whether the ECU's values above (running .. faults) are live; while the ECU is not heard
+    # they are unknown (source none, zeros, as in the state row) and shown as such.
+    ecu_live: bool = False
+    ecu_link: str = "wait"  # wait (parameters not all acknowledged yet), ok, lost
+    ecu_where: str = ""  # the CAN interface:channel the terminal listens on
     gnss_link: str = "wait"  # wait, ok, no fix, lost
     crop_link: str = "wait"  # wait, ok, "3/4" (fresh of configured), silent, lost
     lat: float | None = None
@@ -348,11 +352,11 @@ class Terminal:
         ndvi: float | None,
         rates: tuple[float, float],
     ) -> Snapshot:
-        ecu = self.link.ecu
+        live = self.link.ecu_alive
+        # The ECU's last frames are history once it is not heard: nothing is shown from them.
+        ecu = self.link.ecu if live else EcuView()
         st, diag, sp, tg = ecu.status, ecu.diag, ecu.speeds, ecu.targets
         pos = self.tracker.position
-        lost = "lost" if self.link.counters.ecu_lost else "wait"
-        ecu_link = "ok" if self.link.ecu_alive else lost
         return Snapshot(
             t_s=now - (self._t0 if self._t0 is not None else now),
             running=st.running if st is not None else False,
@@ -369,7 +373,9 @@ class Terminal:
             meter_rpm=(st.meter_rpm_upper, st.meter_rpm_lower) if st else (0.0, 0.0),
             fan_rpm=(st.fan_rpm_upper, st.fan_rpm_lower) if st else (0.0, 0.0),
             faults=int(diag.faults) if diag is not None else 0,
-            ecu_link=ecu_link,
+            ecu_live=live,
+            ecu_link=self.link.state,
+            ecu_where=self.link.where,
             gnss_link=self._gnss_state,
             crop_link=self._crop_state,
             lat=pos.lat if pos else None,

@@ -5,13 +5,16 @@ slcan, pcan, kvaser, virtual, udp_multicast, ...). It never reads a clock and ne
 terminal loop hands it every received frame (`on_frame`) and calls `poll(now)` often; `now` is
 seconds on any monotonic clock (virtual in tests). It
 
-- pushes the ECU parameters at start, one PcParamSet each, and waits for each EcuParamAck
-  (a silent ECU is retried, a refusal fails at once; either error names the parameter);
+- pushes the ECU parameters at start, one PcParamSet each, and waits for each EcuParamAck:
+  a refusal fails at once naming the parameter; a silent ECU (not powered yet, the implement
+  not hitched) is waited for, retrying with a backoff, and the push goes on at once when its
+  first status frame is heard;
 - sends the paper's PcCommand every `command_period_s`, and at once on a new GNSS speed when
   `send_on_gnss` is set;
 - decodes EcuStatus, EcuDiag, EcuSpeeds and EcuTargets, counting foreign and malformed frames;
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
   and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
+  An ECU never heard is waited for ("wait"), not lost.
 
 `SimulatedEcu` is the twin of the real ECU on the other end of a bus: the C core through the
 binding, on virtual time, with fault knobs (mute, deaf to parameters).
@@ -38,6 +41,9 @@ log = logging.getLogger(__name__)
 MAX_GNSS_KMH = 25.0
 MAX_RATE_KG_HA = 600.0
 MAX_FAN_RPM = 6000.0
+#: Waits between parameter tries once the fast retries went unanswered (the ECU is not on the
+#: bus yet): every 1 s for 5 s, then every 2 s; the last repeats.
+PARAM_BACKOFF_S = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
 # Tolerance of time comparisons: a deadline met to the microsecond counts as met.
 _EPS_S = 1e-6
 
@@ -104,6 +110,7 @@ class _ParamPush:
     index: int = 0
     tries: int = 0
     sent_t: float | None = None
+    waiting: bool = False  # the fast retries of this parameter went unanswered
 
     @property
     def done(self) -> bool:
@@ -124,6 +131,7 @@ class CanLink:
         fan_rpm: float = 0.0,
         param_ack_timeout_s: float = 0.2,
         param_retries: int = 3,
+        param_backoff_s: tuple[float, ...] = PARAM_BACKOFF_S,
         on_tx: Callable[[can.Message], None] | None = None,
         on_event: Callable[[str], None] | None = None,
     ) -> None:
@@ -132,6 +140,7 @@ class CanLink:
         self.ids = frame_ids(cfg)
         self._ack_timeout_s = param_ack_timeout_s
         self._retries = param_retries
+        self._backoff_s = param_backoff_s
         self._on_tx = on_tx
         self._on_event = on_event
         self.counters = LinkCounters()
@@ -142,7 +151,9 @@ class CanLink:
         self._next_cmd_t: float | None = None
         self._alive = False
         self._lost = False
-        self._started_t: float | None = None
+        self._begin_t = 0.0
+        self._waited = False  # the push had to wait for a silent ECU
+        self._ready = False  # every parameter acknowledged once: the ECU works for us
         self._send_failing = False
 
     # ---- start-up: parameters -------------------------------------------------------------
@@ -152,14 +163,34 @@ class CanLink:
         Raises ProtocolError at once for a value the frame cannot carry."""
         for param_id, value in params.items():
             protocol.param(param_id).check(value)
-        self._started_t = now
+        self._begin_t = now
         self._params = sorted(params.items())
         self._push = _ParamPush(list(self._params))
-        self._send_param(now)
+        if self._push.done:
+            self._on_push_done(now)
+        else:
+            self._send_param(now)
 
     @property
     def params_done(self) -> bool:
         return self._push is not None and self._push.done
+
+    @property
+    def ready(self) -> bool:
+        """Every parameter was acknowledged once: the ECU has worked for this terminal."""
+        return self._ready
+
+    @property
+    def state(self) -> str:
+        """`wait` until every parameter was acknowledged once, then `ok` or `lost`."""
+        if self._lost:
+            return "lost"
+        return "ok" if self._ready and self._alive else "wait"
+
+    @property
+    def where(self) -> str:
+        """The interface and channel the link listens on, e.g. `socketcan:can0`."""
+        return f"{self.cfg.interface}:{self.cfg.channel}"
 
     def _send_param(self, now: float) -> None:
         push = self._push
@@ -192,24 +223,45 @@ class CanLink:
             )
         push.index += 1
         push.tries = 0
-        self._send_param(now)
+        push.waiting = False
+        if push.done:
+            self._on_push_done(now)
+        else:
+            self._send_param(now)
+
+    def _on_push_done(self, now: float) -> None:
+        self._ready = True
+        if self._waited:
+            self._waited = False
+            since = now - self._begin_t
+            self._event(f"ECU ready: every parameter acknowledged, {since:.1f} s after start")
 
     def _poll_params(self, now: float) -> None:
         push = self._push
         if push is None or push.done or push.sent_t is None:
             return
-        if now - push.sent_t < self._ack_timeout_s - _EPS_S:
-            return
-        if push.tries > self._retries:
-            param_id, value = push.items[push.index]
-            raise EcuParamError(
-                protocol.param_name(param_id),
-                value,
-                f"no acknowledgement from the ECU after {push.tries} tries (is it powered, "
-                f"on CAN {self.cfg.interface} channel {self.cfg.channel}?)",
-            )
-        self.counters.param_retries += 1
-        self._send_param(now)
+        waited = now - push.sent_t + _EPS_S
+        if push.tries > self._retries and not push.waiting and waited >= self._ack_timeout_s:
+            push.waiting = True
+            self._waited = True
+            self._event(self._wait_text(push))
+        if waited >= self._retry_gap_s(push.tries):
+            self.counters.param_retries += 1
+            self._send_param(now)
+
+    def _retry_gap_s(self, tries: int) -> float:
+        # A present ECU answers within milliseconds: fast retries, then the backoff.
+        if tries <= self._retries:
+            return self._ack_timeout_s
+        return self._backoff_s[min(tries - self._retries - 1, len(self._backoff_s) - 1)]
+
+    def _wait_text(self, push: _ParamPush) -> str:
+        name = protocol.param_name(push.items[push.index][0])
+        head = f"ECU wait: {name} unacknowledged after {push.tries} tries on CAN {self.where}"
+        if self.ecu.status_t is None:
+            return f"{head}; still trying (is the ECU powered, on this bus?)"
+        # It talks but does not answer: other frame identifiers, or a firmware without them.
+        return f"{head}; the ECU sends status but does not answer (check [can.ids]); still trying"
 
     # ---- running --------------------------------------------------------------------------
     def set_command(
@@ -242,7 +294,7 @@ class CanLink:
     def poll(self, now: float) -> None:
         """Periodic work: parameter retries, the command period, ECU liveness.
 
-        Raises EcuParamError when a parameter is refused or never acknowledged."""
+        Raises EcuParamError when a parameter is refused."""
         self._poll_params(now)
         if self.params_done and (self._next_cmd_t is None or now >= self._next_cmd_t - _EPS_S):
             # On a fixed grid, so send-on-GNSS frames in between do not shift the period;
@@ -294,14 +346,11 @@ class CanLink:
                 log.debug("foreign frame 0x%08X", msg.arbitration_id)
             return
         if isinstance(decoded, protocol.EcuStatus):
+            first = self.ecu.status_t is None
             self.ecu = replace(self.ecu, status=decoded, status_t=now)
             self._alive = True
-            if self._lost:
-                self._lost = False
-                self._event("ECU back")
-                if self.params_done:
-                    self._push = _ParamPush(list(self._params))
-                    self._send_param(now)
+            if first or self._lost:
+                self._on_heard(now, back=self._lost)
         elif isinstance(decoded, protocol.EcuDiag):
             self.ecu = replace(self.ecu, diag=decoded)
         elif isinstance(decoded, protocol.EcuSpeeds):
@@ -312,8 +361,27 @@ class CanLink:
             self._on_ack(decoded, now)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
+    def _on_heard(self, now: float, back: bool) -> None:
+        """The first status frame, or the first after a loss."""
+        if back:
+            self._lost = False
+            self._event("ECU back")
+        push = self._push
+        if push is None:
+            return
+        if push.done:
+            if back:  # an ECU that rebooted meanwhile runs on its defaults
+                self._push = _ParamPush(list(self._params))
+                self._send_param(now)
+        elif push.waiting:
+            # It has just been powered: go on at once, not at the end of the backoff.
+            push.tries = 0
+            push.waiting = False
+            self._send_param(now)
+
     def _poll_liveness(self, now: float) -> None:
-        last = self.ecu.status_t if self.ecu.status_t is not None else self._started_t
+        # An ECU never heard is waited for (see `state`), not lost.
+        last = self.ecu.status_t
         if last is None or self._lost or now - last <= self.cfg.ecu_timeout_s + _EPS_S:
             return
         self._lost = True

@@ -12,6 +12,10 @@ from typing import Any
 
 from topdress.terminal.config import load_config, read_config_text
 
+#: `topdress run` ended (duration, Ctrl-C, SIGTERM) without the ECU ever acknowledging its
+#: parameters: the inputs were logged, nothing was metered.
+EXIT_NO_ECU = 3
+
 
 def register(sub: Any) -> None:
     """Add `demo` and `run` to the top-level parser."""
@@ -31,7 +35,15 @@ def register(sub: Any) -> None:
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
     demo.set_defaults(func=_demo)
 
-    run = sub.add_parser("run", help="the terminal against real devices (serial ports, CAN)")
+    run = sub.add_parser(
+        "run",
+        help="the terminal against real devices (serial ports, CAN)",
+        epilog=(
+            "Waits for an ECU not on the bus yet. Exit codes: 0 done; 2 an error (a bad "
+            f"configuration, a device, a parameter the ECU refuses); {EXIT_NO_ECU} the ECU "
+            "never answered (inputs logged, nothing metered)."
+        ),
+    )
     run.add_argument("--config", type=Path, required=True, metavar="FILE", help="TOML file")
     run.add_argument(
         "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
@@ -76,5 +88,5 @@ def _run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     with _sigterm_stops():
-        run_terminal(cfg, read_config_text(args.config), args.duration, sys.stdout)
-    return 0
+        result = run_terminal(cfg, read_config_text(args.config), args.duration, sys.stdout)
+    return 0 if result.ecu_ready else EXIT_NO_ECU

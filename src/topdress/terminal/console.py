@@ -40,35 +40,55 @@ def _col(value: float | None, fmt: str) -> str:
     return _num(value, fmt).rjust(len(format(0.0, fmt)))
 
 
+def _ecu_link(s: Snapshot, space: str = " ") -> str:
+    # While waiting, where it listens: the first thing to check when the ECU never answers.
+    waiting = s.ecu_link == "wait" and s.ecu_where
+    return f"wait{space}({s.ecu_where})" if waiting else s.ecu_link
+
+
 def render_lines(s: Snapshot) -> list[str]:
-    """The full status block."""
-    faults = ", ".join(fault_names(s.faults)) or "none"
-    cv = _col(s.cv_pct, ".2f")
+    """The full status block. The ECU's values are "--" while it is not heard."""
+    live = s.ecu_live
+
+    def col(value: float, fmt: str) -> str:
+        return _col(value if live else None, fmt)
+
+    faults = (", ".join(fault_names(s.faults)) or "none") if live else "--"
+    uniform = ("uniform" if s.uniform else "varying") if live else "--"
+    running = ("RUNNING" if s.running else "stopped") if live else "--"
     return [
-        f"topdress terminal   t {s.t_s:7.1f} s   ECU {s.ecu_link:<5}  GNSS {s.gnss_link:<7}"
-        f"  CROP {s.crop_link:<6}  {'RUNNING' if s.running else 'stopped'}",
-        f"speed   {s.v_kmh:5.2f} km/h from {s.source:<5}  wheel {s.v_wheel_kmh:5.2f}"
-        f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h   CV {cv} %"
-        f" ({'uniform' if s.uniform else 'varying'})",
+        f"topdress terminal   t {s.t_s:7.1f} s   ECU {_ecu_link(s):<5}  GNSS {s.gnss_link:<7}"
+        f"  CROP {s.crop_link:<6}  {running}",
+        f"speed   {col(s.v_kmh, '5.2f')} km/h from {s.source if live else '--':<5}"
+        f"  wheel {col(s.v_wheel_kmh, '5.2f')}"
+        f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h   CV {_col(s.cv_pct if live else None, '.2f')} %"
+        f" ({uniform})",
         f"NDVI    sensors {_col(s.ndvi_sensors, '.3f')}  at meters {_col(s.ndvi, '.3f')}"
         f"   rate upper {s.rate_kg_ha[0]:6.1f}  lower {s.rate_kg_ha[1]:6.1f} kg/ha",
-        f"meters  target {s.target_rpm[0]:6.2f} / {s.target_rpm[1]:6.2f} r/min"
-        f"   actual {s.meter_rpm[0]:6.2f} / {s.meter_rpm[1]:6.2f} r/min",
-        f"fans    {s.fan_rpm[0]:5.0f} / {s.fan_rpm[1]:5.0f} rpm   faults: {faults}",
+        f"meters  target {col(s.target_rpm[0], '6.2f')} / {col(s.target_rpm[1], '6.2f')} r/min"
+        f"   actual {col(s.meter_rpm[0], '6.2f')} / {col(s.meter_rpm[1], '6.2f')} r/min",
+        f"fans    {col(s.fan_rpm[0], '5.0f')} / {col(s.fan_rpm[1], '5.0f')} rpm   faults: {faults}",
         "counts  " + "  ".join(f"{k} {v}" for k, v in s.counters.items()),
         f"last    {s.last_event or '-'}",
     ]
 
 
 def render_line(s: Snapshot) -> str:
-    """One compact line, for a log or a pipe."""
-    faults = ",".join(fault_names(s.faults)) or "-"
+    """One compact line, for a log or a pipe. The ECU's values are "--" while it is not heard."""
+    live = s.ecu_live
+
+    def num(value: float | None, fmt: str) -> str:
+        return _num(value if live else None, fmt)
+
+    faults = (",".join(fault_names(s.faults)) or "-") if live else "--"
     return (
-        f"t={s.t_s:.1f}s v={s.v_kmh:.2f}km/h src={s.source} cv={_num(s.cv_pct, '.2f')}%"
+        f"t={s.t_s:.1f}s v={num(s.v_kmh, '.2f')}km/h src={s.source if live else '--'}"
+        f" cv={num(s.cv_pct, '.2f')}%"
         f" ndvi={_num(s.ndvi, '.3f')} rate={s.rate_kg_ha[0]:.1f}/{s.rate_kg_ha[1]:.1f}kg/ha"
-        f" target={s.target_rpm[0]:.2f}/{s.target_rpm[1]:.2f} meter={s.meter_rpm[0]:.2f}/"
-        f"{s.meter_rpm[1]:.2f}r/min fan={s.fan_rpm[0]:.0f}/{s.fan_rpm[1]:.0f}rpm faults={faults}"
-        f" ecu={s.ecu_link} gnss={s.gnss_link} crop={s.crop_link}"
+        f" target={num(s.target_rpm[0], '.2f')}/{num(s.target_rpm[1], '.2f')}"
+        f" meter={num(s.meter_rpm[0], '.2f')}/{num(s.meter_rpm[1], '.2f')}r/min"
+        f" fan={num(s.fan_rpm[0], '.0f')}/{num(s.fan_rpm[1], '.0f')}rpm faults={faults}"
+        f" ecu={_ecu_link(s, space='')} gnss={s.gnss_link} crop={s.crop_link}"
     )
 
 

@@ -60,6 +60,7 @@ class RunResult:
     session_path: Path | None  # None when the log could not be written
     ticks: int
     last: Snapshot
+    ecu_ready: bool  # the ECU acknowledged every parameter: the terminal could work
 
 
 def run_terminal(
@@ -101,8 +102,13 @@ def run_terminal(
         # Also after an error: the operator needs to know where the data went.
         _shutdown(bus)
         console.draw(term.snapshot)
+        if not term.link.ready:
+            out.write(
+                f"the ECU never acknowledged its parameters on CAN {term.link.where}: "
+                "nothing was metered\n"
+            )
         _report(out, path, session.errors + session.dropped + session.lost)
-    return RunResult(path, rows, term.snapshot)
+    return RunResult(path, rows, term.snapshot, term.link.ready)
 
 
 def _shutdown(bus: can.BusABC) -> None:
