@@ -99,6 +99,29 @@ def test_refused_parameter_fails_at_once_naming_it(rig: Rig) -> None:
     assert rig.twin.ecu.params.queue_len == 5
 
 
+def test_parameter_inconsistent_only_with_the_ecus_old_values_goes_after_the_others(
+    rig: Rig,
+) -> None:
+    # both 3 in the file; in id order queue_len 3 reaches an ECU still on cv_window 5
+    params = loads_config("[speed]\nqueue_len = 3\ncv_window = 3\n").ecu_params()
+    rig.link.begin(params, 0.0)
+    rig.run(1.0)
+    assert rig.link.params_done
+    p = rig.twin.ecu.params
+    assert (p.queue_len, p.cv_window) == (3, 3)
+    ids = [i for _, i in _param_sets(rig)]
+    assert ids[:6] == [1, 2, 3, 4, 5, 6] and ids[6] == 7 and ids[-1] == 6
+    assert len(ids) == len(params) + 1
+
+
+def test_parameter_still_inconsistent_after_the_others_is_refused(rig: Rig) -> None:
+    rig.link.begin({6: 3, 7: 5}, 0.0)  # a window longer than the queue: never consistent
+    with pytest.raises(EcuParamError, match=r"QueueLength = 3: refused by the ECU: inconsistent"):
+        rig.run(0.5)
+    assert [i for _, i in _param_sets(rig)] == [6, 7, 6]
+    assert (rig.twin.ecu.params.queue_len, rig.twin.ecu.params.cv_window) == (5, 5)
+
+
 def _param_sets(rig: Rig) -> list[tuple[float, int]]:
     """(time seen, parameter id) of every PcParamSet on the bus."""
     out = []

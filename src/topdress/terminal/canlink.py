@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import can
@@ -111,6 +111,7 @@ class _ParamPush:
     tries: int = 0
     sent_t: float | None = None
     waiting: bool = False  # the fast retries of this parameter went unanswered
+    deferred: set[int] = field(default_factory=set)  # ids moved to the end once (inconsistent)
 
     @property
     def done(self) -> bool:
@@ -216,6 +217,8 @@ class CanLink:
             push.tries = 0
             self._send_param(now)
             return
+        if ack.result is AckResult.INCONSISTENT and self._defer(push, now):
+            return
         if ack.result not in (AckResult.OK, AckResult.BUSY):
             reason = ack.result.name.lower().replace("_", " ")
             raise EcuParamError(
@@ -228,6 +231,19 @@ class CanLink:
             self._on_push_done(now)
         else:
             self._send_param(now)
+
+    def _defer(self, push: _ParamPush, now: float) -> bool:
+        """Move a parameter the ECU finds inconsistent with a value it still holds to the end,
+        once: the file's queue_len 3 and cv_window 3 reach an ECU holding cv_window 5 in id
+        order, and queue_len 3 is accepted only after cv_window 3."""
+        item = push.items[push.index]
+        if item[0] in push.deferred or push.index == len(push.items) - 1:
+            return False
+        push.deferred.add(item[0])
+        push.items.append(push.items.pop(push.index))
+        push.tries = 0
+        self._send_param(now)
+        return True
 
     def _on_push_done(self, now: float) -> None:
         self._ready = True
