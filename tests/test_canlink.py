@@ -249,6 +249,23 @@ def test_ecu_rebooted_while_lost_gets_the_parameters_again(rig: Rig) -> None:
     assert rig.link.counters.tx_params == 4
 
 
+def test_ecu_back_without_acknowledging_is_waited_for_not_ok(rig: Rig) -> None:
+    rig.link.begin({1: 4.2}, 0.0)
+    rig.link.set_command(True, 3000, 200, 100)
+    rig.run(1.0)
+    assert rig.link.state == "ok"
+    rig.twin.mute = True
+    rig.run(2.0)
+    assert rig.link.state == "lost"
+    # a rebooted ECU that talks but does not take parameters
+    rig.twin = SimulatedEcu(rig.ecu_bus, now=rig.t)
+    rig.twin.deaf_to_params = True
+    rig.run(4.0)
+    assert rig.link.ecu_alive and not rig.link.params_done
+    assert rig.link.state == "wait"
+    assert not [t for t, _ in rig.commands() if t > 2.1]  # nothing commanded meanwhile
+
+
 def test_value_the_frame_cannot_carry_is_refused_before_sending(rig: Rig) -> None:
     with pytest.raises(ProtocolError, match="WorkingWidth"):
         rig.link.begin({1: 31.0}, 0.0)

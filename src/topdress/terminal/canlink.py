@@ -183,10 +183,11 @@ class CanLink:
 
     @property
     def state(self) -> str:
-        """`wait` until every parameter was acknowledged once, then `ok` or `lost`."""
+        """`wait` until every parameter is acknowledged (at start, and again after the ECU
+        came back from a loss), then `ok`; `lost` while it is not heard."""
         if self._lost:
             return "lost"
-        return "ok" if self._ready and self._alive else "wait"
+        return "ok" if self._ready and self._alive and self.params_done else "wait"
 
     @property
     def where(self) -> str:
