@@ -33,18 +33,29 @@ class MeterParams:
     encoder_dead_at_s: float = -1.0  # fault knob: encoder stops counting; < 0 never
 
 
-class MeterMotor:
-    def __init__(self, p: MeterParams, dt: float) -> None:
-        self.p = p
-        self._decay = math.exp(-dt / p.tau_s)
+class _Shaft:
+    """A shaft with first-order speed: its speed, revolutions and cumulative encoder count."""
+
+    def __init__(self, tau_s: float, dt: float) -> None:
+        self._decay = math.exp(-dt / tau_s)  # exact discretisation of the first-order lag
         self.rpm = 0.0
         self.revolutions = 0.0
         self.count = 0
 
+
+def _clamp_duty(duty: float) -> float:
+    return 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)
+
+
+class MeterMotor(_Shaft):
+    def __init__(self, p: MeterParams, dt: float) -> None:
+        super().__init__(p.tau_s, dt)
+        self.p = p
+
     def step(self, t: float, dt: float, duty: float) -> int:
         """Apply duty for dt; return the cumulative encoder count."""
         p = self.p
-        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)
+        duty = _clamp_duty(duty)
         if 0.0 <= p.jammed_at_s <= t:
             self.rpm = 0.0
             return self.count
@@ -82,17 +93,15 @@ class FanParams:
     belt_slip: float = 0.0  # fault knob: fraction of speed lost to a slipping belt
 
 
-class Fan:
+class Fan(_Shaft):
     def __init__(self, p: FanParams, dt: float) -> None:
+        super().__init__(p.tau_s, dt)
         self.p = p
-        self._decay = math.exp(-dt / p.tau_s)
-        self.rpm = 0.0
-        self.revolutions = 0.0
-        self.count = 0
 
     def step(self, t: float, dt: float, duty: float) -> int:
+        """Apply duty for dt; return the cumulative tachometer count."""
         p = self.p
-        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)
+        duty = _clamp_duty(duty)
         if 0.0 <= p.failed_at_s <= t:
             duty = 0.0
         w_ss = p.max_rpm * duty * (1.0 - p.belt_slip)
