@@ -73,6 +73,15 @@ static inline void rig_init(rig_t *r, const td_params_t *p, uint32_t t0_us) {
     assert_int_equal(td_app_init(&r->app, &r->p, t0_us), TD_OK);
 }
 
+/* The PC has sent start and forwards gnss_kmh; the ground moves under the wheel at wheel_kmh. */
+static inline void rig_start(rig_t *r, const td_params_t *p, uint32_t t0_us, double gnss_kmh,
+                             double wheel_kmh) {
+    rig_init(r, p, t0_us);
+    r->pc_start = true;
+    r->pc_gnss_kmh = gnss_kmh;
+    r->wheel_kmh = wheel_kmh;
+}
+
 static inline td_can_frame_t rig_command_frame(bool start, double fan, double up, double lo, double gnss) {
     td_command_t c;
     c.start = start;
@@ -144,6 +153,12 @@ static inline void rig_run_ms(rig_t *r, uint32_t ms) {
 
 static inline const td_state_t *rig_st(const rig_t *r) {
     return td_app_state(&r->app);
+}
+
+/* A machine working at 8 km/h on GNSS for 6 s: GNSS 8.0, the wheel 7 % under by slip. */
+static inline void rig_start_working(rig_t *r, const td_params_t *p, uint32_t t0_us) {
+    rig_start(r, p, t0_us, 8.0, 8.0 * 0.93);
+    rig_run_ms(r, 6000);
 }
 
 #endif /* TD_TEST_H */

@@ -7,19 +7,10 @@
 static const float k_up_target_8kmh = 3.6f * 200.0f * 8.0f / (600.0f * 0.3f); /* 32 r/min */
 static const float k_lo_target_8kmh = 3.6f * 150.0f * 8.0f / (600.0f * 0.3f); /* 24 r/min */
 
-/* A machine working at 8 km/h: GNSS 8.0, the wheel 7 % under by slip. */
-static void start_working(rig_t *r, uint32_t t0_us) {
-    rig_init(r, NULL, t0_us);
-    r->pc_start = true;
-    r->pc_gnss_kmh = 8.0;
-    r->wheel_kmh = 8.0 * 0.93;
-    rig_run_ms(r, 6000);
-}
-
 static void test_uniform_8kmh_meters_on_gnss_across_clock_wrap(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0xFFFFFFFFu - 3000000u); /* the microsecond clock wraps 3 s in */
+    rig_start_working(&r, NULL, 0xFFFFFFFFu - 3000000u); /* the microsecond clock wraps 3 s in */
     const td_state_t *st = rig_st(&r);
     assert_true(st->running);
     assert_int_equal(st->faults, 0);
@@ -43,10 +34,7 @@ static void test_uniform_8kmh_meters_on_gnss_across_clock_wrap(void **state) {
 static void test_below_switch_speed_meters_on_wheel(void **state) {
     (void)state;
     rig_t r;
-    rig_init(&r, NULL, 0u);
-    r.pc_start = true;
-    r.pc_gnss_kmh = 4.0;
-    r.wheel_kmh = 3.9;
+    rig_start(&r, NULL, 0u, 4.0, 3.9);
     rig_run_ms(&r, 5000);
     const td_state_t *st = rig_st(&r);
     assert_true(st->uniform);
@@ -82,7 +70,7 @@ static void test_command_timeout_at_1500ms(void **state) {
     (void)state;
     rig_t r;
     r.wheel_kmh = 8.0;
-    start_working(&r, 1000u);
+    rig_start_working(&r, NULL, 1000u);
     r.wheel_kmh = 8.0;
     r.pc_sending = false;
     /* step until exactly 1.5 s after the last command */
@@ -109,7 +97,7 @@ static void test_command_timeout_at_1500ms(void **state) {
 static void test_gnss_not_available_and_stale(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0u);
+    rig_start_working(&r, NULL, 0u);
     assert_int_equal(rig_st(&r)->source, TD_SRC_GNSS);
     /* 0xFF: wheel at once, no waiting for the stale timeout */
     r.pc_gnss_kmh = -1.0;
@@ -154,7 +142,7 @@ static uint32_t run_until_wheel_zero(rig_t *r) {
 static void test_encoder_fault_after_2s_latched_until_stop(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0u);
+    rig_start_working(&r, NULL, 0u);
     r.pc_gnss_jitter_kmh = 0.1; /* a live receiver: its speed moves by a digit now and then */
     r.wheel_kmh = 0.0;          /* encoder cable cut */
     const uint32_t t_zero = run_until_wheel_zero(&r);
@@ -210,7 +198,7 @@ static void test_encoder_fault_overrides_wheel_only_mode(void **state) {
 static void test_no_speed_when_both_sources_fail(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0u);
+    rig_start_working(&r, NULL, 0u);
     r.pc_gnss_jitter_kmh = 0.1;
     r.wheel_kmh = 0.0;
     rig_run_ms(&r, 4000);
@@ -229,7 +217,7 @@ static void test_no_speed_when_both_sources_fail(void **state) {
 static void test_blocked_meter_stops_that_motor_only(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0u);
+    rig_start_working(&r, NULL, 0u);
     r.meter_blocked[TD_UPPER] = true;
     int k = 0;
     while (!r.app.blocked_suspect[TD_UPPER]) {
@@ -270,11 +258,8 @@ static void test_blocked_meter_stops_that_motor_only(void **state) {
 static void test_fan_low_gates_its_layer(void **state) {
     (void)state;
     rig_t r;
-    rig_init(&r, NULL, 0u);
+    rig_start(&r, NULL, 0u, 8.0, 8.0);
     r.fan_broken[TD_UPPER] = true;
-    r.pc_start = true;
-    r.pc_gnss_kmh = 8.0;
-    r.wheel_kmh = 8.0;
     bool upper_ever_metered = false;
     for (int i = 0; i < 300; i++) { /* the 3 s spin-up grace: gated but no fault bit */
         rig_step(&r);
@@ -301,7 +286,7 @@ static void test_fan_low_gates_its_layer(void **state) {
 static void test_stop_command_stops_motors_and_fans(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0u);
+    rig_start_working(&r, NULL, 0u);
     assert_true(r.out.meter_duty[TD_UPPER] > 0.1f);
     r.pc_start = false;
     r.next_cmd_us = r.now_us;
@@ -319,10 +304,7 @@ static void test_stop_command_stops_motors_and_fans(void **state) {
 static void test_headland_stop_meters_reach_zero(void **state) {
     (void)state;
     rig_t r;
-    rig_init(&r, NULL, 0u);
-    r.pc_start = true;
-    r.pc_gnss_kmh = 4.0;
-    r.wheel_kmh = 4.0;
+    rig_start(&r, NULL, 0u, 4.0, 4.0);
     rig_run_ms(&r, 4000);
     assert_true(r.out.meter_duty[TD_UPPER] > 0.1f);
     /* the tractor stops at the headland; the PC keeps the ECU running */
@@ -489,7 +471,7 @@ static void test_tx_queue_overflow_counted(void **state) {
 static void test_status_frames_every_100ms_with_state(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, 0u);
+    rig_start_working(&r, NULL, 0u);
     int n[4] = { 0, 0, 0, 0 };
     td_can_frame_t last_status;
     memset(&last_status, 0, sizeof last_status);

@@ -3,15 +3,6 @@
  * stop while a meter is blocked, fans below their minimum while starting. */
 #include "td_test.h"
 
-/* Working at 8 km/h on GNSS: GNSS 8.0, the wheel 7 % under by slip. */
-static void start_working(rig_t *r, const td_params_t *p, uint32_t t0_us) {
-    rig_init(r, p, t0_us);
-    r->pc_start = true;
-    r->pc_gnss_kmh = 8.0;
-    r->wheel_kmh = 8.0 * 0.93;
-    rig_run_ms(r, 6000);
-}
-
 static void step_drained(rig_t *r) {
     rig_step(r);
     (void)rig_drain(r, 0u);
@@ -34,7 +25,7 @@ static void brake_to_stop_with_gnss_frozen_at_8(rig_t *r) {
 static void test_frozen_gnss_while_the_wheel_stops_never_meters(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, NULL, 0u);
+    rig_start_working(&r, NULL, 0u);
     assert_int_equal(rig_st(&r)->source, TD_SRC_GNSS);
     brake_to_stop_with_gnss_frozen_at_8(&r);
     /* standing: queue G fills with zeros (CV 0, "uniform") and GNSS says 8 km/h > 6 */
@@ -67,7 +58,7 @@ static void test_frozen_gnss_stops_the_meters_in_gnss_only_mode(void **state) {
     td_params_default(&p);
     p.speed_mode = TD_MODE_GNSS_ONLY;
     rig_t r;
-    start_working(&r, &p, 0u);
+    rig_start_working(&r, &p, 0u);
     brake_to_stop_with_gnss_frozen_at_8(&r);
     /* GNSS only trusts the receiver for enc_fault_time_ms, then no longer */
     rig_run_ms(&r, 2100);
@@ -83,7 +74,7 @@ static void test_frozen_gnss_stops_the_meters_in_gnss_only_mode(void **state) {
 static void test_live_gnss_after_a_frozen_phase_latches_the_encoder_fault(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, NULL, 0u);
+    rig_start_working(&r, NULL, 0u);
     r.wheel_kmh = 0.0; /* encoder cable cut at 8 km/h, GNSS repeating 8.0 for a while */
     rig_run_ms(&r, 3500);
     assert_int_equal(rig_st(&r)->faults & (TD_FAULT_GNSS_FROZEN | TD_FAULT_WHEEL_ENCODER), TD_FAULT_GNSS_FROZEN);
@@ -100,7 +91,7 @@ static void test_command_timeout_boundary_at_the_clock_wrap(void **state) {
     (void)state;
     rig_t r;
     /* commands at t0 + 0, 0.5, ... 5.5 s; the last one 1.5 s before the clock wraps to 0 */
-    start_working(&r, NULL, 0u - 7000000u);
+    rig_start_working(&r, NULL, 0u - 7000000u);
     r.pc_sending = false;
     while (r.now_us != 0u) {
         step_drained(&r);
@@ -152,11 +143,8 @@ static void fan_low_set(const rig_t *r) {
 static void test_fan_low_stays_flagged_through_the_clock_wrap(void **state) {
     (void)state;
     rig_t r;
-    rig_init(&r, NULL, 0u);
+    rig_start(&r, NULL, 0u, 4.0, 4.0);
     r.fan_broken[TD_UPPER] = true;
-    r.pc_start = true;
-    r.pc_gnss_kmh = 4.0;
-    r.wheel_kmh = 4.0;
     rig_run_ms(&r, 3100);
     fan_low_set(&r);
     /* 72 min of running: the microsecond clock passes the start time again after 71.6 min */
@@ -171,7 +159,7 @@ static void gnss_lost(const rig_t *r) {
 static void test_stale_gnss_stays_lost_through_the_clock_wrap(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, NULL, 0u);
+    rig_start_working(&r, NULL, 0u);
     r.pc_sending = false; /* the PC is gone for good */
     rig_run_ms(&r, 1300);
     gnss_lost(&r);
@@ -248,7 +236,7 @@ static void test_parameter_writes_to_n_and_N_with_data_in_queue_g(void **state) 
 static void test_stop_while_a_meter_is_blocked(void **state) {
     (void)state;
     rig_t r;
-    start_working(&r, NULL, 0u);
+    rig_start_working(&r, NULL, 0u);
     r.meter_blocked[TD_UPPER] = true;
     rig_run_ms(&r, 1500);
     assert_int_equal(rig_st(&r)->faults & TD_FAULT_UPPER_BLOCKED, TD_FAULT_UPPER_BLOCKED);
@@ -301,10 +289,7 @@ static void test_stop_while_a_meter_is_blocked(void **state) {
 static void test_blocked_meter_at_a_small_target_latches_once_the_duty_is_up(void **state) {
     (void)state;
     rig_t r;
-    rig_init(&r, NULL, 0u);
-    r.pc_start = true;
-    r.pc_gnss_kmh = 4.0;
-    r.wheel_kmh = 4.0;
+    rig_start(&r, NULL, 0u, 4.0, 4.0);
     r.pc_rate[TD_UPPER] = 30.0; /* 2.4 r/min: feed-forward duty 0.04 */
     rig_run_ms(&r, 5000);
     assert_float_equal(rig_st(&r)->target_rpm[TD_UPPER], 3.6 * 30 * 4.0 / 180.0, 0.05);
@@ -323,10 +308,7 @@ static void test_blocked_meter_at_a_small_target_latches_once_the_duty_is_up(voi
 static void test_fans_below_minimum_while_starting(void **state) {
     (void)state;
     rig_t r;
-    rig_init(&r, NULL, 0u);
-    r.pc_start = true;
-    r.pc_gnss_kmh = 4.0;
-    r.wheel_kmh = 4.0;
+    rig_start(&r, NULL, 0u, 4.0, 4.0);
     r.fan_broken[TD_LOWER] = true;
     /* no meter turns before its fan is measured at fan_min_rpm; no fault during the grace */
     bool upper_metered = false;
