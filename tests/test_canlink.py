@@ -11,9 +11,9 @@ import pytest
 import serial
 
 from topdress import protocol
+from topdress.config import CanConfig, default_config, loads_config
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
 from topdress.terminal.canlink import CanLink, SimulatedEcu, open_bus
-from topdress.terminal.config import CanConfig, default_config, loads_config
 
 _channels = itertools.count()
 

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 
-from topdress.errors import ConfigError
-from topdress.terminal.config import (
+from topdress.config import (
     DEFAULT_TOML,
     default_config,
     load_config,
     loads_config,
 )
+from topdress.errors import ConfigError
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "config.md"
 

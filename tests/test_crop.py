@@ -9,8 +9,8 @@ import time
 
 import pytest
 
+from topdress.config import CropConfig, default_config, loads_config
 from topdress.errors import ConfigError, SensorError
-from topdress.terminal.config import CropConfig, default_config, loads_config
 from topdress.terminal.crop import (
     CompensatedNdvi,
     CropSensors,

@@ -17,12 +17,12 @@ from can import Message
 
 from topdress import protocol
 from topdress.cli import main
+from topdress.config import default_config, loads_config
 from topdress.ecu import meter_target_rpm
 from topdress.log.session import RawRecord, SessionReader
 from topdress.protocol import AckResult
 from topdress.sim.live import PtyPort
 from topdress.terminal.cli import EXIT_NO_ECU
-from topdress.terminal.config import default_config, loads_config
 from topdress.terminal.demo import demo_config_toml, run_demo
 
 

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 from topdress.cli import main
-from topdress.terminal.gnss import GnssSpeedTracker
+from topdress.gnss.nmea import GnssFix, NmeaDecoder, make_sentence, nmea_checksum
+from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.terminal.gnss_cli import decode_stream
-from topdress.terminal.nmea import GnssFix, NmeaDecoder, make_sentence, nmea_checksum
 
 GPSD_LOGS = Path(__file__).resolve().parents[1].parent / "shared" / "nmea" / "gpsd-logs"
 

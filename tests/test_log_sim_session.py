@@ -12,13 +12,13 @@ import pytest
 
 from topdress import protocol
 from topdress.cli import main
+from topdress.config import default_config
+from topdress.gnss.nmea import NmeaDecoder
+from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, Truth, World
-from topdress.terminal.config import default_config
-from topdress.terminal.gnss import GnssSpeedTracker
-from topdress.terminal.nmea import NmeaDecoder
 
 RATE = (180.0, 150.0)
 

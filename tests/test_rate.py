@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from topdress.terminal.config import (
+from topdress.config import (
     LinearRateConfig,
     SufficiencyRateConfig,
     TableRateConfig,

@@ -16,14 +16,14 @@ import pytest
 
 from topdress import protocol
 from topdress.cli import main
+from topdress.config import default_config, loads_config
 from topdress.ecu import Ecu
+from topdress.gnss.nmea import NmeaDecoder, make_sentence
+from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.events import Event, NmeaEvent, WheelEvent, read_file, write
 from topdress.log.export import session_events
 from topdress.log.replay import MAX_IDLE_S, ReplayRow, ReplayStats, ecu_params, replay
 from topdress.log.session import SessionLog, SessionReader
-from topdress.terminal.config import default_config, loads_config
-from topdress.terminal.gnss import GnssSpeedTracker
-from topdress.terminal.nmea import NmeaDecoder, make_sentence
 
 R_M, PPR = 0.0615, 500
 V_MAX = 8.0 / 3.6

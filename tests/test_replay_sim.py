@@ -8,13 +8,13 @@ from pathlib import Path
 import pytest
 
 from topdress import protocol
+from topdress.config import default_config
+from topdress.gnss.nmea import NmeaDecoder
+from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent, read_file, write
 from topdress.log.replay import ReplayRow, ecu_params, replay
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.config import default_config
-from topdress.terminal.gnss import GnssSpeedTracker
-from topdress.terminal.nmea import NmeaDecoder
 
 
 def live_run(target_kmh: float, seed: int) -> tuple[list[ReplayRow], list[Event]]:

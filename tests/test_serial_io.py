@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from topdress.config import CropConfig, GnssConfig
 from topdress.errors import DeviceError
-from topdress.terminal.config import CropConfig, GnssConfig
-from topdress.terminal.nmea import NmeaDecoder, make_sentence
+from topdress.gnss.nmea import NmeaDecoder, make_sentence
 from topdress.terminal.serial_io import (
     FakeLineSource,
     FileLineSource,

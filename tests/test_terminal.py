@@ -11,15 +11,15 @@ import can
 import pytest
 
 from topdress import protocol
+from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.ecu import meter_target_rpm
+from topdress.gnss.nmea import make_sentence
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
-from topdress.terminal.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.terminal.console import render_line, render_lines
-from topdress.terminal.nmea import make_sentence
 from topdress.terminal.rate import build_rate_model, split_layers
 from topdress.terminal.serial_io import FakeLineSource
 

@@ -8,11 +8,11 @@ from dataclasses import replace
 
 import pytest
 
+from topdress.config import default_config
 from topdress.sim import nmea
 from topdress.sim.live import PtyPort
 from topdress.terminal.app import Terminal
 from topdress.terminal.canlink import open_bus
-from topdress.terminal.config import default_config
 from topdress.terminal.serial_io import FakeLineSource, SerialLineSource
 
 

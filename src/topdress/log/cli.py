@@ -100,9 +100,9 @@ def _summary(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from topdress.config import default_config, load_config
     from topdress.log.events import read_file
     from topdress.log.replay import MAX_IDLE_S, ReplayStats, replay, write_csv
-    from topdress.terminal.config import default_config, load_config
 
     cfg = load_config(args.config) if args.config is not None else default_config()
     read = read_file(args.events)

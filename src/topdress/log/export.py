@@ -9,11 +9,11 @@ from dataclasses import dataclass
 from typing import Final, TextIO
 
 from topdress import protocol
+from topdress.config import loads_config
 from topdress.errors import ConfigError, ProtocolError
 from topdress.log.events import CanEvent, CropEvent, Event, NmeaEvent, WheelEvent
 from topdress.log.model import STATE_COLUMNS
 from topdress.log.session import RawRecord, SessionReader
-from topdress.terminal.config import loads_config
 
 _log = logging.getLogger(__name__)
 

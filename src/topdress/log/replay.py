@@ -28,13 +28,13 @@ from dataclasses import dataclass, field
 from typing import Final, TextIO
 
 from topdress import protocol
+from topdress.config import SPEED_MODE_IDS, TerminalConfig
 from topdress.ecu import Ecu, EcuParams, EcuState
 from topdress.errors import ProtocolError
+from topdress.gnss.nmea import NmeaDecoder
+from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent
 from topdress.protocol.frames import GNSS_MAX_KMH
-from topdress.terminal.config import SPEED_MODE_IDS, TerminalConfig
-from topdress.terminal.gnss import GnssSpeedTracker
-from topdress.terminal.nmea import NmeaDecoder
 
 _log = logging.getLogger(__name__)
 

@@ -12,10 +12,10 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Final
 
 from topdress import protocol
+from topdress.config import MachineConfig, loads_config
 from topdress.errors import ConfigError
 from topdress.log.model import RAW_KINDS, SOURCES, StateRow
 from topdress.log.session import SessionReader
-from topdress.terminal.config import MachineConfig, loads_config
 
 _log = logging.getLogger(__name__)
 

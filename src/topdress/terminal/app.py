@@ -28,14 +28,14 @@ from typing import Any
 
 import can
 
+from topdress.config import TerminalConfig
+from topdress.gnss.nmea import NmeaDecoder
+from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
 from topdress.terminal.canlink import CanLink, EcuView
-from topdress.terminal.config import TerminalConfig
 from topdress.terminal.crop import CompensatedNdvi
-from topdress.terminal.gnss import GnssSpeedTracker
-from topdress.terminal.nmea import NmeaDecoder
 from topdress.terminal.rate import build_rate_model, split_layers
 from topdress.terminal.serial_io import LineSource
 

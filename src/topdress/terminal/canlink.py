@@ -30,10 +30,10 @@ from typing import Any
 import can
 
 from topdress import protocol
+from topdress.config import CanConfig
 from topdress.ecu import Ecu, EcuParams
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
 from topdress.protocol import AckResult, FrameIds
-from topdress.terminal.config import CanConfig
 
 log = logging.getLogger(__name__)
 

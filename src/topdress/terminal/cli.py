@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from topdress.terminal.config import load_config, read_config_text
+from topdress.config import load_config, read_config_text
 
 #: `topdress run` ended (duration, Ctrl-C, SIGTERM) without the ECU ever acknowledging its
 #: parameters: the inputs were logged, nothing was metered.

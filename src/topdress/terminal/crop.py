@@ -14,8 +14,8 @@ from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from topdress.config import CropConfig
 from topdress.errors import ConfigError, SensorError
-from topdress.terminal.config import CropConfig
 
 _REFLECTANCES = ("red", "red_edge", "nir")
 _INDICES = ("ndre", "ndvi")

@@ -18,6 +18,7 @@ from typing import TextIO
 
 import can
 
+from topdress.config import TerminalConfig, loads_config
 from topdress.errors import DeviceError
 from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
@@ -25,7 +26,6 @@ from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
-from topdress.terminal.config import TerminalConfig, loads_config
 from topdress.terminal.console import Console
 from topdress.terminal.serial_io import open_line_source
 

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 from typing import Any, BinaryIO, TextIO
 
 from topdress.errors import DeviceError
-from topdress.terminal.nmea import NmeaDecoder
+from topdress.gnss.nmea import NmeaDecoder
 
 
 def register(sub: Any) -> None:

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from topdress.terminal.config import (
+from topdress.config import (
     LinearRateConfig,
     RateConfig,
     SufficiencyRateConfig,

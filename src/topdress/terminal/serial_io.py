@@ -19,8 +19,8 @@ from typing import BinaryIO, Protocol
 
 import serial
 
+from topdress.config import CropConfig, GnssConfig
 from topdress.errors import DeviceError
-from topdress.terminal.config import CropConfig, GnssConfig
 
 Sink = Callable[[float, bytes], None]
 Clock = Callable[[], float]

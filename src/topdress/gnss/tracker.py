@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from topdress.terminal.nmea import GnssFix
+from topdress.gnss.nmea import GnssFix
 
 
 @dataclass(frozen=True)
