@@ -115,19 +115,20 @@ def test_other_sentences_are_accepted_without_a_fix() -> None:
             "malformed",
         ),
         (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,ten,K,A"), "malformed"),
-        # numbers a checksum cannot vouch for: NaN, infinite or negative speed, latitude 99
+        # text that Python's float() reads but NMEA does not write: not a number field
         (
             make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,nan,87.5,210526,,,A"),
-            "out_of_range",
+            "malformed",
         ),
         (
             make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,1e999,87.5,210526,,,A"),
-            "out_of_range",
+            "malformed",
         ),
         (
             make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,-3.2,87.5,210526,,,A"),
-            "out_of_range",
+            "malformed",
         ),
+        # numbers a checksum cannot vouch for: latitude 99, longitude 185, course 400
         (
             make_sentence("GPRMC,081836.00,A,9904.5678,N,12534.1234,E,3.24,87.5,210526,,,A"),
             "out_of_range",
@@ -140,8 +141,8 @@ def test_other_sentences_are_accepted_without_a_fix() -> None:
             make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,400.0,210526,,,A"),
             "out_of_range",
         ),
-        (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,-10.2,K,A"), "out_of_range"),
-        (make_sentence("GPVTG,nan,T,034.4,M,005.5,N,10.2,K,A"), "out_of_range"),
+        (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,-10.2,K,A"), "malformed"),
+        (make_sentence("GPVTG,nan,T,034.4,M,005.5,N,10.2,K,A"), "malformed"),
         (
             make_sentence("GPGGA,081836.00,9104.5678,S,12534.1234,E,1,08,1.0,100,M,0,M,,"),
             "out_of_range",
@@ -356,3 +357,70 @@ def test_gnss_decode_shows_a_live_receiver_line_by_line() -> None:
         proc.stdout.close()
         assert proc.stderr is not None
         proc.stderr.close()
+
+
+# A checksum-valid sentence with a second '*' inside: framing (last '*') and the field parser
+# (first '*') disagreed on where the body ends and the parser raised AttributeError.
+@pytest.mark.parametrize(
+    "line",
+    [
+        b"$GPRMC,,*,,,,,,,,,,*61",
+        b"$GPVTG,,T,,M,,N*,,K,N*06",
+        b"$GPGGA,,,*,,,,,,,,,,,*7C",
+        # the first checksum wrong, a second one right over the whole text: not accepted
+        b"$GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*00*40",
+    ],
+)
+def test_second_star_is_malformed(line: bytes) -> None:
+    body = line[1 : line.rindex(b"*")]
+    assert int(line[-2:], 16) == nmea_checksum(body)  # the reproducer's checksum holds
+    d = NmeaDecoder()
+    fix = d.decode(line)
+    assert not fix.ok and fix.speed_kmh is None
+    assert fix.error is not None and fix.error.startswith("malformed:")
+    assert d.counters == {"malformed": 1}
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        # 1e308 knots passed the finiteness check and overflowed to an infinite km/h
+        "GPRMC,123519,A,4807.038,N,01131.000,E,1e308,084.4,230394,003.1,W",
+        "GPVTG,054.7,T,034.4,M,1e308,N,,K,A",
+        "GPRMC,123519,A,4807.038,N,01131.000,E,2_2.4,084.4,230394,003.1,W",
+        "GPRMC,123519,A,-4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W",
+        "GPRMC,123519,A,4807.038,Q,01131.000,E,022.4,084.4,230394,003.1,W",
+        "GPRMC,123519,A,4807.038,N,01131.000,,022.4,084.4,230394,003.1,W",
+        "GPGGA,123519,4807.038,N,01131.000,X,1,08,0.9,545.4,M,46.9,M,,",
+        "GPRMC,123519,A,4807.038,N,01131.000,E,+22.4,084.4,230394,003.1,W",
+        "GPRMC,123519,A,4807.038,N,01131.000,E,inf,084.4,230394,003.1,W",
+    ],
+)
+def test_number_fields_take_nmea_forms_only(body: str) -> None:
+    d = NmeaDecoder()
+    fix = d.decode(make_sentence(body))
+    assert not fix.ok and fix.speed_kmh is None
+    assert fix.error is not None and fix.error.startswith("malformed:"), fix.error
+    assert d.counters == {"malformed": 1}
+
+
+def test_long_number_that_overflows_after_conversion_is_refused() -> None:
+    # 10**309 knots: an NMEA-form number whose float is already infinite
+    d = NmeaDecoder()
+    fix = d.decode(make_sentence(f"GPVTG,054.7,T,034.4,M,1{'0' * 309},N,,K,A"))
+    assert not fix.ok and fix.error is not None and fix.error.startswith("out_of_range:")
+    # 10**308 knots is finite, but knots * 1.852 overflows: checked after converting
+    fix = d.decode(make_sentence(f"GPVTG,054.7,T,034.4,M,1{'0' * 308},N,,K,A"))
+    assert not fix.ok and fix.error is not None and fix.error.startswith("out_of_range:")
+    assert d.counters == {"out_of_range": 2}
+
+
+def test_worked_rmc_still_decodes_with_the_stricter_fields() -> None:
+    # the classic example sentence, with its real checksum: 22.4 kn = 41.4848 km/h
+    fix = NmeaDecoder().decode(
+        b"$GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*6A"
+    )
+    assert fix.ok and fix.fix_valid
+    assert fix.speed_kmh == pytest.approx(22.4 * 1.852)
+    assert fix.lat == pytest.approx(48 + 7.038 / 60)
+    assert fix.lon == pytest.approx(11 + 31.0 / 60)

@@ -28,6 +28,16 @@ _CHECKED = {
     "VTG": {"cogt": 0, "sogn": 4, "sogk": 6},
     "GGA": {"time": 0, "lat": 1, "lon": 3, "quality": 5},
 }
+# The numeric fields above take NMEA's form only: unsigned digits with an optional fraction.
+# Python's float() also reads "2_2.4", "-4807.038", "1e308" or "inf", which no receiver writes
+# and which would pass as numbers (1e308 knots overflows to an infinite km/h).
+_NUMBER = re.compile(rb"^(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)$")
+# Hemisphere fields: index of the field -> the letters it may hold (empty only with no value).
+_HEMISPHERES = {
+    "RMC": {3: b"NS", 5: b"EW"},
+    "GGA": {2: b"NS", 4: b"EW"},
+    "VTG": {},
+}
 # Physical limits of the numbers parsed: a NaN, an infinite or negative speed, latitude 99 or a
 # course of 400 pass the checksum when the receiver (or a relay) wrote them, and must not travel
 # on as a valid fix (a NaN speed cannot even be put in the command frame).
@@ -112,6 +122,10 @@ class NmeaDecoder:
             return _bad("truncated", "line ends inside the checksum")
         if not _HEX2.match(given):
             return _bad("malformed", f"checksum field {given.decode()!r} is not two hex digits")
+        if b"*" in body:
+            # '*' only ever opens the checksum: a second one means two sentences ran together
+            # or a corrupt one; the field parser would split it elsewhere than this framing.
+            return _bad("malformed", "'*' inside the sentence body (only one '*hh' is allowed)")
         address = body.split(b",", 1)[0]
         if not _ADDRESS.match(address):
             return _bad("malformed", f"bad address field {address.decode()!r}")
@@ -153,15 +167,26 @@ def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
     except Exception as exc:  # pynmeagps raises many types on odd fields
         return _bad("malformed", f"{type(exc).__name__}: {exc}", talker, kind)
     for attr, index in _CHECKED[kind].items():
-        if fields[index] and getattr(msg, attr, "") == "":
-            text = fields[index].decode()
-            return _bad("malformed", f"{kind} field {attr}={text!r}", talker, kind)
+        text = fields[index]
+        if text and (not _NUMBER.match(text) or getattr(msg, attr, "") == ""):
+            return _bad("malformed", f"{kind} field {attr}={text.decode()!r}", talker, kind)
+    for index, letters in _HEMISPHERES[kind].items():
+        hemi, value = fields[index], fields[index - 1]
+        if (hemi or value) and (len(hemi) != 1 or hemi not in letters):
+            msg_text = f"{kind} hemisphere {hemi.decode()!r} is not one of {letters.decode()}"
+            return _bad("malformed", msg_text, talker, kind)
     for attr, (lo, hi) in _LIMITS[kind].items():
         value = getattr(msg, attr, "")
         if isinstance(value, int | float) and not (math.isfinite(value) and lo <= value <= hi):
             msg_text = f"{kind} field {attr}={value!r} outside {lo:g}..{hi:g}"
             return _bad("out_of_range", msg_text, talker, kind)
-    return _FIELD_PARSERS[kind](msg, talker)
+    fix = _FIELD_PARSERS[kind](msg, talker)
+    # Checked again after converting: a finite knots value can still give an infinite km/h.
+    for name in ("speed_kmh", "course_deg", "lat", "lon"):
+        value = getattr(fix, name)
+        if value is not None and not math.isfinite(value):
+            return _bad("out_of_range", f"{kind} {name} is not finite", talker, kind)
+    return fix
 
 
 def _opt(value: Any) -> float | None:

@@ -10,6 +10,7 @@ computed from red and NIR: (nir - red) / (nir + red).
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -18,6 +19,10 @@ from topdress.config import CropConfig
 from topdress.errors import ConfigError, SensorError
 
 _REFLECTANCES = ("red", "red_edge", "nir")
+# The logger writes plain decimals. float() and int() would also read "1_0", "+1", "1e0",
+# "inf" or "nan": such a field is refused, not read as a number.
+_DECIMAL = re.compile(r"^-?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)$")
+_SENSOR_ID = re.compile(r"^[0-9]{1,3}$")
 _INDICES = ("ndre", "ndvi")
 
 
@@ -43,10 +48,12 @@ def parse_crop_line(
     need = max(columns.values()) + 1
     if len(fields) < need:
         raise SensorError(f"fields: {len(fields)} fields, the column map needs {need}")
-    values = {name: _field(fields[i], name) for name, i in columns.items()}
-    sensor = values.pop("sensor_id")
-    if sensor is None or sensor != int(sensor) or not 1 <= sensor <= sensors:
-        raise SensorError(f"sensor_id: {fields[columns['sensor_id']]!r} is not 1..{sensors}")
+    id_text = fields[columns["sensor_id"]]
+    _field(id_text, "sensor_id")  # not a decimal at all: a 'number' error like the others
+    if not _SENSOR_ID.match(id_text) or not 1 <= int(id_text) <= sensors:
+        raise SensorError(f"sensor_id: {id_text!r} is not 1..{sensors}")
+    sensor = int(id_text)
+    values = {name: _field(fields[i], name) for name, i in columns.items() if name != "sensor_id"}
     for name in _REFLECTANCES:
         v = values.get(name)
         if v is not None and not 0.0 <= v <= 1.0:
@@ -60,7 +67,7 @@ def parse_crop_line(
         ndvi = _ndvi(values.get("red"), values.get("nir"))
     return CropReading(
         t=t,
-        sensor_id=int(sensor),
+        sensor_id=sensor,
         ndvi=ndvi,
         red=values.get("red"),
         red_edge=values.get("red_edge"),
@@ -82,11 +89,10 @@ def _text(line: bytes | str) -> str:
 def _field(text: str, name: str) -> float | None:
     if not text:
         return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise SensorError(f"number: {name} {text!r} is not a number") from None
-    if not math.isfinite(value):
+    if not _DECIMAL.match(text):
+        raise SensorError(f"number: {name} {text!r} is not a decimal number")
+    value = float(text)
+    if not math.isfinite(value):  # a decimal of over 308 digits
         raise SensorError(f"number: {name} {text!r} is not finite")
     return value
 

@@ -53,7 +53,8 @@ def decode_stream(stream: BinaryIO, out: TextIO, err: TextIO) -> int:
     for lines in _numbered_chunks(stream):
         for number, line in lines:
             fix = decoder.decode(line)
-            out.write(json.dumps({"line": number, **dataclasses.asdict(fix)}) + "\n")
+            record = {"line": number, **dataclasses.asdict(fix)}
+            out.write(json.dumps(record, allow_nan=False) + "\n")  # strict JSON, no Infinity
         out.flush()  # a live receiver piped in shows each line as it comes
     counts = ", ".join(f"{k}={v}" for k, v in sorted(decoder.counters.items()))
     err.write(f"gnss decode: {counts or 'no lines'}\n")
