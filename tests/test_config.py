@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
+import random
+from collections import Counter
 from pathlib import Path
 
 import pytest
 
+from topdress.cli import main
 from topdress.config import (
     DEFAULT_TOML,
+    MAX_CONFIG_BYTES,
     default_config,
     load_config,
     loads_config,
@@ -199,3 +204,111 @@ def test_a_file_with_a_byte_order_mark_loads(tmp_path: Path) -> None:
     path = tmp_path / "notepad.toml"
     path.write_bytes("\ufeff[machine]\nwidth_m = 4.2\n".encode())
     assert load_config(path).machine.width_m == 4.2
+
+
+# ---- hostile files: errors name the key, never a traceback ----------------------------------
+
+_HUGE = "1" + "0" * 400  # an integer no float holds: float() and isfinite() raise OverflowError
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        (f"[machine]\nwidth_m = {_HUGE}\n", "machine.width_m"),
+        (f"[machine]\nwheel_ppr = {_HUGE}\n", "machine.wheel_ppr"),
+        (f"[ecu]\npid_kp = {_HUGE}\n", "ecu.pid_kp"),
+        (f"[crop.columns]\nsensor_id = {_HUGE}\nndvi = 1\n", "crop.columns.sensor_id"),
+        (f"[can.ids]\ncommand = {_HUGE}\n", "can.ids.command"),
+        (
+            f'[rate]\nmodel = "table"\n[rate.table]\npoints = [[0.1, {_HUGE}], [0.5, 3.0]]\n',
+            "rate.table.points[0]",
+        ),
+        (f"[machine]\nwidth_m = -{_HUGE}\n", "machine.width_m"),
+    ],
+)
+def test_overflowing_integers_name_the_key(text: str, key: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        loads_config(text)
+    assert err.value.key == key
+    assert "400 digits" in str(err.value) or "401 digits" in str(err.value)
+
+
+def test_integer_over_the_digit_limit_names_the_key() -> None:
+    # tomllib raises ValueError (Python's 4,300-digit limit on int parsing), with no key
+    text = "[gnss]\nbaud = 9600\n\n[machine]\nrows = 6\nwidth_m = 1" + "0" * 5000 + "\n"
+    with pytest.raises(ConfigError) as err:
+        loads_config(text)
+    assert err.value.key == "machine.width_m"
+    assert "too long" in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("[speed]\nqueue_len = " + "[" * 100_000 + "]" * 100_000 + "\n", "speed.queue_len"),
+        ("x = " + "{a = " * 50_000 + "}" * 50_000 + "\n", "x"),
+    ],
+)
+def test_nesting_100000_deep_names_the_key(text: str, key: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        loads_config(text)
+    assert err.value.key == key
+    assert "nested too deep" in str(err.value)
+
+
+def test_device_files_fifo_and_directories_are_refused(tmp_path: Path) -> None:
+    fifo = tmp_path / "config.fifo"
+    os.mkfifo(fifo)  # opening it to read would block until a writer came
+    for path in (Path("/dev/zero"), Path("/dev/urandom"), fifo, tmp_path):
+        with pytest.raises(ConfigError) as err:
+            load_config(path)
+        assert err.value.key == str(path)
+        assert "not a regular file" in str(err.value)
+
+
+def test_a_file_over_1_mib_is_refused_and_one_at_the_limit_is_read(tmp_path: Path) -> None:
+    big = tmp_path / "big.toml"
+    comment = "# " + "x" * 98 + "\n"  # 101 bytes a line
+    body = "[machine]\nwidth_m = 3.0\n"
+    pad = MAX_CONFIG_BYTES - len(body)
+    big.write_text(body + comment * (pad // len(comment)) + "#" * (pad % len(comment) - 1) + "\n")
+    assert big.stat().st_size == MAX_CONFIG_BYTES
+    assert load_config(big).machine.width_m == 3.0
+    with big.open("a") as f:
+        f.write("#")
+    with pytest.raises(ConfigError) as err:
+        load_config(big)
+    assert "over 1048576 bytes" in str(err.value)
+
+
+def test_cli_refuses_dev_zero_with_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "--config", "/dev/zero", "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "/dev/zero" in err and "not a regular file" in err and "Traceback" not in err
+
+
+def test_mutated_configuration_files_give_config_error_only() -> None:
+    # Deterministic mutations of the documented file: each is loaded or refused with a
+    # ConfigError naming a key; nothing else may escape (2,000 files, about a second).
+    rng = random.Random(8)
+    base = DEFAULT_TOML
+    alphabet = '[]{}=."\n#,-+_0123456789eEinfa \t'
+    outcomes: Counter[str] = Counter()
+    for _ in range(2000):
+        text = list(base)
+        for _ in range(rng.randint(1, 6)):
+            i = rng.randrange(len(text))
+            op = rng.random()
+            if op < 0.4:
+                text[i] = rng.choice(alphabet)
+            elif op < 0.7:
+                del text[i]
+            else:
+                text.insert(i, rng.choice(["0" * rng.randint(1, 500), "[" * 60, "1e999"]))
+        try:
+            loads_config("".join(text))
+            outcomes["ok"] += 1
+        except ConfigError as exc:
+            assert exc.key, exc
+            outcomes["refused"] += 1
+    assert outcomes["refused"] > 500 and outcomes["ok"] > 50

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
+import random
 import threading
 import time
 
@@ -213,3 +215,23 @@ def test_crop_lines_over_a_pseudo_terminal() -> None:
         os.close(slave)
     assert sensors.counters == {"ok": 4, "sensor_id": 1}
     assert sensors.mean_ndvi(times[-1]) == pytest.approx((0.6 + 0.7 + 0.8 + 0.9) / 4)
+
+
+def test_mutated_crop_lines_give_a_reading_or_a_sensor_error() -> None:
+    rng = random.Random(12)
+    cols = default_config().crop.columns
+    base = "2,0.0412,0.2104,0.4419,0.3541,0.8295"
+    readings = errors = 0
+    for _ in range(20_000):
+        line = list(base)
+        for _ in range(rng.randint(1, 3)):
+            i = rng.randrange(len(line))
+            line[i] = rng.choice("0123456789.,-+_eEinfa ")
+        try:
+            r = parse_crop_line(0.0, "".join(line), cols, 4)
+        except SensorError:
+            errors += 1
+            continue
+        readings += 1
+        assert 1 <= r.sensor_id <= 4 and math.isfinite(r.ndvi) and -1.0 <= r.ndvi <= 1.0
+    assert readings > 1000 and errors > 1000

@@ -5,6 +5,8 @@ from __future__ import annotations
 import datetime as dt
 import io
 import json
+import math
+import random
 import select
 import subprocess
 import sys
@@ -424,3 +426,31 @@ def test_worked_rmc_still_decodes_with_the_stricter_fields() -> None:
     assert fix.speed_kmh == pytest.approx(22.4 * 1.852)
     assert fix.lat == pytest.approx(48 + 7.038 / 60)
     assert fix.lon == pytest.approx(11 + 31.0 / 60)
+
+
+def test_mutated_sentences_never_raise_and_never_give_a_non_finite_number() -> None:
+    # Deterministic mutations of real sentences, checksum recomputed so they reach the field
+    # parser: every one is a fix or a counted rejection, with finite numbers only.
+    rng = random.Random(11)
+    bases = [
+        "GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W",
+        "GPVTG,054.7,T,034.4,M,005.5,N,010.2,K,A",
+        "GNGGA,081836.00,4304.5678,N,12534.1234,E,1,08,1.0,100,M,0,M,,",
+        "BDRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A",
+    ]
+    alphabet = "0123456789.,*-+_eENSWQ$AVnaif "
+    d = NmeaDecoder()
+    for _ in range(8_000):
+        body = list(rng.choice(bases))
+        for _ in range(rng.randint(1, 4)):
+            i = rng.randrange(len(body))
+            if rng.random() < 0.5:
+                body[i] = rng.choice(alphabet)
+            else:
+                body.insert(i, rng.choice(["*", "1e308", "9" * 320, ",", "-"]))
+        fix = d.decode(make_sentence("".join(body)))
+        for value in (fix.speed_kmh, fix.course_deg, fix.lat, fix.lon):
+            assert value is None or math.isfinite(value), fix
+        assert fix.ok or fix.error is not None
+    assert sum(d.counters.values()) - d.counters["resync"] == 8_000
+    assert d.counters["ok"] > 400 and d.counters["malformed"] > 400

@@ -268,10 +268,16 @@ def test_a_nan_speed_with_a_good_checksum_is_skipped_not_fatal() -> None:
         sent = rig.term.link.counters.tx_commands
         # sent at once with send_on_gnss: a NaN here used to stop the terminal
         rig.gnss.emit(3.0, make_sentence("GNRMC,000003.00,A,4500.0,N,12600.0,E,nan,0.0,010126,,,A"))
+        # a second '*' crashed the field parser; 1e308 knots became an infinite speed
+        rig.gnss.emit(3.1, b"$GPRMC,,*,,,,,,,,,,*61\r\n")
+        rig.gnss.emit(3.2, b"$GPVTG,,T,,M,,N*,,K,N*06\r\n")
+        rig.gnss.emit(
+            3.3, make_sentence("GPRMC,123519,A,4807.038,N,01131.000,E,1e308,084.4,230394,,W")
+        )
         rig.run(4.0)
         assert rig.term.link.counters.tx_commands > sent
-        assert rig.term.nmea.counters["out_of_range"] == 1
-        assert rig.term.snapshot.counters["nmea_bad"] == 1
+        assert rig.term.nmea.counters["malformed"] == 4
+        assert rig.term.snapshot.counters["nmea_bad"] == 4
     finally:
         rig.close()
 

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
+import stat
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -234,9 +236,23 @@ def default_config() -> TerminalConfig:
     return TerminalConfig()
 
 
+MAX_CONFIG_BYTES = 1 << 20  # a configuration file is a few kB; anything over 1 MiB is not one
+
+
 def read_config_text(path: str | Path) -> str:
-    """The file's text; a byte order mark (some Windows editors write one) is dropped."""
-    return Path(path).read_text(encoding="utf-8-sig")
+    """The file's text; a byte order mark (some Windows editors write one) is dropped.
+
+    Only a regular file of at most MAX_CONFIG_BYTES is read: /dev/zero, /dev/urandom or a FIFO
+    given as the configuration would otherwise be read forever (or block on open)."""
+    path = Path(path)
+    info = path.stat()  # follows links; never blocks, unlike opening a FIFO
+    if not stat.S_ISREG(info.st_mode):
+        raise ConfigError(str(path), "is not a regular file (a device, FIFO or directory)")
+    with path.open("rb") as f:
+        data = f.read(MAX_CONFIG_BYTES + 1)
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(str(path), f"is over {MAX_CONFIG_BYTES} bytes: not a configuration")
+    return data.decode("utf-8-sig")
 
 
 def load_config(path: str | Path) -> TerminalConfig:
@@ -253,6 +269,10 @@ def loads_config(text: str, source: str = "<config>") -> TerminalConfig:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(source, f"not valid TOML: {exc}") from exc
+    except ValueError as exc:  # an integer over Python's 4,300-digit conversion limit
+        raise ConfigError(_key_at(text, _has_long_digits), f"number too long: {exc}") from exc
+    except RecursionError:
+        raise ConfigError(_key_at(text, _is_deep), "arrays or tables nested too deep") from None
     sections = {f.name: f for f in dataclasses.fields(TerminalConfig)}
     _reject_unknown(doc, sections, "")
     built: dict[str, Any] = {}
@@ -323,9 +343,47 @@ def _number(raw: Any, key: str, lo: float, hi: float, integer: bool) -> Any:
         raise ConfigError(key, f"must be a number, not {raw!r}")
     if integer and not isinstance(raw, int):
         raise ConfigError(key, f"must be an integer, not {raw!r}")
-    if not math.isfinite(raw) or not lo <= raw <= hi:
-        raise ConfigError(key, f"{raw!r} is outside {lo:g}..{hi:g}")
+    # Range first: an int compares exactly with any float, while isfinite() or float() of an
+    # int of 400 digits raises OverflowError.
+    if (isinstance(raw, float) and not math.isfinite(raw)) or not lo <= raw <= hi:
+        raise ConfigError(key, f"{_short(raw)} is outside {lo:g}..{hi:g}")
     return raw if integer else float(raw)
+
+
+def _short(raw: int | float) -> str:
+    if isinstance(raw, int) and abs(raw).bit_length() > 64:  # do not echo 400 digits
+        return f"an integer of {len(str(abs(raw)))} digits"
+    return repr(raw)
+
+
+# ---- locating the key of an error tomllib reports without one -------------------------------
+
+_LONG_DIGITS = re.compile(r"[0-9_]{4000,}")
+_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]")
+_ASSIGN = re.compile(r"^\s*([^=\s]+)\s*=")
+
+
+def _has_long_digits(line: str) -> bool:
+    return _LONG_DIGITS.search(line) is not None
+
+
+def _is_deep(line: str) -> bool:
+    return line.count("[") + line.count("{") > 100
+
+
+def _key_at(text: str, bad: Callable[[str], bool]) -> str:
+    """The dotted key of the first line that `bad` flags, from the [section] above it."""
+    section = ""
+    key = "<config>"
+    for line in text.splitlines():
+        assign = _ASSIGN.match(line)
+        if assign is not None:
+            key = f"{section}.{assign.group(1)}" if section else assign.group(1)
+        if bad(line):
+            return key
+        if assign is None and (header := _HEADER.match(line)) is not None:
+            section = header.group(1).strip()
+    return key
 
 
 def _columns(raw: Any, key: str) -> dict[str, int]:

@@ -176,9 +176,9 @@ def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
             msg_text = f"{kind} hemisphere {hemi.decode()!r} is not one of {letters.decode()}"
             return _bad("malformed", msg_text, talker, kind)
     for attr, (lo, hi) in _LIMITS[kind].items():
-        value = getattr(msg, attr, "")
-        if isinstance(value, int | float) and not (math.isfinite(value) and lo <= value <= hi):
-            msg_text = f"{kind} field {attr}={value!r} outside {lo:g}..{hi:g}"
+        number = getattr(msg, attr, "")
+        if isinstance(number, int | float) and not (math.isfinite(number) and lo <= number <= hi):
+            msg_text = f"{kind} field {attr}={number!r} outside {lo:g}..{hi:g}"
             return _bad("out_of_range", msg_text, talker, kind)
     fix = _FIELD_PARSERS[kind](msg, talker)
     # Checked again after converting: a finite knots value can still give an infinite km/h.
