@@ -84,7 +84,10 @@ class StartWheelCal:
 
 @dataclass(frozen=True)
 class FinishWheelCal:
-    pass
+    """End of the run; `distance_m` the distance measured on the ground if it differs from the
+    one given at the start (the machine stopped short of the mark)."""
+
+    distance_m: float | None = None
 
 
 @dataclass(frozen=True)
