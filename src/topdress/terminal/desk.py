@@ -158,6 +158,8 @@ class OperatorDesk:
                 return op.CommandResult(False, str(exc))
             self.counters.save()
             return self._done(f"{c.which} counter reset")
+        if isinstance(c, op.Help):
+            return op.CommandResult(False, c.text)
         if isinstance(c, op.TestDevice):
             return self._device_test(c.device)
         if isinstance(c, op.ApplySettings):
