@@ -115,6 +115,15 @@ def test_manual_fixed_and_percent_rates_are_commanded_and_shown() -> None:
         for i, kg_rev in enumerate((m.kg_per_rev_upper, m.kg_per_rev_lower)):
             eq4 = meter_target_rpm(m.width_m, s.rate_kg_ha[i], s.v_kmh, kg_rev)
             assert s.target_rpm[i] == pytest.approx(eq4, rel=0.03)
+        # the rate actually applied, from the measured metering speed (eq. 4 inverted)
+        assert s.applied_kg_ha[0] == pytest.approx(200.0, rel=0.05)
+        assert s.applied_kg_ha[1] == pytest.approx(100.0, rel=0.05)
+        assert len(s.ndvi_per_sensor) == 4 and all(0.2 < x < 1.0 for x in s.ndvi_per_sensor if x)
+        assert s.ndvi_sensors == pytest.approx(
+            sum(x for x in s.ndvi_per_sensor if x) / sum(1 for x in s.ndvi_per_sensor if x)
+        )
+        assert (s.cv_threshold_pct, s.switch_speed_kmh) == (4.2, 6.0)
+        assert s.speed_why.startswith("gnss: CV ") and s.speed_why.endswith(" > 6 km/h")
         assert post(rig, op.SetManual("percent", percent=20.0)).ok
         rig.run(17.0)
         s = rig.term.snapshot
@@ -360,6 +369,8 @@ def test_settings_to_the_ecu_acknowledged_saved_or_refused_and_put_back(tmp_path
         assert res.ok, res.message
         assert rig.world.ecu.params.cv_threshold_pct == pytest.approx(5.0)
         assert rig.term.cfg.speed.cv_threshold_pct == 5.0
+        assert rig.term.snapshot.settings_state == {"speed.cv_threshold_pct": "ok"}
+        assert rig.term.snapshot.cv_threshold_pct == 5.0
         assert "cv_threshold_pct = 5.0" in path.read_text()
         # refused by the ECU: the field is named and what it took of the change goes back
         _refuse_param(rig, 9)
@@ -368,6 +379,9 @@ def test_settings_to_the_ecu_acknowledged_saved_or_refused_and_put_back(tmp_path
         )
         assert not res.ok
         assert list(res.errors) == ["speed.switch_speed_kmh"]
+        state = rig.term.snapshot.settings_state
+        assert state["speed.cv_threshold_pct"] == "put back"
+        assert state["speed.switch_speed_kmh"].startswith("refused: SwitchSpeed = 7: ")
         rig.run(rig.world.t_s + 0.5)
         assert rig.world.ecu.params.cv_threshold_pct == pytest.approx(5.0)  # put back
         assert rig.world.ecu.params.switch_speed_kmh == pytest.approx(6.0)
