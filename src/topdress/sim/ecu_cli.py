@@ -21,7 +21,9 @@ from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.canlink import open_bus
 
-_POLL_S = 0.5
+# Polled often enough that the meter has hardly turned when the start of a test is seen.
+_POLL_S = 0.02
+_SETTLE_S = 0.5  # the shaft coasts a little after the stop
 
 
 def register(sub: Any) -> None:
@@ -125,7 +127,7 @@ def _watch(machine: LiveMachine, duration_s: float | None) -> None:
         elif not running and start_kg is not None:
             layer = cal.layer if cal is not None else 0
             # the shaft coasts a little after the stop: let it settle before weighing
-            time.sleep(_POLL_S)
+            time.sleep(_SETTLE_S)
             kg = world.metered_kg(layer) - start_kg
             what = cal.state if cal is not None else "ended"
             print(
