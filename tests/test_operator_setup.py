@@ -91,7 +91,7 @@ def test_run_on_the_virtual_bus_warns_that_no_ecu_can_answer(
     assert main(["run", "--config", str(cfg), "--duration", "0.5"]) == 3
     out = capsys.readouterr().out
     assert 'warning: can.interface = "virtual" is the simulator\'s in-process bus' in out
-    assert "meters stopped until the operator starts them (start, or the display)" in out
+    assert "meters stopped until the operator starts them (type start, or the display)" in out
 
 
 @pytest.mark.parametrize(
