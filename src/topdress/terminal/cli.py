@@ -8,7 +8,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from topdress.config import load_config, read_config_text
 
@@ -33,6 +33,11 @@ def register(sub: Any) -> None:
         help="where the session log goes (default: ./topdress-sessions)",
     )
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
+    demo.add_argument(
+        "--start",
+        action="store_true",
+        help="start the meters at once (default: the operator's start)",
+    )
     demo.set_defaults(func=_demo)
 
     run = sub.add_parser(
@@ -47,6 +52,12 @@ def register(sub: Any) -> None:
     run.add_argument("--config", type=Path, required=True, metavar="FILE", help="TOML file")
     run.add_argument(
         "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
+    )
+    run.add_argument(
+        "--start",
+        action="store_true",
+        help="start the meters at once, headless (as [operator] autostart = true); "
+        "default: the operator's start, typed here or on the display",
     )
     run.set_defaults(func=_run)
 
@@ -80,13 +91,31 @@ def _demo(args: argparse.Namespace) -> int:
     from topdress.terminal.demo import run_demo
 
     with _sigterm_stops():
-        return run_demo(args.duration, args.out, seed=args.seed)
+        return run_demo(
+            args.duration, args.out, seed=args.seed, start=args.start, keyboard=_keyboard()
+        )
 
 
 def _run(args: argparse.Namespace) -> int:
     from topdress.terminal.demo import run_terminal
 
     cfg = load_config(args.config)
+    start = args.start or cfg.operator.autostart
+    # A line source reading stdin owns it; else typed commands come from there.
+    reads_stdin = "stdin" in (cfg.gnss.source, cfg.crop.source)
     with _sigterm_stops():
-        result = run_terminal(cfg, read_config_text(args.config), args.duration, sys.stdout)
+        result = run_terminal(
+            cfg,
+            read_config_text(args.config),
+            args.duration,
+            sys.stdout,
+            start=start,
+            config_path=args.config,
+            keyboard=None if reads_stdin else _keyboard(),
+        )
     return 0 if result.ecu_ready else EXIT_NO_ECU
+
+
+def _keyboard() -> TextIO | None:
+    """The operator's typed commands: stdin when it is a terminal."""
+    return sys.stdin if sys.stdin is not None and sys.stdin.isatty() else None

@@ -18,7 +18,7 @@ from typing import TextIO
 
 import can
 
-from topdress.config import TerminalConfig, loads_config
+from topdress.config import TerminalConfig, loads_config, redacted_text
 from topdress.errors import DeviceError
 from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
@@ -27,6 +27,8 @@ from topdress.sim.world import SimConfig, World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
 from topdress.terminal.console import Console
+from topdress.terminal.keyboard import KeyboardCommands
+from topdress.terminal.operator import CONSOLE_HELP
 from topdress.terminal.serial_io import open_line_source
 
 log = logging.getLogger(__name__)
@@ -69,9 +71,20 @@ def run_terminal(
     duration_s: float | None,
     out: TextIO,
     machine: LiveMachine | None = None,
+    start: bool = True,
+    config_path: Path | None = None,
+    keyboard: TextIO | None = None,
 ) -> RunResult:
-    """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
+    """Open the devices of `cfg`, run the terminal with a live console, report where data went.
+
+    `start`: the meters start at once; else at the operator's start (typed on `keyboard`, or
+    from the display). `config_path`: where settings changed while running are saved."""
     console = Console(out, period_s=cfg.display.refresh_s)
+    if cfg.can.interface == "virtual" and machine is None:
+        console.message(
+            'warning: can.interface = "virtual" is the simulator\'s in-process bus: no ECU can '
+            "answer there (set [can] interface and channel, e.g. socketcan can0)"
+        )
     # Devices first: one that cannot be opened stops here, before a session file is made.
     bus = open_bus(cfg.can)
     try:
@@ -79,11 +92,28 @@ def run_terminal(
     except DeviceError:
         bus.shutdown()
         raise
-    session = SessionLog.create(cfg.log.dir, config_toml)
+    session = SessionLog.create(cfg.log.dir, redacted_text(config_toml))  # never the PIN
     opened = session.ok  # `ok` turns False once closed
     if not opened:
         console.message(f"warning: session log not written: {session.last_error}")
-    term = Terminal(cfg, gnss, crop, bus, session, on_event=console.message)
+    term = Terminal(
+        cfg,
+        gnss,
+        crop,
+        bus,
+        session,
+        start=start,
+        on_event=console.message,
+        config_path=config_path,
+    )
+    if keyboard is not None:
+        KeyboardCommands(term, keyboard, console.message).start()
+    if not start:
+        console.message(
+            "meters stopped until the operator starts them (type start, or the display)"
+        )
+        if keyboard is not None:
+            console.message(CONSOLE_HELP)
     rows = 0
 
     def on_tick(snapshot: Snapshot, now: float) -> None:
@@ -134,9 +164,17 @@ def _report(out: TextIO, path: Path | None, errors: int) -> None:
 
 
 def run_demo(
-    duration_s: float | None, out_dir: Path, seed: int = 1, out: TextIO = sys.stdout
+    duration_s: float | None,
+    out_dir: Path,
+    seed: int = 1,
+    out: TextIO = sys.stdout,
+    start: bool = True,
+    keyboard: TextIO | None = None,
 ) -> int:
-    """The simulated machine in a thread, the terminal in front of it; returns the exit code."""
+    """The simulated machine in a thread, the terminal in front of it; returns the exit code.
+
+    The demo's configuration is written to `out_dir/topdress-demo.toml`, where settings changed
+    while it runs are saved."""
     drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
     world = World(SimConfig(), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
@@ -149,12 +187,15 @@ def run_demo(
     try:
         text = demo_config_toml(machine.gnss_port.path, machine.crop_port.path, channel, out_dir)
         cfg = loads_config(text)
+        config_path = out_dir / "topdress-demo.toml"
+        out_dir.mkdir(parents=True, exist_ok=True)
+        config_path.write_text(text, encoding="utf-8")
         out.write(
             f"topdress demo: simulated machine on {machine.gnss_port.path} (GNSS NMEA), "
             f"{machine.crop_port.path} (crop sensors), CAN virtual:{channel}\n"
         )
         machine.start()
-        run_terminal(cfg, text, duration_s, out, machine)
+        run_terminal(cfg, text, duration_s, out, machine, start, config_path, keyboard)
     finally:
         machine.stop()
         sim_bus.shutdown()
