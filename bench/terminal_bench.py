@@ -9,10 +9,16 @@ enabled, session log on), exactly as in the cab. Each RMC carries a new speed; t
 from writing its line to the pty to receiving the PcCommand carrying that speed on the bus.
 The child measures its own CPU time with time.process_time over the whole run.
 
+Then a flood: the same terminal (commands every can.command_period_s, 0.5 s) while this
+process writes RMC lines to the GNSS pty as fast as the terminal reads them, for `--flood`
+seconds (40); the spy records every PcCommand on the bus, and the longest gap between two
+commands after the warm-up is reported against the 1.5 x command period target.
+
 Prints:
     nmea_to_command_p50_ms: X
     nmea_to_command_p99_ms: X
     terminal_cpu_pct_of_core: X
+    flood_cmd_gap_max_ms: X
 """
 
 from __future__ import annotations
@@ -74,6 +80,8 @@ class Machine:
         self.latencies_s: list[float] = []
         self.measure_after = float("inf")
         self.lock = threading.Lock()
+        self.command_times: list[float] = []
+        self.flood_lines = 0
 
     def run_ecu(self) -> None:
         while not self.stop.wait(0.01):
@@ -94,6 +102,22 @@ class Machine:
                 t_w = self.written.pop(round(cmd.gnss_kmh * 10), None)
             if t_w is not None and t_w >= self.measure_after:
                 self.latencies_s.append(t - t_w)
+
+    def run_command_spy(self) -> None:
+        """Every PcCommand's arrival time (the flood phase)."""
+        while not self.stop.is_set():
+            msg = self.spy.recv(timeout=0.1)
+            if msg is not None and msg.arbitration_id == protocol.DEFAULT_IDS.command:
+                self.command_times.append(time.monotonic())
+
+    def run_flood(self, duration_s: float) -> None:
+        """RMC lines as fast as the pty takes them (its buffer blocks this writer)."""
+        line = nmea.rmc("GN", 36000.0, True, 43.8853, 125.3245, 6.5 / 3.6, 90.0, "210526")
+        block = line.encode() * 64
+        t0 = time.monotonic()
+        while not self.stop.is_set() and time.monotonic() - t0 < duration_s:
+            self.gnss.write(block)
+            self.flood_lines += 64
 
     def run_gnss(self, duration_s: float) -> None:
         t0 = time.monotonic()
@@ -186,15 +210,67 @@ def parent(duration_s: float) -> int:
     return 0
 
 
+def flood(flood_s: float) -> int:
+    """The longest gap between commands while the GNSS pty is flooded."""
+    group = f"239.75.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
+    m = Machine(group)
+    period_s = 0.5
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "terminal.toml"
+        cfg.write_text(
+            f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
+            f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
+            f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\n'
+            f"command_period_s = {period_s}\n"
+            f'[log]\ndir = "{tmp}"\n'
+        )
+        for target in (m.run_ecu, m.run_command_spy):
+            threading.Thread(target=target, daemon=True).start()
+        run_s = flood_s + WARMUP_S + 1.0
+        proc = subprocess.Popen(
+            [sys.executable, __file__, "--child", str(cfg), "--duration", str(run_s)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        time.sleep(WARMUP_S)  # the child opens its ports and pushes its parameters
+        t_from = time.monotonic()
+        writer = threading.Thread(target=m.run_flood, args=(flood_s,), daemon=True)
+        writer.start()
+        writer.join(flood_s + 5.0)
+        t_to = time.monotonic()
+        out, _ = proc.communicate(timeout=run_s + 60)
+        m.close()
+    if proc.returncode != 0:
+        print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
+        return 1
+    counters = json.loads(out.strip().splitlines()[-1])["counters"]
+    sent = [t for t in m.command_times if t_from <= t <= t_to]
+    # The window's ends count as bounds: a terminal that stops sending shows as one long gap.
+    times = [t_from, *sent, t_to]
+    gap_ms = max(b - a for a, b in zip(times, times[1:], strict=False)) * 1e3
+    print(f"flood_cmd_gap_max_ms: {gap_ms:.1f}")
+    print(
+        f"# target <= {1.5 * period_s * 1e3:.0f} (1.5 x command period); {len(sent)} commands "
+        f"in {t_to - t_from:.1f} s of flood, {m.flood_lines} lines written; terminal counters "
+        f"{counters}",
+        file=sys.stderr,
+    )
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--duration", type=float, default=22.0, help="seconds (>= 20 for the CPU)")
+    ap.add_argument("--flood", type=float, default=40.0, help="seconds of GNSS flood (0: none)")
     ap.add_argument("--child", type=Path, metavar="CONFIG", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
         child(args.child, args.duration)
         return 0
-    return parent(args.duration)
+    rc = parent(args.duration) if args.duration > 0 else 0
+    if args.flood > 0:
+        rc = max(rc, flood(args.flood))
+    return rc
 
 
 if __name__ == "__main__":

@@ -18,7 +18,6 @@ ECU falls back to the wheel.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections import Counter
@@ -42,6 +41,7 @@ from topdress.terminal.canlink import CanLink, EcuView
 from topdress.terminal.counters import CounterView
 from topdress.terminal.crop import CompensatedNdvi
 from topdress.terminal.desk import OperatorDesk
+from topdress.terminal.inbox import Inbox
 from topdress.terminal.operator import CommandResult, ManualView
 from topdress.terminal.rate import build_rate_model, split_layers
 from topdress.terminal.serial_io import LineSource
@@ -126,7 +126,7 @@ class Terminal:
         self.session = session
         self.clock = clock
         self._on_event = on_event
-        self.inbox: queue.Queue[tuple[str, float, Any]] = queue.Queue()
+        self.inbox = Inbox()
         self.link = CanLink(
             bus,
             cfg.can,
@@ -216,12 +216,9 @@ class Terminal:
         next_tick = t0
         while end is None or self.clock() < end:
             now = self.clock()
-            try:
-                kind, t, payload = self.inbox.get(timeout=max(0.0, next_tick - now))
-            except queue.Empty:
-                pass
-            else:
-                self.handle(kind, t, payload)
+            item = self.inbox.get(timeout=max(0.0, next_tick - now))
+            if item is not None:
+                self.handle(*item)
             now = self.clock()
             if now >= next_tick:
                 self.tick(now)
@@ -436,6 +433,8 @@ class Terminal:
             out["log_err"] = self.session.errors
         # The loop's own anomalies (no NDVI, CAN receive errors) only when they happen.
         out.update((k, v) for k, v in self.counters.items() if k != "events" and v)
+        # Lines a flooding source lost (the oldest of its bounded queue), per source.
+        out.update((f"{k}_dropped", v) for k, v in self.inbox.dropped.items() if v)
         return out
 
     def _row(self, now: float) -> StateRow:
