@@ -24,6 +24,7 @@ Prints:
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import random
 import subprocess
@@ -247,7 +248,7 @@ def flood(flood_s: float) -> int:
     sent = [t for t in m.command_times if t_from <= t <= t_to]
     # The window's ends count as bounds: a terminal that stops sending shows as one long gap.
     times = [t_from, *sent, t_to]
-    gap_ms = max(b - a for a, b in zip(times, times[1:], strict=False)) * 1e3
+    gap_ms = max(b - a for a, b in itertools.pairwise(times)) * 1e3
     print(f"flood_cmd_gap_max_ms: {gap_ms:.1f}")
     print(
         f"# target <= {1.5 * period_s * 1e3:.0f} (1.5 x command period); {len(sent)} commands "
