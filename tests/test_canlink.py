@@ -428,3 +428,46 @@ def test_adapter_pulled_send_errors_are_counted_and_reported_once(rig: Rig) -> N
     rig.pc_bus.send = send  # type: ignore[method-assign]
     rig.run(2.6)
     assert rig.events[-1][1] == "CAN send works again"
+
+
+def _forged_ack(param_id: int, result: protocol.AckResult, raw: int) -> can.Message:
+    db = protocol.database()
+    msg = db.get_message_by_name("EcuParamAck")
+    data = msg.encode({"AckParamId": param_id, "AckResult": int(result), "AckRaw": raw})
+    return can.Message(arbitration_id=msg.frame_id, data=data, is_extended_id=True)
+
+
+def test_forged_acknowledgements_are_ignored_not_obeyed(rig: Rig) -> None:
+    # Any host on a udp_multicast LAN can write frames: a forged refusal used to stop the
+    # terminal (EcuParamError). Answers the ECU cannot give are counted and ignored.
+    attacker = open_bus(rig.cfg)
+    try:
+        params = default_config().ecu_params()
+        first_id, first_value = sorted(params.items())[0]
+        spec = protocol.param(first_id)
+        # for the parameter being pushed, ahead of the ECU's answer: "out of range" for a value
+        # inside the range (twice), and "ok" with another value in force
+        rig.link.begin(params, 0.0)
+        attacker.send(_forged_ack(first_id, protocol.AckResult.OUT_OF_RANGE, 0))
+        attacker.send(_forged_ack(first_id, protocol.AckResult.OUT_OF_RANGE, 7))
+        attacker.send(_forged_ack(first_id, protocol.AckResult.OK, spec.to_raw(first_value) + 1))
+        rig.run(1.5)  # would raise EcuParamError on the forged refusal
+        assert rig.link.params_done
+        assert rig.link.counters.rx_implausible == 3
+        assert rig.twin.ecu.params.working_width_m == pytest.approx(first_value)
+    finally:
+        attacker.shutdown()
+
+
+def test_udp_multicast_is_warned_about_at_start() -> None:
+    cfg = loads_config('[can]\ninterface = "udp_multicast"\nchannel = "239.74.163.2"\n').can
+    bus = can.Bus(interface="virtual", channel="test-canlink-udp-warning")
+    events: list[str] = []
+    try:
+        link = CanLink(bus, cfg, fan_rpm=3000, on_event=events.append)
+        link.begin({}, 0.0)
+        link.begin({}, 1.0)  # a re-push: said once
+    finally:
+        bus.shutdown()
+    warnings = [e for e in events if "udp_multicast" in e]
+    assert len(warnings) == 1 and "any host on this network" in warnings[0]

@@ -425,7 +425,7 @@ class Terminal:
             "crop": crop["ok"],
             "crop_bad": sum(v for k, v in crop.items() if k not in ("ok", "stale")),
             "can_rx": lc.rx_frames,
-            "can_bad": lc.rx_foreign + lc.rx_malformed,
+            "can_bad": lc.rx_foreign + lc.rx_malformed + lc.rx_implausible,
             "cmd_tx": lc.tx_commands,
             "tx_err": lc.tx_errors,
         }

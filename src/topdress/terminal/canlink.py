@@ -85,6 +85,7 @@ class LinkCounters:
     rx_frames: int = 0
     rx_foreign: int = 0
     rx_malformed: int = 0
+    rx_implausible: int = 0  # well-formed frames impossible in the current state: ignored
     tx_commands: int = 0
     tx_params: int = 0
     tx_errors: int = 0
@@ -119,6 +120,27 @@ class _ParamPush:
     @property
     def done(self) -> bool:
         return self.index >= len(self.items)
+
+
+UDP_MULTICAST_WARNING = (
+    "warning: CAN over udp_multicast: any host on this network can read and inject frames "
+    "(no authentication); use it only on a private network or this machine"
+)
+
+
+def _impossible_ack(
+    ack: protocol.EcuParamAck, param_id: int, value: float, push: _ParamPush
+) -> str | None:
+    """Why an answer to `param_id` cannot have come from the ECU, or None when it can."""
+    if push.sent_t is None:
+        return "no PcParamSet was sent yet"
+    spec = protocol.param(param_id)
+    raw = spec.to_raw(value)
+    if ack.result is AckResult.OK and ack.raw != raw:
+        return f"ok, but in force {ack.raw} is not the {raw} sent"  # ok means the value took
+    if ack.result is AckResult.OUT_OF_RANGE and spec.minimum <= value <= spec.maximum:
+        return f"out of range, but {value:g} is inside {spec.minimum:g}..{spec.maximum:g}"
+    return None
 
 
 def _clamp(value: float, hi: float) -> float:
@@ -156,6 +178,7 @@ class CanLink:
         self._alive = False
         self._lost = False
         self._begin_t = 0.0
+        self._warned_open_bus = False
         self._waited = False  # the push had to wait for a silent ECU
         self._ready = False  # every parameter acknowledged once: the ECU works for us
         self._send_failing = False
@@ -167,6 +190,9 @@ class CanLink:
         Raises ProtocolError at once for a value the frame cannot carry."""
         for param_id, value in params.items():
             protocol.param(param_id).check(value)
+        if self.cfg.interface == "udp_multicast" and not self._warned_open_bus:
+            self._warned_open_bus = True
+            self._event(UDP_MULTICAST_WARNING)
         self._begin_t = now
         self._params = sorted(params.items())
         self._push = _ParamPush(list(self._params))
@@ -214,6 +240,12 @@ class CanLink:
         param_id, value = push.items[push.index]
         if ack.param_id != param_id:
             return  # a late answer to an earlier parameter
+        if (why := _impossible_ack(ack, param_id, value, push)) is not None:
+            # On a bus anyone can write to (udp_multicast on a LAN), a forged refusal would stop
+            # the terminal: an answer the ECU cannot give is counted and ignored instead.
+            self.counters.rx_implausible += 1
+            log.warning("ignored EcuParamAck for %s: %s", protocol.param_name(param_id), why)
+            return
         if ack.result is AckResult.BUSY and ack.raw != protocol.param(param_id).to_raw(value):
             # Running with another value (the terminal restarted mid-field with a new file):
             # stop it, then write again. Busy with the value already in force is as good as Ok.
