@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sqlite3
+import threading
 import time
 from pathlib import Path
 
@@ -207,3 +208,40 @@ def test_damaged_page_is_a_clear_error_when_read(
         list(reader.states())
     assert main(["log", "summary", str(log.path)]) == 2
     assert f"sqlite3 {log.path} .recover" in capsys.readouterr().err
+
+
+def test_sessions_created_at_once_in_one_directory_each_get_their_own_file(
+    tmp_path: Path,
+) -> None:
+    # The name was checked, then created: a second terminal took it in between and one
+    # session's rows went into the other's file. 40 at once, same name, one directory.
+    barrier = threading.Barrier(40)
+    logs: list[SessionLog] = []
+    lock = threading.Lock()
+
+    def make(k: int) -> None:
+        barrier.wait()
+        log = SessionLog.create(tmp_path, f"# terminal {k}\n", name="field")
+        with lock:
+            logs.append(log)
+
+    threads = [threading.Thread(target=make, args=(k,)) for k in range(40)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    for log in logs:
+        log.close()
+    assert all(log.errors == 0 for log in logs)
+    assert len({log.path for log in logs}) == 40
+    configs = {SessionReader(log.path).config_toml for log in logs}
+    assert configs == {f"# terminal {k}\n" for k in range(40)}  # no file written twice
+
+
+def test_a_file_that_cannot_get_its_schema_is_not_left_behind(tmp_path: Path) -> None:
+    # A disk full at start left a 0-byte .sqlite that later looked like a damaged session.
+    log = SessionLog.create(tmp_path, "# cfg\n", max_bytes=1)  # 1 page: the schema cannot fit
+    assert not log.ok and log.errors == 1
+    assert log.last_error is not None and "full" in log.last_error
+    log.close()
+    assert list(tmp_path.iterdir()) == []

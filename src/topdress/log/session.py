@@ -11,7 +11,9 @@ the caller after `create()` has returned, and `create()` itself only reports, ne
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import queue
 import sqlite3
 import threading
@@ -82,14 +84,28 @@ def _connect(path: Path) -> sqlite3.Connection:
     return conn
 
 
-def _unique_path(directory: Path, name: str | None) -> Path:
+def _claim_path(directory: Path, name: str | None) -> Path:
+    """A fresh file name, created empty here with O_EXCL: checking first and creating after let
+    a second terminal on the same directory take the name in between (and both wrote one
+    file). SQLite takes an empty file as a new database."""
     stem = name or datetime.now(UTC).strftime("session-%Y%m%dT%H%M%SZ")
-    path = directory / f"{stem}{SUFFIX}"
-    n = 1
-    while path.exists():
-        path = directory / f"{stem}-{n}{SUFFIX}"
-        n += 1
-    return path
+    n = 0
+    while True:
+        path = directory / (f"{stem}{SUFFIX}" if n == 0 else f"{stem}-{n}{SUFFIX}")
+        try:
+            os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
+        except FileExistsError:
+            n += 1
+            continue
+        return path
+
+
+def _remove_unfinished(path: Path) -> None:
+    """A file whose schema could not be written (disk full at start) holds nothing: remove it
+    with its WAL and shared-memory files, rather than leave a 0-byte session behind."""
+    for p in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+        with contextlib.suppress(OSError):
+            p.unlink()
 
 
 class SessionLog:
@@ -140,15 +156,22 @@ class SessionLog:
         """
         directory = Path(directory)
         path = directory / f"{name or 'session'}{SUFFIX}"
+        claimed = False
+        conn: sqlite3.Connection | None = None
         try:
             directory.mkdir(parents=True, exist_ok=True)
-            path = _unique_path(directory, name)
+            path = _claim_path(directory, name)
+            claimed = True
             conn = _connect(path)
             if max_bytes is not None:
                 page_size = int(conn.execute("PRAGMA page_size").fetchone()[0])
                 conn.execute(f"PRAGMA max_page_count = {max(1, max_bytes // page_size)}")
             _init_schema(conn, config_toml)
         except (OSError, sqlite3.Error) as exc:
+            if conn is not None:
+                conn.close()
+            if claimed:
+                _remove_unfinished(path)
             return cls(path, None, queue_size, commit_period_s, f"cannot create the file: {exc}")
         return cls(path, conn, queue_size, commit_period_s, None)
 
