@@ -13,8 +13,8 @@
 #define MIN_RPM 1.0f
 #define DUTY_LO 0.05f
 #define DUTY_HI 0.95f
-#define MIN_SETTLED_RPM 0.2f
-#define MIN_SETTLED_SHARE 0.01f
+#define MIN_SETTLED_RPM 1.0f
+#define MIN_SETTLED_SHARE 0.1f
 
 static void clear_fit(td_drive_t *d) {
     d->sn = 0.0f;

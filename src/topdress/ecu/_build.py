@@ -163,6 +163,17 @@ void td_pid_init(td_pid_t *pid, float kp, float ki, float kd, float kff, float o
 void td_pid_reset(td_pid_t *pid);
 float td_pid_step(td_pid_t *pid, float setpoint, float measured, float dt_s);
 
+/* td_drive.h */
+typedef struct {
+    td_pid_t pid; float kff_cfg; float tau_s; bool adapt; float ref_rpm; float duty_lag;
+    float sn, su, sw, suu, suw; ...;
+} td_drive_t;
+void td_drive_init(td_drive_t *d, float kp, float ki, float kd, float kff, float tau_s,
+                   bool adapt);
+void td_drive_reset(td_drive_t *d);
+float td_drive_step(td_drive_t *d, float target_rpm, float meas_rpm, float dt_s);
+float td_drive_rpm_per_duty(const td_drive_t *d);
+
 /* td_speedsel.h */
 td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float cv_pct,
                              float cv_threshold_pct, float switch_speed_kmh, float v_wheel_kmh,
@@ -254,7 +265,10 @@ typedef struct {
     uint32_t tx_dropped;
     ...;
 } td_counters_t;
-typedef struct { td_params_t p; td_state_t st; td_counters_t cnt; ...; } td_app_t;
+typedef struct {
+    td_params_t p; td_state_t st; td_counters_t cnt; td_drive_t meter_drive[2]; td_fused_t fused;
+    ...;
+} td_app_t;
 int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
 int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
 int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out);
@@ -275,6 +289,7 @@ int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
 SHIMS = r"""
 #include <string.h>
 #include "td_app.h"
+#include "td_drive.h"
 #include "td_edge.h"
 #include "td_fused.h"
 #include "td_meter.h"
