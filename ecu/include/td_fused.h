@@ -9,11 +9,13 @@
  * Wheel (every step):   z_w = s * v + noise,  H = [s, 0, v],
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports).
  * GNSS (delayed by d = age + lag): z_g = v(t - d) = v - a*d + noise,  H = [1, -d, 0],
- *   R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay): the measurement is applied to the
+ *   R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it while learning, as the caller
+ *   learns only in motion steady for longer than the delay): the measurement is applied to the
  *   current state through the model instead of rewinding a history (no RAM for one).
  * The scale row of the gain is zeroed (Joseph-form covariance update, so P stays consistent)
  * unless `learn` is set: the caller learns the scale only while GNSS is good and the motion
  * steady, and keeps it through GNSS outages.
+ * Scale random walk 2e-5/s; its variance never grows beyond the initial (10 %)^2.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.

@@ -48,7 +48,7 @@ typedef struct {
     uint16_t gnss_lag_ms;           /**< (29) added to every GNSS speed's age: receiver latency + velocity filter lag, 0..3000, default 0 */
     uint16_t lead_meter_ms;         /**< (30) look-ahead: metering drive response, 0..3000, default 0 (off) */
     uint16_t lead_air_ms;           /**< (31) look-ahead: air-line transport, 0..5000, default 0 (off) */
-    float fused_jerk_ms3;           /**< (32) process noise: white-jerk density sqrt, m/s^3 per sqrt(Hz), 0.01..50, default 1.0 */
+    float fused_jerk_ms3;           /**< (32) process noise: white-jerk density sqrt, m/s^3 per sqrt(Hz), 0.01..50, default 0.3 */
     float fused_gnss_std_kmh;       /**< (33) GNSS speed noise, 1 sigma, km/h, 0.01..10, default 0.4 */
     float fused_wheel_noise_pct;    /**< (34) wheel speed noise (bounce), 1 sigma, % of speed, 0.1..50, default 6 */
     uint16_t wheel_stop_ms;         /**< (35) no wheel edge for this long = standstill, 20..5000, default 300 */

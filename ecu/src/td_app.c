@@ -26,8 +26,9 @@
 #define TD_BACKWARD_LIMIT 0x80000000u
 /* Longest dt the fused estimate predicts over in one step. */
 #define TD_MAX_PREDICT_S 1.0f
-/* Steady motion for slip learning: |a| below this, faster than TD_LEARN_MIN_MS, for TD_STEADY_US. */
-#define TD_STEADY_A_MS2 0.1f
+/* Steady motion for slip learning: the paper's uniform motion (CV of queue G below its
+ * threshold), |a| below this, faster than TD_LEARN_MIN_MS, for TD_STEADY_US. */
+#define TD_STEADY_A_MS2 0.3f
 #define TD_LEARN_MIN_MS 0.5f
 #define TD_STEADY_US 1500000u
 /* An accepted GNSS speed younger than this backs the estimate against a disagreeing wheel. */
@@ -394,7 +395,9 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
     const bool wheel_ok = (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
     const bool gnss_ok = st->gnss_valid && (st->faults & TD_FAULT_GNSS_FROZEN) == 0u;
     const bool backs = gnss_ok && app->have_fused && td_age_us(now_us, app->gnss_fused_us) < TD_GNSS_BACKS_US;
-    if (fabsf(f->a_ms2) < TD_STEADY_A_MS2 && f->v_ms > TD_LEARN_MIN_MS) {
+    /* the paper's own test of uniform motion (the wheel's CV): the estimate's acceleration alone
+     * would not do, as an unlearned scale shows up in it */
+    if (st->uniform && fabsf(f->a_ms2) < TD_STEADY_A_MS2 && f->v_ms > TD_LEARN_MIN_MS) {
         if (!app->steady) {
             app->steady = true;
             app->steady_since_us = now_us;

@@ -15,7 +15,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define P0_A 1.0f         /* initial acceleration variance */
 #define P0_S 0.01f        /* initial scale variance: 10 % slip, 1 sigma */
 #define P_S_MAX 0.01f     /* the scale's variance never grows beyond its initial value */
-#define Q_SCALE 2.0e-4f   /* scale random walk, 1/s: 1.4 % per sqrt(s) */
+#define Q_SCALE 2.0e-5f   /* scale random walk, 1/s: 0.45 % per sqrt(s) */
+#define Q_STEADY 0.01f    /* share of the jerk density over a GNSS delay in steady motion */
 #define WHEEL_FLOOR_MS 0.02f
 #define GATE_SIGMA2 25.0f /* 5 sigma */
 #define GATE_MIN_MS 0.3f
@@ -115,7 +116,11 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     const float h[3] = { f->scale, 0.0f, f->v_ms };
     const float sd = f->wheel_rel * z_ms;
     const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
-    if (update(f, h, z_ms - f->scale * f->v_ms, r, learn)) {
+    const float y = z_ms - f->scale * f->v_ms;
+    /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
+     * again, not because the estimate grew uncertain without it */
+    const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
+    if (!held && update(f, h, y, r, learn)) {
         f->wheel_rejects = 0u;
         return TD_FUSED_ACCEPTED;
     }
@@ -143,7 +148,9 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float h[3] = { 1.0f, -d, 0.0f };
     const float y = z_ms - (f->v_ms - f->a_ms2 * d);
     f->innov_ms = y;
-    const float r = f->r_gnss + f->q_jerk * d * d * d / 3.0f;
+    /* the jerk over the delay; in steady motion (learn: steady for longer than the delay) a
+     * small share of it, or the GNSS speed would teach the scale almost nothing */
+    const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
     return update(f, h, y, r, learn) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
 }
 

@@ -109,7 +109,7 @@ void td_params_default(td_params_t *p) {
     p->gnss_lag_ms = 0u;
     p->lead_meter_ms = 0u;
     p->lead_air_ms = 0u;
-    p->fused_jerk_ms3 = 1.0f;
+    p->fused_jerk_ms3 = 0.3f;
     p->fused_gnss_std_kmh = 0.4f;
     p->fused_wheel_noise_pct = 6.0f;
     p->wheel_stop_ms = 300u;
