@@ -49,8 +49,9 @@ typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED 
 /** Speed modes, as in parameter SpeedMode. TD_MODE_FUSED: the Kalman estimate of td_fused.h. */
 typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2, TD_MODE_FUSED = 3 } td_speed_mode_t;
 
-/** Slip compensation of the wheel speed in the modes dual, wheel and GNSS (parameter SlipComp).
- *  TD_MODE_FUSED always uses the learned scale. */
+/** Slip compensation of the wheel speed (parameter SlipComp). Modes dual, wheel and GNSS: none,
+ *  the scale the fused estimate learned, eq. 5. The fused mode always compensates: eq. 5's shape
+ *  in speed times a learned factor, except with TD_SLIP_LEARNED (one learned constant scale). */
 typedef enum { TD_SLIP_OFF = 0, TD_SLIP_LEARNED = 1, TD_SLIP_MODEL = 2 } td_slip_comp_t;
 
 /** Which speed the dual rule compares with switch_speed_kmh (parameter SwitchCompare). */

@@ -6,7 +6,9 @@
  *
  * Model (docs/speed.md): constant acceleration driven by white jerk of density q = jerk^2,
  *   v' = v + a*dt,  a' = a,  s' = s (+ a slow random walk, only felt while it is learned).
- * Wheel (every step):   z_w = s * v + noise,  H = [s, 0, v],
+ * Wheel (every step):   z_w = s * g(v) * v + noise,  H = [s (g + v g'), 0, g v], with g = 1 the
+ *   scale is a constant; with the slip shape on, g(v) = 1 - eq. 5 slip(v) / 100 and s learns how
+ *   far this soil is from the paper's wheat stubble (the slip then follows the speed at once),
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports).
  * GNSS (delayed by d = age + lag): z_g = v(t - d) = v - a*d + noise,  H = [1, -d, 0],
  *   R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it while learning, as the caller
@@ -40,6 +42,7 @@ typedef struct {
     float wheel_rel;           /**< wheel noise, share of speed */
     float innov_ms;            /**< last GNSS innovation (z - prediction at its time of validity), m/s */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
+    bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
 } td_fused_t;
 
 /** Initialise at rest, scale 1, with the tuning (units of td_params.h). TD_E_ARG on a bad argument. */
@@ -58,6 +61,8 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn);
 /** The wheel stands (no pulse for the stop time): speed and acceleration are zero. */
 void td_fused_standstill(td_fused_t *f);
+/** The slip shape g(v) (1 without the shape) and, if slope != NULL, dg/dv per m/s. */
+float td_fused_shape(const td_fused_t *f, float v_ms, float *slope);
 /** Speed predicted lead_s ahead, m/s, >= 0 (0 once the prediction reaches a stop). */
 float td_fused_lead_ms(const td_fused_t *f, float lead_s);
 /** 1-sigma uncertainty of the speed, m/s. */

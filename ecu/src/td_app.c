@@ -119,6 +119,7 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
     config_drives(app);
     init_speed_chain(app);
     (void)td_fused_init(&app->fused, app->p.fused_jerk_ms3, app->p.fused_gnss_std_kmh, app->p.fused_wheel_noise_pct);
+    app->fused.slip_shape = app->p.slip_comp != (uint8_t)TD_SLIP_LEARNED;
     app->st.drive_rpm_per_duty[TD_UPPER] = td_drive_rpm_per_duty(&app->meter_drive[TD_UPPER]);
     app->st.drive_rpm_per_duty[TD_LOWER] = td_drive_rpm_per_duty(&app->meter_drive[TD_LOWER]);
     app->last_step_us = now_us;
@@ -288,6 +289,7 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
                 init_speed_chain(app);
             }
             td_fused_tune(&app->fused, app->p.fused_jerk_ms3, app->p.fused_gnss_std_kmh, app->p.fused_wheel_noise_pct);
+            app->fused.slip_shape = app->p.slip_comp != (uint8_t)TD_SLIP_LEARNED;
             /* n, threshold, switch speed, mode, compare act at once, not at the next wheel update */
             refresh_cv_and_source(app);
         } else {
@@ -446,7 +448,7 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
                      td_age_us(now_us, app->gnss_fused_us) <= (uint32_t)app->p.gnss_timeout_ms * 1000u;
     st->v_fused_kmh = f->v_ms * TD_KMH_PER_MS;
     st->a_fused_ms2 = f->a_ms2;
-    st->slip_pct = (1.0f - f->scale) * 100.0f;
+    st->slip_pct = (1.0f - f->scale * td_fused_shape(f, f->v_ms, NULL)) * 100.0f;
     st->speed_std_kmh = td_fused_speed_std_ms(f) * TD_KMH_PER_MS;
 }
 

@@ -7,6 +7,7 @@
 #include <math.h>
 #include <stddef.h>
 #include "td_common.h"
+#include "td_slip.h"
 
 enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 
@@ -23,6 +24,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define WHEEL_RESTART 25u
 #define SCALE_MIN 0.5f
 #define SCALE_MAX 1.5f
+#define SHAPE_MIN 0.5f
 
 int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct) {
     if (f == NULL || !(jerk_ms3 > 0.0f) || !(gnss_std_kmh > 0.0f) || !(wheel_noise_pct > 0.0f)) {
@@ -39,6 +41,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->p[SS] = P0_S;
     f->innov_ms = 0.0f;
     f->wheel_rejects = 0u;
+    f->slip_shape = false;
     td_fused_tune(f, jerk_ms3, gnss_std_kmh, wheel_noise_pct);
     return TD_OK;
 }
@@ -112,11 +115,36 @@ static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn
     return true;
 }
 
+float td_fused_shape(const td_fused_t *f, float v_ms, float *slope) {
+    if (!f->slip_shape) {
+        if (slope != NULL) {
+            *slope = 0.0f;
+        }
+        return 1.0f;
+    }
+    /* eq. 5: slip(%) = A v^2 + B v + C, v in km/h; g = 1 - slip/100, dg/dv per m/s */
+    const float vk = v_ms * 3.6f;
+    const float g = 1.0f - td_slip_model_pct(vk) * 0.01f;
+    if (g < SHAPE_MIN || g > 1.0f) {
+        if (slope != NULL) {
+            *slope = 0.0f;
+        }
+        return g < SHAPE_MIN ? SHAPE_MIN : 1.0f;
+    }
+    if (slope != NULL) {
+        *slope = -(td_slip_model_pct(vk + 0.5f) - td_slip_model_pct(vk - 0.5f)) * 0.01f * 3.6f;
+    }
+    return g;
+}
+
 td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs) {
-    const float h[3] = { f->scale, 0.0f, f->v_ms };
+    float dg = 0.0f;
+    const float g = td_fused_shape(f, f->v_ms, &dg);
+    /* z = s * g(v) * v: dz/dv = s * (g + v * g'), dz/ds = g * v */
+    const float h[3] = { f->scale * (g + f->v_ms * dg), 0.0f, g * f->v_ms };
     const float sd = f->wheel_rel * z_ms;
     const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
-    const float y = z_ms - f->scale * f->v_ms;
+    const float y = z_ms - f->scale * g * f->v_ms;
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
      * again, not because the estimate grew uncertain without it */
     const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
@@ -132,7 +160,7 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
         return TD_FUSED_REJECTED;
     }
     /* the wheel has disagreed for long and nothing says it is wrong: start again from it */
-    f->v_ms = z_ms / f->scale;
+    f->v_ms = z_ms / (f->scale * td_fused_shape(f, z_ms / f->scale, NULL));
     f->a_ms2 = 0.0f;
     f->p[VV] = r;
     f->p[VA] = 0.0f;

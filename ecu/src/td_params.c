@@ -110,8 +110,8 @@ void td_params_default(td_params_t *p) {
     p->lead_meter_ms = 0u;
     p->lead_air_ms = 0u;
     p->fused_jerk_ms3 = 0.3f;
-    p->fused_gnss_std_kmh = 0.4f;
-    p->fused_wheel_noise_pct = 6.0f;
+    p->fused_gnss_std_kmh = 0.2f;
+    p->fused_wheel_noise_pct = 15.0f;
     p->wheel_stop_ms = 300u;
     p->drive_adapt = 1u;
     p->meter_tau_ms = 200u;

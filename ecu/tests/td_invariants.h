@@ -78,7 +78,7 @@ static inline void td_inv_check_step(const td_app_t *app, const td_io_out_t *out
     /* the fused estimate and the look-ahead: finite, speeds >= 0, the scale in its bounds */
     TD_CHECK(td_inv_finite_nonneg(st->v_fused_kmh));
     TD_CHECK(isfinite(st->a_fused_ms2) && isfinite(st->slip_pct) && isfinite(st->innov_kmh));
-    TD_CHECK(st->slip_pct >= -50.0f && st->slip_pct <= 50.0f);
+    TD_CHECK(st->slip_pct >= -50.0f && st->slip_pct <= 75.0f);
     TD_CHECK(td_inv_finite_nonneg(st->speed_std_kmh));
     TD_CHECK(td_inv_finite_nonneg(st->v_edge_kmh));
     TD_CHECK(td_inv_finite_nonneg(st->v_lead_kmh));
