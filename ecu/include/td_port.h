@@ -54,7 +54,7 @@ typedef struct {
 
 /** Inputs read by the port each control period: cumulative encoder counters and, if the port
  *  has an input-capture timer on the wheel encoder, the time of its last edge. A port that
- *  only counts leaves the last two fields zero (an initialiser with the first three is one). */
+ *  only counts sets the last two fields to zero. */
 typedef struct {
     uint32_t wheel_count;      /**< ground wheel encoder pulses (A phase), wheel_ppr per wheel revolution */
     uint32_t meter_count[2];   /**< metering shaft encoder counts [TD_UPPER, TD_LOWER], meter_counts_per_rev per shaft revolution */
