@@ -62,7 +62,7 @@ typedef struct {
     /* fused estimate, slip, look-ahead, drives (td_fused.h, td_edge.h, td_drive.h): every step, in every mode */
     float v_fused_kmh;         /**< fused speed estimate, km/h, >= 0 */
     float a_fused_ms2;         /**< fused acceleration, m/s^2 */
-    float slip_pct;            /**< learned wheel slip, (1 - scale) x 100, % */
+    float slip_pct;            /**< wheel slip the estimate applies at its speed, (1 - wheel / ground speed) x 100, % */
     float innov_kmh;           /**< last GNSS innovation (speed minus estimate at its time of validity), km/h */
     float speed_std_kmh;       /**< 1 sigma of v_fused_kmh, km/h */
     float v_edge_kmh;          /**< wheel speed from pulse timing, km/h, no slip correction */

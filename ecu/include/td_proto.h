@@ -84,7 +84,7 @@ typedef struct {
 typedef struct {
     float speed_kmh;           /**< 0.01 km/h, 0..655.35 */
     float accel_ms2;           /**< 0.001 m/s^2, saturating at +-32.767 */
-    float slip_pct;            /**< learned slip (1 - scale) x 100, 0.01 %, signed */
+    float slip_pct;            /**< slip applied at the current speed, (1 - wheel / ground) x 100, 0.01 %, signed */
     float innov_kmh;           /**< last GNSS innovation, 0.05 km/h, saturating at -6.4..6.35 */
     bool slip_learning;        /**< the scale is being learned now */
     bool edge_timing;          /**< the port supplies wheel edge times */
