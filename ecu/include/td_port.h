@@ -29,7 +29,8 @@
  *       td_can_frame_t rx;
  *       while (hal_can_read(&rx)) td_app_rx(&app, &rx, now);
  *       td_io_in_t in = { hal_counter(WHEEL), { hal_counter(M_UP), hal_counter(M_LO) },
- *                         { hal_counter(F_UP), hal_counter(F_LO) } };
+ *                         { hal_counter(F_UP), hal_counter(F_LO) },
+ *                         hal_capture(WHEEL), 1 };   // 0, 0 without a capture timer
  *       td_io_out_t out;
  *       td_app_step(&app, now, &in, &out);
  *       hal_pwm(M_UP, out.meter_duty[0]); hal_pwm(M_LO, out.meter_duty[1]);
