@@ -30,11 +30,29 @@ static void drive_to(rig_t *r, double from_kmh, double v_kmh, double slip, doubl
     rig_run_ms(r, hold_ms);
 }
 
-static void start_fused(rig_t *r, const td_params_t *p) {
+static void start_fused_port(rig_t *r, const td_params_t *p, bool edge_timing) {
     rig_start(r, p, 5000u, 0.0, 0.0);
-    r->edge_timing = true;
+    r->edge_timing = edge_timing;
     rig_run_ms(r, 4000); /* fans up, standing */
     drive_to(r, 0.0, 8.0, 0.07, 3.0, 40000u);
+}
+
+static void start_fused(rig_t *r, const td_params_t *p) {
+    start_fused_port(r, p, true);
+}
+
+/* A port that only counts: the same estimate, the pulses timed by the step clock. */
+static void test_fused_on_a_counts_only_port(void **state) {
+    (void)state;
+    const td_params_t p = fused_params();
+    rig_t r;
+    start_fused_port(&r, &p, false);
+    const td_state_t *st = rig_st(&r);
+    assert_int_equal(st->source, TD_SRC_FUSED);
+    assert_false(st->edge_timing);
+    assert_float_equal(st->slip_pct, 7.0, 0.7);
+    assert_float_equal(st->v_kmh, 8.0, 0.2);
+    assert_float_equal(st->v_edge_kmh, 8.0 * 0.93, 0.3); /* one pulse in 24 per step */
 }
 
 static void test_fused_meters_on_the_estimate_with_learned_slip(void **state) {
@@ -256,6 +274,7 @@ static void test_slip_compensation_in_wheel_mode(void **state) {
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_fused_meters_on_the_estimate_with_learned_slip),
+        cmocka_unit_test(test_fused_on_a_counts_only_port),
         cmocka_unit_test(test_fused_gnss_lost_uses_the_wheel_with_its_scale),
         cmocka_unit_test(test_fused_encoder_fault_uses_gnss),
         cmocka_unit_test(test_fused_frozen_receiver_at_standstill),
