@@ -23,14 +23,16 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import can
 
 from topdress.config import TerminalConfig
+from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
+from topdress.gnss.utc import UtcClock
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
@@ -78,6 +80,12 @@ class Snapshot:
     distance_m: float = 0.0
     counters: dict[str, int] = field(default_factory=dict)
     last_event: str | None = None
+    utc: tuple[float, str] | None = None  # (POSIX s, "gnss" | "system")
+    heading_deg: float | None = None
+    outlet_lat: float | None = None  # the meters' outlet (antenna + [machine] offsets)
+    outlet_lon: float | None = None
+    zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
+    prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
 
 
 class Terminal:
@@ -114,6 +122,8 @@ class Terminal:
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop)
         self.model = build_rate_model(cfg.rate)
+        self.utc = UtcClock()
+        self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()
         self.snapshot = Snapshot()
         self._t0: float | None = None
@@ -226,6 +236,11 @@ class Terminal:
         fix = self.nmea.decode(line)
         if not fix.ok:
             return
+        if fix.fix_valid:
+            self.utc.on_fix(t, fix.utc)
+            self.outlet.on_fix(
+                fix.lat, fix.lon, fix.course_deg, fix.speed_kmh, self.ndvi.odometer.distance_m
+            )
         if self.tracker.update(t, fix) is not None:
             self._gnss_seen = True
             self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
@@ -255,6 +270,7 @@ class Terminal:
         ndvi_meters = self.ndvi.update(now, v_sel)
         # Before the meters reach the first spot sensed, the nearest information is the sensors'.
         ndvi = ndvi_meters if ndvi_meters is not None else ndvi_sensors
+        outlet = self.outlet.position(self.ndvi.odometer.distance_m)
         if ndvi is None:
             self.counters["no_ndvi_ticks"] += 1
             rates = split_layers(0.0, self.cfg.rate.split_upper, self.cfg.machine.layers)
@@ -266,8 +282,12 @@ class Terminal:
         start = self.start_requested
         self.link.set_command(start, self.cfg.machine.fan_rpm, rates.upper_kg_ha, rates.lower_kg_ha)
         self.link.poll(now)
-        self.snapshot = self._snapshot(
-            now, ndvi_sensors, ndvi, (rates.upper_kg_ha, rates.lower_kg_ha)
+        self.snapshot = replace(
+            self._snapshot(now, ndvi_sensors, ndvi, (rates.upper_kg_ha, rates.lower_kg_ha)),
+            utc=self.utc.now(now),
+            heading_deg=outlet.heading_deg if outlet is not None else None,
+            outlet_lat=outlet.lat if outlet is not None else None,
+            outlet_lon=outlet.lon if outlet is not None else None,
         )
         if self.session is not None:
             self.session.state(self._row(now))
@@ -419,6 +439,15 @@ class Terminal:
             position=(s.lat, s.lon) if s.lat is not None and s.lon is not None else None,
             ndvi=s.ndvi,
             rates_kg_ha=s.rate_kg_ha,
+            utc=s.utc,
+            heading_deg=s.heading_deg,
+            outlet=(
+                (s.outlet_lat, s.outlet_lon)
+                if s.outlet_lat is not None and s.outlet_lon is not None
+                else None
+            ),
+            zone=s.zone,
+            prescription_kg_ha=s.prescription_kg_ha,
         )
 
     # ---- events and the transmit tap ----------------------------------------------------------
