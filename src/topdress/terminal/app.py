@@ -38,7 +38,7 @@ from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
 from topdress.terminal.canlink import CanLink, EcuView
 from topdress.terminal.crop import CompensatedNdvi
-from topdress.terminal.rate import build_rate_model, split_layers
+from topdress.terminal.rate import build_rate_model, build_site_rate, split_layers
 from topdress.terminal.serial_io import LineSource
 
 log = logging.getLogger(__name__)
@@ -122,6 +122,8 @@ class Terminal:
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop)
         self.model = build_rate_model(cfg.rate)
+        # The prescription map and boundary files are read here: a bad one stops start-up.
+        self.site = build_site_rate(cfg, self.model)
         self.utc = UtcClock()
         self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()
@@ -271,12 +273,11 @@ class Terminal:
         # Before the meters reach the first spot sensed, the nearest information is the sensors'.
         ndvi = ndvi_meters if ndvi_meters is not None else ndvi_sensors
         outlet = self.outlet.position(self.ndvi.odometer.distance_m)
-        if ndvi is None:
+        # The prescription and the boundary at the outlet, the NDVI model as configured.
+        site = self.site.decide(ndvi, (outlet.lat, outlet.lon) if outlet is not None else None)
+        if ndvi is None and site.used_ndvi:
             self.counters["no_ndvi_ticks"] += 1
-            rates = split_layers(0.0, self.cfg.rate.split_upper, self.cfg.machine.layers)
-        else:
-            total = self.model.rate_kg_ha(ndvi)
-            rates = split_layers(total, self.cfg.rate.split_upper, self.cfg.machine.layers)
+        rates = split_layers(site.total_kg_ha, self.cfg.rate.split_upper, self.cfg.machine.layers)
         # No command goes out before the parameters are in force anyway; while they are pushed
         # again (ECU back), a stop here would stop a running ECU for a command period.
         start = self.start_requested
@@ -288,6 +289,8 @@ class Terminal:
             heading_deg=outlet.heading_deg if outlet is not None else None,
             outlet_lat=outlet.lat if outlet is not None else None,
             outlet_lon=outlet.lon if outlet is not None else None,
+            zone=site.zone,
+            prescription_kg_ha=site.prescription_kg_ha,
         )
         if self.session is not None:
             self.session.state(self._row(now))
