@@ -20,7 +20,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 from datetime import datetime
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -29,7 +29,7 @@ from pyproj import CRS, Transformer
 
 from topdress.config import MachineConfig, SpeedConfig, TerminalConfig, loads_config
 from topdress.errors import ConfigError, MapError
-from topdress.log.model import StateRow
+from topdress.log.model import STATE_COLUMNS
 from topdress.log.session import SessionReader
 
 _log = logging.getLogger(__name__)
@@ -80,12 +80,19 @@ class AsApplied:
         return float(np.sum(self.points.get("AppliedKg", np.zeros(0))))
 
 
-def _col(rows: list[StateRow], name: str) -> FloatArray:
-    return np.array([getattr(r, name) for r in rows], dtype=float)  # None -> nan
+Columns = dict[str, list[Any]]
 
 
-def _opt(rows: list[StateRow], name: str) -> FloatArray:
-    return np.array([math.nan if (v := getattr(r, name)) is None else v for r in rows], dtype=float)
+def _col(rows: Columns, name: str) -> FloatArray:
+    return np.array(rows[name], dtype=float)  # None -> nan
+
+
+def _opt(rows: Columns, name: str) -> FloatArray:
+    return np.array(rows[name], dtype=float)
+
+
+def _text(rows: Columns, name: str) -> ObjArray:
+    return np.array(["" if v is None else v for v in rows[name]], dtype=object)
 
 
 def _iso(utc: FloatArray) -> ObjArray:
@@ -102,8 +109,8 @@ def utm_crs(lat: float, lon: float) -> CRS:
 
 def build(reader: SessionReader) -> AsApplied:
     cfg = session_config(reader.config_toml)
-    rows = list(reader.states())
-    out = AsApplied(str(reader.path), cfg.machine, rows=len(rows))
+    rows = reader.state_values(STATE_COLUMNS)
+    out = AsApplied(str(reader.path), cfg.machine, rows=len(rows["t"]))
     present = reader.state_columns()
     for col, what in (
         ("outlet_lat", "the outlet position (the antenna's is used)"),
@@ -118,12 +125,12 @@ def build(reader: SessionReader) -> AsApplied:
 
 def _points(
     out: AsApplied,
-    rows: list[StateRow],
+    rows: Columns,
     m: MachineConfig,
     speed: SpeedConfig,
     created_utc: str | None,
 ) -> None:
-    if not rows:
+    if not rows["t"]:
         out.notes.append("no state rows")
         return
     t = _col(rows, "t")
@@ -138,7 +145,7 @@ def _points(
     if np.isnan(heading).all():
         heading = _track_heading(lat, lon)
     utc = _opt(rows, "utc")
-    src = np.array([r.utc_source or "" for r in rows], dtype=object)
+    src = _text(rows, "utc_source")
     missing = np.isnan(utc)
     if missing.any():
         base = _created(created_utc)
@@ -165,7 +172,7 @@ def _points(
         "LogTime": t,
         "Heading": heading,
         "SPEED": v,
-        "SpeedSrc": np.array([r.source for r in rows], dtype=object),
+        "SpeedSrc": _text(rows, "source"),
         "DISTANCE": v / 3.6 * dt,
         "SWATHWIDTH": np.full_like(t, m.width_m),
         "NDVI": _opt(rows, "ndvi"),
@@ -182,8 +189,8 @@ def _points(
         "AppliedKg": kg[0] + kg[1],
         "TargetKg": tkg[0] + tkg[1],
         "WorkState": ((rpm[0] > 0) | (rpm[1] > 0)).astype(np.int32),
-        "Faults": np.array([r.faults for r in rows], dtype=np.int64),
-        "Zone": np.array([r.zone or "" for r in rows], dtype=object),
+        "Faults": np.array(rows["faults"], dtype=np.int64),
+        "Zone": _text(rows, "zone"),
         "PrescRate": _opt(rows, "prescription_kg_ha"),
     }
     out.points = {k: c[has] for k, c in cols.items()}

@@ -3,8 +3,8 @@
 From polygons (GeoPackage, Shapefile, GeoJSON: the rate attribute named in the configuration,
 in its configured units) or from an ISOXML task's grid (types 1 and 2; units from the DDI).
 `lookup(lat, lon)` gives the zone there, None outside every zone. Polygons are found with an
-STR-tree of their bounding boxes, then an exact point-in-polygon test on prepared geometries;
-where zones overlap, the first in the file wins.
+STR-tree of their bounding boxes, then an exact point-in-polygon test on the candidates (a
+point on a zone's edge is in it); where zones overlap, the first in the file wins.
 """
 
 from __future__ import annotations
@@ -53,7 +53,6 @@ class PolygonPrescription:
     ) -> None:
         self.source = source
         self.geoms = geoms
-        shapely.prepare(geoms)
         self.tree = shapely.STRtree(geoms)
         self.zones = [
             Zone(float(r), float(lo), float(hi), lab)
@@ -61,15 +60,11 @@ class PolygonPrescription:
         ]
 
     def lookup(self, lat: float, lon: float) -> Zone | None:
-        point = shapely.Point(lon, lat)
-        hits = self.tree.query(point)
+        # One GEOS call: the tree's bounding boxes, then the exact test on the candidates.
+        hits = self.tree.query(shapely.Point(lon, lat), predicate="intersects")
         if hits.size == 0:
             return None
-        hits.sort()
-        inside = shapely.contains_xy(self.geoms[hits], lon, lat)
-        if not inside.any():
-            return None
-        return self.zones[int(hits[np.argmax(inside)])]
+        return self.zones[int(hits.min())]  # overlapping zones: the first in the file
 
 
 class GridPrescription:

@@ -372,6 +372,16 @@ class SessionReader:
         for values in self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"):
             yield StateRow(**dict(zip(cols, values, strict=True)))
 
+    def state_values(self, columns: tuple[str, ...]) -> dict[str, list[Any]]:
+        """The given state columns in logged order, as lists (bulk reading for exports);
+        a column this file lacks reads as None."""
+        present = self.state_columns()
+        cols = [c for c in columns if c in present]
+        rows = list(self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"))
+        n = len(rows)
+        got = dict(zip(cols, (list(c) for c in zip(*rows, strict=True)), strict=True)) if n else {}
+        return {c: got.get(c, [None] * n) if c in present else [None] * n for c in columns}
+
     def state_columns(self) -> frozenset[str]:
         """The state table's columns in this file (older files lack the added ones)."""
         return frozenset(str(r[1]) for r in self._select("PRAGMA table_info(state)"))
