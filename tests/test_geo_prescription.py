@@ -348,3 +348,10 @@ def test_a_boundary_turns_the_meters_off_in_the_headland(tmp_path: Path) -> None
     # after entering the headland the meters stop within a metre or two of travel
     assert np.all(rpm[y > 43] == 0.0)
     assert np.median(rpm[(y > 20) & (y < 38)]) > 5.0
+    # the boundary and its headland line are drawn on the map
+    from topdress.cli import main
+
+    html = tmp_path / "m.html"
+    assert main(["log", "map", str(session), "--out", str(html)]) == 0
+    text = html.read_text(encoding="utf-8")
+    assert '"boundary":[[[' in text and text.count("],[") > 10

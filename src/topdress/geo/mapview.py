@@ -2,7 +2,8 @@
 classes), the track, the stops, the boundary zones; as PNG (matplotlib) or as one offline HTML
 file (Leaflet 1.9.4 bundled in the package and inlined: no tile server, no network).
 
-`map_layers()` gives the layers as GeoJSON-like dicts; the PNG, the HTML and a live display
+`map_layers()` gives the layers as GeoJSON-like dicts (plus `boundary_rings()` for the
+field boundary and its headland line); the PNG, the HTML and a live display
 draw the same layers.
 """
 
@@ -20,7 +21,8 @@ import numpy.typing as npt
 import shapely
 
 from topdress.errors import MapError
-from topdress.geo.asapplied import AsApplied, build, require_points
+from topdress.geo.asapplied import AsApplied, build, require_points, session_config
+from topdress.geo.boundary import load_boundary
 from topdress.log.session import SessionReader
 
 # Colour ramp for the classes (low to high), readable in print and for most colour vision.
@@ -100,11 +102,30 @@ def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def boundary_rings(reader: SessionReader) -> tuple[list[list[list[float]]], str | None]:
+    """The session's field boundary and headland line (lon/lat rings), when its configuration
+    names a boundary file that is still there; else no rings and why not."""
+    cfg = session_config(reader.config_toml).boundary
+    if not cfg.path:
+        return [], None
+    try:
+        b = load_boundary(cfg)
+    except MapError as exc:
+        return [], f"boundary not drawn: {exc}"
+    rings = []
+    for geom in (b.boundary, b.inner_wgs84()):
+        for line in shapely.get_parts(shapely.boundary(geom)):
+            for part in shapely.get_parts(line):
+                rings.append(shapely.get_coordinates(part).round(8).tolist())
+    return rings, None
+
+
 def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
     """The map of the session to `out` (.png or .html); returns a line saying what was drawn."""
     data = build(reader)
     require_points(data)
     layers = map_layers(data, classes)
+    layers["boundary"], why = boundary_rings(reader)
     suffix = out.suffix.lower()
     try:
         if suffix == ".png":
@@ -117,7 +138,7 @@ def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
         raise MapError(f"cannot write {out}: {exc}") from exc
     return (
         f"{out}: {len(layers['swaths'])} swaths in {len(layers['classes'])} classes, "
-        f"{len(layers['stops'])} stops"
+        f"{len(layers['stops'])} stops" + (f"; {why}" if why else "")
     )
 
 
@@ -140,6 +161,9 @@ def _png(layers: dict[str, Any], out: Path, title: str) -> None:
         ax.add_collection(PolyCollection(polys, facecolors=colours, edgecolors="none"))
     if track.size:
         ax.plot(track[:, 0], track[:, 1], color="#555555", lw=0.6, label="track")
+    for k, ring in enumerate(layers.get("boundary", [])):
+        r = np.array(ring)
+        ax.plot(r[:, 0], r[:, 1], color="#0b4f9c", lw=1.0, label="boundary" if k == 0 else None)
     stops = np.array(layers["stops"])
     if stops.size:
         ax.plot(stops[:, 0], stops[:, 1], "kx", ms=7, label="stops")
@@ -187,8 +211,11 @@ const swaths = L.layerGroup(L_DATA.swaths.map(s => L.polygon(
 const track = L.polyline(L_DATA.track.map(p => [p[1], p[0]]), {{color: "#555", weight: 1}});
 const stops = L.layerGroup(L_DATA.stops.map(p => L.circleMarker([p[1], p[0]],
   {{radius: 5, color: "#000", fill: false}}).bindTooltip("stop")));
-swaths.addTo(map); track.addTo(map); stops.addTo(map);
-L.control.layers(null, {{"swaths": swaths, "track": track, "stops": stops}}).addTo(map);
+const boundary = L.layerGroup((L_DATA.boundary || []).map(r => L.polyline(
+  r.map(p => [p[1], p[0]]), {{color: "#0b4f9c", weight: 2}})));
+swaths.addTo(map); track.addTo(map); stops.addTo(map); boundary.addTo(map);
+L.control.layers(null, {{"swaths": swaths, "track": track, "stops": stops, "boundary": boundary}})
+  .addTo(map);
 L.control.scale({{imperial: false}}).addTo(map);
 map.fitBounds(track.getBounds(), {{padding: [20, 20]}});
 const legend = L.control({{position: "bottomright"}});
