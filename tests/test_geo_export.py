@@ -84,6 +84,9 @@ def test_every_vector_format_reads_back_in_gdal(session: Path, tmp_path: Path, f
         else:
             assert 0.9 * want_kg < kg <= want_kg * 1.0001
         assert set(np.unique(cols["SWATHWIDTH"])) == {3.6}
+    if fmt in ("shp", "geojson"):  # the rate classes' style, on the field QGIS reads
+        style = (tmp_path / "field_swaths.qml").read_text()
+        assert f'attr="{"AppliedRt" if fmt == "shp" else "AppliedRate"}"' in style
     if fmt in ("shp", "csv"):
         units = (tmp_path / "field_fields.csv").read_text()
         assert "AppliedRt,AppliedRate,kg/ha" in units if fmt == "shp" else "AppliedRate" in units

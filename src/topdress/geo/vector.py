@@ -3,7 +3,8 @@ GeoJSON, CSV.
 
 A GeoPackage holds both layers (`as_applied_points`, `as_applied_swaths`) in one file; the
 single-layer formats get one file per layer beside the path given (`NAME_points.shp`,
-`NAME_swaths.shp`). Shapefile (dBASE) names are cut to 10 characters: the one longer name is
+`NAME_swaths.shp`, with a QGIS style `NAME_swaths.qml` of the rate classes that QGIS applies
+by itself). Shapefile (dBASE) names are cut to 10 characters: the one longer name is
 written as SHAPEFILE_NAMES says, and a `NAME_fields.csv` sidecar gives every field's full name
 and unit (dBASE has no place for units).
 """
@@ -11,6 +12,7 @@ and unit (dBASE has no place for units).
 from __future__ import annotations
 
 import csv
+from importlib import resources
 from pathlib import Path
 from typing import Final
 
@@ -93,6 +95,14 @@ def write(data: AsApplied, path: Path, fmt: str, crs: str = "wgs84") -> list[Pat
         _write_layer(out, layer, fmt, cols, _project(geom, target), gtype, target)
         if out not in written:
             written.append(out)
+    if fmt in ("shp", "geojson"):
+        # QGIS applies a style named like the layer's file by itself
+        style = paths[SWATHS_LAYER].with_suffix(".qml")
+        qml = resources.files("topdress.geo").joinpath("data", "as_applied_rate.qml")
+        attr = SHAPEFILE_NAMES.get("AppliedRate", "AppliedRate") if fmt == "shp" else "AppliedRate"
+        text = qml.read_text(encoding="utf-8").replace('attr="AppliedRate"', f'attr="{attr}"')
+        style.write_text(text, encoding="utf-8")
+        written.append(style)
     if fmt in ("shp", "csv"):
         sidecar = path.with_suffix("") if path.suffix.lower() == SUFFIX[fmt] else path
         sidecar = sidecar.with_name(f"{sidecar.name}_fields.csv")
