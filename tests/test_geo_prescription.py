@@ -355,3 +355,16 @@ def test_a_boundary_turns_the_meters_off_in_the_headland(tmp_path: Path) -> None
     assert main(["log", "map", str(session), "--out", str(html)]) == 0
     text = html.read_text(encoding="utf-8")
     assert '"boundary":[[[' in text and text.count("],[") > 10
+
+
+def test_the_terminal_refuses_to_start_on_a_bad_map_naming_key_and_file(tmp_path: Path) -> None:
+    from topdress.config import loads_config
+    from topdress.terminal.rate import build_rate_model, build_site_rate
+
+    bad = write_polygons(tmp_path / "rx.geojson", [box(0, 0, 5, 5)], {"dose": [1.0]})
+    cfg = loads_config(f'[prescription]\npath = "{bad}"\n')
+    with pytest.raises(MapError, match=r"^prescription\.path: .*rx\.geojson: no attribute 'rate'"):
+        build_site_rate(cfg, build_rate_model(cfg.rate))
+    cfg = loads_config(f'[boundary]\npath = "{tmp_path / "none.shp"}"\n')
+    with pytest.raises(MapError, match=r"^boundary\.path: .*none\.shp: no such file"):
+        build_site_rate(cfg, build_rate_model(cfg.rate))

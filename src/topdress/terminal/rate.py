@@ -21,6 +21,7 @@ from topdress.config import (
     TableRateConfig,
     TerminalConfig,
 )
+from topdress.errors import MapError
 from topdress.geo.boundary import FieldBoundary, load_boundary
 from topdress.geo.prescription import RateMap, load_prescription
 
@@ -222,7 +223,14 @@ class SiteRate:
 
 
 def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
-    """Loads the configured prescription and boundary files (MapError naming the file)."""
-    presc = load_prescription(cfg.prescription) if cfg.prescription.path else None
-    boundary = load_boundary(cfg.boundary) if cfg.boundary.path else None
+    """Loads the configured prescription and boundary files (MapError naming the key, the
+    file and the feature)."""
+    try:
+        presc = load_prescription(cfg.prescription) if cfg.prescription.path else None
+    except MapError as exc:
+        raise MapError(f"prescription.path: {exc}") from exc
+    try:
+        boundary = load_boundary(cfg.boundary) if cfg.boundary.path else None
+    except MapError as exc:
+        raise MapError(f"boundary.path: {exc}") from exc
     return SiteRate(model, presc, boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha)
