@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
+	$(BIN)/python bench/maps_bench.py
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c

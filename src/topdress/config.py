@@ -42,6 +42,10 @@ class MachineConfig:
     wheel_radius_m: float = _num(0.0615, 0.02, 1.0)
     wheel_ppr: int = _num(500, 1, 10000)
     fan_rpm: int = _num(3000, 0, 6000)
+    # The meters' outlet from the GNSS antenna: forward along the track (behind < 0), and to
+    # the right across it, m. The as-applied map, prescription and boundary use the outlet.
+    outlet_along_m: float = _num(0.0, -50.0, 50.0)
+    outlet_across_m: float = _num(0.0, -30.0, 30.0)
 
 
 @dataclass(frozen=True)
@@ -203,6 +207,29 @@ class LogConfig:
 
 
 @dataclass(frozen=True)
+class PrescriptionConfig:
+    # A prescription map: GeoPackage, Shapefile or GeoJSON polygons, or an ISOXML
+    # TASKDATA.XML with a grid (types 1 and 2). "" = none.
+    path: str = ""
+    layer: str = ""  # layer of a multi-layer file ("" = the first)
+    attribute: str = "rate"  # the polygons' rate attribute
+    units: str = _choice("kg/ha", "kg/ha", "lb/ac", "t/ha")
+    # alone: the map's rate; bound: the NDVI model's rate within the zone's min and max
+    mode: str = _choice("alone", "alone", "bound")
+    min_attribute: str = "min_rate"  # bound mode: the zone's limits (same units)
+    max_attribute: str = "max_rate"
+    outside_kg_ha: float = _num(0.0, 0.0, 1200.0)  # outside every zone, and with no position
+
+
+@dataclass(frozen=True)
+class BoundaryConfig:
+    # The field boundary: polygons (same formats) or an ISOXML TASKDATA.XML partfield. "" = none.
+    path: str = ""
+    layer: str = ""
+    headland_m: float = _num(0.0, 0.0, 200.0)  # strip inside the boundary with the meters off
+
+
+@dataclass(frozen=True)
 class DisplayConfig:
     refresh_s: float = _num(0.5, 0.2, 2.0)  # console redraw period on a TTY
     enabled: bool = True  # serve the operator display (web page)
@@ -244,6 +271,8 @@ class TerminalConfig:
     log: LogConfig = field(default_factory=LogConfig)
     display: DisplayConfig = field(default_factory=DisplayConfig)
     operator: OperatorConfig = field(default_factory=OperatorConfig)
+    prescription: PrescriptionConfig = field(default_factory=PrescriptionConfig)
+    boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
 
     def ecu_params(self) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start.
@@ -597,6 +626,8 @@ kg_per_rev_lower = 0.3
 wheel_radius_m = 0.0615    # ground wheel, 12.3 cm diameter
 wheel_ppr = 500            # ground-wheel encoder pulses per revolution
 fan_rpm = 3000             # fan target sent in every command frame, rpm
+outlet_along_m = 0.0       # meters' outlet from the GNSS antenna: forward (behind < 0), m
+outlet_across_m = 0.0      # and to the right (left < 0), m
 
 [speed]
 mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss
@@ -709,4 +740,19 @@ off_rate_pct = 10.0        # a metering speed this far off its target...
 off_rate_s = 5.0           # ...for longer than this raises the off-rate alarm
 fan_check_s = 10.0         # how long the fan check runs the fans
 counters_file = "counters.json"  # field and season counters, in log.dir
+
+[prescription]             # a prescription map as rate source (see docs/maps.md)
+path = ""                  # .gpkg, .shp, .geojson polygons or ISOXML TASKDATA.XML; "" = none
+layer = ""                 # layer of a multi-layer file ("" = the first)
+attribute = "rate"         # the polygons' rate attribute
+units = "kg/ha"            # of that attribute: kg/ha | lb/ac | t/ha (ISOXML: from its DDI)
+mode = "alone"             # alone (the map's rate) | bound (NDVI model within the zone's min/max)
+min_attribute = "min_rate" # bound mode: the zone's limits
+max_attribute = "max_rate"
+outside_kg_ha = 0.0        # outside every zone, and while the position is not known
+
+[boundary]                 # the field boundary: meters off outside it and in the headland
+path = ""                  # .gpkg, .shp, .geojson polygons or ISOXML TASKDATA.XML
+layer = ""
+headland_m = 0.0           # headland strip inside the boundary, m
 """

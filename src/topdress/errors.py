@@ -51,3 +51,8 @@ class EcuParamError(TopdressError):
         super().__init__(f"ECU parameter {name} = {value:g}: {message}")
         self.name = name
         self.value = value
+
+
+class MapError(TopdressError):
+    """A map file (prescription, boundary, ISOXML) or an export that cannot be made; the
+    message names the file and, where there is one, the feature."""

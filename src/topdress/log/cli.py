@@ -26,7 +26,39 @@ def register(sub: Any) -> None:
         metavar="OUT.toml",
         help="write the configuration the session ran with",
     )
+    export.add_argument(
+        "--out",
+        type=Path,
+        metavar="PATH",
+        help="write the as-applied points and swaths (or the ISOXML task data directory)",
+    )
+    export.add_argument(
+        "--format",
+        choices=("gpkg", "shp", "geojson", "isoxml", "csv"),
+        default="gpkg",
+        help="format of --out (default: gpkg)",
+    )
+    export.add_argument(
+        "--crs",
+        choices=("wgs84", "utm"),
+        default="wgs84",
+        help="coordinates of --out: WGS 84 (default) or the field's UTM zone",
+    )
+    export.add_argument(
+        "--can", type=Path, metavar="OUT.log|OUT.asc", help="write the CAN traffic (candump/asc)"
+    )
     export.set_defaults(func=_export)
+
+    amap = log_sub.add_parser("map", help="the as-applied map as PNG or offline HTML")
+    amap.add_argument("session", type=Path, help="session file (.sqlite)")
+    amap.add_argument("--out", type=Path, required=True, metavar="map.png|map.html")
+    amap.add_argument(
+        "--classes",
+        choices=("rate", "rpm"),
+        default="rate",
+        help="colour by applied rate classes (default) or the paper's metering-speed classes",
+    )
+    amap.set_defaults(func=_map)
 
     summary = log_sub.add_parser("summary", help="duration, distance, area, fertilizer, faults")
     summary.add_argument("session", type=Path, help="session file (.sqlite)")
@@ -58,10 +90,11 @@ def _export(args: argparse.Namespace) -> int:
     from topdress.log.export import ExportStats, session_events, write_state_csv
     from topdress.log.session import SessionReader
 
-    outs = [p for p in (args.events, args.csv, args.config) if p is not None]
+    outs = [p for p in (args.events, args.csv, args.config, args.out, args.can) if p is not None]
     if not outs:
         raise LogError(
-            "nothing to do: give --events OUT.ndjson, --csv OUT.csv or --config OUT.toml"
+            "nothing to do: give --out PATH [--format ...], --events OUT.ndjson, --csv OUT.csv, "
+            "--config OUT.toml or --can OUT.log"
         )
     for out_path in outs:  # a typo must not truncate the session it reads
         if out_path.exists() and args.session.exists() and out_path.samefile(args.session):
@@ -83,6 +116,22 @@ def _export(args: argparse.Namespace) -> int:
             with _open_out(args.config) as out:
                 out.write(reader.config_toml)
             print(f"{args.config}: the session's configuration")
+        if args.out is not None or args.can is not None:
+            from topdress.log.export import export_maps
+
+            for line in export_maps(reader, args.out, args.format, args.crs, args.can):
+                print(line)
+    return 0
+
+
+def _map(args: argparse.Namespace) -> int:
+    from topdress.geo.mapview import render
+    from topdress.log.session import SessionReader
+
+    if args.out.exists() and args.session.exists() and args.out.samefile(args.session):
+        raise LogError(f"{args.out} is the session file itself: give another output")
+    with SessionReader(args.session) as reader:
+        print(render(reader, args.out, args.classes))
     return 0
 
 

@@ -39,9 +39,19 @@ class StateRow:
     fan_rpm_upper: float
     fan_rpm_lower: float
     faults: int
+    # Added columns (None in files written before them, and when not known):
+    utc: float | None = None  # UTC, POSIX seconds, of this row
+    utc_source: str | None = None  # "gnss" (the last fix's time carried forward) or "system"
+    heading_deg: float | None = None  # course over ground, degrees clockwise from north
+    outlet_lat: float | None = None  # the meters' outlet, from the antenna by [machine] offsets
+    outlet_lon: float | None = None
+    zone: str | None = None  # field boundary: "field", "headland", "outside"; None = no boundary
+    prescription_kg_ha: float | None = None  # prescription map's total rate at the outlet
 
     def as_tuple(self) -> tuple[object, ...]:
         return astuple(self)
 
 
 STATE_COLUMNS: Final = tuple(f.name for f in fields(StateRow))
+UTC_SOURCES: Final = ("gnss", "system")
+ZONES: Final = ("field", "headland", "outside")

@@ -17,10 +17,16 @@ def state_row(
     position: tuple[float, float] | None = None,
     ndvi: float | None = None,
     rates_kg_ha: tuple[float, float] = (0.0, 0.0),
+    utc: tuple[float, str] | None = None,
+    heading_deg: float | None = None,
+    outlet: tuple[float, float] | None = None,
+    zone: str | None = None,
+    prescription_kg_ha: float | None = None,
 ) -> StateRow:
     """A frame not received yet gives zeros (and source "none"); speeds come at 0.01 km/h
-    from EcuSpeeds, else at 0.1 km/h from EcuStatus."""
+    from EcuSpeeds, else at 0.1 km/h from EcuStatus. `utc` is (POSIX s, "gnss"|"system")."""
     lat, lon = position if position is not None else (None, None)
+    outlet_lat, outlet_lon = outlet if outlet is not None else (None, None)
     if speeds is not None:
         v_wheel, v_gnss, v = speeds.wheel_kmh, speeds.gnss_kmh, speeds.selected_kmh
     else:
@@ -45,4 +51,11 @@ def state_row(
         fan_rpm_upper=status.fan_rpm_upper if status is not None else 0.0,
         fan_rpm_lower=status.fan_rpm_lower if status is not None else 0.0,
         faults=int(diag.faults) if diag is not None else 0,
+        utc=utc[0] if utc is not None else None,
+        utc_source=utc[1] if utc is not None else None,
+        heading_deg=heading_deg,
+        outlet_lat=outlet_lat,
+        outlet_lon=outlet_lon,
+        zone=zone,
+        prescription_kg_ha=prescription_kg_ha,
     )

@@ -52,7 +52,9 @@ CREATE TABLE state (
     target_rpm_upper REAL NOT NULL, target_rpm_lower REAL NOT NULL,
     meter_rpm_upper REAL NOT NULL, meter_rpm_lower REAL NOT NULL,
     fan_rpm_upper REAL NOT NULL, fan_rpm_lower REAL NOT NULL,
-    faults INTEGER NOT NULL
+    faults INTEGER NOT NULL,
+    utc REAL, utc_source TEXT, heading_deg REAL, outlet_lat REAL, outlet_lon REAL,
+    zone TEXT, prescription_kg_ha REAL
 );
 PRAGMA user_version = {SCHEMA_VERSION};
 """
@@ -386,9 +388,26 @@ class SessionReader:
             yield RawRecord(t, kind, line, can_id, data)
 
     def states(self) -> Iterator[StateRow]:
-        """State rows in the order they were logged."""
-        for values in self._select(f"SELECT {', '.join(STATE_COLUMNS)} FROM state ORDER BY id"):
-            yield StateRow(*values)
+        """State rows in the order they were logged. Columns added since a file was written
+        (utc, outlet position, ...) read as None."""
+        present = self.state_columns()
+        cols = [c for c in STATE_COLUMNS if c in present]
+        for values in self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"):
+            yield StateRow(**dict(zip(cols, values, strict=True)))
+
+    def state_values(self, columns: tuple[str, ...]) -> dict[str, list[Any]]:
+        """The given state columns in logged order, as lists (bulk reading for exports);
+        a column this file lacks reads as None."""
+        present = self.state_columns()
+        cols = [c for c in columns if c in present]
+        rows = list(self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"))
+        n = len(rows)
+        got = dict(zip(cols, (list(c) for c in zip(*rows, strict=True)), strict=True)) if n else {}
+        return {c: got.get(c, [None] * n) if c in present else [None] * n for c in columns}
+
+    def state_columns(self) -> frozenset[str]:
+        """The state table's columns in this file (older files lack the added ones)."""
+        return frozenset(str(r[1]) for r in self._select("PRAGMA table_info(state)"))
 
     def raw_counts(self) -> dict[str, int]:
         """Number of raw inputs of each kind."""

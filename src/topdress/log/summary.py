@@ -8,11 +8,12 @@ integrated and is reported as a gap instead.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Final
 
 from topdress import protocol
-from topdress.config import MachineConfig, loads_config
+from topdress.config import MachineConfig, SpeedConfig, TerminalConfig, loads_config
 from topdress.errors import ConfigError
 from topdress.log.model import RAW_KINDS, SOURCES, StateRow
 from topdress.log.session import SessionReader
@@ -32,6 +33,22 @@ class LayerSummary:
 
 
 @dataclass
+class StopEvent:
+    """A stop in the field (the machine's speed fell below the working speed) or a headland
+    entry (the outlet crossed from the field into the headland or outside the boundary), and
+    what the meters did after it, until the machine moved on (or left the headland)."""
+
+    kind: str  # "stop" or "headland"
+    t: float  # log time of the event
+    lat: float | None
+    lon: float | None
+    reached_zero: bool  # both meters at 0 r/min before the machine moved on
+    zero_after_s: float | None  # from the event to both meters at rest
+    kg_after: float = 0.0  # fertilizer metered from the event until then
+    m_after: float = 0.0  # distance travelled (selected speed) while still metering
+
+
+@dataclass
 class Summary:
     path: str
     duration_s: float = 0.0
@@ -47,21 +64,29 @@ class Summary:
     state_rows: int = 0
     raw_inputs: dict[str, int] = field(default_factory=dict)
     log_meta: dict[str, str] = field(default_factory=dict)  # loss counters stored at close
+    stops: list[StopEvent] = field(default_factory=list)  # headlands: stops and entries
+    stops_zero_pct: float | None = None  # stops after which the metering reached zero
+    headland_zero_pct: float | None = None  # headland entries likewise (with a boundary)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
-def _machine(config_toml: str) -> MachineConfig:
+def _config(config_toml: str) -> TerminalConfig:
     try:
-        return loads_config(config_toml).machine
+        return loads_config(config_toml)
     except ConfigError as exc:
         _log.warning("session configuration unreadable (%s): default machine used", exc)
-        return MachineConfig()
+        return TerminalConfig()
+
+
+def _machine(config_toml: str) -> MachineConfig:
+    return _config(config_toml).machine
 
 
 def summarise(reader: SessionReader) -> Summary:
-    machine = _machine(reader.config_toml)
+    cfg = _config(reader.config_toml)
+    machine = cfg.machine
     kg_per_rev = (machine.kg_per_rev_upper, machine.kg_per_rev_lower)
     s = Summary(str(reader.path), width_m=machine.width_m)
     s.source_s = dict.fromkeys(SOURCES, 0.0)
@@ -74,7 +99,9 @@ def summarise(reader: SessionReader) -> Summary:
     layers = [LayerSummary(), LayerSummary()]
     first: StateRow | None = None
     prev: StateRow | None = None
+    rows: list[StateRow] = []
     for row in reader.states():
+        rows.append(row)
         s.state_rows += 1
         if prev is None:
             first = row
@@ -90,7 +117,60 @@ def summarise(reader: SessionReader) -> Summary:
         if layer.target_kg > 0:
             layer.rate_error_pct = (layer.applied_kg - layer.target_kg) / layer.target_kg * 100.0
     s.layers = dict(zip(LAYERS, layers, strict=True))
+    s.stops = headland_events(rows, kg_per_rev, cfg.speed)
+    for kind, attr in (("stop", "stops_zero_pct"), ("headland", "headland_zero_pct")):
+        events = [e for e in s.stops if e.kind == kind]
+        if events:
+            setattr(s, attr, 100.0 * sum(e.reached_zero for e in events) / len(events))
     return s
+
+
+def headland_events(
+    rows: list[StateRow], kg_per_rev: tuple[float, float], speed: SpeedConfig
+) -> list[StopEvent]:
+    """Every stop in the field and every headland entry, with what was metered after it (the
+    paper judged its headlands by whether the metering reached zero)."""
+    out: list[StopEvent] = []
+    v_min = speed.min_work_speed_kmh
+    for i in range(1, len(rows)):
+        prev, row = rows[i - 1], rows[i]
+        if _moving(prev, v_min) and not _moving(row, v_min):
+            out.append(_after(rows, i, "stop", kg_per_rev, lambda r: not _moving(r, v_min)))
+        if prev.zone == "field" and row.zone in ("headland", "outside"):
+            out.append(_after(rows, i, "headland", kg_per_rev, lambda r: r.zone != "field"))
+    return out
+
+
+def _moving(row: StateRow, v_min: float) -> bool:
+    # The GNSS speed where there is one: the selected wheel speed lags a stop by its update.
+    v = row.v_gnss_kmh if row.v_gnss_kmh is not None else row.v_kmh
+    return v >= v_min
+
+
+def _after(
+    rows: list[StateRow],
+    i: int,
+    kind: str,
+    kg_per_rev: tuple[float, float],
+    lasts: Callable[[StateRow], bool],
+) -> StopEvent:
+    start = rows[i]
+    lat = start.outlet_lat if start.outlet_lat is not None else start.lat
+    lon = start.outlet_lon if start.outlet_lon is not None else start.lon
+    ev = StopEvent(kind, start.t, lat, lon, reached_zero=False, zero_after_s=None)
+    for j in range(i, len(rows)):
+        row = rows[j]
+        if not lasts(row):
+            break
+        if row.meter_rpm_upper <= 0 and row.meter_rpm_lower <= 0:
+            ev.reached_zero, ev.zero_after_s = True, row.t - start.t
+            break
+        dt = rows[j + 1].t - row.t if j + 1 < len(rows) else 0.0
+        if 0 <= dt <= MAX_GAP_S:
+            ev.kg_after += (row.meter_rpm_upper * kg_per_rev[0]) / 60.0 * dt
+            ev.kg_after += (row.meter_rpm_lower * kg_per_rev[1]) / 60.0 * dt
+            ev.m_after += row.v_kmh / 3.6 * dt
+    return ev
 
 
 def _integrate(
@@ -139,6 +219,17 @@ def format_text(s: Summary) -> str:
     lines.append(f"faults           {faults}")
     if s.gaps:
         lines.append(f"gaps             {s.gaps} (longer than {MAX_GAP_S:g} s), {s.gap_s:.1f} s")
+    for kind, pct in (("stop", s.stops_zero_pct), ("headland", s.headland_zero_pct)):
+        events = [e for e in s.stops if e.kind == kind]
+        if not events:
+            continue
+        kg = sum(e.kg_after for e in events)
+        m = sum(e.m_after for e in events)
+        name = "stops" if kind == "stop" else "headland entries"
+        lines.append(
+            f"{name:<16} {len(events)}, metering reached zero after {pct:.0f} %, "
+            f"{kg:.3f} kg and {m:.1f} m metered after them"
+        )
     raw = ", ".join(f"{k} {s.raw_inputs.get(k, 0)}" for k in RAW_KINDS)
     lines.append(f"raw inputs       {raw}")
     if s.log_meta:

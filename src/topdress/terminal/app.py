@@ -30,8 +30,10 @@ from typing import Any
 import can
 
 from topdress.config import TerminalConfig
+from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
+from topdress.gnss.utc import UtcClock
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
@@ -43,7 +45,7 @@ from topdress.terminal.crop import CompensatedNdvi
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.operator import CommandResult, ManualView
-from topdress.terminal.rate import build_rate_model, split_layers
+from topdress.terminal.rate import build_rate_model, build_site_rate, split_layers
 from topdress.terminal.serial_io import LineSource
 
 log = logging.getLogger(__name__)
@@ -100,6 +102,12 @@ class Snapshot:
     cv_threshold_pct: float = 4.2  # the speed rule's thresholds in force
     switch_speed_kmh: float = 6.0
     applied_kg_ha: tuple[float, float] = (0.0, 0.0)  # from the measured metering speeds
+    utc: tuple[float, str] | None = None  # (POSIX s, "gnss" | "system")
+    heading_deg: float | None = None
+    outlet_lat: float | None = None  # the meters' outlet (antenna + [machine] offsets)
+    outlet_lon: float | None = None
+    zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
+    prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
 
 
 class Terminal:
@@ -138,6 +146,10 @@ class Terminal:
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop)
         self.model = build_rate_model(cfg.rate)
+        # The prescription map and boundary files are read here: a bad one stops start-up.
+        self.site = build_site_rate(cfg, self.model)
+        self.utc = UtcClock()
+        self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()
         self.snapshot = Snapshot()
         self._t0: float | None = None
@@ -256,6 +268,11 @@ class Terminal:
         fix = self.nmea.decode(line)
         if not fix.ok:
             return
+        if fix.fix_valid:
+            self.utc.on_fix(t, fix.utc)
+            self.outlet.on_fix(
+                fix.lat, fix.lon, fix.course_deg, fix.speed_kmh, self.ndvi.odometer.distance_m
+            )
         if self.tracker.update(t, fix) is not None:
             self._gnss_seen = True
             self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
@@ -285,19 +302,27 @@ class Terminal:
         ndvi_meters = self.ndvi.update(now, v_sel)
         # Before the meters reach the first spot sensed, the nearest information is the sensors'.
         ndvi = ndvi_meters if ndvi_meters is not None else ndvi_sensors
-        if ndvi is None:
+        outlet = self.outlet.position(self.ndvi.odometer.distance_m)
+        # The prescription and the boundary at the outlet, the NDVI model as configured.
+        site = self.site.decide(ndvi, (outlet.lat, outlet.lon) if outlet is not None else None)
+        if ndvi is None and site.used_ndvi:
             self.counters["no_ndvi_ticks"] += 1
-            rates = split_layers(0.0, self.cfg.rate.split_upper, self.cfg.machine.layers)
-        else:
-            total = self.model.rate_kg_ha(ndvi)
-            rates = split_layers(total, self.cfg.rate.split_upper, self.cfg.machine.layers)
+        rates = split_layers(site.total_kg_ha, self.cfg.rate.split_upper, self.cfg.machine.layers)
         # No command goes out before the parameters are in force anyway; while they are pushed
         # again (ECU back), a stop here would stop a running ECU for a command period.
         # The operator's state (stopped, paused, manual, a calibration) decides what goes out.
         start, fan, upper, lower = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
         self.link.set_command(start, fan, upper, lower)
         self.link.poll(now)
-        snap = self._snapshot(now, ndvi_sensors, ndvi, (upper, lower))
+        snap = replace(
+            self._snapshot(now, ndvi_sensors, ndvi, (upper, lower)),
+            utc=self.utc.now(now),
+            heading_deg=outlet.heading_deg if outlet is not None else None,
+            outlet_lat=outlet.lat if outlet is not None else None,
+            outlet_lon=outlet.lon if outlet is not None else None,
+            zone=site.zone,
+            prescription_kg_ha=site.prescription_kg_ha,
+        )
         self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
         if self.session is not None:
             self.session.state(self._row(now))
@@ -451,6 +476,15 @@ class Terminal:
             position=(s.lat, s.lon) if s.lat is not None and s.lon is not None else None,
             ndvi=s.ndvi,
             rates_kg_ha=s.rate_kg_ha,
+            utc=s.utc,
+            heading_deg=s.heading_deg,
+            outlet=(
+                (s.outlet_lat, s.outlet_lon)
+                if s.outlet_lat is not None and s.outlet_lon is not None
+                else None
+            ),
+            zone=s.zone,
+            prescription_kg_ha=s.prescription_kg_ha,
         )
 
     # ---- events and the transmit tap ----------------------------------------------------------

@@ -1,0 +1,78 @@
+"""The field boundary and its headland: where the meters may work.
+
+`zone(lat, lon)` is "field" inside the boundary and farther than `headland_m` from it,
+"headland" in the strip of that width inside it, "outside" beyond it. The strip is the
+boundary buffered inwards in the field's UTM zone (metres); islands (inner rings) get their
+own strip. The boundary comes from polygons (GeoPackage, Shapefile, GeoJSON; several features
+are joined) or from an ISOXML partfield (PLN type 1).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import shapely
+from pyproj import Transformer
+
+from topdress.config import BoundaryConfig
+from topdress.errors import MapError
+from topdress.geo.asapplied import WGS84, utm_crs
+from topdress.geo.isoxml import read_partfield_boundary
+from topdress.geo.polygons import read_polygons
+
+
+class FieldBoundary:
+    def __init__(self, source: Path, boundary_wgs84: Any, headland_m: float) -> None:
+        self.source = source
+        self.headland_m = headland_m
+        self.boundary = boundary_wgs84
+        c = boundary_wgs84.centroid
+        self.crs = utm_crs(c.y, c.x)
+        self._fwd = Transformer.from_crs(WGS84, self.crs, always_xy=True)
+        self.outer = shapely.transform(
+            boundary_wgs84, lambda xy: np.column_stack(self._fwd.transform(xy[:, 0], xy[:, 1]))
+        )
+        self.inner = self.outer.buffer(-headland_m) if headland_m > 0 else self.outer
+        shapely.prepare(self.outer)
+        shapely.prepare(self.inner)
+
+    def zone(self, lat: float, lon: float) -> str:
+        x, y = self._fwd.transform(lon, lat)
+        if not shapely.contains_xy(self.outer, x, y):
+            return "outside"
+        return "field" if shapely.contains_xy(self.inner, x, y) else "headland"
+
+    def zones(self, lat: npt.NDArray[np.float64], lon: npt.NDArray[np.float64]) -> list[str]:
+        x, y = self._fwd.transform(lon, lat)
+        outer = shapely.contains_xy(self.outer, x, y)
+        inner = shapely.contains_xy(self.inner, x, y)
+        return [
+            "field" if i else "headland" if o else "outside"
+            for o, i in zip(outer, inner, strict=True)
+        ]
+
+    def inner_wgs84(self) -> Any:
+        back = Transformer.from_crs(self.crs, WGS84, always_xy=True)
+        return shapely.transform(
+            self.inner, lambda xy: np.column_stack(back.transform(xy[:, 0], xy[:, 1]))
+        )
+
+
+def load_boundary(cfg: BoundaryConfig) -> FieldBoundary:
+    path = Path(cfg.path)
+    if path.suffix.lower() == ".xml":
+        geom = read_partfield_boundary(path)
+    else:
+        geom = shapely.union_all(read_polygons(path, cfg.layer).geoms)
+    if geom.is_empty or geom.area == 0:
+        raise MapError(f"{path}: the boundary encloses no area")
+    out = FieldBoundary(path, geom, cfg.headland_m)
+    if out.inner.is_empty:
+        raise MapError(
+            f"{path}: a headland of {cfg.headland_m:g} m (boundary.headland_m) leaves no field "
+            "inside the boundary"
+        )
+    return out

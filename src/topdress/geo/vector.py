@@ -1,0 +1,178 @@
+"""As-applied points and swaths to GDAL vector formats (pyogrio): GeoPackage, Shapefile,
+GeoJSON, CSV.
+
+A GeoPackage holds both layers (`as_applied_points`, `as_applied_swaths`) in one file; the
+single-layer formats get one file per layer beside the path given (`NAME_points.shp`,
+`NAME_swaths.shp`, with a QGIS style `NAME_swaths.qml` of the rate classes that QGIS applies
+by itself). Shapefile (dBASE) names are cut to 10 characters: the one longer name is
+written as SHAPEFILE_NAMES says, and a `NAME_fields.csv` sidecar gives every field's full name
+and unit (dBASE has no place for units).
+"""
+
+from __future__ import annotations
+
+import csv
+from importlib import resources
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+import pyogrio
+import shapely
+from pyogrio.errors import DataSourceError, FieldError, GeometryError
+from pyproj import CRS, Transformer
+
+from topdress.errors import MapError
+from topdress.geo.asapplied import WGS84, AsApplied
+
+FORMATS: Final = ("gpkg", "shp", "geojson", "csv")
+DRIVERS: Final = {"gpkg": "GPKG", "shp": "ESRI Shapefile", "geojson": "GeoJSON", "csv": "CSV"}
+SUFFIX: Final = {"gpkg": ".gpkg", "shp": ".shp", "geojson": ".geojson", "csv": ".csv"}
+POINTS_LAYER: Final = "as_applied_points"
+SWATHS_LAYER: Final = "as_applied_swaths"
+SHAPEFILE_NAMES: Final = {"AppliedRate": "AppliedRt"}
+
+# field -> (unit, meaning)
+FIELDS: Final = {
+    "IsoTime": ("ISO 8601 UTC", "time of the record"),
+    "Time": ("UTC", "time of the record, YYYY-MM-DD hh:mm:ss.sss"),
+    "UtcSource": ("", "gnss (fix time), system (PC clock) or created (session start + log time)"),
+    "LogTime": ("s", "the terminal's monotonic clock"),
+    "Heading": ("deg", "course over ground, clockwise from north"),
+    "SPEED": ("km/h", "selected speed (the one that drove the meters)"),
+    "SpeedSrc": ("", "speed source: wheel, gnss, none"),
+    "DISTANCE": ("m", "distance to the next record"),
+    "SWATHWIDTH": ("m", "working width"),
+    "AREA": ("ha", "swath area"),
+    "NDVI": ("", "NDVI at the meters"),
+    "TargetRate": ("kg/ha", "target rate commanded, both layers (swaths: mean of its ends)"),
+    "AppliedRate": ("kg/ha", "actual rate, both layers, eq. 4 inverted (swaths: mean of ends)"),
+    "CmdRate": ("kg/ha", "rate commanded to the ECU, both layers"),
+    "TgtRateUp": ("kg/ha", "target rate, upper layer"),
+    "AppRateUp": ("kg/ha", "actual rate, upper layer"),
+    "TgtRateLo": ("kg/ha", "target rate, lower layer"),
+    "AppRateLo": ("kg/ha", "actual rate, lower layer"),
+    "TgtRpmUp": ("r/min", "target metering speed, upper"),
+    "RpmUp": ("r/min", "measured metering speed, upper"),
+    "TgtRpmLo": ("r/min", "target metering speed, lower"),
+    "RpmLo": ("r/min", "measured metering speed, lower"),
+    "AppliedKg": ("kg", "fertilizer applied until the next record, both layers"),
+    "TargetKg": ("kg", "target fertilizer until the next record, both layers"),
+    "WorkState": ("", "1 while a meter turns"),
+    "Faults": ("", "ECU fault word"),
+    "Zone": ("", "field boundary: field, headland, outside; empty = no boundary"),
+    "PrescRate": ("kg/ha", "prescription map rate at the outlet"),
+}
+
+
+def output_paths(path: Path, fmt: str) -> dict[str, Path]:
+    """Layer -> file for `fmt`: one GeoPackage, else NAME_points / NAME_swaths."""
+    if fmt == "gpkg":
+        return {POINTS_LAYER: path, SWATHS_LAYER: path}
+    stem = path.with_suffix("") if path.suffix.lower() == SUFFIX[fmt] else path
+    return {
+        POINTS_LAYER: stem.with_name(f"{stem.name}_points{SUFFIX[fmt]}"),
+        SWATHS_LAYER: stem.with_name(f"{stem.name}_swaths{SUFFIX[fmt]}"),
+    }
+
+
+def write(data: AsApplied, path: Path, fmt: str, crs: str = "wgs84") -> list[Path]:
+    """Write both layers; returns the files written. `crs` is wgs84 or utm (the field's zone)."""
+    if fmt not in FORMATS:
+        raise MapError(f"{path}: unknown format {fmt!r} (one of {', '.join(FORMATS)})")
+    target = WGS84 if crs == "wgs84" or data.utm is None else data.utm
+    paths = output_paths(path, fmt)
+    for p in set(paths.values()):
+        _remove(p, fmt)
+    written: list[Path] = []
+    for layer, cols, geom, gtype in (
+        (POINTS_LAYER, data.points, data.point_geom, "Point"),
+        (SWATHS_LAYER, data.swaths, data.swath_geom, "Polygon"),
+    ):
+        out = paths[layer]
+        _write_layer(out, layer, fmt, cols, _project(geom, target), gtype, target)
+        if out not in written:
+            written.append(out)
+    if fmt in ("shp", "geojson"):
+        # QGIS applies a style named like the layer's file by itself
+        style = paths[SWATHS_LAYER].with_suffix(".qml")
+        qml = resources.files("topdress.geo").joinpath("data", "as_applied_rate.qml")
+        attr = SHAPEFILE_NAMES.get("AppliedRate", "AppliedRate") if fmt == "shp" else "AppliedRate"
+        text = qml.read_text(encoding="utf-8").replace('attr="AppliedRate"', f'attr="{attr}"')
+        style.write_text(text, encoding="utf-8")
+        written.append(style)
+    if fmt in ("shp", "csv"):
+        sidecar = path.with_suffix("") if path.suffix.lower() == SUFFIX[fmt] else path
+        sidecar = sidecar.with_name(f"{sidecar.name}_fields.csv")
+        _write_units(sidecar, fmt, [*data.points, *data.swaths])
+        written.append(sidecar)
+    return written
+
+
+def _remove(path: Path, fmt: str) -> None:
+    exts = (".shp", ".shx", ".dbf", ".prj", ".cpg") if fmt == "shp" else (path.suffix,)
+    for ext in exts:
+        p = path.with_suffix(ext)
+        if p.exists():
+            p.unlink()
+
+
+def _project(geom: npt.NDArray[np.object_], crs: CRS) -> npt.NDArray[np.object_]:
+    if crs == WGS84 or geom.size == 0:
+        return geom
+    tr = Transformer.from_crs(WGS84, crs, always_xy=True)
+    return np.asarray(shapely.transform(geom, lambda xy: np.column_stack(tr.transform(*xy.T))))
+
+
+def _write_layer(
+    path: Path,
+    layer: str,
+    fmt: str,
+    cols: dict[str, npt.NDArray[np.generic]],
+    geom: npt.NDArray[np.object_],
+    gtype: str,
+    crs: CRS,
+) -> None:
+    names = [SHAPEFILE_NAMES.get(n, n) if fmt == "shp" else n for n in cols]
+    # Arrow hands GDAL whole columns (several times faster than feature by feature); NaN is
+    # written as an empty field.
+    table = pa.table(
+        {n: pa.array(c, from_pandas=True) for n, c in zip(names, cols.values(), strict=True)}
+        | {"geometry": pa.array(shapely.to_wkb(geom).tolist(), type=pa.binary())}
+    )
+    options: dict[str, str] = {}
+    if fmt == "csv":
+        options["GEOMETRY"] = "AS_XY" if gtype == "Point" else "AS_WKT"
+        options["CREATE_CSVT"] = "YES"
+    elif fmt == "geojson":
+        options["COORDINATE_PRECISION"] = "8"
+    elif fmt == "gpkg":
+        options["SPATIAL_INDEX"] = "YES"
+    try:
+        pyogrio.write_arrow(
+            table,
+            str(path),
+            layer=layer,
+            geometry_name="geometry",
+            driver=DRIVERS[fmt],
+            geometry_type=gtype,
+            crs=crs.to_wkt(),
+            append=fmt == "gpkg" and layer == SWATHS_LAYER,
+            layer_options=options,
+            encoding="UTF-8" if fmt == "shp" else None,
+        )
+    except (DataSourceError, FieldError, GeometryError, OSError) as exc:
+        raise MapError(f"cannot write {path}: {exc}") from exc
+
+
+def _write_units(path: Path, fmt: str, names: list[str]) -> None:
+    with path.open("w", encoding="utf-8", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["field", "name", "unit", "meaning"])
+        for name in dict.fromkeys(names):
+            unit, meaning = FIELDS[name]
+            w.writerow(
+                [SHAPEFILE_NAMES.get(name, name) if fmt == "shp" else name, name, unit, meaning]
+            )

@@ -1,0 +1,294 @@
+"""As-applied exports of a simulated session, read back by independent readers: GDAL (pyogrio)
+for the vector formats, the `isoxml` package and a reader written from the ISO 11783-10 record
+layout for the task data, python-can and cantools for the CAN trace."""
+
+from __future__ import annotations
+
+import itertools
+import shutil
+import sqlite3
+import struct
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import can
+import numpy as np
+import pyogrio
+import pyogrio.raw
+import pytest
+from isoxml.util.isoxml_io import isoxml_from_path
+
+from geo_rig import record
+from topdress.cli import main
+from topdress.config import DEFAULT_TOML
+from topdress.ecu import meter_rate_kg_ha
+from topdress.geo.asapplied import rate_kg_ha
+from topdress.log.session import SessionReader
+from topdress.log.summary import summarise
+from topdress.sim.tractor import Drive
+
+DBC = Path(__file__).parents[1] / "src/topdress/protocol/topdress.dbc"
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Two 40 m passes at 8 km/h with a headland turn, outlet 1.5 m behind the antenna."""
+    toml = DEFAULT_TOML + "\n"
+    toml = toml.replace("outlet_along_m = 0.0", "outlet_along_m = -1.5")
+    return record(tmp_path_factory.mktemp("s"), toml, Drive.field_passes(2, 40.0, 8.0), 60.0)
+
+
+def _summary_kg(path: Path) -> float:
+    with SessionReader(path) as r:
+        s = summarise(r)
+    return s.layers["upper"].applied_kg + s.layers["lower"].applied_kg
+
+
+def _read(path: Path, layer: str | None = None) -> tuple[dict[str, object], dict[str, np.ndarray]]:
+    meta, _, geom, fields = pyogrio.raw.read(path, layer=layer)
+    cols = dict(zip(meta["fields"], fields, strict=True))
+    return meta, cols | {"__geom__": geom}
+
+
+@pytest.mark.parametrize("fmt", ["gpkg", "shp", "geojson", "csv"])
+def test_every_vector_format_reads_back_in_gdal(session: Path, tmp_path: Path, fmt: str) -> None:
+    out = tmp_path / f"field.{fmt}"
+    assert main(["log", "export", str(session), "--format", fmt, "--out", str(out)]) == 0
+    layers = (
+        {"points": (out, "as_applied_points"), "swaths": (out, "as_applied_swaths")}
+        if fmt == "gpkg"
+        else {k: (tmp_path / f"field_{k}.{fmt}", None) for k in ("points", "swaths")}
+    )
+    want_kg = _summary_kg(session)
+    for kind, (path, layer) in layers.items():
+        info = pyogrio.read_info(path, layer=layer)
+        meta, cols = _read(path, layer)
+        names = list(meta["fields"])
+        if fmt == "csv":  # GDAL's CSV: X,Y columns (points) or WKT (swaths), WGS 84 by the docs
+            assert ("X" in names and "Y" in names) if kind == "points" else "WKT" in names
+            continue
+        assert info["crs"] == "EPSG:4326"
+        assert info["geometry_type"] == ("Point" if kind == "points" else "Polygon")
+        assert info["features"] > 100
+        if fmt == "shp":
+            assert all(len(n) <= 10 for n in names)
+            assert "AppliedRt" in names and "SWATHWIDTH" in names
+        else:
+            assert "AppliedRate" in names
+        # the kg of the export are the summary's (points: every interval; swaths: moving ones)
+        kg = float(np.sum(cols["AppliedKg"]))
+        if kind == "points":
+            assert kg == pytest.approx(want_kg, rel=0.005)
+        else:
+            assert 0.9 * want_kg < kg <= want_kg * 1.0001
+        assert set(np.unique(cols["SWATHWIDTH"])) == {3.6}
+    if fmt in ("shp", "geojson"):  # the rate classes' style, on the field QGIS reads
+        style = (tmp_path / "field_swaths.qml").read_text()
+        assert f'attr="{"AppliedRt" if fmt == "shp" else "AppliedRate"}"' in style
+    if fmt in ("shp", "csv"):
+        units = (tmp_path / "field_fields.csv").read_text()
+        assert "AppliedRt,AppliedRate,kg/ha" in units if fmt == "shp" else "AppliedRate" in units
+
+
+def test_points_carry_time_heading_rates_and_the_outlet_position(
+    session: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "a.gpkg"
+    assert main(["log", "export", str(session), "--out", str(out)]) == 0
+    _, p = _read(out, "as_applied_points")
+    assert all(str(s).endswith("Z") and str(s).startswith("20") for s in p["IsoTime"])
+    assert set(p["UtcSource"]) == {"gnss"}
+    speed = p["SPEED"]
+    first_pass = (speed > 7.5) & (p["LogTime"] < 25.0)
+    # the first pass runs north: heading near 0 (or 360), the outlet 1.5 m south of the antenna
+    h = p["Heading"][first_pass]
+    assert np.all(np.minimum(h, 360.0 - h) < 3.0)
+    steady = first_pass & (p["RpmUp"] > 0)
+    # actual rate from eq. 4 inverted: close to the target in steady work
+    assert np.median(np.abs(p["AppliedRate"][steady] - p["TargetRate"][steady])) < 10.0
+    assert np.all(p["AppliedRate"][speed < 0.5] == 0.0)  # no rate per area at a standstill
+    with SessionReader(session) as r:
+        rows = [row for row in r.states() if row.outlet_lat is not None and row.v_kmh > 7.5]
+    row = rows[len(rows) // 3]
+    assert row.lat is not None and row.outlet_lat < row.lat  # type: ignore[operator]
+    dlat_m = (row.lat - row.outlet_lat) * 111_100.0  # type: ignore[operator]
+    assert 1.0 < dlat_m < 3.0  # 1.5 m offset + the run since the last fix - the fix's age
+
+
+def test_utm_option_projects_to_the_fields_zone(session: Path, tmp_path: Path) -> None:
+    out = tmp_path / "u.gpkg"
+    assert main(["log", "export", str(session), "--out", str(out), "--crs", "utm"]) == 0
+    info = pyogrio.read_info(out, layer="as_applied_swaths")
+    assert info["crs"] == "EPSG:32651"  # 125.3 deg E, northern hemisphere
+    bounds = pyogrio.read_bounds(out, layer="as_applied_swaths")[1]
+    assert 100_000 < np.min(bounds[0]) < 900_000 and np.min(bounds[1]) > 4_000_000
+    # 2 passes of 40 m at 3.6 m: the swaths cover about that much (plus the turn)
+    _, cols = _read(out, "as_applied_swaths")
+    assert 0.025 < float(np.sum(cols["AREA"])) < 0.04
+
+
+def test_isoxml_task_data_reads_back(session: Path, tmp_path: Path) -> None:
+    out = tmp_path / "TASKDATA"
+    assert main(["log", "export", str(session), "--format", "isoxml", "--out", str(out)]) == 0
+    task_data, bins = isoxml_from_path(out)
+    task = task_data.tasks[0]
+    assert [t.filename for t in task.time_logs] == ["TLG00001"]
+    ddis = {int.from_bytes(d.ddi, "big") for d in task_data.devices[0].process_data}
+    assert {6, 7, 67, 81, 141, 397, 400} <= ddis
+    totals = {v.device_element_id_ref: v.process_data_value for v in task.times[0].data_log_values}
+    assert totals["DET2"] + totals["DET3"] == pytest.approx(_summary_kg(session), abs=1.0)
+    records = _read_tlg(out / "TLG00001.XML", bins["TLG00001"])
+    _, pts = _read(_gpkg(session, tmp_path), "as_applied_points")
+    assert len(records) == len(pts["IsoTime"])
+    lonlat = np.array([[r["east"], r["north"]] for r in records]) * 1e-7
+    import shapely
+
+    want = shapely.get_coordinates(shapely.from_wkb(pts["__geom__"]))
+    assert np.max(np.abs(lonlat - want)) < 2e-7
+    actual_upper = np.array([r[(7, "DET2")] for r in records]) / 100.0  # mg/m2 -> kg/ha
+    assert actual_upper == pytest.approx(pts["AppRateUp"], abs=0.01)
+    speed = np.array([r[(397, "DET1")] for r in records]) * 0.0036  # mm/s -> km/h
+    assert speed == pytest.approx(pts["SPEED"], abs=0.002)
+    assert {r[(400, "DET1")] for r in records} <= {0, 1, 3}
+    assert {r[(141, "DET1")] for r in records} == {0, 1}
+
+
+def _gpkg(session: Path, tmp_path: Path) -> Path:
+    out = tmp_path / "ref.gpkg"
+    assert main(["log", "export", str(session), "--out", str(out)]) == 0
+    return out
+
+
+def _read_tlg(header: Path, data: bytes) -> list[dict[object, int]]:
+    """ISO 11783-10 binary time log records, from the header's empty attributes (read here,
+    independently of the writer)."""
+    tim = ET.parse(header).getroot()
+    ptn = tim.find("PTN")
+    assert ptn is not None
+    pos_fields = [
+        (name, fmt)
+        for key, name, fmt in (
+            ("A", "north", "i"),
+            ("B", "east", "i"),
+            ("C", "up", "i"),
+            ("D", "status", "B"),
+            ("E", "pdop", "H"),
+            ("F", "hdop", "H"),
+            ("G", "sats", "B"),
+            ("H", "gps_time", "I"),
+            ("I", "gps_date", "H"),
+        )
+        if ptn.get(key) == ""
+    ]
+    dlvs = [(int(d.get("A", ""), 16), d.get("C")) for d in tim.findall("DLV")]
+    out: list[dict[object, int]] = []
+    i = 0
+    while i < len(data):
+        rec: dict[object, int] = {}
+        rec["ms"], rec["days"] = struct.unpack_from("<IH", data, i)
+        i += 6
+        for name, fmt in pos_fields:
+            (rec[name],) = struct.unpack_from("<" + fmt, data, i)
+            i += struct.calcsize(fmt)
+        n = data[i]
+        i += 1
+        for _ in range(n):
+            k, value = struct.unpack_from("<Bi", data, i)
+            i += 5
+            rec[dlvs[k]] = value
+        out.append(rec)
+    return out
+
+
+def test_can_trace_reads_in_python_can_and_cantools(session: Path, tmp_path: Path) -> None:
+    log, asc = tmp_path / "bus.log", tmp_path / "bus.asc"
+    assert main(["log", "export", str(session), "--can", str(log)]) == 0
+    assert main(["log", "export", str(session), "--can", str(asc)]) == 0
+    with SessionReader(session) as r:
+        counts = r.raw_counts()
+    n = counts["can_rx"] + counts["can_tx"]
+    for path in (log, asc):
+        msgs = list(can.LogReader(path))
+        assert len(msgs) == n
+        assert {m.arbitration_id for m in msgs} >= {0x185C6465, 0x0A5C6465}
+        # candump: UTC time stamps; asc: relative to its header's UTC start
+        assert msgs[0].timestamp > 1.5e9 if path == log else msgs[0].timestamp == 0.0
+        assert all(b.timestamp >= a.timestamp for a, b in itertools.pairwise(msgs))
+    decoded = subprocess.run(
+        [sys.executable, "-m", "cantools", "decode", "--single-line", str(DBC)],
+        stdin=log.open(),
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert decoded.count("EcuStatus(") == sum(
+        1 for m in can.LogReader(log) if m.arbitration_id == 0x185C6465
+    )
+    played = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "can.player",
+            "-i",
+            "virtual",
+            "-c",
+            "play",
+            "--ignore-timestamps",
+            "-g",
+            "0",
+            "-v",
+            str(log),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    ).stdout
+    assert played.count("ID: 185c6465") == decoded.count("EcuStatus(")
+
+
+def test_a_session_without_the_added_columns_still_exports(session: Path, tmp_path: Path) -> None:
+    old = tmp_path / "old.sqlite"
+    shutil.copy(session, old)
+    with sqlite3.connect(old) as conn:
+        for col in (
+            "utc",
+            "utc_source",
+            "heading_deg",
+            "outlet_lat",
+            "outlet_lon",
+            "zone",
+            "prescription_kg_ha",
+        ):
+            conn.execute(f"ALTER TABLE state DROP COLUMN {col}")
+    out = tmp_path / "old.gpkg"
+    assert main(["log", "export", str(old), "--out", str(out)]) == 0
+    _, p = _read(out, "as_applied_points")
+    assert set(p["UtcSource"]) == {"created"}
+    assert float(np.sum(p["AppliedKg"])) == pytest.approx(_summary_kg(session), rel=0.005)
+    moving = p["SPEED"] > 7.5
+    assert np.nanmedian(np.abs(p["Heading"][moving & (p["LogTime"] < 20)])) < 5.0
+
+
+def test_no_position_at_all_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from topdress.log.rows import state_row
+    from topdress.log.session import SessionLog
+
+    with SessionLog.create(tmp_path, "") as log:
+        for i in range(5):
+            log.state(state_row(i * 0.1, status=None, diag=None, speeds=None, targets=None))
+    assert main(["log", "export", str(log.path), "--out", str(tmp_path / "x.gpkg")]) == 2
+    assert "no state row has a position" in capsys.readouterr().err
+
+
+def test_eq4_inverted_over_columns_is_the_c_function() -> None:
+    rng = np.random.default_rng(1)
+    rpm = rng.uniform(0, 80, 200)
+    v = rng.uniform(0, 14, 200)
+    got = rate_kg_ha(rpm, v, 3.6, 0.3, 0.5)
+    want = [meter_rate_kg_ha(3.6, r, s, 0.3, 0.5) for r, s in zip(rpm, v, strict=True)]
+    assert got == pytest.approx(want, rel=1e-5, abs=1e-6)
