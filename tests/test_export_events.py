@@ -189,7 +189,7 @@ def test_export_errors_are_clear(tmp_path: Path, capsys: pytest.CaptureFixture[s
     # a typo that names the session as the output leaves the session whole
     size = path.stat().st_size
     assert main(["log", "export", str(path), "--csv", str(path)]) == 2
-    assert "is the session file itself" in capsys.readouterr().err
+    assert "is the input" in capsys.readouterr().err
     assert path.stat().st_size == size
     assert main(["log", "summary", str(path)]) == 0
 

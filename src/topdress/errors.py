@@ -56,3 +56,7 @@ class EcuParamError(TopdressError):
 class MapError(TopdressError):
     """A map file (prescription, boundary, ISOXML) or an export that cannot be made; the
     message names the file and, where there is one, the feature."""
+
+
+class OutputError(TopdressError):
+    """An output file that would destroy an input, or cannot be written."""

@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from topdress.errors import LogError
+from topdress.errors import LogError, OutputError
+from topdress.outpath import check_output, is_stdout, open_text_output, write_output
 
 
 def register(sub: Any) -> None:
@@ -78,13 +79,6 @@ def register(sub: Any) -> None:
     replay.set_defaults(func=_replay)
 
 
-def _open_out(path: Path) -> Any:
-    try:
-        return path.open("w", encoding="utf-8", newline="")
-    except OSError as exc:
-        raise LogError(f"cannot write {path}: {exc}") from exc
-
-
 def _export(args: argparse.Namespace) -> int:
     from topdress.log.events import write
     from topdress.log.export import ExportStats, session_events, write_state_csv
@@ -96,31 +90,45 @@ def _export(args: argparse.Namespace) -> int:
             "nothing to do: give --out PATH [--format ...], --events OUT.ndjson, --csv OUT.csv, "
             "--config OUT.toml or --can OUT.log"
         )
-    for out_path in outs:  # a typo must not truncate the session it reads
-        if out_path.exists() and args.session.exists() and out_path.samefile(args.session):
-            raise LogError(f"{out_path} is the session file itself: give another output")
+    for out_path in outs:  # a typo must not truncate the session it reads (or its WAL)
+        check_output(out_path, [args.session])
+    if len({str(p) for p in outs if not is_stdout(p)}) < len([p for p in outs if not is_stdout(p)]):
+        raise OutputError("two outputs name the same file: give each its own")
+    if args.out is not None and is_stdout(args.out):
+        raise OutputError(f"--out -: the {args.format} export writes files; give a path")
+    # Reports go to standard error when an output is standard output, so the data stays clean.
+    report = sys.stderr if any(is_stdout(p) for p in outs) else sys.stdout
     with SessionReader(args.session) as reader:
         if args.events is not None:
             stats = ExportStats()
-            with _open_out(args.events) as out:
+            with open_text_output(args.events, [args.session]) as out:
                 write(session_events(reader, stats), out)
             print(
                 f"{args.events}: {stats.events} events ({stats.wheel_counts} wheel counts)"
-                + (f", {stats.bad_diag} EcuDiag frames not decoded" if stats.bad_diag else "")
+                + (f", {stats.bad_diag} EcuDiag frames not decoded" if stats.bad_diag else ""),
+                file=report,
             )
         if args.csv is not None:
-            with _open_out(args.csv) as out:
+            with open_text_output(args.csv, [args.session]) as out:
                 rows = write_state_csv(reader, out)
-            print(f"{args.csv}: {rows} state rows")
+            print(f"{args.csv}: {rows} state rows", file=report)
         if args.config is not None:
-            with _open_out(args.config) as out:
+            with open_text_output(args.config, [args.session]) as out:
                 out.write(reader.config_toml)
-            print(f"{args.config}: the session's configuration")
-        if args.out is not None or args.can is not None:
+            print(f"{args.config}: the session's configuration", file=report)
+        if args.out is not None:
             from topdress.log.export import export_maps
 
-            for line in export_maps(reader, args.out, args.format, args.crs, args.can):
-                print(line)
+            for line in export_maps(reader, args.out, args.format, args.crs, None):
+                print(line, file=report)
+        if args.can is not None:
+            from topdress.geo.cantrace import write_trace
+
+            # python-can picks the trace format by the file's extension: keep it on the temp.
+            n = write_output(
+                args.can, [args.session], lambda tmp: write_trace(reader, tmp), args.can.suffix
+            )
+            print(f"{args.can}: {n} CAN frames", file=report)
     return 0
 
 
@@ -128,10 +136,15 @@ def _map(args: argparse.Namespace) -> int:
     from topdress.geo.mapview import render
     from topdress.log.session import SessionReader
 
-    if args.out.exists() and args.session.exists() and args.out.samefile(args.session):
-        raise LogError(f"{args.out} is the session file itself: give another output")
+    suffix = ".html" if is_stdout(args.out) else args.out.suffix
     with SessionReader(args.session) as reader:
-        print(render(reader, args.out, args.classes))
+        line = write_output(
+            args.out,
+            [args.session],
+            lambda tmp: render(reader, tmp, args.classes).replace(str(tmp), str(args.out)),
+            suffix,
+        )
+    print(line, file=sys.stderr if is_stdout(args.out) else sys.stdout)
     return 0
 
 
@@ -159,11 +172,12 @@ def _replay(args: argparse.Namespace) -> int:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
     stats = ReplayStats()
     rows = replay(read.events, cfg, args.speed_mode, stats)
-    with _open_out(args.out) as out:
+    with open_text_output(args.out, [args.events]) as out:
         write_csv(rows, out)
     print(
         f"{args.out}: {len(rows)} speed updates from {len(read.events)} events"
         + (f" ({len(read.bad)} malformed lines skipped)" if read.bad else "")
-        + (f", {stats.gaps_cut} pauses over {MAX_IDLE_S:g} s cut" if stats.gaps_cut else "")
+        + (f", {stats.gaps_cut} pauses over {MAX_IDLE_S:g} s cut" if stats.gaps_cut else ""),
+        file=sys.stderr if is_stdout(args.out) else sys.stdout,
     )
     return 0
