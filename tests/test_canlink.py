@@ -5,12 +5,14 @@ from __future__ import annotations
 import itertools
 from collections.abc import Iterator
 from dataclasses import replace
+from pathlib import Path
 
 import can
 import pytest
 import serial
 
 from topdress import protocol
+from topdress.cli import main
 from topdress.config import CanConfig, default_config, loads_config
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
 from topdress.terminal.canlink import CanLink, SimulatedEcu, open_bus
@@ -471,3 +473,22 @@ def test_udp_multicast_is_warned_about_at_start() -> None:
         bus.shutdown()
     warnings = [e for e in events if "udp_multicast" in e]
     assert len(warnings) == 1 and "any host on this network" in warnings[0]
+
+
+def test_interface_without_its_driver_is_a_device_error_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # kvaser without the vendor's canlib raised NameError: a traceback and exit code 1
+    cfg = replace(CanConfig(), interface="kvaser", channel="0")
+    with pytest.raises(DeviceError, match="'kvaser': its driver or the vendor library"):
+        open_bus(cfg)
+    empty = tmp_path / "empty.txt"
+    empty.write_text("")
+    config = tmp_path / "kvaser.toml"
+    config.write_text(
+        f'[gnss]\nsource = "file"\npath = "{empty}"\n[crop]\nsource = "file"\npath = "{empty}"\n'
+        f'[can]\ninterface = "kvaser"\nchannel = "0"\n[log]\ndir = "{tmp_path}"\n'
+    )
+    assert main(["run", "--config", str(config), "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "kvaser" in err and "Traceback" not in err

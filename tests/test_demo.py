@@ -4,6 +4,7 @@ with pyserial) and a virtual CAN bus, the terminal in front of it, the session l
 from __future__ import annotations
 
 import io
+import os
 import signal
 import subprocess
 import sys
@@ -273,3 +274,20 @@ def test_demo_without_pseudo_terminals_fails_naming_them(
     err = capsys.readouterr().err
     assert "cannot make the simulated machine's pseudo-terminals" in err
     assert "out of pty devices" in err
+
+
+def test_demo_log_directory_with_an_emoji_works(tmp_path: Path) -> None:
+    # The path went into the embedded TOML as a JSON surrogate pair, which TOML refuses.
+    out_dir = tmp_path / "feld 🚜"
+    assert run_demo(1.0, out_dir, out=io.StringIO()) == 0
+    assert len(list(out_dir.glob("*.sqlite"))) == 1
+    assert "🚜" in (out_dir / "topdress-demo.toml").read_text(encoding="utf-8")
+
+
+def test_demo_log_directory_with_a_non_utf8_byte_is_a_clear_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = os.fsdecode(os.fsencode(str(tmp_path)) + b"/bad\xff")
+    assert main(["demo", "--duration", "1", "--out", bad]) == 2
+    err = capsys.readouterr().err
+    assert "not UTF-8" in err and "Traceback" not in err and "RuntimeError" not in err

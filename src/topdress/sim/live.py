@@ -78,7 +78,8 @@ class LiveMachine:
     def stop(self) -> None:
         """Stop the thread, then close the ptys."""
         self._stop.set()
-        self._thread.join(timeout=5.0)
+        if self._thread.ident is not None:  # started: stop() also runs after a failed start
+            self._thread.join(timeout=5.0)
         self.gnss_port.close()
         self.crop_port.close()
 

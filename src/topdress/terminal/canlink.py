@@ -58,7 +58,13 @@ def open_bus(cfg: CanConfig, **extra: Any) -> can.BusABC:
     kwargs.update(extra)
     try:
         return can.Bus(**kwargs)
-    except (can.CanError, OSError, ValueError, ImportError) as exc:
+    except Exception as exc:
+        # anything (kvaser without canlib: NameError); every failure to open is a DeviceError.
+        if isinstance(exc, NameError | ImportError | AttributeError):
+            raise DeviceError(
+                f"cannot open CAN interface {cfg.interface!r}: its driver or the vendor library "
+                f"it needs is not installed ({type(exc).__name__}: {exc})"
+            ) from exc
         raise DeviceError(
             f"cannot open CAN interface {cfg.interface!r} channel {cfg.channel!r}: {exc}"
         ) from exc

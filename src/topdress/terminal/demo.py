@@ -19,7 +19,7 @@ from typing import TextIO
 import can
 
 from topdress.config import TerminalConfig, loads_config, redacted_text
-from topdress.errors import DeviceError
+from topdress.errors import ConfigError, DeviceError
 from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
 from topdress.sim.tractor import Drive
@@ -54,7 +54,20 @@ def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path
 
 def _toml_str(text: str) -> str:
     # A JSON string is a TOML basic string: quotes and backslashes in a path stay intact.
-    return json.dumps(text)
+    # Not ASCII-escaped: JSON writes an emoji as a surrogate pair, which TOML refuses.
+    return json.dumps(text, ensure_ascii=False)
+
+
+def _check_out_dir(out_dir: Path) -> None:
+    """The log directory goes into a TOML file, which holds text only: a path with bytes that
+    are not UTF-8 (kept by Python as lone surrogates) cannot be written there."""
+    try:
+        str(out_dir).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = str(out_dir).encode("utf-8", "backslashreplace").decode("ascii", "replace")
+        raise ConfigError(
+            "--out", f"{shown}: the path has bytes that are not UTF-8; choose another directory"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -175,6 +188,7 @@ def run_demo(
 
     The demo's configuration is written to `out_dir/topdress-demo.toml`, where settings changed
     while it runs are saved."""
+    _check_out_dir(out_dir)
     drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
     world = World(SimConfig(), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
