@@ -49,17 +49,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    """The exit code: 0 done, 2 an error the message explains, 130 interrupted (Ctrl-C while
+    starting: the subcommands import numpy and more, which takes a moment)."""
     try:
+        args = build_parser().parse_args(argv)
+        logging.basicConfig(
+            level=logging.DEBUG if args.verbose else logging.WARNING,
+            format="%(levelname)s %(name)s: %(message)s",
+        )
         code: int = args.func(args)
     except TopdressError as exc:
         print(f"topdress: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        print("topdress: interrupted", file=sys.stderr)
         return 130
     return code
 

@@ -37,6 +37,7 @@ from topdress.gnss.utc import UtcClock
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
+from topdress.terminal import signals
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.calibration import CalibrationView
 from topdress.terminal.canlink import CanLink, EcuView
@@ -180,7 +181,12 @@ class Terminal:
         self.link.begin(self.cfg.ecu_params(), now)
 
     def close(self) -> None:
-        """Stop the ECU (a stop command), the readers, and the log."""
+        """Stop the ECU (a stop command), the readers, and the log; a stop signal arriving
+        meanwhile is held until the log is closed (see topdress.terminal.signals)."""
+        with signals.deferred():
+            self._close()
+
+    def _close(self) -> None:
         self.desk.close()
         self.link.set_command(False, 0.0, 0.0, 0.0)
         self.link.send_now()

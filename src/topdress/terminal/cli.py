@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -11,6 +10,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from topdress.config import load_config, read_config_text
+from topdress.terminal.signals import StopSignals
 
 #: `topdress run` ended (duration, Ctrl-C, SIGTERM) without the ECU ever acknowledging its
 #: parameters: the inputs were logged, nothing was metered.
@@ -75,16 +75,10 @@ def _seconds(text: str) -> float:
 @contextmanager
 def _sigterm_stops() -> Iterator[None]:
     """SIGTERM (a service stop, the cab PC shutting down) stops the terminal as Ctrl-C does:
-    the stop command to the ECU, the log closed, where the data went."""
-
-    def stop(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt("SIGTERM")
-
-    previous = signal.signal(signal.SIGTERM, stop)
-    try:
+    the stop command to the ECU, the log closed, where the data went; a second signal of
+    either kind while that happens is ignored, never a torn log."""
+    with StopSignals().installed():
         yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _demo(args: argparse.Namespace) -> int:
