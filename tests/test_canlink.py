@@ -447,8 +447,8 @@ def test_forged_acknowledgements_are_ignored_not_obeyed(rig: Rig) -> None:
         params = default_config().ecu_params()
         first_id, first_value = sorted(params.items())[0]
         spec = protocol.param(first_id)
-        # for the parameter being pushed, ahead of the ECU's answer: "out of range" for a value
-        # inside the range (twice), and "ok" with another value in force
+        # for the parameter being pushed, ahead of the ECU's answer: refusals whose value in
+        # force (AckRaw: 0 and 0.007 m) no ECU can hold, and "ok" with another value in force
         rig.link.begin(params, 0.0)
         attacker.send(_forged_ack(first_id, protocol.AckResult.OUT_OF_RANGE, 0))
         attacker.send(_forged_ack(first_id, protocol.AckResult.OUT_OF_RANGE, 7))

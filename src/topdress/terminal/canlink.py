@@ -144,8 +144,10 @@ def _impossible_ack(
     raw = spec.to_raw(value)
     if ack.result is AckResult.OK and ack.raw != raw:
         return f"ok, but in force {ack.raw} is not the {raw} sent"  # ok means the value took
-    if ack.result is AckResult.OUT_OF_RANGE and spec.minimum <= value <= spec.maximum:
-        return f"out of range, but {value:g} is inside {spec.minimum:g}..{spec.maximum:g}"
+    in_force = ack.raw * spec.scale
+    if not spec.minimum - spec.scale <= in_force <= spec.maximum + spec.scale:
+        # AckRaw is the value the ECU now holds, and it never holds one outside the range
+        return f"the value in force {in_force:g} is outside {spec.minimum:g}..{spec.maximum:g}"
     return None
 
 
