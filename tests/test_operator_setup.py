@@ -389,3 +389,35 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
         term.bus.shutdown()
         child.wait(timeout=30)
     assert child.returncode == 0
+
+
+def test_can_adapter_options_reach_python_can() -> None:
+    import can
+
+    from topdress.terminal.canlink import open_bus
+
+    cfg = loads_config(
+        '[can]\nchannel = "test-setup-options"\n[can.options]\nreceive_own_messages = true\n'
+    )
+    assert cfg.can.options == {"receive_own_messages": True}
+    bus = open_bus(cfg.can)
+    try:
+        bus.send(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))
+        echo = bus.recv(timeout=1.0)  # only with the option: a virtual bus echoes its own frames
+        assert echo is not None and echo.arbitration_id == 0x123
+    finally:
+        bus.shutdown()
+    assert loads_config(
+        '[can]\ninterface = "slcan"\nchannel = "/dev/ttyACM0"\n[can.options]\n'
+        "tty_baudrate = 115200\n"
+    ).can.options == {"tty_baudrate": 115200}
+    for bad, key in (
+        ("bitrate = 500000", "can.options.bitrate"),
+        ("x = [1, 2]", "can.options.x"),
+        ('"not a name" = 1', "can.options.not a name"),
+    ):
+        with pytest.raises(ConfigError) as exc:
+            loads_config(f"[can.options]\n{bad}\n")
+        assert exc.value.key == key
+    new = settings.validate_section(default_config(), "can", {"options": {"tty_baudrate": 57600}})
+    assert new.can.options == {"tty_baudrate": 57600}
