@@ -403,6 +403,16 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
             "(not saved: no configuration file)"
         )
         assert rig.term.cfg.rate.model == "table"
+        # a crop key that is not the port's: taken at once, the same source kept
+        source = rig.term.crop
+        assert post(rig, op.ApplySettings("crop", {"sensors": 2})).ok
+        bad_before = rig.term.snapshot.counters["crop_bad"]
+        rig.run(rig.world.t_s + 2.0)
+        assert rig.term.crop is source
+        assert len(rig.term.snapshot.ndvi_per_sensor) == 2
+        assert rig.term.snapshot.counters["crop_bad"] > bad_before  # sensors 3 and 4 refused
+        assert post(rig, op.ApplySettings("gnss", {"stale_s": 5.0})).ok
+        assert rig.term.tracker.stale_s == 5.0 and rig.term.gnss is rig.gnss
         res = post(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
         assert not res.ok and list(res.errors) == ["can"]
         assert rig.term.cfg.can.interface == "virtual"
@@ -413,7 +423,9 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         can_lines = post(rig, op.TestDevice("can")).data
         assert any(line.decoded.startswith("EcuStatus(") for line in can_lines)
         crop = post(rig, op.TestDevice("crop")).data
-        assert crop and all(line.decoded.startswith("sensor ") for line in crop)
+        decoded = {line.decoded.split(" NDVI")[0] for line in crop}
+        # with crop.sensors = 2 now: sensors 1 and 2 read, 3 and 4 refused, each line said why
+        assert {"sensor 1", "sensor 2", "not usable: sensor_id: '3' is not 1..2"} <= decoded
         assert not post(rig, op.TestDevice("radar")).ok
     finally:
         rig.close()
