@@ -429,3 +429,35 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         assert not post(rig, op.TestDevice("radar")).ok
     finally:
         rig.close()
+
+
+def test_gnss_port_changed_while_running_is_reopened_on_the_new_device() -> None:
+    import time as wall
+
+    from topdress.sim import nmea
+    from topdress.sim.live import PtyPort
+
+    port = PtyPort()
+    rig = make_rig(drive(stand(30.0)))
+    try:
+        rig.run(2.0)
+        old = rig.term.gnss
+        res = post(rig, op.ApplySettings("gnss", {"port": port.path, "baud": 115200}))
+        assert res.ok, res.message
+        assert rig.term.gnss is not old and rig.term.gnss.name == f"serial:{port.path}"
+        assert rig.term.cfg.gnss.port == port.path
+        line = nmea.rmc("GN", 3600.0, True, 43.9, 125.3, 5.0 / 3.6, 90.0, "210526")
+        deadline = wall.monotonic() + 5.0
+        seen: list[Any] = []
+        while not seen and wall.monotonic() < deadline:
+            port.write(line.encode())
+            wall.sleep(0.05)
+            rig.run(rig.world.t_s + 0.1)
+            seen = [
+                x for x in post(rig, op.TestDevice("gnss"), 0.01).data if "5.00 km/h" in x.decoded
+            ]
+        assert seen and seen[-1].raw == line.strip()
+        assert rig.term.link.command.gnss_kmh == pytest.approx(5.0, abs=0.01)
+    finally:
+        rig.close()
+        port.close()
