@@ -325,10 +325,14 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
 
     group = f"239.74.{os.getpid() % 250}.{7 + os.getpid() % 200}"
     _udp_or_skip(group)
+    # A port of its own: a socket on the default port hears every group joined on this host
+    # (Linux), so another udp_multicast run on the machine would talk to this ECU.
+    udp_port = 20000 + (os.getpid() * 7919) % 20000
     child = subprocess.Popen(
         [
             *(sys.executable, "-m", "topdress.cli", "sim", "ecu"),
-            *("--can", f"udp_multicast:{group}", "--drive", "stand", "--duration", "9"),
+            *("--can", f"udp_multicast:{group}", "--option", f"port={udp_port}"),
+            *("--drive", "stand", "--duration", "9"),
         ],
         stdout=subprocess.PIPE,
         text=True,
@@ -344,6 +348,7 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
     snippet = head.split("a terminal reaches it with:\n")[1].split("Ctrl-C")[0]
     cfg = loads_config(snippet)
     assert cfg.can.interface == "udp_multicast" and cfg.can.channel == group
+    assert cfg.can.options == {"port": udp_port}
     term = Terminal(
         cfg,
         open_line_source(cfg.gnss),
@@ -371,7 +376,7 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
             weighed = re.search(
                 r"catch test done: the upper meter let out ([0-9.]+) kg", "".join(rest)
             )
-        assert weighed, "".join(rest)
+        assert weighed, ("".join(rest), term.snapshot.calibration)
         cal = term.snapshot.calibration
         assert cal is not None and cal.step == "weigh", cal
         assert term.snapshot.gnss_link == "ok" and term.snapshot.crop_link == "ok"
@@ -421,3 +426,20 @@ def test_can_adapter_options_reach_python_can() -> None:
         assert exc.value.key == key
     new = settings.validate_section(default_config(), "can", {"options": {"tty_baudrate": 57600}})
     assert new.can.options == {"tty_baudrate": 57600}
+
+
+def test_sim_ecu_options_become_the_terminals_can_options() -> None:
+    from topdress.sim.ecu_cli import parse_options, terminal_snippet
+
+    opts = parse_options(["port=43200", "tty_baudrate=115200", "fd=false", "name=left rack"])
+    text = terminal_snippet("/dev/pts/3", "/dev/pts/4", "udp_multicast", "239.0.0.9", opts)
+    cfg = loads_config(text)
+    assert cfg.can.options == {
+        "port": 43200,
+        "tty_baudrate": 115200,
+        "fd": False,
+        "name": "left rack",
+    }
+    assert (cfg.gnss.port, cfg.crop.port) == ("/dev/pts/3", "/dev/pts/4")
+    with pytest.raises(ConfigError, match="KEY=VALUE"):
+        parse_options(["port"])
