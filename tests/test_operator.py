@@ -403,6 +403,16 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
             "(not saved: no configuration file)"
         )
         assert rig.term.cfg.rate.model == "table"
+        # a crop key that is not the port's: taken at once, the same source kept
+        source = rig.term.crop
+        assert post(rig, op.ApplySettings("crop", {"sensors": 2})).ok
+        bad_before = rig.term.snapshot.counters["crop_bad"]
+        rig.run(rig.world.t_s + 2.0)
+        assert rig.term.crop is source
+        assert len(rig.term.snapshot.ndvi_per_sensor) == 2
+        assert rig.term.snapshot.counters["crop_bad"] > bad_before  # sensors 3 and 4 refused
+        assert post(rig, op.ApplySettings("gnss", {"stale_s": 5.0})).ok
+        assert rig.term.tracker.stale_s == 5.0 and rig.term.gnss is rig.gnss
         res = post(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
         assert not res.ok and list(res.errors) == ["can"]
         assert rig.term.cfg.can.interface == "virtual"
@@ -413,7 +423,41 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         can_lines = post(rig, op.TestDevice("can")).data
         assert any(line.decoded.startswith("EcuStatus(") for line in can_lines)
         crop = post(rig, op.TestDevice("crop")).data
-        assert crop and all(line.decoded.startswith("sensor ") for line in crop)
+        decoded = {line.decoded.split(" NDVI")[0] for line in crop}
+        # with crop.sensors = 2 now: sensors 1 and 2 read, 3 and 4 refused, each line said why
+        assert {"sensor 1", "sensor 2", "not usable: sensor_id: '3' is not 1..2"} <= decoded
         assert not post(rig, op.TestDevice("radar")).ok
     finally:
         rig.close()
+
+
+def test_gnss_port_changed_while_running_is_reopened_on_the_new_device() -> None:
+    import time as wall
+
+    from topdress.sim import nmea
+    from topdress.sim.live import PtyPort
+
+    port = PtyPort()
+    rig = make_rig(drive(stand(30.0)))
+    try:
+        rig.run(2.0)
+        old = rig.term.gnss
+        res = post(rig, op.ApplySettings("gnss", {"port": port.path, "baud": 115200}))
+        assert res.ok, res.message
+        assert rig.term.gnss is not old and rig.term.gnss.name == f"serial:{port.path}"
+        assert rig.term.cfg.gnss.port == port.path
+        line = nmea.rmc("GN", 3600.0, True, 43.9, 125.3, 5.0 / 3.6, 90.0, "210526")
+        deadline = wall.monotonic() + 5.0
+        seen: list[Any] = []
+        while not seen and wall.monotonic() < deadline:
+            port.write(line.encode())
+            wall.sleep(0.05)
+            rig.run(rig.world.t_s + 0.1)
+            seen = [
+                x for x in post(rig, op.TestDevice("gnss"), 0.01).data if "5.00 km/h" in x.decoded
+            ]
+        assert seen and seen[-1].raw == line.strip()
+        assert rig.term.link.command.gnss_kmh == pytest.approx(5.0, abs=0.01)
+    finally:
+        rig.close()
+        port.close()

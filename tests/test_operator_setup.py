@@ -325,10 +325,14 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
 
     group = f"239.74.{os.getpid() % 250}.{7 + os.getpid() % 200}"
     _udp_or_skip(group)
+    # A port of its own: a socket on the default port hears every group joined on this host
+    # (Linux), so another udp_multicast run on the machine would talk to this ECU.
+    udp_port = 20000 + (os.getpid() * 7919) % 20000
     child = subprocess.Popen(
         [
             *(sys.executable, "-m", "topdress.cli", "sim", "ecu"),
-            *("--can", f"udp_multicast:{group}", "--drive", "stand", "--duration", "9"),
+            *("--can", f"udp_multicast:{group}", "--option", f"port={udp_port}"),
+            *("--drive", "stand", "--duration", "9"),
         ],
         stdout=subprocess.PIPE,
         text=True,
@@ -344,6 +348,7 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
     snippet = head.split("a terminal reaches it with:\n")[1].split("Ctrl-C")[0]
     cfg = loads_config(snippet)
     assert cfg.can.interface == "udp_multicast" and cfg.can.channel == group
+    assert cfg.can.options == {"port": udp_port}
     term = Terminal(
         cfg,
         open_line_source(cfg.gnss),
@@ -371,7 +376,7 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
             weighed = re.search(
                 r"catch test done: the upper meter let out ([0-9.]+) kg", "".join(rest)
             )
-        assert weighed, "".join(rest)
+        assert weighed, ("".join(rest), term.snapshot.calibration)
         cal = term.snapshot.calibration
         assert cal is not None and cal.step == "weigh", cal
         assert term.snapshot.gnss_link == "ok" and term.snapshot.crop_link == "ok"
@@ -389,3 +394,52 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
         term.bus.shutdown()
         child.wait(timeout=30)
     assert child.returncode == 0
+
+
+def test_can_adapter_options_reach_python_can() -> None:
+    import can
+
+    from topdress.terminal.canlink import open_bus
+
+    cfg = loads_config(
+        '[can]\nchannel = "test-setup-options"\n[can.options]\nreceive_own_messages = true\n'
+    )
+    assert cfg.can.options == {"receive_own_messages": True}
+    bus = open_bus(cfg.can)
+    try:
+        bus.send(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))
+        echo = bus.recv(timeout=1.0)  # only with the option: a virtual bus echoes its own frames
+        assert echo is not None and echo.arbitration_id == 0x123
+    finally:
+        bus.shutdown()
+    assert loads_config(
+        '[can]\ninterface = "slcan"\nchannel = "/dev/ttyACM0"\n[can.options]\n'
+        "tty_baudrate = 115200\n"
+    ).can.options == {"tty_baudrate": 115200}
+    for bad, key in (
+        ("bitrate = 500000", "can.options.bitrate"),
+        ("x = [1, 2]", "can.options.x"),
+        ('"not a name" = 1', "can.options.not a name"),
+    ):
+        with pytest.raises(ConfigError) as exc:
+            loads_config(f"[can.options]\n{bad}\n")
+        assert exc.value.key == key
+    new = settings.validate_section(default_config(), "can", {"options": {"tty_baudrate": 57600}})
+    assert new.can.options == {"tty_baudrate": 57600}
+
+
+def test_sim_ecu_options_become_the_terminals_can_options() -> None:
+    from topdress.sim.ecu_cli import parse_options, terminal_snippet
+
+    opts = parse_options(["port=43200", "tty_baudrate=115200", "fd=false", "name=left rack"])
+    text = terminal_snippet("/dev/pts/3", "/dev/pts/4", "udp_multicast", "239.0.0.9", opts)
+    cfg = loads_config(text)
+    assert cfg.can.options == {
+        "port": 43200,
+        "tty_baudrate": 115200,
+        "fd": False,
+        "name": "left rack",
+    }
+    assert (cfg.gnss.port, cfg.crop.port) == ("/dev/pts/3", "/dev/pts/4")
+    with pytest.raises(ConfigError, match="KEY=VALUE"):
+        parse_options(["port"])

@@ -39,7 +39,7 @@ from topdress.terminal.calibration import (
 )
 from topdress.terminal.canlink import CanLink, open_bus
 from topdress.terminal.counters import CounterView, WorkCounters
-from topdress.terminal.crop import parse_crop_line
+from topdress.terminal.crop import DistanceQueue, parse_crop_line
 from topdress.terminal.rate import build_rate_model
 from topdress.terminal.serial_io import open_line_source
 from topdress.terminal.settings import (
@@ -367,6 +367,18 @@ class OperatorDesk:
             self._reopen(now, c.section, new)
         return self._commit(c, new)
 
+    def _retune(self, section: str, new: TerminalConfig) -> None:
+        """The keys of [gnss] and [crop] that are not the device's: taken at once."""
+        term = self.term
+        if section == "gnss":
+            term.tracker.rmc_timeout_s = new.gnss.rmc_timeout_s
+            term.tracker.stale_s = new.gnss.stale_s
+        elif section == "crop":
+            term.ndvi.sensors.cfg = new.crop  # columns, sensor count, NDVI range, stale_s
+            if new.crop.sensor_to_meter_m != term.cfg.crop.sensor_to_meter_m:
+                # NDVI queued for the old distance would be applied at the wrong spot.
+                term.ndvi.queue = DistanceQueue(new.crop.sensor_to_meter_m)
+
     def _commit(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
         term = self.term
@@ -409,6 +421,11 @@ class OperatorDesk:
             self._old_buses.append((now, old_bus))
             return
         src_cfg = new.gnss if section == "gnss" else new.crop
+        old_cfg = term.cfg.gnss if section == "gnss" else term.cfg.crop
+        self._retune(section, new)
+        device = ("source", "port", "baud", "path", "replay_interval_s")
+        if all(getattr(src_cfg, k) == getattr(old_cfg, k) for k in device):
+            return  # the same device: no reopening
         kind = "nmea" if section == "gnss" else "crop"
         source = open_line_source(src_cfg)
         old = term.gnss if section == "gnss" else term.crop
