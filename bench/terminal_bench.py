@@ -91,7 +91,10 @@ class Machine:
     def run_spy(self) -> None:
         ids = protocol.DEFAULT_IDS
         while not self.stop.is_set():
-            msg = self.spy.recv(timeout=0.1)
+            try:
+                msg = self.spy.recv(timeout=0.1)
+            except OSError:  # the bus was shut down under it: the run is over
+                return
             t = time.perf_counter()
             if msg is None or msg.arbitration_id != ids.command:
                 continue
@@ -107,7 +110,10 @@ class Machine:
     def run_command_spy(self) -> None:
         """Every PcCommand's arrival time (the flood phase)."""
         while not self.stop.is_set():
-            msg = self.spy.recv(timeout=0.1)
+            try:
+                msg = self.spy.recv(timeout=0.1)
+            except OSError:  # the bus was shut down under it: the run is over
+                return
             if msg is not None and msg.arbitration_id == protocol.DEFAULT_IDS.command:
                 self.command_times.append(time.monotonic())
 
