@@ -245,3 +245,13 @@ def test_a_file_that_cannot_get_its_schema_is_not_left_behind(tmp_path: Path) ->
     assert log.last_error is not None and "full" in log.last_error
     log.close()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_name_with_a_left_over_wal_is_not_taken(tmp_path: Path) -> None:
+    # session.sqlite deleted by hand, its -wal left: SQLite would replay that WAL into a new
+    # file of the same name and mix an old session into the new one.
+    (tmp_path / "field.sqlite-wal").write_bytes(b"old wal")
+    log = SessionLog.create(tmp_path, "# new\n", name="field")
+    log.close()
+    assert log.path.name == "field-1.sqlite" and log.errors == 0
+    assert (tmp_path / "field.sqlite-wal").read_bytes() == b"old wal"

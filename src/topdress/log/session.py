@@ -94,6 +94,9 @@ def _claim_path(directory: Path, name: str | None) -> Path:
     n = 0
     while True:
         path = directory / (f"{stem}{SUFFIX}" if n == 0 else f"{stem}-{n}{SUFFIX}")
+        if any(path.with_name(path.name + c).exists() for c in ("-wal", "-shm")):
+            n += 1  # a left-over WAL would be applied to the new file as if it were its own
+            continue
         try:
             os.close(os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
         except FileExistsError:
