@@ -461,3 +461,20 @@ def test_gnss_port_changed_while_running_is_reopened_on_the_new_device() -> None
     finally:
         rig.close()
         port.close()
+
+
+def test_a_command_is_served_before_a_flood_of_lines() -> None:
+    rig = make_rig(drive(stand(10.0)), autostart=True)
+    try:
+        rig.run(1.0)
+        for _ in range(400):
+            rig.term.inbox.put(("nmea", rig.world.t_s, b"$GPGGA,garbage*00"))
+        fut = rig.term.post(op.Stop())
+        kind, t, payload = rig.term.inbox.get(timeout=0)
+        assert kind == "op"  # ahead of the 400 lines queued before it
+        rig.term.handle(kind, t, payload)
+        assert fut.result(timeout=0).ok
+        assert rig.term.desk.op.state == op.STOPPED
+        assert rig.term.link.command.start is False
+    finally:
+        rig.close()
