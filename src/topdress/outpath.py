@@ -56,6 +56,22 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
+@contextlib.contextmanager
+def _staged(out: str | Path, suffix: str) -> Iterator[Path]:
+    """A temporary path beside `out`, renamed over it when the block ends without an
+    exception; removed in every case that did not rename it."""
+    target = Path(out)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp{suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc}") from exc
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
 def write_output(
     out: str | Path,
     inputs: Iterable[str | Path],
@@ -74,17 +90,8 @@ def write_output(
                 shutil.copyfileobj(f, sys.stdout.buffer)
             sys.stdout.buffer.flush()
             return result
-    target = Path(out)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp{suffix}")
-    try:
-        result = write(tmp)
-        os.replace(tmp, target)
-    except OSError as exc:
-        raise OutputError(f"cannot write {out}: {exc}") from exc
-    finally:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-    return result
+    with _staged(out, suffix) as tmp:
+        return write(tmp)
 
 
 @contextlib.contextmanager
@@ -96,14 +103,5 @@ def open_text_output(out: str | Path, inputs: Iterable[str | Path]) -> Iterator[
         yield sys.stdout
         sys.stdout.flush()
         return
-    target = Path(out)
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
-        with tmp.open("w", encoding="utf-8", newline="") as f:
-            yield f
-        os.replace(tmp, target)
-    except OSError as exc:
-        raise OutputError(f"cannot write {out}: {exc}") from exc
-    finally:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+    with _staged(out, "") as tmp, tmp.open("w", encoding="utf-8", newline="") as f:
+        yield f
