@@ -168,18 +168,24 @@ static void stop(td_app_t *app) {
     }
 }
 
+/* A received frame's decode result, counted in the rx counters; returns `rc`. */
+static int count_rx(td_app_t *app, int rc) {
+    if (rc == TD_OK) {
+        app->cnt.rx_ok++;
+    } else if (rc == TD_E_LENGTH) {
+        app->cnt.rx_bad_length++;
+    } else {
+        app->cnt.rx_out_of_range++;
+    }
+    return rc;
+}
+
 static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
     td_command_t c;
-    const int rc = td_proto_decode_command(frame, &c);
-    if (rc == TD_E_LENGTH) {
-        app->cnt.rx_bad_length++;
-        return rc;
-    }
+    const int rc = count_rx(app, td_proto_decode_command(frame, &c));
     if (rc != TD_OK) {
-        app->cnt.rx_out_of_range++;
         return rc;
     }
-    app->cnt.rx_ok++;
     app->have_cmd = true;
     app->last_cmd_us = now_us;
     set_fault(app, TD_FAULT_CMD_TIMEOUT, false);
@@ -221,16 +227,10 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
 /* PcGnssTime: the GNSS speed with its age; a new GnssSeq is applied at the next step. */
 static int apply_gnss_time(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
     td_gnss_time_t g;
-    const int rc = td_proto_decode_gnss_time(frame, &g);
-    if (rc == TD_E_LENGTH) {
-        app->cnt.rx_bad_length++;
-        return rc;
-    }
+    const int rc = count_rx(app, td_proto_decode_gnss_time(frame, &g));
     if (rc != TD_OK) {
-        app->cnt.rx_out_of_range++;
         return rc;
     }
-    app->cnt.rx_ok++;
     app->have_gnss_time = true;
     app->gnss_time_us = now_us;
     if (g.valid && !(app->have_seq && g.seq == app->gnss_seq)) {
@@ -309,15 +309,7 @@ int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
     }
     if (frame->extended != 0u) {
         if (frame->id == TD_ID_PC_CAL_COMMAND) {
-            const int rc = td_cal_rx(&app->cal, frame, app->st.running, now_us);
-            if (rc == TD_OK) {
-                app->cnt.rx_ok++;
-            } else if (rc == TD_E_LENGTH) {
-                app->cnt.rx_bad_length++;
-            } else {
-                app->cnt.rx_out_of_range++;
-            }
-            return rc;
+            return count_rx(app, td_cal_rx(&app->cal, frame, app->st.running, now_us));
         }
         if (frame->id == app->p.command_id) {
             return apply_command(app, frame, now_us);
