@@ -33,6 +33,7 @@ def register(sub: Any) -> None:
         help="where the session log goes (default: ./topdress-sessions)",
     )
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
+    _display_args(demo)
     demo.set_defaults(func=_demo)
 
     run = sub.add_parser(
@@ -48,7 +49,25 @@ def register(sub: Any) -> None:
     run.add_argument(
         "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
     )
+    _display_args(run)
     run.set_defaults(func=_run)
+
+
+def _display_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--display",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="serve the operator display in the browser (default: display.enabled, on)",
+    )
+    parser.add_argument(
+        "--port", type=int, metavar="N", help="the display's port (default: display.port, 8080)"
+    )
+    parser.add_argument(
+        "--host",
+        metavar="ADDR",
+        help="the display's address (default: display.host, 127.0.0.1; others need display.pin)",
+    )
 
 
 def _seconds(text: str) -> float:
@@ -77,16 +96,23 @@ def _sigterm_stops() -> Iterator[None]:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from topdress.config import default_config
+    from topdress.display.serve import display_options
     from topdress.terminal.demo import run_demo
 
+    display = display_options(default_config(), args.display, args.host, args.port)
     with _sigterm_stops():
-        return run_demo(args.duration, args.out, seed=args.seed)
+        return run_demo(args.duration, args.out, seed=args.seed, display=display)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from topdress.display.serve import display_options
     from topdress.terminal.demo import run_terminal
 
     cfg = load_config(args.config)
+    display = display_options(cfg, args.display, args.host, args.port)
     with _sigterm_stops():
-        result = run_terminal(cfg, read_config_text(args.config), args.duration, sys.stdout)
+        result = run_terminal(
+            cfg, read_config_text(args.config), args.duration, sys.stdout, display=display
+        )
     return 0 if result.ecu_ready else EXIT_NO_ECU

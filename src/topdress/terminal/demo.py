@@ -14,7 +14,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import can
 
@@ -28,6 +28,9 @@ from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
 from topdress.terminal.console import Console
 from topdress.terminal.serial_io import open_line_source
+
+if TYPE_CHECKING:
+    from topdress.display.server import DisplayOptions
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +72,7 @@ def run_terminal(
     duration_s: float | None,
     out: TextIO,
     machine: LiveMachine | None = None,
+    display: DisplayOptions | None = None,
 ) -> RunResult:
     """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
     console = Console(out, period_s=cfg.display.refresh_s)
@@ -84,12 +88,19 @@ def run_terminal(
     if not opened:
         console.message(f"warning: session log not written: {session.last_error}")
     term = Terminal(cfg, gnss, crop, bus, session, on_event=console.message)
+    shown = None
+    if display is not None:  # the web display beside the console (topdress.display)
+        from topdress.display.serve import serve_display
+
+        shown = serve_display(term, cfg, display, console.message)
     rows = 0
 
     def on_tick(snapshot: Snapshot, now: float) -> None:
         nonlocal rows
         rows += 1
         console.update(snapshot, now)
+        if shown is not None:
+            shown.publish(snapshot)
         if machine is not None and machine.error is not None:
             raise DeviceError(f"the simulated machine failed: {machine.error}")
 
@@ -100,6 +111,8 @@ def run_terminal(
         console.message(f"stopped by {exc}" if exc.args else "stopped by the operator (Ctrl-C)")
     finally:
         # Also after an error: the operator needs to know where the data went.
+        if shown is not None:
+            shown.stop()
         _shutdown(bus)
         console.draw(term.snapshot)
         if not term.link.ready:
@@ -134,7 +147,11 @@ def _report(out: TextIO, path: Path | None, errors: int) -> None:
 
 
 def run_demo(
-    duration_s: float | None, out_dir: Path, seed: int = 1, out: TextIO = sys.stdout
+    duration_s: float | None,
+    out_dir: Path,
+    seed: int = 1,
+    out: TextIO = sys.stdout,
+    display: DisplayOptions | None = None,
 ) -> int:
     """The simulated machine in a thread, the terminal in front of it; returns the exit code."""
     drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
@@ -154,7 +171,7 @@ def run_demo(
             f"{machine.crop_port.path} (crop sensors), CAN virtual:{channel}\n"
         )
         machine.start()
-        run_terminal(cfg, text, duration_s, out, machine)
+        run_terminal(cfg, text, duration_s, out, machine, display)
     finally:
         machine.stop()
         sim_bus.shutdown()

@@ -1,0 +1,102 @@
+"""The pages: a common frame (screens, language, links) around each screen.
+
+Each page pulls the latest snapshot with a `ui.timer` in the display's own event loop; the
+control loop never waits on it. A change of language (from any page, or the console's setting)
+redraws every open page's content in place.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+from nicegui import ui
+
+from topdress import i18n
+from topdress.config import TerminalConfig
+from topdress.display.hub import DisplayHub
+from topdress.display.main_screen import MainScreen
+from topdress.i18n import tr
+from topdress.terminal.app import Snapshot
+
+UPDATE_PERIOD_S = 0.2  # how often a page looks for a new snapshot (5 Hz of the loop's 10)
+
+#: path, catalogue key of the screen's name
+SCREENS = (
+    ("/", "screen.main"),
+    ("/communication", "screen.communication"),
+    ("/control", "screen.control"),
+    ("/calibration", "screen.calibration"),
+)
+
+
+class Screen(Protocol):
+    def update(self, s: Snapshot) -> None: ...
+
+
+@dataclass
+class PageState:
+    """One browser tab's view: what it last drew."""
+
+    serial: int = -1
+    lang_version: int = -1
+
+
+def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
+    """The header (screens, language, time) and the screen's content, kept up to date."""
+    state = PageState()
+    screen: list[Screen] = []
+    ui.page_title("topdress")
+
+    @ui.refreshable
+    def content() -> None:
+        state.lang_version = i18n.version()
+        with ui.row().classes(
+            "w-full items-center gap-2 bg-green-900 text-white px-3 py-1 rounded"
+        ):
+            ui.label("topdress").classes("text-lg font-bold mr-3")
+            for target, key in SCREENS:
+                button = ui.button(tr(key), on_click=lambda t=target: ui.navigate.to(t))
+                button.props("flat no-caps" + (" outline" if target == path else "")).classes(
+                    "text-white"
+                ).mark(f"nav{target.replace('/', '_')}")
+            ui.space()
+            clock = ui.label("").classes("font-mono text-sm").mark("clock")
+            ui.select(
+                {lang: i18n.LANGUAGE_NAMES[lang] for lang in i18n.LANGUAGES},
+                value=i18n.language(),
+                on_change=lambda e: i18n.set_language(str(e.value)),
+            ).props("dense dark options-dark standout").classes("w-28").mark("language")
+        screen[:] = [build()]
+        clock_label[:] = [clock]
+
+    clock_label: list[ui.label] = []
+    content()
+
+    def update() -> None:
+        if state.lang_version != i18n.version():
+            state.serial = -1
+            content.refresh()
+        serial, published, s = hub.latest()
+        if serial == state.serial:
+            return
+        state.serial = serial
+        clock = clock_label[0]
+        clock.set_text(f"t {s.t_s:7.1f} s")
+        # The wall-clock time this snapshot was published: the benchmark's update latency.
+        clock.props(f'data-published="{published:.3f}"')
+        for sc in screen:
+            sc.update(s)
+
+    ui.timer(UPDATE_PERIOD_S, update)
+
+
+def register_pages(hub: DisplayHub, cfg: TerminalConfig) -> None:
+    """Add the display's pages to NiceGUI's app (call once, before `ui.run`)."""
+    width_m = cfg.machine.width_m
+    max_kg_ha = cfg.rate.linear.max_kg_ha
+
+    @ui.page("/")
+    def main_page() -> None:
+        frame(hub, "/", lambda: MainScreen(hub, width_m, max_kg_ha))
