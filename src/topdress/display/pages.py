@@ -52,6 +52,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
     @ui.refreshable
     def content() -> None:
         state.lang_version = i18n.version()
+        state.serial = -1  # new elements: the next update fills them whatever the serial
         with ui.row().classes(
             "w-full items-center gap-2 bg-green-900 text-white px-3 py-1 rounded"
         ):
@@ -76,7 +77,6 @@ def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
 
     def update() -> None:
         if state.lang_version != i18n.version():
-            state.serial = -1
             content.refresh()
         serial, published, s = hub.latest()
         if serial == state.serial:
@@ -89,6 +89,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
         for sc in screen:
             sc.update(s)
 
+    update()  # the first view carries the values, not dashes until the timer fires
     ui.timer(UPDATE_PERIOD_S, update)
 
 
