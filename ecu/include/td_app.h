@@ -22,6 +22,7 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include "td_cal.h"
 #include "td_common.h"
 #include "td_params.h"
 #include "td_pid.h"
@@ -94,6 +95,7 @@ typedef struct {
     /* transmit queue */
     td_can_frame_t txq[TD_TXQ_LEN];
     uint8_t tx_head, tx_count;
+    td_cal_t cal;              /**< metering catch test (td_cal.h) */
 } td_app_t;
 
 /** Initialise with a parameter set (validated: TD_E_RANGE / TD_E_INCONSISTENT on a bad one). */

@@ -109,6 +109,7 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
     app->start_us = now_us;
     app->st.source = TD_SRC_WHEEL;
     app->st.faults = TD_FAULT_GNSS_LOST;
+    td_cal_init(&app->cal);
     return TD_OK;
 }
 
@@ -256,6 +257,17 @@ int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
         }
         if (frame->id == TD_ID_PC_PARAM_SET) {
             return apply_param_set(app, frame);
+        }
+        if (frame->id == TD_ID_PC_CAL_COMMAND) {
+            const int rc = td_cal_rx(&app->cal, frame, app->st.running, now_us);
+            if (rc == TD_OK) {
+                app->cnt.rx_ok++;
+            } else if (rc == TD_E_LENGTH) {
+                app->cnt.rx_bad_length++;
+            } else {
+                app->cnt.rx_out_of_range++;
+            }
+            return rc;
         }
     }
     app->cnt.rx_unknown_id++;
@@ -469,6 +481,12 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
      * must still zero the outputs it gates */
     control_fans(app, now_us, dt_s, out);
     control_meters(app, now_us, dt_s, out);
+    const td_cal_io_t cal_io = { st->running, st->v_wheel_kmh, { in->meter_count[TD_UPPER], in->meter_count[TD_LOWER] },
+                                 { st->meter_rpm[TD_UPPER], st->meter_rpm[TD_LOWER] } };
+    td_can_frame_t cal_status;
+    if (td_cal_step(&app->cal, now_us, dt_s, &app->p, &cal_io, out, &cal_status) > 0) {
+        txq_push(app, &cal_status);
+    }
 
     const uint32_t period_us = (uint32_t)app->p.status_period_ms * 1000u;
     if (td_elapsed_us(now_us, app->last_status_us) >= period_us) {

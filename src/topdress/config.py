@@ -8,7 +8,9 @@ start-up before any device is opened.
 from __future__ import annotations
 
 import dataclasses
+import hmac
 import math
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -158,7 +160,17 @@ class RateConfig:
     sufficiency: SufficiencyRateConfig = field(default_factory=SufficiencyRateConfig)
 
 
-CAN_ID_NAMES = ("status", "command", "diag", "speeds", "targets", "param_set", "param_ack")
+CAN_ID_NAMES = (
+    "status",
+    "command",
+    "diag",
+    "speeds",
+    "targets",
+    "param_set",
+    "param_ack",
+    "cal_command",
+    "cal_status",
+)
 
 
 @dataclass(frozen=True)
@@ -178,6 +190,8 @@ class CanConfig:
             "targets": 0x185F6465,
             "param_set": 0x0A606465,
             "param_ack": 0x18616465,
+            "cal_command": 0x0A646465,
+            "cal_status": 0x18656465,
         }
     )
 
@@ -190,6 +204,31 @@ class LogConfig:
 @dataclass(frozen=True)
 class DisplayConfig:
     refresh_s: float = _num(0.5, 0.2, 2.0)  # console redraw period on a TTY
+    enabled: bool = True  # serve the operator display (web page)
+    host: str = "127.0.0.1"  # any other address needs a pin
+    port: int = _num(8080, 1, 65535)
+    pin: str = ""  # 4..12 digits; required to operate from another address; never logged
+    language: str = _choice("en", "en", "zh")
+
+
+#: Addresses that only the cab PC itself reaches: the display needs no PIN there.
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def check_pin(display: DisplayConfig, given: str) -> bool:
+    """Whether `given` is the display PIN, compared in constant time; True when none is set."""
+    if not display.pin:
+        return True
+    return hmac.compare_digest(display.pin.encode("utf-8"), given.encode("utf-8"))
+
+
+@dataclass(frozen=True)
+class OperatorConfig:
+    autostart: bool = False  # meters run at once, without the operator's start (headless use)
+    off_rate_pct: float = _num(10.0, 1.0, 100.0)  # metering speed this far off its target...
+    off_rate_s: float = _num(5.0, 0.5, 120.0)  # ...for longer than this is an alarm
+    fan_check_s: float = _num(10.0, 2.0, 120.0)  # how long the fan check runs the fans
+    counters_file: str = "counters.json"  # field and season counters, relative to log.dir
 
 
 @dataclass(frozen=True)
@@ -203,6 +242,7 @@ class TerminalConfig:
     can: CanConfig = field(default_factory=CanConfig)
     log: LogConfig = field(default_factory=LogConfig)
     display: DisplayConfig = field(default_factory=DisplayConfig)
+    operator: OperatorConfig = field(default_factory=OperatorConfig)
 
     def ecu_params(self) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start.
@@ -230,6 +270,14 @@ class TerminalConfig:
         return dict(sorted(params.items()))
 
 
+_PIN_LINE = re.compile(r'(?m)^(\s*pin\s*=\s*)("(?:[^"\\]|\\.)*"|\'[^\']*\'|[^#\s]+)')
+
+
+def redacted_text(text: str) -> str:
+    """The configuration text with the display PIN's value replaced, for the session log."""
+    return _PIN_LINE.sub(lambda m: m.group(1) + '"***"', text)
+
+
 def default_config() -> TerminalConfig:
     return TerminalConfig()
 
@@ -253,6 +301,11 @@ def loads_config(text: str, source: str = "<config>") -> TerminalConfig:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(source, f"not valid TOML: {exc}") from exc
+    return config_from_dict(doc)
+
+
+def config_from_dict(doc: Mapping[str, Any]) -> TerminalConfig:
+    """Validate a parsed TOML document (the same checks as a file); ConfigError names the key."""
     sections = {f.name: f for f in dataclasses.fields(TerminalConfig)}
     _reject_unknown(doc, sections, "")
     built: dict[str, Any] = {}
@@ -309,7 +362,8 @@ def _value(f: dataclasses.Field[Any], raw: Any, key: str) -> Any:
         return raw
     if isinstance(default, str):
         if not isinstance(raw, str):
-            raise ConfigError(key, f"must be a string, not {raw!r}")
+            shown = "a number" if key == "display.pin" else repr(raw)  # the PIN is never shown
+            raise ConfigError(key, f"must be a string, not {shown}")
         choices = f.metadata.get("choices")
         if choices and raw not in choices:
             raise ConfigError(key, f"must be one of {', '.join(choices)}, not {raw!r}")
@@ -431,7 +485,18 @@ def _cross_check(cfg: TerminalConfig) -> None:
         raise ConfigError("rate.linear.min_kg_ha", "must not exceed rate.linear.max_kg_ha")
     if not cfg.can.interface:
         raise ConfigError("can.interface", "must name a python-can interface")
+    _check_display(cfg.display)
     _check_timing(cfg)
+
+
+def _check_display(d: DisplayConfig) -> None:
+    if not d.host:
+        raise ConfigError("display.host", "must be an address to listen on")
+    if d.pin and not (d.pin.isdigit() and d.pin.isascii() and 4 <= len(d.pin) <= 12):
+        raise ConfigError("display.pin", "must be 4 to 12 digits")
+    if d.host not in LOCAL_HOSTS and not d.pin:
+        # Anyone on the network could start the meters or change a setting.
+        raise ConfigError("display.pin", f"is required when display.host is {d.host!r}")
 
 
 def _check_timing(cfg: TerminalConfig) -> None:
@@ -550,7 +615,9 @@ max_n_kg_ha = 200.0
 n_fraction = 0.46          # N fraction of the product (urea 0.46)
 
 [can]
-interface = "virtual"      # python-can interface: socketcan, slcan, pcan, kvaser, udp_multicast...
+# python-can interface: socketcan (can0 on Linux), slcan, pcan, kvaser, udp_multicast...
+# "virtual" is the simulator's in-process bus: no real ECU can answer there.
+interface = "virtual"
 channel = "topdress"
 bitrate = 250000
 command_period_s = 0.5     # command frame period
@@ -565,10 +632,24 @@ speeds = 0x185E6465
 targets = 0x185F6465
 param_set = 0x0A606465
 param_ack = 0x18616465
+cal_command = 0x0A646465   # calibration (catch test) command and its status
+cal_status = 0x18656465
 
 [log]
 dir = "topdress-sessions"  # one SQLite file per session
 
 [display]
 refresh_s = 0.5            # live status redrawn every 0.2..2 s on a terminal (1 line/s to a pipe)
+enabled = true             # serve the operator display in a browser
+host = "127.0.0.1"         # only this PC; any other address (0.0.0.0) needs a pin
+port = 8080
+pin = ""                   # 4..12 digits: needed to operate (start, stop, settings) from afar
+language = "en"            # en | zh
+
+[operator]
+autostart = false          # true: the meters start at once, without the operator (headless)
+off_rate_pct = 10.0        # a metering speed this far off its target...
+off_rate_s = 5.0           # ...for longer than this raises the off-rate alarm
+fan_check_s = 10.0         # how long the fan check runs the fans
+counters_file = "counters.json"  # field and season counters, in log.dir
 """

@@ -2,15 +2,20 @@
 
 from topdress.protocol.dbc import database, dbc_text
 from topdress.protocol.frames import (
+    CAL_REASONS,
+    CAL_STATES,
+    EcuCalStatus,
     EcuDiag,
     EcuParamAck,
     EcuSpeeds,
     EcuStatus,
     EcuTargets,
     Frame,
+    PcCalCommand,
     PcCommand,
     PcParamSet,
     decode,
+    encode_cal_command,
     encode_command,
     encode_param_set,
     is_known_id,
@@ -29,11 +34,14 @@ from topdress.protocol.model import (
 from topdress.protocol.params import ParamSpec, param, param_name, params
 
 __all__ = [
+    "CAL_REASONS",
+    "CAL_STATES",
     "DEFAULT_IDS",
     "LATCHED_FAULTS",
     "AckResult",
     "CanFrame",
     "Compare",
+    "EcuCalStatus",
     "EcuDiag",
     "EcuParamAck",
     "EcuSpeeds",
@@ -43,6 +51,7 @@ __all__ = [
     "Frame",
     "FrameIds",
     "ParamSpec",
+    "PcCalCommand",
     "PcCommand",
     "PcParamSet",
     "Source",
@@ -50,6 +59,7 @@ __all__ = [
     "database",
     "dbc_text",
     "decode",
+    "encode_cal_command",
     "encode_command",
     "encode_param_set",
     "is_known_id",

@@ -122,7 +122,45 @@ class EcuParamAck:
             return None
 
 
-Frame = PcCommand | EcuStatus | EcuDiag | EcuSpeeds | EcuTargets | PcParamSet | EcuParamAck
+@dataclass(frozen=True)
+class PcCalCommand:
+    """Calibration command: catch test of one layer (action 1) or reset/abort (action 0)."""
+
+    action: int
+    layer: int  # 0 upper, 1 lower
+    revolutions: float
+    meter_rpm: float
+    seq: int
+
+
+#: EcuCalStatus.CalState and CalReason (DBC value tables).
+CAL_STATES = ("idle", "running", "done", "aborted")
+CAL_REASONS = ("none", "reset", "running", "moving", "blocked", "timeout", "bad value")
+
+
+@dataclass(frozen=True)
+class EcuCalStatus:
+    """Catch test state; revolutions counted on the meter encoder since the test began."""
+
+    state: str  # CAL_STATES
+    layer: int
+    reason: str  # CAL_REASONS
+    revolutions: float
+    meter_rpm: float
+    seq: int
+
+
+Frame = (
+    PcCommand
+    | EcuStatus
+    | EcuDiag
+    | EcuSpeeds
+    | EcuTargets
+    | PcParamSet
+    | EcuParamAck
+    | PcCalCommand
+    | EcuCalStatus
+)
 
 
 def _frame_parts(frame: can.Message | CanFrame) -> tuple[int, bytes]:
@@ -239,6 +277,51 @@ def _decode_param_ack(data: bytes) -> EcuParamAck:
     return EcuParamAck(raw["AckParamId"], result, raw["AckRaw"])
 
 
+def _decode_cal_command(data: bytes) -> PcCalCommand:
+    raw = _decode_raw("PcCalCommand", data)
+    return PcCalCommand(
+        action=int(_check("PcCalCommand", "CalAction", raw["CalAction"])),
+        layer=int(_check("PcCalCommand", "CalLayer", raw["CalLayer"])),
+        revolutions=raw["CalRevolutions"] * 0.1,
+        meter_rpm=raw["CalMeterSpeed"] * 0.01,
+        seq=raw["CalSeq"],
+    )
+
+
+def _decode_cal_status(data: bytes) -> EcuCalStatus:
+    raw = _decode_raw("EcuCalStatus", data)
+    state = int(_check("EcuCalStatus", "CalState", raw["CalState"]))
+    reason = int(_check("EcuCalStatus", "CalReason", raw["CalReason"]))
+    return EcuCalStatus(
+        state=CAL_STATES[state],
+        layer=int(_check("EcuCalStatus", "CalLayer", raw["CalLayer"])),
+        reason=CAL_REASONS[reason],
+        revolutions=raw["CalRevolutions"] * 0.001,
+        meter_rpm=raw["CalMeterSpeed"] * 0.01,
+        seq=raw["CalSeq"],
+    )
+
+
+def encode_cal_command(
+    action: int,
+    layer: int = 0,
+    revolutions: float = 0.0,
+    meter_rpm: float = 0.0,
+    seq: int = 0,
+    *,
+    ids: FrameIds = DEFAULT_IDS,
+) -> can.Message:
+    """PcCalCommand: action 1 = catch test of `layer`, 0 = reset/abort; range-checked."""
+    signals = {
+        "CalAction": action,
+        "CalLayer": layer,
+        "CalRevolutions": float(revolutions),
+        "CalMeterSpeed": float(meter_rpm),
+        "CalSeq": seq % 256,
+    }
+    return _message(ids.cal_command, _encode("PcCalCommand", signals))
+
+
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
     """True for the identifier of a frame of the protocol (to tell malformed from foreign)."""
     return frame_id in (
@@ -249,6 +332,8 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
         ids.targets,
         ids.param_set,
         ids.param_ack,
+        ids.cal_command,
+        ids.cal_status,
     )
 
 
@@ -263,6 +348,8 @@ def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
         ids.targets: _decode_targets,
         ids.param_set: _decode_param_set,
         ids.param_ack: _decode_param_ack,
+        ids.cal_command: _decode_cal_command,
+        ids.cal_status: _decode_cal_status,
     }
     try:
         decoder = decoders[frame_id]

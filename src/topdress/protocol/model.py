@@ -105,6 +105,8 @@ class FrameIds:
     targets: int = 0x185F6465
     param_set: int = 0x0A606465
     param_ack: int = 0x18616465
+    cal_command: int = 0x0A646465
+    cal_status: int = 0x18656465
 
 
 DEFAULT_IDS = FrameIds()

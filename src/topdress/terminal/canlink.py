@@ -102,6 +102,7 @@ class EcuView:
     speeds: protocol.EcuSpeeds | None = None
     targets: protocol.EcuTargets | None = None
     status_t: float | None = None
+    cal: protocol.EcuCalStatus | None = None  # the catch test's status (calibration)
 
 
 @dataclass
@@ -112,6 +113,8 @@ class _ParamPush:
     sent_t: float | None = None
     waiting: bool = False  # the fast retries of this parameter went unanswered
     deferred: set[int] = field(default_factory=set)  # ids moved to the end once (inconsistent)
+    # A settings push (push_params): told the outcome instead of raising on a refusal.
+    on_done: Callable[[str | None, list[int]], None] | None = None
 
     @property
     def done(self) -> bool:
@@ -222,6 +225,12 @@ class CanLink:
             return
         if ack.result not in (AckResult.OK, AckResult.BUSY):
             reason = ack.result.name.lower().replace("_", " ")
+            if push.on_done is not None:
+                accepted = [pid for pid, _ in push.items[: push.index]]
+                self._push = _ParamPush([])  # nothing pending: commands go on
+                name = protocol.param_name(param_id)
+                push.on_done(f"{name} = {value:g}: refused by the ECU: {reason}", accepted)
+                return
             raise EcuParamError(
                 protocol.param_name(param_id), value, f"refused by the ECU: {reason}"
             )
@@ -246,7 +255,38 @@ class CanLink:
         self._send_param(now)
         return True
 
+    def push_params(
+        self,
+        params: Mapping[int, float],
+        now: float,
+        on_done: Callable[[str | None, list[int]], None],
+    ) -> None:
+        """Push changed parameters later in the run (settings), acknowledged one by one as at
+        start; `on_done(None, ids)` once all are in force, or `on_done(reason, accepted_ids)` at
+        the first refusal (nothing raised: the caller puts the accepted ones back). The ECU
+        takes parameters only while stopped. ProtocolError at once for a value the frame
+        cannot carry."""
+        for param_id, value in params.items():
+            protocol.param(param_id).check(value)
+        self._push = _ParamPush(sorted(params.items()), on_done=on_done)
+        if self._push.done:
+            self._on_push_done(now)
+        else:
+            self._send_param(now)
+
+    def send(self, msg: can.Message) -> bool:
+        """Send one frame now (calibration commands); a failure is counted as for commands."""
+        return self._send(msg)
+
     def _on_push_done(self, now: float) -> None:
+        push = self._push
+        if push is not None and push.on_done is not None:
+            # In force now: what is pushed again after the ECU comes back.
+            merged = dict(self._params)
+            merged.update(push.items)
+            self._params = sorted(merged.items())
+            push.on_done(None, [pid for pid, _ in push.items])
+            push.on_done = None
         self._ready = True
         if self._waited:
             self._waited = False
@@ -376,6 +416,8 @@ class CanLink:
             self.ecu = replace(self.ecu, targets=decoded)
         elif isinstance(decoded, protocol.EcuParamAck):
             self._on_ack(decoded, now)
+        elif isinstance(decoded, protocol.EcuCalStatus):
+            self.ecu = replace(self.ecu, cal=decoded)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
     def _on_heard(self, now: float, back: bool) -> None:

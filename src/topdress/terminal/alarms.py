@@ -1,0 +1,137 @@
+"""Alarms the operator acknowledges: off-rate, blocked meter, fan low, an input lost.
+
+Each alarm follows the usual annunciator sequence: it comes `active` (unacknowledged); the
+operator acknowledges it (`acked`, still active); when its condition ends it leaves the list if
+acknowledged, or stays as `cleared` until acknowledged, so a short fault is never missed. The
+conditions come from the terminal's own state and the ECU's fault word, evaluated every tick.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from topdress.protocol import Fault
+
+ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
+#: Metering speed targets below this are not judged off-rate (a meter just starting or stopping).
+MIN_TARGET_RPM = 1.0
+
+
+@dataclass(frozen=True)
+class AlarmInputs:
+    """What the alarms are judged on, from one tick."""
+
+    metering: bool  # the operator has the meters running and the ECU is live
+    target_rpm: tuple[float, float]
+    meter_rpm: tuple[float, float]
+    faults: int
+    gnss_link: str
+    crop_link: str
+    ecu_link: str
+
+
+@dataclass(frozen=True)
+class AlarmView:
+    name: str
+    text: str
+    state: str  # active | acked | cleared
+    since_s: float  # terminal time the alarm came
+
+
+@dataclass
+class _Alarm:
+    text: str
+    since_s: float
+    active: bool = True
+    acked: bool = False
+
+
+_LAYERS = ("upper", "lower")
+_BLOCKED = (Fault.UPPER_BLOCKED, Fault.LOWER_BLOCKED)
+_FAN_LOW = (Fault.UPPER_FAN_LOW, Fault.LOWER_FAN_LOW)
+
+
+class AlarmBook:
+    """The alarms of one run. `update` once per tick; returns the texts of new alarms."""
+
+    def __init__(self, off_rate_pct: float, off_rate_s: float) -> None:
+        self.off_rate_pct = off_rate_pct
+        self.off_rate_s = off_rate_s
+        self._alarms: dict[str, _Alarm] = {}
+        self._off_since: list[float | None] = [None, None]
+
+    def update(self, t_s: float, x: AlarmInputs) -> list[str]:
+        conditions = dict(self._conditions(t_s, x))
+        new: list[str] = []
+        for name, text in conditions.items():
+            a = self._alarms.get(name)
+            if a is None or not a.active:
+                self._alarms[name] = _Alarm(text, t_s)
+                new.append(f"alarm: {text}")
+        for name, a in list(self._alarms.items()):
+            if a.active and name not in conditions:
+                a.active = False
+                if a.acked:
+                    del self._alarms[name]
+        return new
+
+    def _conditions(self, t_s: float, x: AlarmInputs) -> Iterator[tuple[str, str]]:
+        for i, layer in enumerate(_LAYERS):
+            if self._off_rate(i, t_s, x):
+                yield (
+                    f"off_rate_{layer}",
+                    f"{layer} meter off rate: {x.meter_rpm[i]:.1f} r/min for "
+                    f"{x.target_rpm[i]:.1f} (more than {self.off_rate_pct:g} % for "
+                    f"{self.off_rate_s:g} s)",
+                )
+            if x.faults & _BLOCKED[i]:
+                yield f"blocked_{layer}", f"{layer} meter blocked (stopped by the ECU)"
+            if x.faults & _FAN_LOW[i]:
+                yield f"fan_low_{layer}", f"{layer} fan low: the {layer} meter is held"
+        if x.gnss_link == "lost":
+            yield "gnss_lost", "GNSS lost: metering on the ground wheel"
+        if x.crop_link in ("lost", "silent"):
+            yield "crop_lost", f"crop sensors {x.crop_link}: no NDVI, rate 0 (unless manual)"
+        if x.ecu_link == "lost":
+            yield "ecu_lost", "ECU lost: no status frames"
+
+    def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
+        target = x.target_rpm[i]
+        off = (
+            x.metering
+            and target >= MIN_TARGET_RPM
+            and abs(x.meter_rpm[i] - target) * 100.0 > self.off_rate_pct * target
+        )
+        if not off:
+            self._off_since[i] = None
+            return False
+        since = self._off_since[i]
+        if since is None:
+            self._off_since[i] = t_s
+            return False
+        return t_s - since > self.off_rate_s - 1e-9
+
+    def ack(self, name: str | None) -> int:
+        """Acknowledge one alarm (or all); returns how many were acknowledged."""
+        names = list(self._alarms) if name is None else [name] if name in self._alarms else []
+        n = 0
+        for key in names:
+            a = self._alarms[key]
+            if a.acked:
+                continue
+            n += 1
+            a.acked = True
+            if not a.active:
+                del self._alarms[key]
+        return n
+
+    def known(self, name: str) -> bool:
+        return name in self._alarms
+
+    def views(self) -> tuple[AlarmView, ...]:
+        out = []
+        for name, a in self._alarms.items():
+            state = (ACKED if a.acked else ACTIVE) if a.active else CLEARED
+            out.append(AlarmView(name, a.text, state, a.since_s))
+        return tuple(out)

@@ -1,0 +1,136 @@
+"""Work counters for the field and for the season: area, kg per layer, working time, distance.
+
+Two counters run side by side and are reset apart (a new field; a new season). They count
+only what was applied: while the ECU reports a meter turning, from the speed it meters with
+(its selected speed), the working width and the measured metering speed times kg/rev. They
+live in a small JSON file beside the session logs, written atomically (a temporary file, then
+rename) every `SAVE_PERIOD_S` and at the end, so a power cut loses at most that much work and
+never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import os
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+SAVE_PERIOD_S = 10.0
+COUNTERS = ("field", "season")
+
+
+@dataclass(frozen=True)
+class CounterView:
+    area_ha: float = 0.0
+    kg: tuple[float, float] = (0.0, 0.0)  # upper, lower
+    work_s: float = 0.0  # time with a meter turning
+    distance_m: float = 0.0  # distance worked
+    since: str = ""  # ISO date and time of the last reset
+
+    def add(self, area_ha: float, kg: tuple[float, float], dt_s: float, d_m: float) -> CounterView:
+        return replace(
+            self,
+            area_ha=self.area_ha + area_ha,
+            kg=(self.kg[0] + kg[0], self.kg[1] + kg[1]),
+            work_s=self.work_s + dt_s,
+            distance_m=self.distance_m + d_m,
+        )
+
+
+def _now_iso() -> str:
+    return dt.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+def _from_json(raw: Any) -> CounterView:
+    if not isinstance(raw, dict):
+        raise ValueError("not an object")
+    kg = raw.get("kg", [0.0, 0.0])
+    return CounterView(
+        area_ha=float(raw.get("area_ha", 0.0)),
+        kg=(float(kg[0]), float(kg[1])),
+        work_s=float(raw.get("work_s", 0.0)),
+        distance_m=float(raw.get("distance_m", 0.0)),
+        since=str(raw.get("since", "")),
+    )
+
+
+class WorkCounters:
+    """The field and season counters, persisted in `path` (None: in memory only)."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+        self.error: str | None = None  # the last load/save problem, for the operator
+        self.counters = {name: CounterView(since=_now_iso()) for name in COUNTERS}
+        self._last_save_t: float | None = None
+        self._dirty = False
+        if path is not None:
+            self._load(path)
+
+    def _load(self, path: Path) -> None:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return
+        except OSError as exc:
+            self.error = f"cannot read {path}: {exc}"
+            log.warning("%s", self.error)
+            return
+        try:
+            doc = json.loads(text)
+            self.counters = {name: _from_json(doc[name]) for name in COUNTERS}
+        except (ValueError, KeyError, IndexError, TypeError) as exc:
+            # Kept aside, not overwritten: the season's figures may be recoverable by hand.
+            aside = path.with_name(path.name + ".damaged")
+            os.replace(path, aside)
+            self.error = f"counters file {path} damaged ({exc}): moved to {aside}, counting anew"
+            log.warning("%s", self.error)
+
+    def add(self, area_ha: float, kg: tuple[float, float], dt_s: float, d_m: float) -> None:
+        for name in COUNTERS:
+            self.counters[name] = self.counters[name].add(area_ha, kg, dt_s, d_m)
+        self._dirty = True
+
+    def reset(self, which: str) -> None:
+        if which not in COUNTERS:
+            raise ValueError(f"no counter {which!r} (known: {', '.join(COUNTERS)})")
+        self.counters[which] = CounterView(since=_now_iso())
+        self._dirty = True
+
+    def view(self, which: str) -> CounterView:
+        return self.counters[which]
+
+    def maybe_save(self, now: float) -> None:
+        """Save when something changed and SAVE_PERIOD_S has passed since the last save."""
+        if self._last_save_t is None:
+            self._last_save_t = now
+        if self._dirty and now - self._last_save_t >= SAVE_PERIOD_S:
+            self._last_save_t = now
+            self.save()
+
+    def save(self) -> None:
+        if self.path is None:
+            return
+        doc = {name: asdict(v) for name, v in self.counters.items()}
+        try:
+            atomic_write(self.path, json.dumps(doc, indent=2) + "\n")
+        except OSError as exc:
+            self.error = f"cannot save the counters to {self.path}: {exc}"
+            log.warning("%s", self.error)
+            return
+        self._dirty = False
+
+
+def atomic_write(path: Path, text: str) -> None:
+    """Write `text` to `path` so that a crash leaves the old or the new file, never a mix."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)

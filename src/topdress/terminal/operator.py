@@ -1,0 +1,198 @@
+"""What the operator does: start, stop, pause, a manual rate; the commands that carry it.
+
+Commands are frozen dataclasses posted to the terminal (`Terminal.post(command)` returns a
+`concurrent.futures.Future[CommandResult]`); the control loop alone acts on them, so a display
+or a console thread never touches the loop's state. `Operator` holds the run state and the
+manual mode and turns the model's rates into the ones commanded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from topdress.errors import TopdressError
+
+#: Run states: the meters stopped (stop in every PcCommand), running, paused (start with zero
+#: rates: the fans keep turning, the meters stand), or a calibration wizard at work.
+STOPPED, RUNNING, PAUSED, CALIBRATING = "stopped", "running", "paused", "calibrating"
+MANUAL_MODES = ("off", "fixed", "percent")
+LAYERS = ("upper", "lower")
+MAX_RATE_KG_HA = 600.0  # what PcCommand carries per layer
+PERCENT_RANGE = (-100.0, 200.0)
+
+
+class OperatorError(TopdressError):
+    """A command that cannot be carried out now (the reason is the message)."""
+
+
+# ---- commands ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Start:
+    """Meters on (from paused: resume)."""
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Meters and fans off; always accepted, also ends a calibration."""
+
+
+@dataclass(frozen=True)
+class Pause:
+    """Meters to zero, fans kept turning."""
+
+
+@dataclass(frozen=True)
+class SetManual:
+    """`off`: the NDVI model; `fixed`: kg/ha per layer; `percent`: the model's rate +/- %."""
+
+    mode: str
+    upper_kg_ha: float = 0.0
+    lower_kg_ha: float = 0.0
+    percent: float = 0.0
+
+
+@dataclass(frozen=True)
+class AckAlarm:
+    """Acknowledge one alarm by name, or every alarm (None)."""
+
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class ResetCounter:
+    which: str  # field | season
+
+
+@dataclass(frozen=True)
+class StartCatchTest:
+    layer: str  # upper | lower
+    revolutions: float = 20.0
+    meter_rpm: float = 20.0
+
+
+@dataclass(frozen=True)
+class FinishCatchTest:
+    weighed_kg: float
+
+
+@dataclass(frozen=True)
+class StartWheelCal:
+    distance_m: float = 40.0
+
+
+@dataclass(frozen=True)
+class FinishWheelCal:
+    pass
+
+
+@dataclass(frozen=True)
+class StartFanCheck:
+    seconds: float | None = None  # None: operator.fan_check_s
+
+
+@dataclass(frozen=True)
+class CloseCalibration:
+    """Leave the wizard; apply=True saves its result (file and ECU) through the settings."""
+
+    apply: bool = False
+
+
+@dataclass(frozen=True)
+class ApplySettings:
+    """Validate, save (atomically, previous file kept as .bak) and apply one section."""
+
+    section: str
+    values: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class TestDevice:
+    device: str  # gnss | crop | can
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    ok: bool
+    message: str = ""
+    errors: dict[str, str] = field(default_factory=dict)  # dotted key -> reason
+    data: Any = None
+
+
+# ---- state --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ManualView:
+    mode: str = "off"
+    upper_kg_ha: float = 0.0
+    lower_kg_ha: float = 0.0
+    percent: float = 0.0
+
+    def describe(self) -> str:
+        if self.mode == "fixed":
+            return f"manual {self.upper_kg_ha:.1f}/{self.lower_kg_ha:.1f} kg/ha"
+        if self.mode == "percent":
+            return f"manual {self.percent:+.0f} % on the model"
+        return "model"
+
+
+def check_manual(cmd: SetManual) -> ManualView:
+    """The manual mode a command asks for; OperatorError naming the value that is wrong."""
+    if cmd.mode not in MANUAL_MODES:
+        raise OperatorError(f"manual mode must be one of {', '.join(MANUAL_MODES)}")
+    if cmd.mode == "fixed":
+        for name, v in (("upper_kg_ha", cmd.upper_kg_ha), ("lower_kg_ha", cmd.lower_kg_ha)):
+            if not 0.0 <= v <= MAX_RATE_KG_HA:
+                raise OperatorError(f"{name}: {v:g} is outside 0..{MAX_RATE_KG_HA:g} kg/ha")
+        return ManualView("fixed", float(cmd.upper_kg_ha), float(cmd.lower_kg_ha))
+    if cmd.mode == "percent":
+        lo, hi = PERCENT_RANGE
+        if not lo <= cmd.percent <= hi:
+            raise OperatorError(f"percent: {cmd.percent:g} is outside {lo:g}..{hi:g} %")
+        return ManualView("percent", percent=float(cmd.percent))
+    return ManualView()
+
+
+class Operator:
+    """The run state and the manual mode; pure state, no I/O (the terminal logs the events)."""
+
+    def __init__(self, autostart: bool) -> None:
+        self.state = RUNNING if autostart else STOPPED
+        self.manual = ManualView()
+
+    @property
+    def start_bit(self) -> bool:
+        """What PcCommand's start says: running and paused both keep the ECU started."""
+        return self.state in (RUNNING, PAUSED)
+
+    def start(self) -> str:
+        if self.state == CALIBRATING:
+            raise OperatorError("a calibration is running: close it first")
+        was, self.state = self.state, RUNNING
+        return "resumed" if was == PAUSED else "started"
+
+    def stop(self) -> str:
+        self.state = STOPPED
+        return "stopped"
+
+    def pause(self) -> str:
+        if self.state != RUNNING:
+            raise OperatorError(f"only running meters can be paused (now {self.state})")
+        self.state = PAUSED
+        return "paused: meters stopped, fans kept"
+
+    def set_manual(self, cmd: SetManual) -> str:
+        self.manual = check_manual(cmd)
+        return f"rate: {self.manual.describe()}"
+
+    def rates(self, model: tuple[float, float]) -> tuple[float, float]:
+        """The rates to command per layer from the model's, under pause and manual mode."""
+        if self.state != RUNNING:
+            return (0.0, 0.0)
+        m = self.manual
+        if m.mode == "fixed":
+            return (m.upper_kg_ha, m.lower_kg_ha)
+        if m.mode == "percent":
+            k = 1.0 + m.percent / 100.0
+            return (min(model[0] * k, MAX_RATE_KG_HA), min(model[1] * k, MAX_RATE_KG_HA))
+        return model

@@ -1,0 +1,148 @@
+"""Settings changed while the terminal runs: checked as the file is, saved, then applied.
+
+- `validate_section(cfg, section, values)` puts the changed values into the configuration and
+  runs the very checks of `load_config` (ConfigError names the dotted key);
+- `save_section(path, section, values)` writes only those values into the file with tomlkit,
+  so the user's comments and layout stay, atomically (temporary file, then rename), the
+  previous file kept as `FILE.bak`;
+- applying (reopening a port or the CAN bus, pushing ECU parameters) is the terminal's, on its
+  own loop (`ApplySettings`, see topdress.terminal.operator).
+
+Also: the serial ports the machine has (pyserial), and the NDVI -> rate curve for a plot.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import tomlkit
+from serial.tools import list_ports
+
+from topdress.config import TerminalConfig, config_from_dict, read_config_text
+from topdress.errors import ConfigError
+from topdress.terminal.counters import atomic_write
+from topdress.terminal.rate import RateModel, build_rate_model
+
+SECTIONS = tuple(f.name for f in dataclasses.fields(TerminalConfig))
+#: What applying a changed section takes, beyond the file.
+REOPEN = {"gnss": "gnss", "crop": "crop", "can": "can"}  # section -> device reopened
+ECU_SECTIONS = ("machine", "speed", "ecu")  # pushed to the ECU (meters stopped)
+LIVE_SECTIONS = ("rate", "operator")  # taken at once by the loop
+RESTART_SECTIONS = ("log", "display")  # saved; in force at the next start
+
+
+@dataclass(frozen=True)
+class SerialPortInfo:
+    device: str
+    description: str
+    hwid: str
+
+
+def list_serial_ports() -> list[SerialPortInfo]:
+    """The serial ports this machine has, by device name (USB adapters included)."""
+    ports = [
+        SerialPortInfo(p.device, p.description or "", p.hwid or "") for p in list_ports.comports()
+    ]
+    return sorted(ports, key=lambda p: p.device)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def section_values(cfg: TerminalConfig, section: str) -> dict[str, Any]:
+    """The values of one section as the TOML file writes them (nested tables as dicts)."""
+    if section not in SECTIONS:
+        raise ConfigError(section, f"no such section (known: {', '.join(SECTIONS)})")
+    sec = getattr(cfg, section)
+    if section == "ecu":
+        return dict(sec.overrides)
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(sec):
+        value = getattr(sec, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            value = {g.name: _plain(getattr(value, g.name)) for g in dataclasses.fields(value)}
+        out[f.name] = _plain(value)
+    return out
+
+
+def config_document(cfg: TerminalConfig) -> dict[str, Any]:
+    return {name: section_values(cfg, name) for name in SECTIONS}
+
+
+def _merge(base: dict[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), dict) and key not in ("ids",):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = _plain(value)
+    return out
+
+
+def validate_section(
+    cfg: TerminalConfig, section: str, values: Mapping[str, Any]
+) -> TerminalConfig:
+    """The configuration with `values` put into `section`, checked as a file is checked."""
+    doc = config_document(cfg)
+    if section not in doc:
+        raise ConfigError(section, f"no such section (known: {', '.join(SECTIONS)})")
+    doc[section] = _merge(doc[section], values)
+    return config_from_dict(doc)
+
+
+def save_section(path: Path, section: str, values: Mapping[str, Any]) -> TerminalConfig:
+    """Write `values` into `section` of the file at `path` (comments kept), atomically, the
+    previous file kept as `path.bak`; returns the configuration the file now holds.
+
+    The whole new file is checked before anything is written: ConfigError names the key."""
+    text = read_config_text(path) if path.exists() else ""
+    try:
+        doc = tomlkit.parse(text)
+    except tomlkit.exceptions.ParseError as exc:
+        raise ConfigError(str(path), f"not valid TOML: {exc}") from exc
+    table = doc.get(section)
+    if table is None:
+        table = tomlkit.table()
+        doc[section] = table
+    _merge_into(table, values)
+    new_text = tomlkit.dumps(doc)
+    cfg = config_from_dict(tomlkit.parse(new_text).unwrap())
+    if path.exists():
+        shutil.copy2(path, path.with_name(path.name + ".bak"))
+    atomic_write(path, new_text)
+    return cfg
+
+
+def _merge_into(table: Any, values: Mapping[str, Any]) -> None:
+    for key, value in values.items():
+        if isinstance(value, Mapping) and key in table and isinstance(table[key], Mapping):
+            _merge_into(table[key], value)
+        else:
+            table[key] = _plain(value)
+
+
+def changed_ecu_params(old: TerminalConfig, new: TerminalConfig) -> dict[int, float]:
+    """The ECU parameters whose value differs between two configurations (id -> new value)."""
+    a, b = old.ecu_params(), new.ecu_params()
+    return {k: v for k, v in b.items() if a.get(k) != v}
+
+
+def rate_curve(
+    rate_cfg: Any, n: int = 51, model: RateModel | None = None
+) -> list[tuple[float, float]]:
+    """(NDVI, total product kg/ha) at n NDVI values over 0..1, for the live plot.
+
+    `model` the terminal's model (the sufficiency model's virtual reference depends on the NDVI
+    seen); None builds one from `rate_cfg` (a RateConfig)."""
+    m = model if model is not None else build_rate_model(rate_cfg)
+    return [(i / (n - 1), m.rate_kg_ha(i / (n - 1))) for i in range(n)]
