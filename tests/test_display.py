@@ -73,9 +73,9 @@ async def shows(user: User, marker: str, expected: str, timeout_s: float = 3.0) 
 
 
 async def test_main_screen_shows_the_snapshot(user: User) -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     hub.publish(working())
-    register_pages(hub, default_config())
+    register_pages(hub)
     await user.open("/")
     assert text_of(user, "v_selected") == "8.0"
     assert text_of(user, "v_wheel") == "7.6"
@@ -95,9 +95,9 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
 
 
 async def test_main_screen_follows_new_snapshots(user: User) -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     hub.publish(working(v_kmh=3.0, source="wheel", uniform=False, cv_pct=9.5))
-    register_pages(hub, default_config())
+    register_pages(hub)
     await user.open("/")
     assert text_of(user, "source") == "wheel"
     assert text_of(user, "source_why") == "CV 9.50 % · accelerating or decelerating"
@@ -107,9 +107,9 @@ async def test_main_screen_follows_new_snapshots(user: User) -> None:
 
 
 async def test_ecu_values_are_dashes_while_the_ecu_is_not_heard(user: User) -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     hub.publish(working(ecu_live=False, ecu_link="lost", gnss_link="ok"))
-    register_pages(hub, default_config())
+    register_pages(hub)
     await user.open("/")
     for marker in ("v_selected", "v_wheel", "target_upper", "meter_lower", "fan_upper", "faults"):
         assert text_of(user, marker) == "--", marker
@@ -120,10 +120,10 @@ async def test_ecu_values_are_dashes_while_the_ecu_is_not_heard(user: User) -> N
 
 
 async def test_faults_in_plain_words_and_waiting_ecu_named(user: User) -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     # bits 1 (GNSS_LOST) and 3 (UPPER_BLOCKED), and an undefined bit 12
     hub.publish(working(faults=(1 << 1) | (1 << 3) | (1 << 12)))
-    register_pages(hub, default_config())
+    register_pages(hub)
     await user.open("/")
     assert text_of(user, "faults") == "GNSS speed lost; upper meter blocked; BIT12"
     hub.publish(working(ecu_live=False, ecu_link="wait", ecu_where="socketcan:can0"))
@@ -132,9 +132,9 @@ async def test_faults_in_plain_words_and_waiting_ecu_named(user: User) -> None:
 
 
 async def test_language_switches_at_run_time(user: User) -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     hub.publish(working(faults=1 << 3))
-    register_pages(hub, default_config())
+    register_pages(hub)
     await user.open("/")
     await user.should_see("Speed")
     user.find(marker="language").click()
@@ -169,7 +169,7 @@ def test_charts_leave_gaps_while_the_ecu_is_not_heard() -> None:
 
 
 def test_chart_window_is_the_last_minute() -> None:
-    hub = DisplayHub(history_s=60.0)
+    hub = DisplayHub(default_config, history_s=60.0)
     for i in range(700):
         hub.publish(working(t_s=i / 10))
     hist = hub.history()
@@ -180,7 +180,7 @@ def test_chart_window_is_the_last_minute() -> None:
 
 
 def test_track_points_every_metre_with_heading() -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     # North at 2.22 m/s (8 km/h), 10 Hz: a point every metre, not every tick.
     for i in range(50):
         north = 0.222 * i
@@ -196,14 +196,14 @@ def test_track_points_every_metre_with_heading() -> None:
 
 
 def test_track_of_a_stopped_machine_is_not_metered() -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     hub.publish(working(meter_rpm=(0.0, 0.0), running=False))
     (p,) = hub.track_since(0)[1]
     assert not p.metering and p.rate_kg_ha == 0.0
 
 
 def test_swath_is_the_working_width_across_the_heading() -> None:
-    hub = DisplayHub()
+    hub = DisplayHub(default_config)
     for lat in (LAT0, LAT0 + math.degrees(2.0 / 6_371_000.0)):
         hub.publish(working(lat=lat))
     a, b = hub.track_since(0)[1]

@@ -11,9 +11,17 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
+from typing import Any
 
+from topdress.config import TerminalConfig, check_pin
 from topdress.terminal.app import TICK_S, Snapshot
+from topdress.terminal.operator import CommandResult
+
+#: Posts an operator command into the terminal's inbox (thread-safe; `Terminal.post`).
+Post = Callable[[Any], "Future[CommandResult]"]
 
 HISTORY_S = 60.0  # what the live charts show
 TRACK_STEP_M = 1.0  # a new track point every metre driven
@@ -33,9 +41,19 @@ class TrackPoint:
 
 
 class DisplayHub:
-    """Latest snapshot, the last minute of them, and the track; safe across threads."""
+    """Latest snapshot, the last minute of them, and the track; safe across threads.
 
-    def __init__(self, history_s: float = HISTORY_S) -> None:
+    `config` returns the configuration in force (the terminal's; it changes when settings are
+    applied), `post` the terminal's command path (None: a display that only watches)."""
+
+    def __init__(
+        self,
+        config: Callable[[], TerminalConfig],
+        post: Post | None = None,
+        history_s: float = HISTORY_S,
+    ) -> None:
+        self.config = config
+        self.post = post
         self._lock = threading.Lock()
         self._latest = Snapshot()
         self._published_wall_s = 0.0
@@ -69,6 +87,15 @@ class DisplayHub:
         return TrackPoint(s.lat, s.lon, heading, rate, metering)
 
     # ---- the page's side -------------------------------------------------------------------
+    @property
+    def pin_required(self) -> bool:
+        """Operating (start/stop, manual rate, settings) asks for the PIN when one is set."""
+        return bool(self.config().display.pin)
+
+    def pin_ok(self, given: str) -> bool:
+        """The PIN check (constant time, topdress.config.check_pin); the PIN is never logged."""
+        return check_pin(self.config().display, given)
+
     def latest(self) -> tuple[int, float, Snapshot]:
         """(serial, wall-clock time it was published, snapshot); the serial grows by one each
         tick, so a page sees whether anything changed since it last looked."""

@@ -85,7 +85,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
         clock = clock_label[0]
         clock.set_text(f"t {s.t_s:7.1f} s")
         # The wall-clock time this snapshot was published: the benchmark's update latency.
-        clock.props(f'data-published="{published:.3f}"')
+        clock.props["data-published"] = f"{published:.3f}"
         for sc in screen:
             sc.update(s)
 

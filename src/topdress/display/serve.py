@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
+from topdress import i18n
 from topdress.config import TerminalConfig
 from topdress.display.hub import DisplayHub
 from topdress.display.server import DisplayError, DisplayOptions, DisplayServer, check_security
@@ -14,16 +14,12 @@ from topdress.terminal.app import Snapshot, Terminal
 def display_options(
     cfg: TerminalConfig, enabled: bool | None, host: str | None, port: int | None
 ) -> DisplayOptions | None:
-    """The `[display]` settings with the command line's over them; None when off."""
-    dc: Any = cfg.display
-    on = getattr(dc, "enabled", True) if enabled is None else enabled
-    if not on:
+    """The `[display]` settings with the command line's over them; None when off.
+    DisplayError when the address needs a PIN that is not set."""
+    dc = cfg.display
+    if not (dc.enabled if enabled is None else enabled):
         return None
-    opts = DisplayOptions(
-        host=host if host else str(getattr(dc, "host", "127.0.0.1")),
-        port=port if port else int(getattr(dc, "port", 8080)),
-        pin=str(getattr(dc, "pin", "")),
-    )
+    opts = DisplayOptions(host=host or dc.host, port=port or dc.port, pin=dc.pin)
     check_security(opts)
     return opts
 
@@ -44,16 +40,13 @@ class AttachedDisplay:
 
 
 def serve_display(
-    term: Terminal,
-    cfg: TerminalConfig,
-    opts: DisplayOptions,
-    message: Callable[[str], None],
+    term: Terminal, opts: DisplayOptions, message: Callable[[str], None]
 ) -> AttachedDisplay:
     """Serve the display for `term`; a display that cannot start is said and left out (the
     terminal works without it)."""
-    del term  # commands go through the terminal's inbox once the operator API is in
-    hub = DisplayHub()
-    server = DisplayServer(hub, opts, cfg)
+    i18n.set_language(term.cfg.display.language)
+    hub = DisplayHub(lambda: term.cfg, getattr(term, "post", None))
+    server = DisplayServer(hub, opts)
     try:
         url = server.start()
     except DisplayError as exc:

@@ -15,7 +15,6 @@ import threading
 import time
 from dataclasses import dataclass
 
-from topdress.config import TerminalConfig
 from topdress.display.hub import DisplayHub
 from topdress.errors import TopdressError
 
@@ -73,10 +72,9 @@ def port_free(host: str, port: int) -> bool:
 class DisplayServer:
     """The NiceGUI app in a daemon thread; `start()` returns once it listens."""
 
-    def __init__(self, hub: DisplayHub, opts: DisplayOptions, cfg: TerminalConfig) -> None:
+    def __init__(self, hub: DisplayHub, opts: DisplayOptions) -> None:
         self.hub = hub
         self.opts = opts
-        self.cfg = cfg
         self.error: str | None = None
         self._thread: threading.Thread | None = None
 
@@ -90,7 +88,7 @@ class DisplayServer:
             )
         from topdress.display.pages import register_pages  # NiceGUI only when serving
 
-        register_pages(self.hub, self.cfg)
+        register_pages(self.hub)
         self._thread = threading.Thread(target=self._serve, name="display", daemon=True)
         self._thread.start()
         deadline = time.monotonic() + START_TIMEOUT_S

@@ -92,7 +92,7 @@ def run_terminal(
     if display is not None:  # the web display beside the console (topdress.display)
         from topdress.display.serve import serve_display
 
-        shown = serve_display(term, cfg, display, console.message)
+        shown = serve_display(term, display, console.message)
     rows = 0
 
     def on_tick(snapshot: Snapshot, now: float) -> None:
