@@ -52,6 +52,8 @@ def test_frame_ids_are_the_dbc_ids_and_the_papers() -> None:
         "EcuTargets": DEFAULT_IDS.targets,
         "PcParamSet": DEFAULT_IDS.param_set,
         "EcuParamAck": DEFAULT_IDS.param_ack,
+        "PcCalCommand": DEFAULT_IDS.cal_command,
+        "EcuCalStatus": DEFAULT_IDS.cal_status,
     }
     assert DEFAULT_IDS.status == 0x185C6465 and DEFAULT_IDS.command == 0x0A5C6465
     assert all(m.is_extended_frame and m.length == 8 for m in db.messages)

@@ -23,7 +23,9 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from concurrent.futures import Future
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import can
@@ -34,8 +36,13 @@ from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
+from topdress.terminal.alarms import AlarmView
+from topdress.terminal.calibration import CalibrationView
 from topdress.terminal.canlink import CanLink, EcuView
+from topdress.terminal.counters import CounterView
 from topdress.terminal.crop import CompensatedNdvi
+from topdress.terminal.desk import OperatorDesk
+from topdress.terminal.operator import CommandResult, ManualView
 from topdress.terminal.rate import build_rate_model, split_layers
 from topdress.terminal.serial_io import LineSource
 
@@ -78,6 +85,16 @@ class Snapshot:
     distance_m: float = 0.0
     counters: dict[str, int] = field(default_factory=dict)
     last_event: str | None = None
+    # The operator's side (topdress.terminal.desk): run state, manual mode, alarms, counters.
+    operator: str = "stopped"  # stopped, running, paused, calibrating
+    manual: ManualView = field(default_factory=ManualView)
+    rate_model_kg_ha: tuple[float, float] = (0.0, 0.0)  # the NDVI model's, before manual/pause
+    speed_why: str = "--"  # why the ECU meters on its source (CV and speed against thresholds)
+    alarms: tuple[AlarmView, ...] = ()
+    count_field: CounterView = field(default_factory=CounterView)  # this field's counter
+    count_season: CounterView = field(default_factory=CounterView)
+    calibration: CalibrationView | None = None
+    settings_pending: bool = False
 
 
 class Terminal:
@@ -93,14 +110,16 @@ class Terminal:
         clock: Callable[[], float] = time.monotonic,
         start: bool = True,
         on_event: Callable[[str], None] | None = None,
+        config_path: Path | None = None,
     ) -> None:
+        """`start`: the meters start at once (headless); else at the operator's Start.
+        `config_path`: where settings changed while running are saved (None: not saved)."""
         self.cfg = cfg
         self.gnss = gnss
         self.crop = crop
         self.bus = bus
         self.session = session
         self.clock = clock
-        self.start_requested = start
         self._on_event = on_event
         self.inbox: queue.Queue[tuple[str, float, Any]] = queue.Queue()
         self.link = CanLink(
@@ -127,6 +146,11 @@ class Terminal:
         self._last_event: str | None = None
         self._stop = threading.Event()
         self._can_thread: threading.Thread | None = None
+        self.desk = OperatorDesk(self, start, config_path)
+
+    def post(self, command: Any) -> Future[CommandResult]:
+        """Hand an operator command (topdress.terminal.operator) to the loop; thread-safe."""
+        return self.desk.post(command)
 
     # ---- life cycle ---------------------------------------------------------------------------
     def open(self) -> None:
@@ -140,6 +164,7 @@ class Terminal:
 
     def close(self) -> None:
         """Stop the ECU (a stop command), the readers, and the log."""
+        self.desk.close()
         self.link.set_command(False, 0.0, 0.0, 0.0)
         self.link.send_now()
         self._stop.set()
@@ -203,7 +228,10 @@ class Terminal:
     # ---- inputs -------------------------------------------------------------------------------
     def handle(self, kind: str, t: float, payload: Any) -> None:
         """Act on one queued input."""
-        if kind == "nmea":
+        self.desk.record(kind, t, payload)
+        if kind == "op":
+            self.desk.handle(t, payload)
+        elif kind == "nmea":
             self._on_nmea(t, payload)
         elif kind == "crop":
             self._on_crop(t, payload)
@@ -263,12 +291,12 @@ class Terminal:
             rates = split_layers(total, self.cfg.rate.split_upper, self.cfg.machine.layers)
         # No command goes out before the parameters are in force anyway; while they are pushed
         # again (ECU back), a stop here would stop a running ECU for a command period.
-        start = self.start_requested
-        self.link.set_command(start, self.cfg.machine.fan_rpm, rates.upper_kg_ha, rates.lower_kg_ha)
+        # The operator's state (stopped, paused, manual, a calibration) decides what goes out.
+        start, fan, upper, lower = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
+        self.link.set_command(start, fan, upper, lower)
         self.link.poll(now)
-        self.snapshot = self._snapshot(
-            now, ndvi_sensors, ndvi, (rates.upper_kg_ha, rates.lower_kg_ha)
-        )
+        snap = self._snapshot(now, ndvi_sensors, ndvi, (upper, lower))
+        self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
         if self.session is not None:
             self.session.state(self._row(now))
 

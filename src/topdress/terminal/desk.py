@@ -1,0 +1,540 @@
+"""The operator's desk inside the terminal loop: commands in, run state, alarms, counters,
+calibration wizards and settings; the fields it adds to every Snapshot.
+
+`Terminal.post(command)` puts a command and its Future on the terminal's inbox; the loop
+hands it to `OperatorDesk.handle`, which acts and completes the Future (at once, or once the
+ECU acknowledged settings). Nothing here blocks: device reopening and parameter pushes go on
+over the following ticks.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import can
+
+from topdress import protocol
+from topdress.config import TerminalConfig
+from topdress.ecu import EcuParams
+from topdress.errors import ConfigError, DeviceError, ProtocolError, SensorError
+from topdress.gnss.nmea import NmeaDecoder
+from topdress.protocol import Fault, Source
+from topdress.terminal import operator as op
+from topdress.terminal.alarms import AlarmBook, AlarmInputs, AlarmView
+from topdress.terminal.calibration import (
+    CalCommand,
+    CalibrationError,
+    CalibrationView,
+    CalInputs,
+    CatchTest,
+    FanCheck,
+    WheelCal,
+    Wizard,
+)
+from topdress.terminal.canlink import CanLink, open_bus
+from topdress.terminal.counters import CounterView, WorkCounters
+from topdress.terminal.crop import parse_crop_line
+from topdress.terminal.rate import build_rate_model
+from topdress.terminal.serial_io import open_line_source
+from topdress.terminal.settings import (
+    ECU_SECTIONS,
+    PARAM_KEYS,
+    RESTART_SECTIONS,
+    changed_ecu_params,
+    save_section,
+    validate_section,
+)
+
+if TYPE_CHECKING:
+    from topdress.terminal.app import Snapshot, Terminal
+
+log = logging.getLogger(__name__)
+
+DEVICE_LINES = 20  # lines or frames kept per device for the "test" view
+_BUS_CLOSE_DELAY_S = 0.3  # the CAN reader leaves the old bus within one recv timeout
+
+
+@dataclass(frozen=True)
+class DeviceLine:
+    t_s: float
+    raw: str
+    decoded: str
+
+
+@dataclass(frozen=True)
+class DeskView:
+    """The Snapshot fields the desk fills."""
+
+    operator: str
+    manual: op.ManualView
+    rate_model_kg_ha: tuple[float, float]
+    speed_why: str
+    alarms: tuple[AlarmView, ...]
+    count_field: CounterView
+    count_season: CounterView
+    calibration: CalibrationView | None
+    settings_pending: bool
+
+
+class OperatorDesk:
+    def __init__(self, term: Terminal, autostart: bool, config_path: Path | None) -> None:
+        self.term = term
+        self.config_path = config_path
+        cfg = term.cfg
+        self.op = op.Operator(autostart)
+        self.alarms = AlarmBook(cfg.operator.off_rate_pct, cfg.operator.off_rate_s)
+        counters_path = Path(cfg.log.dir) / cfg.operator.counters_file
+        self.counters = WorkCounters(counters_path if cfg.log.dir else None)
+        if self.counters.error:
+            term._event(self.counters.error)
+        self.wizard: Wizard | None = None
+        self._cal_seq = 0
+        self._pending: Future[op.CommandResult] | None = None  # settings awaiting the ECU
+        self._last_t: float | None = None
+        self._model_rates = (0.0, 0.0)
+        self._lines: dict[str, deque[tuple[float, Any]]] = {
+            k: deque(maxlen=DEVICE_LINES) for k in ("gnss", "crop", "can")
+        }
+        self._old_buses: list[tuple[float, can.BusABC]] = []
+
+    # ---- posting (any thread) ----------------------------------------------------------------
+    def post(self, command: Any) -> Future[op.CommandResult]:
+        fut: Future[op.CommandResult] = Future()
+        self.term.inbox.put(("op", self.term.clock(), (command, fut)))
+        return fut
+
+    # ---- the loop ----------------------------------------------------------------------------
+    def record(self, kind: str, t: float, payload: Any) -> None:
+        """Keep the last inputs of each device for the device test."""
+        key = {"nmea": "gnss", "crop": "crop", "can": "can"}.get(kind)
+        if key is not None:
+            self._lines[key].append((t, payload))
+
+    def handle(self, now: float, item: tuple[Any, Future[op.CommandResult]]) -> None:
+        command, fut = item
+        try:
+            result = self._dispatch(now, command, fut)
+        except (op.OperatorError, CalibrationError, ProtocolError) as exc:
+            result = op.CommandResult(False, str(exc))
+        except ConfigError as exc:
+            result = op.CommandResult(False, str(exc), {exc.key: _reason(exc)})
+        except DeviceError as exc:  # a reopened device that cannot be opened: the old one stays
+            section = command.section if isinstance(command, op.ApplySettings) else "device"
+            result = op.CommandResult(False, str(exc), {section: str(exc)})
+        if result is not None and not fut.done():
+            fut.set_result(result)
+
+    def _dispatch(
+        self, now: float, c: Any, fut: Future[op.CommandResult]
+    ) -> op.CommandResult | None:
+        if isinstance(c, op.Start):
+            return self._done(self.op.start())
+        if isinstance(c, op.Stop):
+            self._end_wizard()
+            msg = self.op.stop()
+            self._send_command_now()
+            return self._done(msg)
+        if isinstance(c, op.Pause):
+            return self._done(self.op.pause())
+        if isinstance(c, op.SetManual):
+            return self._done(self.op.set_manual(c))
+        if isinstance(c, op.AckAlarm):
+            if c.name is not None and not self.alarms.known(c.name):
+                return op.CommandResult(False, f"no alarm {c.name!r}")
+            return op.CommandResult(True, f"{self.alarms.ack(c.name)} acknowledged")
+        if isinstance(c, op.ResetCounter):
+            try:
+                self.counters.reset(c.which)
+            except ValueError as exc:
+                return op.CommandResult(False, str(exc))
+            self.counters.save()
+            return self._done(f"{c.which} counter reset")
+        if isinstance(c, op.TestDevice):
+            return self._device_test(c.device)
+        if isinstance(c, op.ApplySettings):
+            return self._apply(now, c, fut)
+        return self._calibration(now, c, fut)
+
+    def _done(self, message: str) -> op.CommandResult:
+        self.term._event(f"operator: {message}")
+        return op.CommandResult(True, message)
+
+    def _send_command_now(self) -> None:
+        link = self.term.link
+        cmd = self.command()
+        link.set_command(cmd[0], cmd[1], cmd[2], cmd[3])
+        link.send_now()
+
+    # ---- calibration -------------------------------------------------------------------------
+    def _calibration(
+        self, now: float, c: Any, fut: Future[op.CommandResult]
+    ) -> op.CommandResult | None:
+        if isinstance(c, op.StartCatchTest | op.StartWheelCal | op.StartFanCheck):
+            return self._start_wizard(now, c)
+        w = self.wizard
+        if isinstance(c, op.FinishCatchTest):
+            if not isinstance(w, CatchTest):
+                return op.CommandResult(False, "no catch test open")
+            w.finish(c.weighed_kg)
+            return self._done(w.text)
+        if isinstance(c, op.FinishWheelCal):
+            if not isinstance(w, WheelCal):
+                return op.CommandResult(False, "no wheel calibration open")
+            w.finish()
+            return self._done(w.text)
+        if isinstance(c, op.CloseCalibration):
+            if w is None:
+                return op.CommandResult(False, "no calibration open")
+            value = w.value()
+            self._end_wizard()
+            if c.apply and value is not None and w.key:
+                section, key = w.key.split(".")
+                return self._apply(now, op.ApplySettings(section, {key: value}), fut)
+            return op.CommandResult(True, "calibration closed, nothing changed")
+        return op.CommandResult(False, f"unknown command {type(c).__name__}")
+
+    def _start_wizard(self, now: float, c: Any) -> op.CommandResult:
+        if self.op.state != op.STOPPED or self.wizard is not None:
+            raise op.OperatorError(f"stop the meters first (now {self.op.state})")
+        term = self.term
+        if not (term.link.ready and term.link.ecu_alive):
+            raise op.OperatorError(f"the ECU is {term.link.state}: calibration needs it")
+        m = term.cfg.machine
+        if isinstance(c, op.StartCatchTest):
+            self._cal_seq = (self._cal_seq + 1) % 256
+            ids = term.link.ids
+            self.wizard = CatchTest(c.layer, c.revolutions, c.meter_rpm, self._cal_seq, ids)
+        elif isinstance(c, op.StartWheelCal):
+            self.wizard = WheelCal(c.distance_m, m.wheel_radius_m, m.wheel_ppr)
+        else:
+            seconds = c.seconds if c.seconds is not None else term.cfg.operator.fan_check_s
+            fan_min = term.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
+            self.wizard = FanCheck(seconds, m.fan_rpm, float(fan_min))
+        self.op.state = op.CALIBRATING
+        return self._done(f"calibration: {self.wizard.text}")
+
+    def _end_wizard(self) -> None:
+        w = self.wizard
+        if w is None:
+            return
+        for msg in w.close():
+            self.term.link.send(msg)
+        self.wizard = None
+        if self.op.state == op.CALIBRATING:
+            self.op.state = op.STOPPED
+
+    def _wizard_tick(self, now: float, dt_s: float) -> None:
+        w = self.wizard
+        if w is None:
+            return
+        link = self.term.link
+        ecu = link.ecu if link.ecu_alive else None
+        diag = ecu.diag if ecu else None
+        status = ecu.status if ecu else None
+        x = CalInputs(
+            ecu_live=link.ecu_alive,
+            cal_status=ecu.cal if ecu else None,
+            wheel_pulses=diag.wheel_pulses if diag else None,
+            v_wheel_kmh=status.wheel_kmh if status else 0.0,
+            gnss_kmh=link.command.gnss_kmh,
+            fan_rpm=(status.fan_rpm_upper, status.fan_rpm_lower) if status else (0.0, 0.0),
+            dt_s=dt_s,
+        )
+        before = w.step
+        for msg in w.tick(now, x):
+            link.send(msg)
+        if w.step != before and w.step in ("weigh", "aborted", "done"):
+            self.term._event(f"calibration: {w.text}")
+
+    # ---- the command and the tick ------------------------------------------------------------
+    def command(self) -> tuple[bool, float, float, float]:
+        """(start, fan rpm, upper kg/ha, lower kg/ha) for PcCommand now."""
+        fan = float(self.term.cfg.machine.fan_rpm)
+        if self.wizard is not None:
+            c: CalCommand = self.wizard.command
+            return (c.start, c.fan_rpm, 0.0, 0.0)
+        upper, lower = self.op.rates(self._model_rates)
+        return (self.op.start_bit, fan, upper, lower)
+
+    def rates(self, model: tuple[float, float]) -> tuple[bool, float, float, float]:
+        self._model_rates = model
+        return self.command()
+
+    def after_tick(self, now: float, snap: Snapshot) -> DeskView:
+        dt_s = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
+        self._last_t = now
+        self._wizard_tick(now, dt_s)
+        self._count(snap, dt_s)
+        self.counters.maybe_save(now)
+        metering = self.op.state == op.RUNNING and snap.ecu_live and snap.running
+        inputs = AlarmInputs(
+            metering=metering,
+            target_rpm=snap.target_rpm,
+            meter_rpm=snap.meter_rpm,
+            faults=snap.faults if snap.ecu_live else 0,
+            gnss_link=snap.gnss_link,
+            crop_link=snap.crop_link,
+            ecu_link=snap.ecu_link,
+        )
+        for text in self.alarms.update(snap.t_s, inputs):
+            self.term._event(text)
+        self._close_old_buses(now)
+        return DeskView(
+            operator=self.op.state,
+            manual=self.op.manual,
+            rate_model_kg_ha=self._model_rates,
+            speed_why=speed_why(snap, self.term.cfg),
+            alarms=self.alarms.views(),
+            count_field=self.counters.view("field"),
+            count_season=self.counters.view("season"),
+            calibration=self.wizard.view() if self.wizard is not None else None,
+            settings_pending=self._pending is not None,
+        )
+
+    def _count(self, snap: Snapshot, dt_s: float) -> None:
+        if not (snap.ecu_live and snap.running) or dt_s <= 0.0 or dt_s > 1.0:
+            return
+        m = self.term.cfg.machine
+        kg = (
+            snap.meter_rpm[0] / 60.0 * dt_s * m.kg_per_rev_upper,
+            snap.meter_rpm[1] / 60.0 * dt_s * m.kg_per_rev_lower,
+        )
+        if max(snap.meter_rpm) < 0.1:  # fans only (paused, headland): no work done
+            return
+        d_m = snap.v_kmh / 3.6 * dt_s
+        self.counters.add(d_m * m.width_m / 10_000.0, kg, dt_s, d_m)
+
+    def close(self) -> None:
+        self.counters.save()
+        self._end_wizard()
+
+    # ---- device test -------------------------------------------------------------------------
+    def _device_test(self, device: str) -> op.CommandResult:
+        if device not in self._lines:
+            return op.CommandResult(False, f"no device {device!r} (gnss, crop, can)")
+        t0 = self.term._t0 or 0.0
+        decode: Callable[[Any], tuple[str, str]] = {
+            "gnss": _decode_nmea(NmeaDecoder()),
+            "crop": _decode_crop(self.term.cfg),
+            "can": _decode_can(self.term.link.ids),
+        }[device]
+        lines = [DeviceLine(t - t0, *decode(p)) for t, p in self._lines[device]]
+        where = {
+            "gnss": self.term.gnss.name,
+            "crop": self.term.crop.name,
+            "can": self.term.link.where,
+        }[device]
+        return op.CommandResult(True, f"{device} on {where}: {len(lines)} recent", data=lines)
+
+    # ---- settings ----------------------------------------------------------------------------
+    def _apply(
+        self, now: float, c: op.ApplySettings, fut: Future[op.CommandResult] | None
+    ) -> op.CommandResult | None:
+        term = self.term
+        if self._pending is not None:
+            raise op.OperatorError("settings are being applied: wait for the ECU's answer")
+        new = validate_section(term.cfg, c.section, c.values)
+        if c.section in ECU_SECTIONS:
+            changed = changed_ecu_params(term.cfg, new)
+            if changed:
+                return self._push(now, c, new, changed, fut)
+        elif c.section in ("gnss", "crop", "can"):
+            self._reopen(now, c.section, new)
+        return self._commit(c, new)
+
+    def _commit(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
+        """Save the section to the file, then take the new configuration."""
+        term = self.term
+        saved = ""
+        if self.config_path is not None:
+            try:
+                new_file = save_section(self.config_path, c.section, c.values)
+            except OSError as exc:
+                raise op.OperatorError(f"cannot save {self.config_path}: {exc}") from exc
+            # The file may hold other sections than the running ones (edited meanwhile):
+            # the running configuration takes only this section from it.
+            new = _with_section(term.cfg, new_file, c.section)
+            saved = f", saved to {self.config_path}"
+        else:
+            saved = " (not saved: no configuration file)"
+        term.cfg = new
+        if c.section == "rate":
+            term.model = build_rate_model(new.rate)
+        if c.section == "operator":
+            self.alarms.off_rate_pct = new.operator.off_rate_pct
+            self.alarms.off_rate_s = new.operator.off_rate_s
+        later = " (in force at the next start)" if c.section in RESTART_SECTIONS else ""
+        return self._done(f"settings [{c.section}] applied{saved}{later}")
+
+    def _reopen(self, now: float, section: str, new: TerminalConfig) -> None:
+        term = self.term
+        if section == "can":
+            bus = open_bus(new.can)  # DeviceError: the old bus stays
+            old_bus, old_link = term.bus, term.link
+            term.bus = bus
+            term.link = CanLink(
+                bus,
+                new.can,
+                fan_rpm=new.machine.fan_rpm,
+                on_tx=term._log_tx,
+                on_event=term._event,
+            )
+            term.link.command = old_link.command
+            term.link.begin(new.ecu_params(), now)
+            self._old_buses.append((now, old_bus))
+            return
+        src_cfg = new.gnss if section == "gnss" else new.crop
+        kind = "nmea" if section == "gnss" else "crop"
+        source = open_line_source(src_cfg)
+        old = term.gnss if section == "gnss" else term.crop
+        old.stop()
+        if section == "gnss":
+            term.gnss = source
+        else:
+            term.crop = source
+        source.start(lambda t, line: term.inbox.put((kind, t, line)))
+
+    def _close_old_buses(self, now: float) -> None:
+        while self._old_buses and now - self._old_buses[0][0] >= _BUS_CLOSE_DELAY_S:
+            _, bus = self._old_buses.pop(0)
+            try:
+                bus.shutdown()
+            except (can.CanError, OSError) as exc:
+                log.warning("old CAN interface did not shut down cleanly: %s", exc)
+
+    def _push(
+        self,
+        now: float,
+        c: op.ApplySettings,
+        new: TerminalConfig,
+        changed: dict[int, float],
+        fut: Future[op.CommandResult] | None,
+    ) -> op.CommandResult | None:
+        term = self.term
+        link = term.link
+        if self.op.state != op.STOPPED:
+            raise op.OperatorError(
+                f"the ECU takes [{c.section}] only with the meters stopped (now {self.op.state})"
+            )
+        if not (link.ready and link.params_done and link.ecu_alive):
+            raise op.OperatorError(f"the ECU is {link.state}: its parameters cannot be changed")
+        old = term.cfg.ecu_params()
+        pending: Future[op.CommandResult] = fut if fut is not None else Future()
+        self._pending = pending
+
+        def done(error: str | None, accepted: list[int]) -> None:
+            self._pending = None
+            if error is None:
+                try:
+                    result = self._commit(c, new)
+                except (op.OperatorError, ConfigError) as exc:
+                    result = op.CommandResult(False, f"applied in the ECU, not saved: {exc}")
+                pending.set_result(result)
+                return
+            # Nothing half-applied: what the ECU took of this change goes back.
+            back = {pid: old[pid] for pid in accepted if pid in old}
+            refused = _refused_id(error, changed)
+            if back:
+                term.link.push_params(back, term.clock(), _log_rollback)
+            key = PARAM_KEYS.get(refused, c.section) if refused is not None else c.section
+            term._event(f"settings [{c.section}] refused: {error}")
+            pending.set_result(op.CommandResult(False, error, {key: error}))
+
+        link.push_params(changed, now, done)
+        return None if fut is not None else op.CommandResult(True, "pushing to the ECU")
+
+
+def _log_rollback(error: str | None, accepted: list[int]) -> None:
+    if error is not None:
+        log.warning("putting back the previous ECU parameters failed: %s", error)
+
+
+def _refused_id(error: str, changed: dict[int, float]) -> int | None:
+    name = error.split(" = ", 1)[0]
+    for pid in changed:
+        if protocol.param_name(pid) == name:
+            return pid
+    return None
+
+
+def _with_section(running: TerminalConfig, from_file: TerminalConfig, section: str) -> Any:
+    return replace(running, **{section: getattr(from_file, section)})
+
+
+def _reason(exc: ConfigError) -> str:
+    text = str(exc)
+    prefix = f"{exc.key}: "
+    return text[len(prefix) :] if text.startswith(prefix) else text
+
+
+def _decode_nmea(dec: NmeaDecoder) -> Callable[[Any], tuple[str, str]]:
+    def f(line: Any) -> tuple[str, str]:
+        fix = dec.decode(line)
+        raw = bytes(line).decode("latin-1").rstrip()
+        if not fix.ok:
+            return raw, f"not usable: {fix.error}"
+        parts = [f"{fix.talker}{fix.type}", "fix" if fix.fix_valid else "no fix"]
+        if fix.speed_kmh is not None:
+            parts.append(f"{fix.speed_kmh:.2f} km/h")
+        if fix.lat is not None and fix.lon is not None:
+            parts.append(f"{fix.lat:.6f},{fix.lon:.6f}")
+        return raw, " ".join(parts)
+
+    return f
+
+
+def _decode_crop(cfg: TerminalConfig) -> Callable[[Any], tuple[str, str]]:
+    def f(line: Any) -> tuple[str, str]:
+        raw = bytes(line).decode("latin-1").rstrip()
+        try:
+            r = parse_crop_line(0.0, line, cfg.crop.columns, cfg.crop.sensors)
+        except SensorError as exc:
+            return raw, f"not usable: {exc}"
+        return raw, f"sensor {r.sensor_id} NDVI {r.ndvi:.3f}"
+
+    return f
+
+
+def _decode_can(ids: protocol.FrameIds) -> Callable[[Any], tuple[str, str]]:
+    def f(msg: Any) -> tuple[str, str]:
+        raw = f"{msg.arbitration_id:08X} {bytes(msg.data).hex(' ')}"
+        try:
+            return raw, repr(protocol.decode(msg, ids))
+        except ProtocolError as exc:
+            return raw, f"not ours or malformed: {exc}"
+
+    return f
+
+
+def speed_why(snap: Snapshot, cfg: TerminalConfig) -> str:
+    """Why the ECU meters on the speed it does, in the terms of the paper's rule."""
+    if not snap.ecu_live:
+        return "--"
+    s = cfg.speed
+    src = snap.source
+    if s.mode != "paper":
+        return f"{src}: speed mode {s.mode}"
+    faults = Fault(snap.faults)
+    if src == Source.NONE:
+        return "none: no usable speed"
+    if src == Source.GNSS and Fault.WHEEL_ENCODER in faults:
+        return "gnss: wheel encoder fault"
+    if Fault.GNSS_FROZEN in faults:
+        return "wheel: GNSS frozen while the wheel stands"
+    if snap.v_gnss_kmh is None or Fault.GNSS_LOST in faults:
+        return f"{src}: no valid GNSS speed"
+    cmp_v = snap.v_gnss_kmh if s.switch_compare == "gnss" else snap.v_wheel_kmh
+    cv = "CV --" if snap.cv_pct is None else f"CV {snap.cv_pct:.2f} %"
+    thr = f"{s.cv_threshold_pct:g} %"
+    sw = f"{s.switch_speed_kmh:g} km/h"
+    if src == Source.GNSS:
+        return f"gnss: {cv} < {thr}, {s.switch_compare} {cmp_v:.1f} > {sw}"
+    if not snap.uniform:
+        return f"wheel: {cv} >= {thr} (not uniform)"
+    return f"wheel: {s.switch_compare} {cmp_v:.1f} <= {sw}"
