@@ -45,6 +45,9 @@ def working(t_s: float = 12.0, **kw: object) -> Snapshot:
         crop_link="ok",
         lat=LAT0,
         lon=LON0,
+        operator="running",
+        rate_model_kg_ha=(138.9, 138.9),
+        speed_why="gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h",
     )
     base.update(kw)
     return Snapshot(**base)  # type: ignore[arg-type]
@@ -81,7 +84,9 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
     assert text_of(user, "v_wheel") == "7.6"
     assert text_of(user, "v_gnss") == "8.0"
     assert text_of(user, "source") == "GNSS"
-    assert text_of(user, "source_why") == "CV 2.51 % · uniform motion"
+    assert text_of(user, "source_why") == "gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h"
+    assert text_of(user, "op_state") == "RUNNING"
+    assert text_of(user, "manual_state") == ""
     assert text_of(user, "ndvi_sensors") == "0.612"
     assert text_of(user, "ndvi_meters") == "0.587"
     assert text_of(user, "rate_upper") == "138.9"
@@ -96,11 +101,11 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
 
 async def test_main_screen_follows_new_snapshots(user: User) -> None:
     hub = DisplayHub(default_config)
-    hub.publish(working(v_kmh=3.0, source="wheel", uniform=False, cv_pct=9.5))
+    hub.publish(working(v_kmh=3.0, source="wheel", speed_why="wheel: CV 9.50 % ≥ 4.2 %"))
     register_pages(hub)
     await user.open("/")
     assert text_of(user, "source") == "wheel"
-    assert text_of(user, "source_why") == "CV 9.50 % · accelerating or decelerating"
+    assert text_of(user, "source_why") == "wheel: CV 9.50 % ≥ 4.2 %"
     hub.publish(working(t_s=12.1, v_kmh=6.5))
     await shows(user, "v_selected", "6.5")
     assert text_of(user, "source") == "GNSS"

@@ -74,7 +74,8 @@ class SectionForm:
             return
         dotted = f"{self.section}.{key}"
         label = label_of(dotted)
-        changed = (lambda _e: self._on_change()) if self._on_change else None
+        hook = self._on_change
+        changed = (lambda _e: hook()) if hook is not None else None
         widget: Widget
         if key in self._choices:
             options = self._choices[key]

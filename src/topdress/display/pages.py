@@ -14,9 +14,12 @@ from typing import Protocol
 from nicegui import ui
 
 from topdress import i18n
-from topdress.config import TerminalConfig
+from topdress.display.actions import Actions
+from topdress.display.calibration import CalibrationScreen
 from topdress.display.hub import DisplayHub
 from topdress.display.main_screen import MainScreen
+from topdress.display.server import is_loopback
+from topdress.display.settings_screens import CommunicationScreen, ControlScreen
 from topdress.i18n import tr
 from topdress.terminal.app import Snapshot
 
@@ -43,9 +46,17 @@ class PageState:
     lang_version: int = -1
 
 
-def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
+def client_is_remote() -> bool:
+    """Whether the browser of the page being built is on another machine."""
+    request = ui.context.client.request
+    host = request.client.host if request is not None and request.client is not None else ""
+    return not is_loopback(host)
+
+
+def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> None:
     """The header (screens, language, time) and the screen's content, kept up to date."""
     state = PageState()
+    actions = Actions(hub, client_is_remote())
     screen: list[Screen] = []
     ui.page_title("topdress")
 
@@ -69,7 +80,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
                 value=i18n.language(),
                 on_change=lambda e: i18n.set_language(str(e.value)),
             ).props("dense dark options-dark standout").classes("w-28").mark("language")
-        screen[:] = [build()]
+        screen[:] = [build(actions)]
         clock_label[:] = [clock]
 
     clock_label: list[ui.label] = []
@@ -93,11 +104,23 @@ def frame(hub: DisplayHub, path: str, build: Callable[[], Screen]) -> None:
     ui.timer(UPDATE_PERIOD_S, update)
 
 
-def register_pages(hub: DisplayHub, cfg: TerminalConfig) -> None:
+def register_pages(hub: DisplayHub) -> None:
     """Add the display's pages to NiceGUI's app (call once, before `ui.run`)."""
-    width_m = cfg.machine.width_m
-    max_kg_ha = cfg.rate.linear.max_kg_ha
 
     @ui.page("/")
     def main_page() -> None:
-        frame(hub, "/", lambda: MainScreen(hub, width_m, max_kg_ha))
+        cfg = hub.config()
+        width_m, max_kg_ha = cfg.machine.width_m, cfg.rate.linear.max_kg_ha
+        frame(hub, "/", lambda a: MainScreen(hub, a, width_m, max_kg_ha))
+
+    @ui.page("/communication")
+    def communication_page() -> None:
+        frame(hub, "/communication", lambda a: CommunicationScreen(hub, a))
+
+    @ui.page("/control")
+    def control_page() -> None:
+        frame(hub, "/control", lambda a: ControlScreen(hub, a))
+
+    @ui.page("/calibration")
+    def calibration_page() -> None:
+        frame(hub, "/calibration", lambda a: CalibrationScreen(hub, a))

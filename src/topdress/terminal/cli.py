@@ -113,6 +113,11 @@ def _run(args: argparse.Namespace) -> int:
     display = display_options(cfg, args.display, args.host, args.port)
     with _sigterm_stops():
         result = run_terminal(
-            cfg, read_config_text(args.config), args.duration, sys.stdout, display=display
+            cfg,
+            read_config_text(args.config),
+            args.duration,
+            sys.stdout,
+            display=display,
+            config_path=args.config,
         )
     return 0 if result.ecu_ready else EXIT_NO_ECU

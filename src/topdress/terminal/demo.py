@@ -53,6 +53,18 @@ def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path
     )
 
 
+def _demo_config_file(out_dir: Path, text: str) -> Path | None:
+    """The demo's configuration as a file the display's settings can be saved to."""
+    path = out_dir / "demo-config.toml"
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        log.warning("settings will not be saved: %s", exc)
+        return None
+    return path
+
+
 def _toml_str(text: str) -> str:
     # A JSON string is a TOML basic string: quotes and backslashes in a path stay intact.
     return json.dumps(text)
@@ -73,6 +85,7 @@ def run_terminal(
     out: TextIO,
     machine: LiveMachine | None = None,
     display: DisplayOptions | None = None,
+    config_path: Path | None = None,
 ) -> RunResult:
     """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
     console = Console(out, period_s=cfg.display.refresh_s)
@@ -87,7 +100,18 @@ def run_terminal(
     opened = session.ok  # `ok` turns False once closed
     if not opened:
         console.message(f"warning: session log not written: {session.last_error}")
-    term = Terminal(cfg, gnss, crop, bus, session, on_event=console.message)
+    # With a display the operator starts the meters (Start); headless, they start at once.
+    start = cfg.operator.autostart or display is None
+    term = Terminal(
+        cfg,
+        gnss,
+        crop,
+        bus,
+        session,
+        on_event=console.message,
+        start=start,
+        config_path=config_path,
+    )
     shown = None
     if display is not None:  # the web display beside the console (topdress.display)
         from topdress.display.serve import serve_display
@@ -166,12 +190,14 @@ def run_demo(
     try:
         text = demo_config_toml(machine.gnss_port.path, machine.crop_port.path, channel, out_dir)
         cfg = loads_config(text)
+        # Settings changed on the display are saved here, as `topdress run` saves its file.
+        config_path = _demo_config_file(out_dir, text) if display is not None else None
         out.write(
             f"topdress demo: simulated machine on {machine.gnss_port.path} (GNSS NMEA), "
             f"{machine.crop_port.path} (crop sensors), CAN virtual:{channel}\n"
         )
         machine.start()
-        run_terminal(cfg, text, duration_s, out, machine, display)
+        run_terminal(cfg, text, duration_s, out, machine, display, config_path)
     finally:
         machine.stop()
         sim_bus.shutdown()
