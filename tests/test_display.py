@@ -3,20 +3,30 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 
 import pytest
+from nicegui import ui
 from nicegui.testing import User
 
 from topdress import i18n
-from topdress.config import default_config
+from topdress.config import TerminalConfig, default_config, loads_config
+from topdress.display import pages
 from topdress.display.charts import meter_options, speed_options
 from topdress.display.hub import DisplayHub, bearing_deg, distance_m
 from topdress.display.map_view import machine_arrow, rate_colour, swath_quad
 from topdress.display.pages import register_pages
 from topdress.display.server import DisplayError, DisplayOptions, check_security, is_loopback
+from topdress.terminal import operator as op
+from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
+from topdress.terminal.calibration import CalibrationView
+from topdress.terminal.counters import CounterView
+from topdress.terminal.desk import DeviceLine
+from topdress.terminal.operator import CommandResult, ManualView
 
 LAT0, LON0 = 43.8853, 125.3245
 
@@ -69,8 +79,9 @@ async def shows(user: User, marker: str, expected: str, timeout_s: float = 3.0) 
     """Wait until the page's timer has drawn `expected` at `marker` (virtual clocks aside,
     the page pulls the snapshot every 0.2 s)."""
     for _ in range(round(timeout_s / 0.05)):
-        if text_of(user, marker) == expected:
-            return
+        with contextlib.suppress(AssertionError):  # not drawn yet
+            if text_of(user, marker) == expected:
+                return
         await asyncio.sleep(0.05)
     assert text_of(user, marker) == expected
 
@@ -254,3 +265,250 @@ def test_any_other_address_needs_a_pin() -> None:
     with pytest.raises(DisplayError, match=r"display\.pin"):
         check_security(DisplayOptions("0.0.0.0", 8080, ""))
     assert DisplayOptions("::1", 8081).url == "http://[::1]:8081"
+
+
+# ---- commands -------------------------------------------------------------------------------
+class Terminal:
+    """The terminal's command path as the display sees it: `post` answers at once."""
+
+    def __init__(self, answer: Callable[[object], CommandResult] | None = None) -> None:
+        self.sent: list[object] = []
+        self.answer = answer or (lambda c: CommandResult(True, f"{type(c).__name__} done"))
+
+    def post(self, command: object) -> Future[CommandResult]:
+        self.sent.append(command)
+        fut: Future[CommandResult] = Future()
+        fut.set_result(self.answer(command))
+        return fut
+
+
+async def settle(user: User, term: Terminal, count: int) -> None:
+    for _ in range(40):
+        if len(term.sent) >= count:
+            return
+        await asyncio.sleep(0.05)
+    assert len(term.sent) >= count, term.sent
+
+
+def pinned() -> TerminalConfig:
+    return loads_config('[display]\nhost = "0.0.0.0"\npin = "4711"\n')
+
+
+async def test_start_stop_pause_go_to_the_terminal(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "op_state") == "STOPPED"
+    user.find(marker="start").click()
+    user.find(marker="pause").click()
+    user.find(marker="stop").click()
+    await settle(user, term, 3)
+    assert term.sent == [op.Start(), op.Pause(), op.Stop()]
+
+
+async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/")
+    user.find(marker="manual_mode").click()  # the radio: pick "fixed"
+    (radio,) = user.find(marker="manual_mode").elements
+    radio.value = "fixed"  # type: ignore[attr-defined]
+    for marker, value in (("manual_upper", 120.0), ("manual_lower", 80.0)):
+        (field,) = user.find(marker=marker).elements
+        field.value = value  # type: ignore[attr-defined]
+    user.find(marker="manual_apply").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.SetManual("fixed", 120.0, 80.0, 0.0)]
+    hub.publish(working(t_s=13.0, manual=ManualView("fixed", 120.0, 80.0)))
+    await shows(user, "manual_state", "MANUAL 120.0 / 80.0 kg/ha")
+    hub.publish(working(t_s=13.1, manual=ManualView("percent", percent=-20.0)))
+    await shows(user, "manual_state", "MANUAL model -20 %")
+
+
+async def test_alarms_are_acknowledged(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    alarms = (
+        AlarmView("blocked_upper", "upper meter blocked (stopped by the ECU)", "active", 3.0),
+        AlarmView("gnss_lost", "GNSS lost: metering on the ground wheel", "acked", 1.0),
+    )
+    hub.publish(working(alarms=alarms))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "alarm_blocked_upper") == "upper meter blocked · active"
+    assert (
+        text_of(user, "alarm_gnss_lost") == "GNSS lost: metering on the ground wheel · acknowledged"
+    )
+    await user.should_not_see(marker="ack_gnss_lost")  # acknowledged already
+    user.find(marker="ack_blocked_upper").click()
+    user.find(marker="ack_all").click()
+    await settle(user, term, 2)
+    assert term.sent == [op.AckAlarm("blocked_upper"), op.AckAlarm(None)]
+    hub.publish(working(t_s=13.0, alarms=()))
+    await user.should_see(marker="alarm_none", retries=20)
+
+
+async def test_counters_shown_and_reset_apart(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    field = CounterView(area_ha=1.2345, kg=(170.2, 168.9), work_s=3725.0, distance_m=3429.0)
+    hub.publish(working(count_field=field, count_season=CounterView(area_ha=12.5)))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "count_field_area") == "1.234 ha"  # 1.2345 rounds half to even
+    assert text_of(user, "count_field_kg_upper") == "170.2 kg"
+    assert text_of(user, "count_field_time") == "1:02:05"
+    assert text_of(user, "count_field_distance") == "3429 m"
+    assert text_of(user, "count_season_area") == "12.500 ha"
+    user.find(marker="reset_season").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.ResetCounter("season")]
+
+
+async def test_a_remote_browser_needs_the_pin_to_operate(
+    user: User, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(pages, "client_is_remote", lambda: True)
+    term = Terminal()
+    hub = DisplayHub(pinned, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "v_selected") == "8.0"  # viewing needs no PIN
+    user.find(marker="start").click()
+    await user.should_see(marker="pin")
+    user.find(marker="pin").type("1234")
+    user.find(marker="pin_ok").click()
+    await user.should_see("wrong PIN")
+    assert term.sent == []
+    user.find(marker="pin").type("4711")
+    user.find(marker="pin_ok").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.Start()]
+    user.find(marker="stop").click()  # once per tab
+    await settle(user, term, 2)
+    assert term.sent == [op.Start(), op.Stop()]
+
+
+async def test_the_cab_screen_itself_needs_no_pin(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(pinned, term.post)
+    hub.publish(working(operator="running"))
+    register_pages(hub)
+    await user.open("/")  # the simulated browser is on 127.0.0.1, as the cab PC's is
+    user.find(marker="stop").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.Stop()]
+    await user.should_not_see(marker="pin")
+
+
+async def test_a_refused_value_is_shown_at_its_field_and_not_sent(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/control")
+    (split,) = user.find(marker="field_rate.split_upper").elements
+    split.value = 1.5  # type: ignore[attr-defined]
+    user.find(marker="apply_rate").click()
+    await shows(user, "answer_rate", "refused: see the field marked")
+    assert split.props["error"] is True
+    assert "1" in str(split.props["error-message"])  # the configuration's own reason
+    assert term.sent == []
+
+
+async def test_a_pid_gain_goes_to_the_ecu_and_its_answer_is_shown(user: User) -> None:
+    def answer(c: object) -> CommandResult:
+        assert isinstance(c, op.ApplySettings)
+        if c.values.get("pid_kp") == 9.0:
+            return CommandResult(False, "refused", {"ecu.pid_kp": "ECU: out of range"})
+        return CommandResult(True, "settings [ecu] applied, saved to demo-config.toml")
+
+    term = Terminal(answer)
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/control")
+    (kp,) = user.find(marker="field_ecu.pid_kp").elements
+    kp.value = 0.02  # type: ignore[attr-defined]
+    user.find(marker="apply_ecu").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.ApplySettings("ecu", {"pid_kp": 0.02})]  # the changed gain only
+    await shows(user, "answer_ecu", "settings [ecu] applied, saved to demo-config.toml")
+    kp.value = 9.0  # type: ignore[attr-defined]
+    user.find(marker="apply_ecu").click()
+    await settle(user, term, 2)
+    await shows(user, "answer_ecu", "refused")
+    assert kp.props["error-message"] == "ECU: out of range"
+    hub.publish(working(t_s=13.0, settings_pending=True))
+    await shows(user, "pending", "waiting for the ECU's acknowledgement …")
+
+
+async def test_rate_curve_follows_the_model_typed(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(ndvi=0.55, rate_model_kg_ha=(150.0, 150.0)))
+    register_pages(hub)
+    await user.open("/control")
+    (chart,) = user.find(kind=ui.echart).elements
+    line = chart.options["series"][0]["data"]
+    assert line[0] == [0.0, 600.0] and line[-1] == [1.0, 30.0]  # 450 at 0.3, 150 at 0.8
+    (r1,) = user.find(marker="field_rate.linear.rate_1_kg_ha").elements
+    r1.value = 250.0  # type: ignore[attr-defined]
+    line = chart.options["series"][0]["data"]
+    assert [p for p in line if p[0] == 0.8] == [[0.8, 250.0]]
+    await shows(user, "operating_point", "operating point: NDVI 0.550 → 300.0 kg/ha")
+
+
+async def test_catch_test_wizard(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/calibration")
+    assert text_of(user, "cal_state") == "no calibration running"
+    user.find(marker="start_catch").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.StartCatchTest("upper", 20.0, 20.0)]
+    view = CalibrationView("catch", "weigh", "upper meter: 20.000 revolutions", 1.0)
+    hub.publish(working(t_s=13.0, operator="calibrating", calibration=view))
+    await shows(user, "cal_state", "Metering catch test · weigh and enter kg")
+    (kg,) = user.find(marker="cal_kg").elements
+    kg.value = 6.02  # type: ignore[attr-defined]
+    user.find(marker="finish_catch").click()
+    await settle(user, term, 2)
+    assert term.sent[1] == op.FinishCatchTest(6.02)
+    done = CalibrationView(
+        "catch",
+        "done",
+        "upper: 0.3010 kg/rev",
+        1.0,
+        {"kg_per_rev": 0.301},
+        "machine.kg_per_rev_upper",
+    )
+    hub.publish(working(t_s=13.1, operator="calibrating", calibration=done))
+    await shows(user, "cal_result_kg_per_rev", "kg per revolution: 0.301")
+    user.find(marker="cal_apply").click()
+    await settle(user, term, 3)
+    assert term.sent[2] == op.CloseCalibration(apply=True)
+
+
+async def test_device_test_shows_the_last_lines(user: User) -> None:
+    lines = [DeviceLine(1.5, "$GNRMC,...*7A", "RMC 8.00 km/h")]
+    term = Terminal(lambda c: CommandResult(True, "", data=lines))
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/communication")
+    user.find(marker="test_gnss").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.TestDevice("gnss")]
+    (table,) = user.find(marker="lines_gnss").elements
+    for _ in range(20):
+        if table.rows:  # type: ignore[attr-defined]
+            break
+        await asyncio.sleep(0.05)
+    assert table.rows == [{"t": "1.5", "raw": "$GNRMC,...*7A", "decoded": "RMC 8.00 km/h"}]  # type: ignore[attr-defined]
