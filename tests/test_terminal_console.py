@@ -112,7 +112,7 @@ def test_ecu_values_are_dashes_while_the_ecu_is_lost() -> None:
     for stale in ("8.02", "7.61", "2.51", "uniform", "22.09", "22.69", "3020", "RUNNING"):
         assert stale not in block, stale
     assert "GNSS_LOST" not in block and "faults: --" in block
-    assert "speed      -- km/h from --     wheel    --" in block
+    assert "speed      -- km/h from --    wheel    --" in block
     assert "target     -- /     -- r/min   actual     -- /     -- r/min" in block
     # the columns stay put: the figures where they were
     assert render_lines(lost)[1].index("CV") == render_lines(WORKING)[1].index("CV")
@@ -124,6 +124,7 @@ def test_ecu_values_are_dashes_while_the_ecu_is_lost() -> None:
     assert line == (
         "t=12.3s v=--km/h src=-- cv=--% ndvi=0.587 rate=138.9/138.9kg/ha target=--/-- "
         "meter=--/--r/min fan=--/--rpm faults=-- ecu=lost gnss=ok crop=3/4"
+        " op=stopped rate=off alarms=0"
     )
 
 
@@ -133,3 +134,38 @@ def test_ecu_wait_says_where_the_terminal_listens() -> None:
     assert " ecu=wait(socketcan:can0) " in render_line(waiting)
     # once it works the place is not repeated
     assert " ecu=ok " in render_line(replace(WORKING, ecu_where="socketcan:can0"))
+
+
+def test_the_block_fits_80_columns_and_shows_the_operator_state() -> None:
+    from topdress.terminal.alarms import AlarmView
+    from topdress.terminal.calibration import CalibrationView
+    from topdress.terminal.operator import ManualView
+
+    busy = replace(
+        WORKING,
+        ecu_link="wait",
+        ecu_where="socketcan:can0",
+        faults=0x1FF,
+        operator="running",
+        manual=ManualView("fixed", 200.0, 100.0),
+        speed_why="gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h",
+        alarms=(
+            AlarmView("blocked_lower", "lower meter blocked", "active", 3.0),
+            AlarmView("off_rate_upper", "upper meter off rate", "acked", 2.0),
+            AlarmView("crop_lost", "crop sensors lost", "cleared", 1.0),
+        ),
+        calibration=CalibrationView("catch", "weigh", "upper meter: 20.012 revolutions", 1.0),
+        counters={f"counter_{i}": i * 1000 for i in range(12)},
+        last_event="GNSS lost (serial:/dev/ttyUSB0: [Errno 2] could not open port " + "x" * 80,
+    )
+    lines = render_lines(busy)
+    assert max(len(x) for x in lines) <= 80
+    text = "\n".join(lines)
+    assert "operator running      rate manual 200.0/100.0 kg/ha" in text
+    assert "source  gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h" in text
+    assert "alarms  blocked_lower  off_rate_upper (acked)  crop_lost (cleared)" in text
+    assert "calib   catch weigh 100 %: upper meter: 20.012 revolutions" in text
+    # every counter is shown, on as many lines as it takes
+    for i in range(12):
+        assert f"counter_{i} {i * 1000}" in text
+    assert lines[-1].endswith("...")

@@ -4,20 +4,32 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import logging
 import sys
 from collections.abc import Sequence
 
+from topdress import __version__
 from topdress.errors import TopdressError
 
 # Each module defines `register(subparsers)` and sets `func` on its parsers;
 # `func(args) -> int` is the exit code.
 REGISTRARS = (
+    "topdress.config_cli",
     "topdress.terminal.cli",
     "topdress.terminal.gnss_cli",
     "topdress.sim.cli",
     "topdress.log.cli",
+    "topdress.sim.ecu_cli",
 )
+
+
+def version() -> str:
+    """The installed package's version (the source tree's when not installed)."""
+    try:
+        return importlib.metadata.version("topdress")
+    except importlib.metadata.PackageNotFoundError:
+        return __version__
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in REGISTRARS:
         importlib.import_module(name).register(sub)

@@ -198,7 +198,13 @@ typedef struct {
     uint32_t tx_dropped;
     ...;
 } td_counters_t;
-typedef struct { td_params_t p; td_state_t st; td_counters_t cnt; ...; } td_app_t;
+/* td_cal.h */
+typedef struct {
+    uint8_t state; uint8_t layer; uint8_t reason; uint8_t seq;
+    float target_rev; float speed_rpm; float done_rev; float meter_rpm;
+    ...;
+} td_cal_t;
+typedef struct { td_params_t p; td_state_t st; td_counters_t cnt; td_cal_t cal; ...; } td_app_t;
 int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
 int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
 int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out);

@@ -65,6 +65,20 @@ class EcuCounters:
     tx_dropped: int
 
 
+_CAL_STATES = ("idle", "running", "done", "aborted")
+
+
+@dataclass(frozen=True)
+class CalState:
+    """The catch test in the core (td_cal_t): state, layer (0 upper), reason code, revolutions."""
+
+    state: str
+    layer: int
+    reason: int
+    target_rev: float
+    done_rev: float
+
+
 def _pair(a: Any) -> tuple[float, float]:
     return (float(a[0]), float(a[1]))
 
@@ -164,6 +178,20 @@ class Ecu:
             faults=Fault(int(s.faults)),
             wheel_updates=int(s.wheel_updates),
             wheel_pulses=int(s.wheel_pulses),
+        )
+
+    @property
+    def cal_state(self) -> CalState | None:
+        """The metering catch test (td_cal.h); None while idle."""
+        c = self._app.cal
+        if c.state == 0:
+            return None
+        return CalState(
+            state=_CAL_STATES[c.state],
+            layer=int(c.layer),
+            reason=int(c.reason),
+            target_rev=float(c.target_rev),
+            done_rev=float(c.done_rev),
         )
 
     @property

@@ -155,6 +155,11 @@ class World:
             bins = self.applied_by_bin[i]
             bins[b] = bins.get(b, 0.0) + landed
 
+    def metered_kg(self, layer: int) -> float:
+        """Fertilizer the layer's metering wheel has let out so far (true kg/rev): what a
+        scale under the outlet shows after a catch test."""
+        return self.meters[layer].revolutions * self.cfg.kg_per_rev[layer]
+
     def run(self, seconds: float) -> None:
         """Advance `seconds` of virtual time, discarding the outputs."""
         for _ in range(round(seconds / self.dt)):

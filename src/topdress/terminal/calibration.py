@@ -222,9 +222,13 @@ class WheelCal:
             self.gnss_m += x.gnss_kmh / 3.6 * x.dt_s
         return []
 
-    def finish(self) -> None:
+    def finish(self, distance_m: float | None = None) -> None:
         if self.step != "drive":
             raise CalibrationError(f"the wheel calibration is {self.step}")
+        if distance_m is not None:
+            if not 1.0 <= distance_m <= 1000.0:
+                raise CalibrationError(f"distance must be 1..1000 m, not {distance_m:g}")
+            self.distance_m = distance_m
         r = wheel_result(
             self.pulses,
             self.ppr,

@@ -8,7 +8,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from topdress.config import load_config, read_config_text
 
@@ -34,6 +34,11 @@ def register(sub: Any) -> None:
     )
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
     _display_args(demo)
+    demo.add_argument(
+        "--start",
+        action="store_true",
+        help="start the meters at once (default: the operator's start)",
+    )
     demo.set_defaults(func=_demo)
 
     run = sub.add_parser(
@@ -50,6 +55,12 @@ def register(sub: Any) -> None:
         "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
     )
     _display_args(run)
+    run.add_argument(
+        "--start",
+        action="store_true",
+        help="start the meters at once, headless (as [operator] autostart = true); "
+        "default: the operator's start, typed here or on the display",
+    )
     run.set_defaults(func=_run)
 
 
@@ -102,7 +113,14 @@ def _demo(args: argparse.Namespace) -> int:
 
     display = display_options(default_config(), args.display, args.host, args.port)
     with _sigterm_stops():
-        return run_demo(args.duration, args.out, seed=args.seed, display=display)
+        return run_demo(
+            args.duration,
+            args.out,
+            seed=args.seed,
+            start=args.start,
+            keyboard=_keyboard(),
+            display=display,
+        )
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -111,13 +129,23 @@ def _run(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     display = display_options(cfg, args.display, args.host, args.port)
+    start = args.start or cfg.operator.autostart
+    # A line source reading stdin owns it; else typed commands come from there.
+    reads_stdin = "stdin" in (cfg.gnss.source, cfg.crop.source)
     with _sigterm_stops():
         result = run_terminal(
             cfg,
             read_config_text(args.config),
             args.duration,
             sys.stdout,
-            display=display,
+            start=start,
             config_path=args.config,
+            keyboard=None if reads_stdin else _keyboard(),
+            display=display,
         )
     return 0 if result.ecu_ready else EXIT_NO_ECU
+
+
+def _keyboard() -> TextIO | None:
+    """The operator's typed commands: stdin when it is a terminal."""
+    return sys.stdin if sys.stdin is not None and sys.stdin.isatty() else None

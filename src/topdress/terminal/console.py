@@ -46,8 +46,58 @@ def _ecu_link(s: Snapshot, space: str = " ") -> str:
     return f"wait{space}({s.ecu_where})" if waiting else s.ecu_link
 
 
+#: Every line of the block fits an 80-column screen (a cab PC's text console).
+WIDTH = 80
+
+
+def _fit(line: str, width: int = WIDTH) -> str:
+    return line if len(line) <= width else line[: width - 3] + "..."
+
+
+def _wrap(head: str, items: list[str], width: int = WIDTH) -> list[str]:
+    """`head` then the items, as many per line as fit; continuation lines indented."""
+    lines, line, fresh = [], head, True
+    for item in items:
+        if not fresh and len(line) + len(item) + 2 > width:
+            lines.append(line)
+            line, fresh = " " * len(head), True
+        line += "  " + item
+        fresh = False
+    lines.append(line)
+    return [_fit(x, width) for x in lines]
+
+
+def _hm(seconds: float) -> str:
+    m = int(seconds // 60)
+    return f"{m // 60}h{m % 60:02d}"
+
+
+def _operator_lines(s: Snapshot) -> list[str]:
+    lines = [
+        f"operator {s.operator:<11}  rate {s.manual.describe()}",
+        f"source  {s.speed_why}",
+    ]
+    if s.alarms:
+        lines += _wrap(
+            "alarms",
+            [a.name + ("" if a.state == "active" else f" ({a.state})") for a in s.alarms],
+        )
+    else:
+        lines.append("alarms  none")
+    f, z = s.count_field, s.count_season
+    lines.append(
+        f"field   {f.area_ha:7.3f} ha {f.kg[0]:7.1f} /{f.kg[1]:7.1f} kg {_hm(f.work_s)}"
+        f"   season {z.area_ha:7.2f} ha {z.kg[0] + z.kg[1]:7.0f} kg {_hm(z.work_s)}"
+    )
+    if s.calibration is not None:
+        c = s.calibration
+        lines.append(f"calib   {c.kind} {c.step} {c.progress * 100:3.0f} %: {c.text}")
+    return lines
+
+
 def render_lines(s: Snapshot) -> list[str]:
-    """The full status block. The ECU's values are "--" while it is not heard."""
+    """The full status block, each line at most WIDTH columns. The ECU's values are "--"
+    while it is not heard."""
     live = s.ecu_live
 
     def col(value: float, fmt: str) -> str:
@@ -56,21 +106,22 @@ def render_lines(s: Snapshot) -> list[str]:
     faults = (", ".join(fault_names(s.faults)) or "none") if live else "--"
     uniform = ("uniform" if s.uniform else "varying") if live else "--"
     running = ("RUNNING" if s.running else "stopped") if live else "--"
-    return [
-        f"topdress terminal   t {s.t_s:7.1f} s   ECU {_ecu_link(s):<5}  GNSS {s.gnss_link:<7}"
+    head = [
+        f"topdress {s.t_s:7.1f} s  ECU {_ecu_link(s):<5}  GNSS {s.gnss_link:<7}"
         f"  CROP {s.crop_link:<6}  {running}",
         f"speed   {col(s.v_kmh, '5.2f')} km/h from {s.source if live else '--':<5}"
-        f"  wheel {col(s.v_wheel_kmh, '5.2f')}"
-        f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h   CV {_col(s.cv_pct if live else None, '.2f')} %"
+        f" wheel {col(s.v_wheel_kmh, '5.2f')}"
+        f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h  CV {_col(s.cv_pct if live else None, '.2f')} %"
         f" ({uniform})",
         f"NDVI    sensors {_col(s.ndvi_sensors, '.3f')}  at meters {_col(s.ndvi, '.3f')}"
         f"   rate upper {s.rate_kg_ha[0]:6.1f}  lower {s.rate_kg_ha[1]:6.1f} kg/ha",
         f"meters  target {col(s.target_rpm[0], '6.2f')} / {col(s.target_rpm[1], '6.2f')} r/min"
         f"   actual {col(s.meter_rpm[0], '6.2f')} / {col(s.meter_rpm[1], '6.2f')} r/min",
         f"fans    {col(s.fan_rpm[0], '5.0f')} / {col(s.fan_rpm[1], '5.0f')} rpm   faults: {faults}",
-        "counts  " + "  ".join(f"{k} {v}" for k, v in s.counters.items()),
-        f"last    {s.last_event or '-'}",
     ]
+    counts = _wrap("counts", [f"{k} {v}" for k, v in s.counters.items()])
+    last = [f"last    {s.last_event or '-'}"]
+    return [_fit(x) for x in head + _operator_lines(s)] + counts + [_fit(x) for x in last]
 
 
 def render_line(s: Snapshot) -> str:
@@ -89,6 +140,7 @@ def render_line(s: Snapshot) -> str:
         f" meter={num(s.meter_rpm[0], '.2f')}/{num(s.meter_rpm[1], '.2f')}r/min"
         f" fan={num(s.fan_rpm[0], '.0f')}/{num(s.fan_rpm[1], '.0f')}rpm faults={faults}"
         f" ecu={_ecu_link(s, space='')} gnss={s.gnss_link} crop={s.crop_link}"
+        f" op={s.operator} rate={s.manual.mode} alarms={len(s.alarms)}"
     )
 
 

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, TextIO
 
 import can
 
-from topdress.config import TerminalConfig, loads_config
+from topdress.config import TerminalConfig, loads_config, redacted_text
 from topdress.errors import DeviceError
 from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
@@ -27,6 +27,8 @@ from topdress.sim.world import SimConfig, World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
 from topdress.terminal.console import Console
+from topdress.terminal.keyboard import KeyboardCommands
+from topdress.terminal.operator import CONSOLE_HELP
 from topdress.terminal.serial_io import open_line_source
 
 if TYPE_CHECKING:
@@ -53,18 +55,6 @@ def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path
     )
 
 
-def _demo_config_file(out_dir: Path, text: str) -> Path | None:
-    """The demo's configuration as a file the display's settings can be saved to."""
-    path = out_dir / "demo-config.toml"
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        log.warning("settings will not be saved: %s", exc)
-        return None
-    return path
-
-
 def _toml_str(text: str) -> str:
     # A JSON string is a TOML basic string: quotes and backslashes in a path stay intact.
     return json.dumps(text)
@@ -84,11 +74,21 @@ def run_terminal(
     duration_s: float | None,
     out: TextIO,
     machine: LiveMachine | None = None,
-    display: DisplayOptions | None = None,
+    start: bool = True,
     config_path: Path | None = None,
+    keyboard: TextIO | None = None,
+    display: DisplayOptions | None = None,
 ) -> RunResult:
-    """Open the devices of `cfg`, run the terminal with a live console, report where data went."""
+    """Open the devices of `cfg`, run the terminal with a live console, report where data went.
+
+    `start`: the meters start at once; else at the operator's start (typed on `keyboard`, or
+    from the display). `config_path`: where settings changed while running are saved."""
     console = Console(out, period_s=cfg.display.refresh_s)
+    if cfg.can.interface == "virtual" and machine is None:
+        console.message(
+            'warning: can.interface = "virtual" is the simulator\'s in-process bus: no ECU can '
+            "answer there (set [can] interface and channel, e.g. socketcan can0)"
+        )
     # Devices first: one that cannot be opened stops here, before a session file is made.
     bus = open_bus(cfg.can)
     try:
@@ -96,20 +96,18 @@ def run_terminal(
     except DeviceError:
         bus.shutdown()
         raise
-    session = SessionLog.create(cfg.log.dir, config_toml)
+    session = SessionLog.create(cfg.log.dir, redacted_text(config_toml))  # never the PIN
     opened = session.ok  # `ok` turns False once closed
     if not opened:
         console.message(f"warning: session log not written: {session.last_error}")
-    # With a display the operator starts the meters (Start); headless, they start at once.
-    start = cfg.operator.autostart or display is None
     term = Terminal(
         cfg,
         gnss,
         crop,
         bus,
         session,
-        on_event=console.message,
         start=start,
+        on_event=console.message,
         config_path=config_path,
     )
     shown = None
@@ -117,6 +115,10 @@ def run_terminal(
         from topdress.display.serve import serve_display
 
         shown = serve_display(term, display, console.message)
+    if keyboard is not None:
+        KeyboardCommands(term, keyboard, console.message).start()
+    if not start:
+        console.message("meters stopped until the operator starts them; " + CONSOLE_HELP)
     rows = 0
 
     def on_tick(snapshot: Snapshot, now: float) -> None:
@@ -175,9 +177,14 @@ def run_demo(
     out_dir: Path,
     seed: int = 1,
     out: TextIO = sys.stdout,
+    start: bool = True,
+    keyboard: TextIO | None = None,
     display: DisplayOptions | None = None,
 ) -> int:
-    """The simulated machine in a thread, the terminal in front of it; returns the exit code."""
+    """The simulated machine in a thread, the terminal in front of it; returns the exit code.
+
+    The demo's configuration is written to `out_dir/topdress-demo.toml`, where settings changed
+    while it runs are saved."""
     drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
     world = World(SimConfig(), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
@@ -190,14 +197,15 @@ def run_demo(
     try:
         text = demo_config_toml(machine.gnss_port.path, machine.crop_port.path, channel, out_dir)
         cfg = loads_config(text)
-        # Settings changed on the display are saved here, as `topdress run` saves its file.
-        config_path = _demo_config_file(out_dir, text) if display is not None else None
+        config_path = out_dir / "topdress-demo.toml"
+        out_dir.mkdir(parents=True, exist_ok=True)
+        config_path.write_text(text, encoding="utf-8")
         out.write(
             f"topdress demo: simulated machine on {machine.gnss_port.path} (GNSS NMEA), "
             f"{machine.crop_port.path} (crop sensors), CAN virtual:{channel}\n"
         )
         machine.start()
-        run_terminal(cfg, text, duration_s, out, machine, display, config_path)
+        run_terminal(cfg, text, duration_s, out, machine, start, config_path, keyboard, display)
     finally:
         machine.stop()
         sim_bus.shutdown()

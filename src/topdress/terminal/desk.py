@@ -89,8 +89,11 @@ class OperatorDesk:
         cfg = term.cfg
         self.op = op.Operator(autostart)
         self.alarms = AlarmBook(cfg.operator.off_rate_pct, cfg.operator.off_rate_s)
-        counters_path = Path(cfg.log.dir) / cfg.operator.counters_file
-        self.counters = WorkCounters(counters_path if cfg.log.dir else None)
+        # Beside the session logs; a terminal without a session log (tests, a log that could
+        # not be created) keeps them in memory only.
+        session = term.session
+        where = session.path.parent if session is not None else None
+        self.counters = WorkCounters(where / cfg.operator.counters_file if where else None)
         if self.counters.error:
             term._event(self.counters.error)
         self.wizard: Wizard | None = None
@@ -155,6 +158,8 @@ class OperatorDesk:
                 return op.CommandResult(False, str(exc))
             self.counters.save()
             return self._done(f"{c.which} counter reset")
+        if isinstance(c, op.Help):
+            return op.CommandResult(False, c.text)
         if isinstance(c, op.TestDevice):
             return self._device_test(c.device)
         if isinstance(c, op.ApplySettings):
@@ -186,7 +191,7 @@ class OperatorDesk:
         if isinstance(c, op.FinishWheelCal):
             if not isinstance(w, WheelCal):
                 return op.CommandResult(False, "no wheel calibration open")
-            w.finish()
+            w.finish(c.distance_m)
             return self._done(w.text)
         if isinstance(c, op.CloseCalibration):
             if w is None:

@@ -84,7 +84,10 @@ class StartWheelCal:
 
 @dataclass(frozen=True)
 class FinishWheelCal:
-    pass
+    """End of the run; `distance_m` the distance measured on the ground if it differs from the
+    one given at the start (the machine stopped short of the mark)."""
+
+    distance_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -110,6 +113,13 @@ class ApplySettings:
 @dataclass(frozen=True)
 class TestDevice:
     device: str  # gnss | crop | can
+
+
+@dataclass(frozen=True)
+class Help:
+    """A typed line that is no command: answered with `text` (printed by the loop's thread)."""
+
+    text: str
 
 
 @dataclass(frozen=True)
@@ -196,3 +206,60 @@ class Operator:
             k = 1.0 + m.percent / 100.0
             return (min(model[0] * k, MAX_RATE_KG_HA), min(model[1] * k, MAX_RATE_KG_HA))
         return model
+
+
+# ---- typed commands (the console) -------------------------------------------------------------
+CONSOLE_HELP = (
+    "commands: start | stop | pause | manual off | manual fixed UPPER LOWER | manual percent P"
+    " | ack [NAME] | reset field|season | catch upper|lower [REV [RPM]] | weigh KG"
+    " | wheel [M] | finish [M] | fan [S] | close [apply] | test gnss|crop|can"
+)
+
+
+def _floats(args: list[str], n_min: int, n_max: int) -> list[float]:
+    if not n_min <= len(args) <= n_max:
+        raise OperatorError(CONSOLE_HELP)
+    try:
+        return [float(a) for a in args]
+    except ValueError:
+        raise OperatorError(f"not a number in {' '.join(args)!r}") from None
+
+
+def parse_command(text: str) -> Any:
+    """A command typed on the console (`CONSOLE_HELP`); OperatorError if it is not one."""
+    words = text.split()
+    if not words:
+        raise OperatorError(CONSOLE_HELP)
+    verb, args = words[0].lower(), words[1:]
+    simple = {"start": Start, "stop": Stop, "pause": Pause}
+    if verb in simple and not args:
+        return simple[verb]()
+    if verb == "manual" and args:
+        mode, rest = args[0], args[1:]
+        if mode == "off":
+            return SetManual("off")
+        if mode == "fixed":
+            upper, lower = _floats(rest, 2, 2)
+            return SetManual("fixed", upper_kg_ha=upper, lower_kg_ha=lower)
+        if mode == "percent":
+            return SetManual("percent", percent=_floats(rest, 1, 1)[0])
+    if verb == "ack" and len(args) <= 1:
+        return AckAlarm(args[0] if args else None)
+    if verb == "reset" and len(args) == 1:
+        return ResetCounter(args[0])
+    if verb == "catch" and args and args[0] in LAYERS:
+        nums = _floats(args[1:], 0, 2)
+        return StartCatchTest(args[0], *nums)
+    if verb == "weigh":
+        return FinishCatchTest(_floats(args, 1, 1)[0])
+    if verb == "wheel":
+        return StartWheelCal(*_floats(args, 0, 1))
+    if verb == "finish":
+        return FinishWheelCal(*_floats(args, 0, 1))
+    if verb == "fan":
+        return StartFanCheck(*_floats(args, 0, 1))
+    if verb == "close" and args in ([], ["apply"]):
+        return CloseCalibration(apply=bool(args))
+    if verb == "test" and len(args) == 1:
+        return TestDevice(args[0])
+    raise OperatorError(CONSOLE_HELP)

@@ -1,0 +1,64 @@
+"""Operator commands typed on the console (`start`, `stop`, `manual fixed 200 150`, ...).
+
+A reader thread turns each line of the input stream into a command (operator.parse_command)
+and posts it to the terminal; the answer is printed as an event when the loop has acted on it.
+Used by `topdress run` and `topdress demo` when their input is a terminal; the display posts
+the very same commands.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from typing import TYPE_CHECKING, TextIO
+
+from topdress.terminal.operator import CommandResult, Help, OperatorError, parse_command
+
+if TYPE_CHECKING:
+    from topdress.terminal.app import Terminal
+
+log = logging.getLogger(__name__)
+
+
+def describe(result: CommandResult) -> str:
+    """The answer to a typed command, with the data of a device test line by line."""
+    text = result.message if result.ok else f"refused: {result.message}"
+    if isinstance(result.data, list):
+        text += "".join(
+            f"\n  {line.t_s:8.2f}  {line.raw[:40]:<40}  {line.decoded}" for line in result.data
+        )
+    return text
+
+
+class KeyboardCommands:
+    """Reads commands from `stream` in a daemon thread until it ends."""
+
+    def __init__(self, term: Terminal, stream: TextIO, say: Callable[[str], None]) -> None:
+        self._term = term
+        self._stream = stream
+        self._say = say  # called on the loop's thread (the Future's callback)
+        self._thread = threading.Thread(target=self._run, name="keyboard", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            for line in self._stream:
+                if line.strip():
+                    self._one(line)
+        except (OSError, ValueError) as exc:  # the terminal went away
+            log.debug("keyboard input ended: %s", exc)
+
+    def _one(self, line: str) -> None:
+        try:
+            command = parse_command(line)
+        except OperatorError as exc:
+            command = Help(str(exc))
+        fut = self._term.post(command)
+        fut.add_done_callback(self._answer)
+
+    def _answer(self, fut: Future[CommandResult]) -> None:
+        self._say(describe(fut.result()))

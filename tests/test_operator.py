@@ -1,0 +1,405 @@
+"""The operator's commands against the simulated machine (World: plant + C ECU core) on virtual
+time: start/stop/pause, manual rate, alarms, counters, the calibration wizards and settings."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from test_terminal import VirtualRig
+from topdress import protocol
+from topdress.config import DEFAULT_TOML, loads_config
+from topdress.ecu import meter_target_rpm
+from topdress.gnss.nmea import make_sentence
+from topdress.log.session import SessionLog
+from topdress.sim.actuators import MeterParams
+from topdress.sim.tractor import Drive, Segment
+from topdress.sim.world import SimConfig, StepOutput, World
+from topdress.terminal import operator as op
+from topdress.terminal.operator import CommandResult
+
+CFG = loads_config(DEFAULT_TOML)
+
+
+def drive(*segments: Segment) -> Drive:
+    return Drive(list(segments))
+
+
+def stand(seconds: float) -> Segment:
+    return Segment("stop", duration_s=seconds)
+
+
+def straight(kmh: float, m: float) -> Segment:
+    return Segment("straight", speed_kmh=kmh, length_m=m)
+
+
+def make_rig(d: Drive, autostart: bool = False, **kw: Any) -> VirtualRig:
+    """A rig whose terminal waits for the operator (autostart False) unless told."""
+    rig = VirtualRig(CFG, d, **kw)
+    rig.term.desk.op.state = op.RUNNING if autostart else op.STOPPED
+    return rig
+
+
+def post(rig: VirtualRig, command: Any, settle_s: float = 0.2) -> CommandResult:
+    fut = rig.term.post(command)
+    rig.run(rig.world.t_s + settle_s)
+    assert fut.done()
+    return fut.result()
+
+
+def snap_at(rig: VirtualRig, t: float) -> Any:
+    return min(rig.snapshots, key=lambda ts: abs(ts[0] - t))[1]
+
+
+def test_meters_wait_for_start_then_stop_is_one_command() -> None:
+    rig = make_rig(drive(stand(2.0), straight(8.0, 200.0)))
+    try:
+        rig.run(8.0)
+        s = rig.term.snapshot
+        assert s.operator == "stopped" and not s.running
+        assert s.v_kmh > 7.0 and s.meter_rpm == (0.0, 0.0)  # moving, nothing metered
+        assert s.rate_model_kg_ha[0] > 0 and s.rate_kg_ha == (0.0, 0.0)
+        assert post(rig, op.Start()).ok
+        rig.run(16.0)
+        s = rig.term.snapshot
+        assert s.operator == "running" and s.running
+        assert s.meter_rpm[0] == pytest.approx(s.target_rpm[0], rel=0.05)
+        t_stop = rig.world.t_s
+        assert post(rig, op.Stop(), settle_s=0.05).ok
+        # the stop goes out at once, not at the next command period
+        assert not rig.world.ecu.state.running
+        assert rig.world.t_s - t_stop < 0.06
+        rig.run(t_stop + 1.0)
+        assert rig.term.snapshot.operator == "stopped" and not rig.term.snapshot.running
+    finally:
+        rig.close()
+    assert any("operator: started" in e for _, e in rig.events)
+
+
+def test_pause_keeps_the_fans_and_start_resumes() -> None:
+    rig = make_rig(drive(straight(8.0, 300.0)), autostart=True)
+    try:
+        rig.run(10.0)
+        assert rig.term.snapshot.meter_rpm[0] > 10.0
+        assert post(rig, op.Pause()).ok
+        rig.run(14.0)
+        s = rig.term.snapshot
+        assert s.operator == "paused" and s.running  # the ECU stays started
+        assert s.rate_kg_ha == (0.0, 0.0) and s.meter_rpm[0] < 0.5
+        assert min(s.fan_rpm) > 2500.0  # fans kept
+        assert "FAN_LOW" not in str(protocol.Fault(s.faults))
+        assert not post(rig, op.Pause()).ok  # only running meters pause
+        assert post(rig, op.Start()).message == "resumed"
+        rig.run(20.0)
+        assert rig.term.snapshot.meter_rpm[0] > 10.0
+    finally:
+        rig.close()
+
+
+def test_manual_fixed_and_percent_rates_are_commanded_and_shown() -> None:
+    rig = make_rig(drive(straight(8.0, 400.0)), autostart=True)
+    m = CFG.machine
+    try:
+        rig.run(8.0)
+        res = post(rig, op.SetManual("fixed", upper_kg_ha=200.0, lower_kg_ha=100.0))
+        assert res.ok and res.message == "rate: manual 200.0/100.0 kg/ha"
+        rig.run(16.0)
+        s = rig.term.snapshot
+        assert s.manual == op.ManualView("fixed", 200.0, 100.0, 0.0)
+        assert s.rate_kg_ha == (200.0, 100.0)
+        for i, kg_rev in enumerate((m.kg_per_rev_upper, m.kg_per_rev_lower)):
+            eq4 = meter_target_rpm(m.width_m, s.rate_kg_ha[i], s.v_kmh, kg_rev)
+            assert s.target_rpm[i] == pytest.approx(eq4, rel=0.03)
+        assert post(rig, op.SetManual("percent", percent=20.0)).ok
+        rig.run(17.0)
+        s = rig.term.snapshot
+        assert s.rate_kg_ha[0] == pytest.approx(s.rate_model_kg_ha[0] * 1.2, abs=0.01)
+        bad = post(rig, op.SetManual("fixed", upper_kg_ha=700.0))
+        assert not bad.ok and "upper_kg_ha" in bad.message
+        assert rig.term.snapshot.manual.mode == "percent"  # unchanged
+        assert post(rig, op.SetManual("off")).ok
+        rig.run(18.0)
+        s = rig.term.snapshot
+        assert s.rate_kg_ha == s.rate_model_kg_ha
+    finally:
+        rig.close()
+    texts = [e for _, e in rig.events]
+    assert "operator: rate: manual +20 % on the model" in texts
+
+
+def test_off_rate_and_blocked_meters_raise_alarms_the_operator_acknowledges() -> None:
+    # upper: a motor too weak for its target (off rate); lower: jams at 12 s (blocked)
+    sim = SimConfig(meter=(MeterParams(max_rpm=15.0), MeterParams(jammed_at_s=12.0)))
+    rig = make_rig(drive(straight(8.0, 400.0)), autostart=True)
+    rig.world = World(sim, seed=3, drive=rig.world.drive)
+    try:
+        rig.run(20.0)
+        # off rate: more than 10 % off its target for more than operator.off_rate_s (5 s)
+        off = [
+            t
+            for t, s in rig.snapshots
+            if s.target_rpm[0] >= 1.0
+            and abs(s.meter_rpm[0] - s.target_rpm[0]) > 0.1 * s.target_rpm[0]
+        ]
+        alarms = {a.name: a for a in rig.term.snapshot.alarms}
+        assert alarms["off_rate_upper"].since_s == pytest.approx(off[0] + 5.0, abs=0.15)
+        assert alarms["off_rate_upper"].state == "active"
+        assert alarms["blocked_lower"].state == "active"
+        assert 13.0 < alarms["blocked_lower"].since_s < 13.6  # blocked_time_ms 1 s after the jam
+        assert "off_rate_lower" not in alarms  # the ECU stopped it: target 0, not off rate
+        assert post(rig, op.AckAlarm("blocked_lower")).ok
+        states = {a.name: a.state for a in rig.term.snapshot.alarms}
+        assert states["blocked_lower"] == "acked" and states["off_rate_upper"] == "active"
+        assert not post(rig, op.AckAlarm("no_such")).ok
+        # a stop clears the latched fault: the acknowledged alarm leaves; the other, gone,
+        # stays as cleared until acknowledged
+        post(rig, op.Stop(), settle_s=0.5)
+        states = {a.name: a.state for a in rig.term.snapshot.alarms}
+        assert "blocked_lower" not in states and states["off_rate_upper"] == "cleared"
+        assert post(rig, op.AckAlarm()).message == "1 acknowledged"
+        assert rig.term.snapshot.alarms == ()
+    finally:
+        rig.close()
+    assert any(e.startswith("alarm: lower meter blocked") for _, e in rig.events)
+
+
+def test_counters_count_what_was_applied_and_persist(tmp_path: Path) -> None:
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = make_rig(
+        drive(stand(2.0), straight(8.0, 60.0), stand(5.0)), autostart=True, session=session
+    )
+    try:
+        rig.run(40.0)
+        truth = rig.world.truth
+        s = rig.term.snapshot
+        f = s.count_field
+        assert f == replace(s.count_season, since=f.since)
+        # distance worked: what the ECU metered over (the meters start after the fans spin up
+        # and stop below min_work_speed_kmh)
+        assert 0.9 * truth.odometer_m < f.distance_m < truth.odometer_m + 0.5
+        assert f.area_ha == pytest.approx(f.distance_m * CFG.machine.width_m / 1e4, rel=1e-9)
+        metered = [rig.world.meters[i].revolutions * 0.3 for i in (0, 1)]
+        assert f.kg[0] == pytest.approx(metered[0], rel=0.03)
+        assert f.kg[1] == pytest.approx(metered[1], rel=0.03)
+        assert truth.applied_kg[0] + truth.in_flight_kg[0] == pytest.approx(metered[0], rel=0.01)
+        assert post(rig, op.ResetCounter("field")).ok
+        assert rig.term.snapshot.count_field.area_ha == 0.0
+        assert rig.term.snapshot.count_season.area_ha == pytest.approx(f.area_ha)
+        assert not post(rig, op.ResetCounter("year")).ok
+    finally:
+        rig.close()
+    doc = json.loads((tmp_path / "counters.json").read_text())
+    assert doc["field"]["area_ha"] == 0.0
+    assert doc["season"]["kg"][0] == pytest.approx(f.kg[0], rel=1e-6)
+
+
+def test_counters_file_damaged_is_kept_aside(tmp_path: Path) -> None:
+    from topdress.terminal.counters import WorkCounters
+
+    path = tmp_path / "counters.json"
+    c = WorkCounters(path)
+    c.add(0.5, (10.0, 5.0), 60.0, 1000.0)
+    c.save()
+    again = WorkCounters(path)
+    assert again.view("season").kg == (10.0, 5.0) and again.error is None
+    path.write_text('{"field": {"area_ha": 1.0}, "sea')
+    broken = WorkCounters(path)
+    assert broken.view("season").area_ha == 0.0
+    assert broken.error is not None and "damaged" in broken.error
+    assert (tmp_path / "counters.json.damaged").read_text().startswith('{"field"')
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def _config_file(tmp_path: Path) -> Path:
+    path = tmp_path / "terminal.toml"
+    path.write_text(DEFAULT_TOML, encoding="utf-8")
+    return path
+
+
+def test_catch_test_standing_gives_kg_per_rev_and_applies_it(tmp_path: Path) -> None:
+    true_kg_rev = 0.3
+    path = _config_file(tmp_path)
+    rig = make_rig(drive(stand(120.0)))
+    rig.term.desk.config_path = path
+    try:
+        rig.run(3.0)
+        res = post(rig, op.StartCatchTest("lower", revolutions=10.0, meter_rpm=20.0))
+        assert res.ok, res.message
+        assert rig.term.snapshot.operator == "calibrating"
+        assert not post(rig, op.Start()).ok  # no start during a calibration
+        rig.run(20.0)
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.step == "running" and 0.3 < cal.progress < 0.9
+        rig.run(40.0)
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.step == "weigh", cal.text
+        revs = rig.world.meters[1].revolutions
+        assert 10.0 <= revs < 10.3 and rig.world.meters[0].revolutions == 0.0
+        assert rig.world.tractor.odometer == 0.0
+        weighed = revs * true_kg_rev  # what the scale says
+        res = post(rig, op.FinishCatchTest(weighed))
+        assert res.ok
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.result["kg_per_rev"] == pytest.approx(true_kg_rev, rel=2e-3)
+        assert cal.key == "machine.kg_per_rev_lower"
+        fut = rig.term.post(op.CloseCalibration(apply=True))
+        rig.run(rig.world.t_s + 0.5)
+        assert fut.result().ok, fut.result().message
+        assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(true_kg_rev, abs=1e-4)
+        assert rig.term.cfg.machine.kg_per_rev_lower == pytest.approx(cal.result["kg_per_rev"])
+        assert rig.term.snapshot.operator == "stopped"
+    finally:
+        rig.close()
+    assert (tmp_path / "terminal.toml.bak").read_text() == DEFAULT_TOML
+    text = path.read_text()
+    assert "# working width, m (6 rows x 0.60 m)" in text  # comments kept
+    assert loads_config(text).machine.kg_per_rev_lower == pytest.approx(cal.result["kg_per_rev"])
+
+
+def test_catch_test_aborts_when_the_machine_moves_and_weighing_then_is_refused() -> None:
+    rig = make_rig(drive(stand(5.0), straight(3.0, 50.0)))
+    try:
+        rig.run(1.0)
+        assert post(rig, op.StartCatchTest("upper", revolutions=50.0, meter_rpm=20.0)).ok
+        rig.run(10.0)
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.step == "aborted" and "moving" in cal.text
+        assert rig.term.snapshot.meter_rpm[0] < 0.5
+        assert not post(rig, op.FinishCatchTest(3.0)).ok
+        assert post(rig, op.CloseCalibration()).message == "calibration closed, nothing changed"
+    finally:
+        rig.close()
+
+
+def test_wheel_calibration_over_a_measured_run() -> None:
+    rig = make_rig(drive(stand(2.0), straight(3.5, 40.0), stand(5.0)))
+    try:
+        rig.run(1.0)
+        assert post(rig, op.StartWheelCal(40.0)).ok
+        rig.run(60.0)
+        odo = rig.world.tractor.odometer  # the tape measure
+        assert odo == pytest.approx(40.0, abs=1.0)
+        assert post(rig, op.FinishWheelCal(distance_m=odo)).ok
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.step == "done"
+        revs = rig.world.wheel.revolutions
+        r = cal.result
+        assert r["revolutions"] == pytest.approx(revs, abs=0.01)
+        # eq. 3 against the measured distance with the configured radius, through the C core
+        want = abs(2 * math.pi * 0.0615 * r["revolutions"] - odo) / odo * 100.0
+        assert r["slip_pct"] == pytest.approx(want, rel=1e-3)
+        assert r["radius_m"] == pytest.approx(odo / (2 * math.pi * r["revolutions"]), rel=1e-6)
+        assert r["gnss_distance_m"] == pytest.approx(odo, abs=1.0)
+        assert 0.0 < r["slip_gnss_pct"] < 5.0
+    finally:
+        rig.close()
+
+
+def test_fan_check_standing() -> None:
+    rig = make_rig(drive(stand(60.0)))
+    try:
+        rig.run(1.0)
+        assert post(rig, op.StartFanCheck(seconds=8.0)).ok
+        rig.run(4.0)
+        assert rig.term.snapshot.running and rig.term.snapshot.meter_rpm == (0.0, 0.0)
+        rig.run(12.0)
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.step == "done", cal.text
+        assert cal.result["upper_ok"] == 1.0 and cal.result["lower_ok"] == 1.0
+        assert cal.result["upper_rpm"] == pytest.approx(3000.0, abs=100.0)
+        assert 0.5 < cal.result["upper_to_min_s"] < 4.0
+        rig.run(13.0)
+        assert not rig.term.snapshot.running  # stopped again at the end
+    finally:
+        rig.close()
+
+
+def _refuse_param(rig: VirtualRig, param_id: int) -> None:
+    """The ECU refuses `param_id` as out of range (an older firmware with a narrower range):
+    the frame never reaches the core, the answer is OutOfRange with the value in force."""
+    world = rig.world
+    deliver, step = world.deliver_can, world.step
+    acks: list[tuple[int, bytes]] = []
+
+    def deliver_can(frame: Any, now_us: int | None = None) -> int:
+        if frame.arbitration_id == protocol.DEFAULT_IDS.param_set and frame.data[0] == param_id:
+            raw = protocol.param(param_id).to_raw(world.ecu.params.get(param_id))
+            acks.append(
+                (
+                    protocol.DEFAULT_IDS.param_ack,
+                    bytes([param_id, 2, 0, 0]) + raw.to_bytes(4, "little"),
+                )
+            )
+            return 0
+        return deliver(frame, now_us)
+
+    def wrapped() -> StepOutput:
+        out = step()
+        extra = list(acks)
+        acks.clear()
+        return replace(out, can=out.can + extra)
+
+    world.deliver_can = deliver_can  # type: ignore[method-assign]
+    world.step = wrapped  # type: ignore[method-assign]
+
+
+def test_settings_to_the_ecu_acknowledged_saved_or_refused_and_put_back(tmp_path: Path) -> None:
+    path = _config_file(tmp_path)
+    rig = make_rig(drive(stand(60.0)))
+    rig.term.desk.config_path = path
+    try:
+        rig.run(2.0)
+        bad = post(rig, op.ApplySettings("speed", {"cv_threshold_pct": 80.0}))
+        assert not bad.ok and bad.errors == {"speed.cv_threshold_pct": "80.0 is outside 0.1..50"}
+        res = post(rig, op.ApplySettings("speed", {"cv_threshold_pct": 5.0}))
+        assert res.ok, res.message
+        assert rig.world.ecu.params.cv_threshold_pct == pytest.approx(5.0)
+        assert rig.term.cfg.speed.cv_threshold_pct == 5.0
+        assert "cv_threshold_pct = 5.0" in path.read_text()
+        # refused by the ECU: the field is named and what it took of the change goes back
+        _refuse_param(rig, 9)
+        res = post(
+            rig, op.ApplySettings("speed", {"cv_threshold_pct": 3.0, "switch_speed_kmh": 7.0})
+        )
+        assert not res.ok
+        assert list(res.errors) == ["speed.switch_speed_kmh"]
+        rig.run(rig.world.t_s + 0.5)
+        assert rig.world.ecu.params.cv_threshold_pct == pytest.approx(5.0)  # put back
+        assert rig.world.ecu.params.switch_speed_kmh == pytest.approx(6.0)
+        assert rig.term.cfg.speed.cv_threshold_pct == 5.0
+        assert "switch_speed_kmh = 7.0" not in path.read_text()
+        # the ECU takes parameters only with the meters stopped
+        post(rig, op.Start())
+        res = post(rig, op.ApplySettings("speed", {"cv_threshold_pct": 4.0}))
+        assert not res.ok and "stopped" in res.message
+    finally:
+        rig.close()
+
+
+def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Path) -> None:
+    rig = make_rig(drive(stand(60.0)))
+    try:
+        rig.run(3.0)
+        assert post(rig, op.ApplySettings("rate", {"model": "table"})).message.endswith(
+            "(not saved: no configuration file)"
+        )
+        assert rig.term.cfg.rate.model == "table"
+        res = post(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
+        assert not res.ok and list(res.errors) == ["can"]
+        assert rig.term.cfg.can.interface == "virtual"
+        rig.gnss.emit(rig.world.t_s, make_sentence("GPGGA,,,,,,0,,,,,,,,"))
+        gnss = post(rig, op.TestDevice("gnss")).data
+        assert len(gnss) == 20
+        assert any("km/h" in line.decoded for line in gnss)
+        can_lines = post(rig, op.TestDevice("can")).data
+        assert any(line.decoded.startswith("EcuStatus(") for line in can_lines)
+        crop = post(rig, op.TestDevice("crop")).data
+        assert crop and all(line.decoded.startswith("sensor ") for line in crop)
+        assert not post(rig, op.TestDevice("radar")).ok
+    finally:
+        rig.close()
