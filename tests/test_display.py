@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 
@@ -61,6 +62,16 @@ def working(t_s: float = 12.0, **kw: object) -> Snapshot:
     )
     base.update(kw)
     return Snapshot(**base)  # type: ignore[arg-type]
+
+
+@pytest.fixture(autouse=True)
+def keep_modules() -> Iterator[None]:
+    """NiceGUI's simulated browser, resetting itself, drops the modules that defined pages (and
+    their parents: `topdress`) from sys.modules; later tests would import a second copy of the
+    package beside the first. Put the first back."""
+    saved = {k: v for k, v in sys.modules.items() if k.split(".")[0] == "topdress"}
+    yield
+    sys.modules.update(saved)
 
 
 @pytest.fixture(autouse=True)
