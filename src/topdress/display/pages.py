@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
-from nicegui import ui
+from nicegui import Client, ui
 
 from topdress import i18n
 from topdress.display.actions import Actions
@@ -57,6 +57,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
     """The header (screens, language, time) and the screen's content, kept up to date."""
     state = PageState()
     actions = Actions(hub, client_is_remote())
+    client = ui.context.client
     screen: list[Screen] = []
     ui.page_title("topdress")
 
@@ -72,7 +73,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
                 button = ui.button(tr(key), on_click=lambda t=target: ui.navigate.to(t))
                 button.props("flat no-caps" + (" outline" if target == path else "")).classes(
                     "text-white"
-                ).mark(f"nav{target.replace('/', '_')}")
+                ).mark(f"nav_{key.removeprefix('screen.')}")
             ui.space()
             clock = ui.label("").classes("font-mono text-sm").mark("clock")
             ui.select(
@@ -89,6 +90,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
     def update() -> None:
         if state.lang_version != i18n.version():
             content.refresh()
+        expose_markers(client)
         serial, published, s = hub.latest()
         if serial == state.serial:
             return
@@ -102,6 +104,15 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
 
     update()  # the first view carries the values, not dashes until the timer fires
     ui.timer(UPDATE_PERIOD_S, update)
+
+
+def expose_markers(client: Client) -> None:
+    """Each element's marker (what the simulated browser finds it by) as its `data-testid` in
+    the real browser, for the end-to-end test and the benchmark: one name for both."""
+    for element in list(client.elements.values()):
+        markers = element._markers
+        if markers and "data-testid" not in element.props:
+            element.props["data-testid"] = markers[0]
 
 
 def register_pages(hub: DisplayHub) -> None:

@@ -33,6 +33,13 @@ def register(sub: Any) -> None:
         help="where the session log goes (default: ./topdress-sessions)",
     )
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
+    demo.add_argument(
+        "--passes",
+        type=_passes,
+        default=30,
+        metavar="N",
+        help="passes of 40 m driven, then the machine stands (for calibrations; default 30)",
+    )
     _display_args(demo)
     demo.add_argument(
         "--start",
@@ -81,6 +88,16 @@ def _display_args(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _passes(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number of passes: {text!r}") from None
+    if not 1 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"must be 1..1000 passes, not {text}")
+    return value
+
+
 def _seconds(text: str) -> float:
     try:
         value = float(text)
@@ -120,6 +137,7 @@ def _demo(args: argparse.Namespace) -> int:
             start=args.start,
             keyboard=_keyboard(),
             display=display,
+            passes=args.passes,
         )
 
 

@@ -180,12 +180,13 @@ def run_demo(
     start: bool = True,
     keyboard: TextIO | None = None,
     display: DisplayOptions | None = None,
+    passes: int = DEMO_PASSES,
 ) -> int:
     """The simulated machine in a thread, the terminal in front of it; returns the exit code.
 
     The demo's configuration is written to `out_dir/topdress-demo.toml`, where settings changed
     while it runs are saved."""
-    drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
+    drive = Drive.field_passes(passes, DEMO_PASS_M, DEMO_SPEED_KMH)
     world = World(SimConfig(), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
     sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
