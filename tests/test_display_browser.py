@@ -93,9 +93,9 @@ def test_the_operator_works_the_demo_in_a_browser(demo: DemoProcess, tmp_path: P
         first = number("v_selected"), number("meter_upper")
         until("speed and meters changing", lambda: (number("v_selected"), number("meter_upper"))
               != first)  # fmt: skip
-        until("the swath on the map", lambda: driver.find_elements(
-            By.CSS_SELECTOR, ".leaflet-overlay-pane path"))  # fmt: skip
-        time.sleep(2.0)  # a little more swath and chart for the picture
+        until("the swath on the map", lambda: len(driver.find_elements(
+            By.CSS_SELECTOR, ".leaflet-overlay-pane path")) > 10)  # fmt: skip
+        until("the GNSS speed in use", lambda: text("source") == "GNSS")
         shoot("main", "en")
         el("stop").click()
         until("STOPPED", lambda: text("op_state") == "STOPPED")

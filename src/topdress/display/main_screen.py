@@ -149,20 +149,19 @@ class MainScreen:
                             self.counters[(which, row)] = (
                                 ui.label("--").classes("font-mono").mark(f"count_{which}_{row}")
                             )
-        with ui.row().classes("w-full gap-3"):
+        with ui.row().classes("w-full gap-3 items-stretch"):
             with ui.card().classes("flex-1 min-w-80"):
                 ui.label(tr("chart.speed_title")).classes("text-sm font-bold")
-                self.speed_chart = ui.echart(speed_options([])).classes("w-full h-56")
+                self.speed_chart = ui.echart(speed_options([])).classes("w-full h-64")
             with ui.card().classes("flex-1 min-w-80"):
                 ui.label(tr("chart.meter_title")).classes("text-sm font-bold")
-                self.meter_chart = ui.echart(meter_options([])).classes("w-full h-56")
-        with ui.card().classes("w-full"):
-            with ui.row().classes("items-center gap-3"):
+                self.meter_chart = ui.echart(meter_options([])).classes("w-full h-64")
+            with ui.card().classes("flex-1 min-w-80 gap-1"):
                 ui.label(tr("map.title")).classes("text-sm font-bold")
                 ui.label(tr("map.legend", max=f"{max_kg_ha:.0f}", unit=kgha)).classes(
                     "text-xs text-gray-600"
                 )
-            self.map = LiveMap(self.hub, width_m, max_kg_ha)
+                self.map = LiveMap(self.hub, width_m, max_kg_ha)
 
     def _pair(self, caption: str, marker: str) -> tuple[ui.label, ui.label]:
         ui.label(caption).classes("text-xs text-gray-500")

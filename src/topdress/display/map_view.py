@@ -73,9 +73,9 @@ class LiveMap:
         self.max_kg_ha = max_kg_ha
         self.map = ui.leaflet(
             center=(0.0, 0.0),
-            zoom=18,
+            zoom=19,
             options={"attributionControl": False, "maxZoom": 23, "zoomSnap": 0.5},
-        ).classes("w-full h-80 bg-white")
+        ).classes("w-full h-64 bg-white")
         self.map.clear_layers()  # no tile server in the cab: Leaflet's default layer goes
         self._seen = 0
         self._last: TrackPoint | None = None
