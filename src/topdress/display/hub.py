@@ -113,7 +113,8 @@ class DisplayHub:
         with self._lock:
             total = self._track_serial
             new = min(total - count, len(self._track))
-            return total, list(self._track)[len(self._track) - new :] if new > 0 else []
+            # From the end: the control loop waits on this lock, so no copy of the whole track.
+            return total, [self._track[-i] for i in range(new, 0, -1)]
 
 
 def distance_m(lat0: float, lon0: float, lat1: float, lon1: float) -> float:
