@@ -180,18 +180,18 @@ def test_speed_chart_marks_the_source_spans() -> None:
     selected = opts["series"][2]
     assert [p[1] for p in selected["data"][:2]] == [8.0, 8.0]
     bands = selected["markArea"]["data"]
-    # charted at 5 Hz, ending with the latest snapshot
+    # charted at 2.5 Hz, ending with the latest snapshot: t 0.1, 0.5, ... 4.9
     assert [(b[0]["name"], b[0]["xAxis"], b[1]["xAxis"]) for b in bands] == [
         ("wheel", 0.1, 2.9),
-        ("GNSS", 3.1, 4.9),
+        ("GNSS", 3.3, 4.9),
     ]
     assert opts["xAxis"]["min"] == 0.1 and opts["xAxis"]["max"] == 4.9
 
 
 def test_charts_leave_gaps_while_the_ecu_is_not_heard() -> None:
-    hist = [working(t_s=1.0 + i / 10, ecu_live=i not in (2, 3)) for i in range(5)]
+    hist = [working(t_s=1.0 + i / 10, ecu_live=i not in range(3, 7)) for i in range(9)]
     sel = speed_options(hist)["series"][2]["data"]
-    assert [p[1] for p in sel] == [8.0, None, 8.0]  # t 1.0, 1.2, 1.4
+    assert [p[1] for p in sel] == [8.0, None, 8.0]  # t 1.0, 1.4, 1.8
     meter = meter_options(hist)["series"][2]["data"]
     assert [p[1] for p in meter] == [22.69, None, 22.69]
 
@@ -204,8 +204,8 @@ def test_chart_window_is_the_last_minute() -> None:
     assert len(hist) == 600
     assert hist[0].t_s == pytest.approx(10.0) and hist[-1].t_s == pytest.approx(69.9)
     opts = speed_options(hist)
-    assert opts["xAxis"]["min"] == pytest.approx(10.1)  # the first charted of the last minute
-    assert len(opts["series"][0]["data"]) == 300
+    assert opts["xAxis"]["min"] == pytest.approx(10.3)  # the first charted of the last minute
+    assert len(opts["series"][0]["data"]) == 150
 
 
 def test_track_points_every_metre_with_heading() -> None:

@@ -50,8 +50,11 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def chromium(profile_dir: Path, width: int = 1400, height: int = 1200) -> WebDriver:
-    """A fresh headless Chromium (its own profile directory)."""
+def chromium(
+    profile_dir: Path, width: int = 1400, height: int = 1200, niceness: int = 0
+) -> WebDriver:
+    """A fresh headless Chromium (its own profile directory); `niceness` > 0 runs it (and its
+    driver) at a lower CPU priority than the terminal, as a cab PC's kiosk browser should."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -61,7 +64,10 @@ def chromium(profile_dir: Path, width: int = 1400, height: int = 1200) -> WebDri
         opts.add_argument(flag)
     opts.add_argument(f"--user-data-dir={profile_dir}")
     opts.add_argument(f"--window-size={width},{height}")
-    return webdriver.Chrome(options=opts, service=Service(CHROMEDRIVER))
+    service = Service(
+        CHROMEDRIVER, popen_kw={"preexec_fn": (lambda: os.nice(niceness)) if niceness else None}
+    )
+    return webdriver.Chrome(options=opts, service=service)
 
 
 class DemoProcess:

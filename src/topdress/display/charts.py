@@ -7,9 +7,9 @@ from typing import Any
 from topdress.i18n import tr
 from topdress.terminal.app import Snapshot
 
-#: Every n-th snapshot of the history is charted (5 Hz of the loop's 10): the curves look the
-#: same and the page update is half as large.
-CHART_EVERY = 2
+#: Every n-th snapshot of the history is charted (2.5 Hz of the loop's 10): over a minute the
+#: curves look the same, and the page update (and the browser's redraw) is a quarter as large.
+CHART_EVERY = 4
 
 SOURCE_COLOURS = {"gnss": "#1565c0", "wheel": "#ef6c00", "none": "#9e9e9e", "fused": "#6a1b9a"}
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from nicegui import ui
+
 from topdress.i18n import tr
 from topdress.terminal.app import Snapshot
 from topdress.terminal.console import fault_names
@@ -31,3 +33,10 @@ def link_text(kind: str, state: str) -> str:
     if "/" in state:
         return tr("link.partial", fresh=state)
     return tr(f"link.{state.replace(' ', '_')}")
+
+
+def restyle(element: ui.element, classes: str) -> None:
+    """Replace the element's classes when they differ: every change is a message to the browser,
+    and the page redraws 5 times a second."""
+    if list(element.classes) != classes.split():
+        element.classes(replace=classes)

@@ -178,7 +178,9 @@ class MainScreen:
         self.v_gnss.set_text(fmt.num(s.v_gnss_kmh, ".1f"))
         source = s.source if live else "none"
         self.source.set_text(tr(f"source.{source}") if source != "none" else "--")
-        self.source.props(f"color={'primary' if source == 'gnss' else 'orange'}")
+        colour = "primary" if source == "gnss" else "orange"
+        if self.source.props.get("color") != colour:
+            self.source.props["color"] = colour
         self.why.set_text(s.speed_why if live else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
@@ -198,8 +200,9 @@ class MainScreen:
             text = f"{tr(f'link_name.{kind}')}: {fmt.link_text(kind, state)}"
             self.links[kind].set_text(text + (where if kind == "ecu" else ""))
             ok = state == "ok"
-            self.links[kind].classes(
-                replace="text-base " + ("text-green-700" if ok else "text-red-700 font-bold")
+            fmt.restyle(
+                self.links[kind],
+                "text-base " + ("text-green-700" if ok else "text-red-700 font-bold"),
             )
         self.faults.set_text(fmt.faults_text(s))
         self.event.set_text(s.last_event or "")
@@ -215,7 +218,7 @@ class MainScreen:
     def _update_operator(self, s: Snapshot) -> None:
         self.state.set_text(tr(f"op.state.{s.operator}"))
         colour = {"running": "text-green-700", "paused": "text-amber-700"}.get(s.operator, "")
-        self.state.classes(replace=f"text-3xl font-bold {colour}")
+        fmt.restyle(self.state, f"text-3xl font-bold {colour}")
         m = s.manual
         if m.mode == "fixed":
             text = tr(
@@ -226,8 +229,8 @@ class MainScreen:
         else:
             text = ""
         self.manual.set_text(text)
-        self.manual.classes(
-            replace="text-lg font-bold text-white bg-orange-700 px-2 rounded" if text else ""
+        fmt.restyle(
+            self.manual, "text-lg font-bold text-white bg-orange-700 px-2 rounded" if text else ""
         )
         for which, c in (("field", s.count_field), ("season", s.count_season)):
             self._update_counter(which, c)
