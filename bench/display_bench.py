@@ -14,7 +14,8 @@ headless Chromium (Debian's, through Selenium) showing its main screen the whole
 - `display_update_p95_ms`: from the control loop publishing a snapshot until the browser's
   page shows it (a MutationObserver in the page timestamps each new snapshot's publication
   mark; both clocks are this machine's wall clock);
-- `display_rss_mb`: peak resident memory of the whole terminal process (VmHWM).
+- `display_rss_mb`: peak resident memory (VmHWM) of the whole terminal: its process and the
+  display process it starts.
 """
 
 from __future__ import annotations
@@ -76,14 +77,17 @@ def child(config: Path, duration_s: float, port: int) -> None:
         sched[:] = [due + TICK_S if now - due < TICK_S else now + TICK_S]
 
     term.run(duration_s, on_tick=on_tick)
+    display_pid = shown.link.pid if shown.link is not None else None
+    # The whole terminal: its own process and the display process it started.
+    hwm = (_status_kb("VmHWM") + (_status_kb("VmHWM", display_pid) if display_pid else 0)) / 1024
     shown.stop()
     bus.shutdown()
-    hwm = _status_kb("VmHWM") / 1024.0
     print(json.dumps({"late_s": late, "rss_mb": hwm, "counters": term.snapshot.counters}))
 
 
-def _status_kb(field: str) -> int:
-    for line in Path("/proc/self/status").read_text().splitlines():
+def _status_kb(field: str, pid: int | None = None) -> int:
+    status = Path(f"/proc/{pid if pid is not None else 'self'}/status")
+    for line in status.read_text().splitlines():
         if line.startswith(field + ":"):
             return int(line.split()[1])
     raise RuntimeError(f"no {field} in /proc/self/status")

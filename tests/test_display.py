@@ -525,3 +525,18 @@ async def test_device_test_shows_the_last_lines(user: User) -> None:
             break
         await asyncio.sleep(0.05)
     assert table.rows == [{"t": "1.5", "raw": "$GNRMC,...*7A", "decoded": "RMC 8.00 km/h"}]  # type: ignore[attr-defined]
+
+
+def test_a_taken_port_is_said_before_anything_starts() -> None:
+    import socket
+
+    from topdress.display.process import DisplayLink
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        link = DisplayLink(object(), DisplayOptions("127.0.0.1", port), print)  # type: ignore[arg-type]
+        with pytest.raises(DisplayError, match=f"127.0.0.1:{port} is in use"):
+            link.start()
+        assert link.pid is None  # no display process was started

@@ -123,11 +123,3 @@ class DemoProcess:
                 self.proc.wait()
         self._log.close()
         return int(self.proc.returncode)
-
-
-def rss_mb(pid: int) -> float:
-    """Resident memory of a process (Linux /proc), MB."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024.0
-    raise RuntimeError(f"no VmRSS for process {pid}")

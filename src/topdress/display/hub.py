@@ -16,6 +16,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
+from topdress import i18n
 from topdress.config import TerminalConfig, check_pin
 from topdress.terminal.app import TICK_S, Snapshot
 from topdress.terminal.operator import CommandResult
@@ -44,16 +45,19 @@ class DisplayHub:
     """Latest snapshot, the last minute of them, and the track; safe across threads.
 
     `config` returns the configuration in force (the terminal's; it changes when settings are
-    applied), `post` the terminal's command path (None: a display that only watches)."""
+    applied), `post` the terminal's command path (None: a display that only watches),
+    `on_language` tells the terminal the language chosen (its console follows)."""
 
     def __init__(
         self,
         config: Callable[[], TerminalConfig],
         post: Post | None = None,
         history_s: float = HISTORY_S,
+        on_language: Callable[[str], None] | None = None,
     ) -> None:
         self.config = config
         self.post = post
+        self._on_language = on_language
         self._lock = threading.Lock()
         self._latest = Snapshot()
         self._published_wall_s = 0.0
@@ -87,6 +91,12 @@ class DisplayHub:
         return TrackPoint(s.lat, s.lon, heading, rate, metering)
 
     # ---- the page's side -------------------------------------------------------------------
+    def set_language(self, code: str) -> None:
+        """Switch every page (and, through the terminal, the console) to `code`."""
+        lang = i18n.set_language(code)
+        if self._on_language is not None:
+            self._on_language(lang)
+
     @property
     def pin_required(self) -> bool:
         """Operating (start/stop, manual rate, settings) asks for the PIN when one is set."""

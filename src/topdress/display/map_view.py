@@ -106,6 +106,10 @@ class LiveMap:
         elif points:
             self.map.run_layer_method(self._machine.id, "setLatLngs", arrow)
             self.map.run_layer_method(self._machine.id, "bringToFront")
-        if not self._centred or points:
+        if not self._centred:
             self.map.set_center((p.lat, p.lon))
             self._centred = True
+        elif points:
+            # Pan only when the machine nears the edge: redrawing the whole swath every second
+            # would cost the browser (and a 2-core cab PC) for nothing.
+            self.map.run_map_method("panInside", [p.lat, p.lon], {"padding": [40, 40]})

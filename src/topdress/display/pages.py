@@ -79,7 +79,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
             ui.select(
                 {lang: i18n.LANGUAGE_NAMES[lang] for lang in i18n.LANGUAGES},
                 value=i18n.language(),
-                on_change=lambda e: i18n.set_language(str(e.value)),
+                on_change=lambda e: hub.set_language(str(e.value)),
             ).props("dense dark options-dark standout").classes("w-28").mark("language")
         screen[:] = [build(actions)]
         clock_label[:] = [clock]

@@ -6,8 +6,8 @@ from collections.abc import Callable
 
 from topdress import i18n
 from topdress.config import TerminalConfig
-from topdress.display.hub import DisplayHub
-from topdress.display.server import DisplayError, DisplayOptions, DisplayServer, check_security
+from topdress.display.process import DisplayLink
+from topdress.display.server import DisplayError, DisplayOptions, check_security
 from topdress.terminal.app import Snapshot, Terminal
 
 
@@ -25,32 +25,31 @@ def display_options(
 
 
 class AttachedDisplay:
-    """The hub the control loop publishes into, and the server reading it."""
+    """What the control loop publishes into; None inside when the display could not start."""
 
-    def __init__(self, hub: DisplayHub, server: DisplayServer | None) -> None:
-        self.hub = hub
-        self.server = server
+    def __init__(self, link: DisplayLink | None) -> None:
+        self.link = link
 
     def publish(self, snapshot: Snapshot) -> None:
-        self.hub.publish(snapshot)
+        if self.link is not None:
+            self.link.publish(snapshot)
 
     def stop(self) -> None:
-        if self.server is not None:
-            self.server.stop()
+        if self.link is not None:
+            self.link.stop()
 
 
 def serve_display(
     term: Terminal, opts: DisplayOptions, message: Callable[[str], None]
 ) -> AttachedDisplay:
-    """Serve the display for `term`; a display that cannot start is said and left out (the
-    terminal works without it)."""
+    """Serve the display for `term` from its own process; a display that cannot start is
+    said and left out (the terminal works without it)."""
     i18n.set_language(term.cfg.display.language)
-    hub = DisplayHub(lambda: term.cfg, getattr(term, "post", None))
-    server = DisplayServer(hub, opts)
+    link = DisplayLink(term, opts, message)
     try:
-        url = server.start()
+        url = link.start()
     except DisplayError as exc:
         message(f"display not served: {exc}")
-        return AttachedDisplay(hub, None)
+        return AttachedDisplay(None)
     message(f"display: {url}")
-    return AttachedDisplay(hub, server)
+    return AttachedDisplay(link)

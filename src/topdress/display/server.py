@@ -1,32 +1,17 @@
-"""Serving the display: NiceGUI (uvicorn) in its own thread, beside the terminal's loop.
-
-The terminal keeps the main thread (Ctrl-C and SIGTERM stop it as before; uvicorn installs no
-signal handler off the main thread) and the display runs its own asyncio loop in a daemon
-thread. Nothing the display does can stop metering: the control loop only hands it a snapshot
-reference; an exception in the display thread ends the display, not the terminal.
-"""
+"""Serving the display: the address and PIN rules, and NiceGUI's server (in the display
+process, see topdress.display.process)."""
 
 from __future__ import annotations
 
 import ipaddress
 import logging
 import socket
-import sys
-import threading
-import time
 from dataclasses import dataclass
 
 from topdress.display.hub import DisplayHub
 from topdress.errors import TopdressError
 
 log = logging.getLogger(__name__)
-
-START_TIMEOUT_S = 20.0  # importing NiceGUI and binding the port, on a busy 2-core machine
-#: How long a thread holding the GIL runs before another may take it (CPython's default is
-#: 5 ms). The display's Python work (building a page update) would otherwise hold up the
-#: control loop and the reader threads by up to that much at each hand-over: the benchmark's
-#: NMEA-to-command p99 went from 15 ms to 6 ms with 1 ms.
-GIL_SWITCH_S = 0.001
 
 
 class DisplayError(TopdressError):
@@ -75,67 +60,21 @@ def port_free(host: str, port: int) -> bool:
     return True
 
 
-class DisplayServer:
-    """The NiceGUI app in a daemon thread; `start()` returns once it listens."""
+def run_server(hub: DisplayHub, opts: DisplayOptions) -> None:
+    """Serve the pages on this thread until the server is stopped (the display process's
+    main thread: uvicorn handles its signals there)."""
+    from nicegui import ui
 
-    def __init__(self, hub: DisplayHub, opts: DisplayOptions) -> None:
-        self.hub = hub
-        self.opts = opts
-        self.error: str | None = None
-        self._thread: threading.Thread | None = None
+    from topdress.display.pages import register_pages  # NiceGUI only when serving
 
-    def start(self) -> str:
-        """Serve; returns the address. DisplayError when it cannot (no PIN, port taken)."""
-        check_security(self.opts)
-        if not port_free(self.opts.host, self.opts.port):
-            raise DisplayError(
-                f"display: {self.opts.host}:{self.opts.port} is in use "
-                "(another topdress? choose another with --port or display.port)"
-            )
-        from topdress.display.pages import register_pages  # NiceGUI only when serving
-
-        register_pages(self.hub)
-        sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_S))
-        self._thread = threading.Thread(target=self._serve, name="display", daemon=True)
-        self._thread.start()
-        deadline = time.monotonic() + START_TIMEOUT_S
-        while not self._listening():
-            if not self._thread.is_alive() or time.monotonic() > deadline:
-                raise DisplayError(f"display did not start: {self.error or 'timed out'}")
-            time.sleep(0.05)
-        return self.opts.url
-
-    def _listening(self) -> bool:
-        from nicegui.server import Server
-
-        server = getattr(Server, "instance", None)
-        return bool(server is not None and server.started)
-
-    def _serve(self) -> None:
-        from nicegui import ui
-
-        try:
-            ui.run(
-                host=self.opts.host,
-                port=self.opts.port,
-                title="topdress",
-                reload=False,
-                show=False,
-                show_welcome_message=False,
-                uvicorn_logging_level="warning",
-                favicon="🌽",
-            )
-        except BaseException as exc:  # SystemExit from uvicorn included: the terminal goes on
-            self.error = f"{type(exc).__name__}: {exc}"
-            log.error("display stopped: %s", self.error)
-
-    def stop(self) -> None:
-        """Ask uvicorn to finish; waits briefly (the thread is a daemon anyway)."""
-        if self._thread is None:
-            return
-        from nicegui.server import Server
-
-        server = getattr(Server, "instance", None)
-        if server is not None:
-            server.should_exit = True
-        self._thread.join(timeout=3.0)
+    register_pages(hub)
+    ui.run(
+        host=opts.host,
+        port=opts.port,
+        title="topdress",
+        reload=False,
+        show=False,
+        show_welcome_message=False,
+        uvicorn_logging_level="warning",
+        favicon="🌽",
+    )
