@@ -115,6 +115,15 @@ def test_manual_fixed_and_percent_rates_are_commanded_and_shown() -> None:
         for i, kg_rev in enumerate((m.kg_per_rev_upper, m.kg_per_rev_lower)):
             eq4 = meter_target_rpm(m.width_m, s.rate_kg_ha[i], s.v_kmh, kg_rev)
             assert s.target_rpm[i] == pytest.approx(eq4, rel=0.03)
+        # the rate actually applied, from the measured metering speed (eq. 4 inverted)
+        assert s.applied_kg_ha[0] == pytest.approx(200.0, rel=0.05)
+        assert s.applied_kg_ha[1] == pytest.approx(100.0, rel=0.05)
+        assert len(s.ndvi_per_sensor) == 4 and all(0.2 < x < 1.0 for x in s.ndvi_per_sensor if x)
+        assert s.ndvi_sensors == pytest.approx(
+            sum(x for x in s.ndvi_per_sensor if x) / sum(1 for x in s.ndvi_per_sensor if x)
+        )
+        assert (s.cv_threshold_pct, s.switch_speed_kmh) == (4.2, 6.0)
+        assert s.speed_why.startswith("gnss: CV ") and s.speed_why.endswith(" > 6 km/h")
         assert post(rig, op.SetManual("percent", percent=20.0)).ok
         rig.run(17.0)
         s = rig.term.snapshot
@@ -360,6 +369,8 @@ def test_settings_to_the_ecu_acknowledged_saved_or_refused_and_put_back(tmp_path
         assert res.ok, res.message
         assert rig.world.ecu.params.cv_threshold_pct == pytest.approx(5.0)
         assert rig.term.cfg.speed.cv_threshold_pct == 5.0
+        assert rig.term.snapshot.settings_state == {"speed.cv_threshold_pct": "ok"}
+        assert rig.term.snapshot.cv_threshold_pct == 5.0
         assert "cv_threshold_pct = 5.0" in path.read_text()
         # refused by the ECU: the field is named and what it took of the change goes back
         _refuse_param(rig, 9)
@@ -368,6 +379,9 @@ def test_settings_to_the_ecu_acknowledged_saved_or_refused_and_put_back(tmp_path
         )
         assert not res.ok
         assert list(res.errors) == ["speed.switch_speed_kmh"]
+        state = rig.term.snapshot.settings_state
+        assert state["speed.cv_threshold_pct"] == "put back"
+        assert state["speed.switch_speed_kmh"].startswith("refused: SwitchSpeed = 7: ")
         rig.run(rig.world.t_s + 0.5)
         assert rig.world.ecu.params.cv_threshold_pct == pytest.approx(5.0)  # put back
         assert rig.world.ecu.params.switch_speed_kmh == pytest.approx(6.0)
@@ -389,6 +403,16 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
             "(not saved: no configuration file)"
         )
         assert rig.term.cfg.rate.model == "table"
+        # a crop key that is not the port's: taken at once, the same source kept
+        source = rig.term.crop
+        assert post(rig, op.ApplySettings("crop", {"sensors": 2})).ok
+        bad_before = rig.term.snapshot.counters["crop_bad"]
+        rig.run(rig.world.t_s + 2.0)
+        assert rig.term.crop is source
+        assert len(rig.term.snapshot.ndvi_per_sensor) == 2
+        assert rig.term.snapshot.counters["crop_bad"] > bad_before  # sensors 3 and 4 refused
+        assert post(rig, op.ApplySettings("gnss", {"stale_s": 5.0})).ok
+        assert rig.term.tracker.stale_s == 5.0 and rig.term.gnss is rig.gnss
         res = post(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
         assert not res.ok and list(res.errors) == ["can"]
         assert rig.term.cfg.can.interface == "virtual"
@@ -399,7 +423,41 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         can_lines = post(rig, op.TestDevice("can")).data
         assert any(line.decoded.startswith("EcuStatus(") for line in can_lines)
         crop = post(rig, op.TestDevice("crop")).data
-        assert crop and all(line.decoded.startswith("sensor ") for line in crop)
+        decoded = {line.decoded.split(" NDVI")[0] for line in crop}
+        # with crop.sensors = 2 now: sensors 1 and 2 read, 3 and 4 refused, each line said why
+        assert {"sensor 1", "sensor 2", "not usable: sensor_id: '3' is not 1..2"} <= decoded
         assert not post(rig, op.TestDevice("radar")).ok
     finally:
         rig.close()
+
+
+def test_gnss_port_changed_while_running_is_reopened_on_the_new_device() -> None:
+    import time as wall
+
+    from topdress.sim import nmea
+    from topdress.sim.live import PtyPort
+
+    port = PtyPort()
+    rig = make_rig(drive(stand(30.0)))
+    try:
+        rig.run(2.0)
+        old = rig.term.gnss
+        res = post(rig, op.ApplySettings("gnss", {"port": port.path, "baud": 115200}))
+        assert res.ok, res.message
+        assert rig.term.gnss is not old and rig.term.gnss.name == f"serial:{port.path}"
+        assert rig.term.cfg.gnss.port == port.path
+        line = nmea.rmc("GN", 3600.0, True, 43.9, 125.3, 5.0 / 3.6, 90.0, "210526")
+        deadline = wall.monotonic() + 5.0
+        seen: list[Any] = []
+        while not seen and wall.monotonic() < deadline:
+            port.write(line.encode())
+            wall.sleep(0.05)
+            rig.run(rig.world.t_s + 0.1)
+            seen = [
+                x for x in post(rig, op.TestDevice("gnss"), 0.01).data if "5.00 km/h" in x.decoded
+            ]
+        assert seen and seen[-1].raw == line.strip()
+        assert rig.term.link.command.gnss_kmh == pytest.approx(5.0, abs=0.01)
+    finally:
+        rig.close()
+        port.close()

@@ -50,7 +50,8 @@ def test_vanished_gnss_port_forwards_not_available_at_once() -> None:
         term.tick(time.monotonic())
         assert term.link.command.gnss_kmh is None
         assert term.snapshot.gnss_link == "lost"
-        assert events[-1].startswith(f"GNSS lost (serial:{port.path}: ")  # names the port
+        assert events[-2].startswith(f"GNSS lost (serial:{port.path}: ")  # names the port
+        assert events[-1] == "alarm: GNSS lost: metering on the ground wheel"  # to acknowledge
         assert gnss.counters["disconnects"] + gnss.counters["open_failures"] >= 1
     finally:
         term.close()

@@ -63,7 +63,11 @@ def test_terminal_process_drives_the_machine_over_udp_multicast(tmp_path: Path) 
     machine.start()
     try:
         child = subprocess.run(
-            [sys.executable, "-m", "topdress.cli", "run", "--config", str(cfg), "--duration", "8"],
+            # headless: --start, the meters start without an operator
+            [
+                *(sys.executable, "-m", "topdress.cli", "run", "--config", str(cfg)),
+                *("--start", "--duration", "8"),
+            ],
             capture_output=True,
             text=True,
             timeout=60,

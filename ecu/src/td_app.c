@@ -252,12 +252,6 @@ int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
         return TD_E_ARG;
     }
     if (frame->extended != 0u) {
-        if (frame->id == app->p.command_id) {
-            return apply_command(app, frame, now_us);
-        }
-        if (frame->id == TD_ID_PC_PARAM_SET) {
-            return apply_param_set(app, frame);
-        }
         if (frame->id == TD_ID_PC_CAL_COMMAND) {
             const int rc = td_cal_rx(&app->cal, frame, app->st.running, now_us);
             if (rc == TD_OK) {
@@ -268,6 +262,12 @@ int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
                 app->cnt.rx_out_of_range++;
             }
             return rc;
+        }
+        if (frame->id == app->p.command_id) {
+            return apply_command(app, frame, now_us);
+        }
+        if (frame->id == TD_ID_PC_PARAM_SET) {
+            return apply_param_set(app, frame);
         }
     }
     app->cnt.rx_unknown_id++;

@@ -5,6 +5,7 @@
 #include "td_params.h"
 
 #include <stddef.h>
+#include "td_cal.h"
 #include "td_proto.h"
 
 typedef enum { F32, U8, U16 } td_ptype_t;
@@ -57,7 +58,7 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
 /* A configurable identifier must not be that of another frame of the protocol. */
 static bool id_taken(uint32_t id) {
     return id == TD_ID_ECU_DIAG || id == TD_ID_ECU_SPEEDS || id == TD_ID_ECU_TARGETS || id == TD_ID_PC_PARAM_SET ||
-           id == TD_ID_ECU_PARAM_ACK;
+           id == TD_ID_ECU_PARAM_ACK || id == TD_ID_PC_CAL_COMMAND || id == TD_ID_ECU_CAL_STATUS;
 }
 
 void td_params_default(td_params_t *p) {

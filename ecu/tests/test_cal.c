@@ -203,6 +203,17 @@ static void test_bad_values_and_bad_frames(void **state) {
     assert_float_equal(r.meter_rpm[TD_UPPER], 0.0, 1e-9); /* nothing started */
 }
 
+static void test_calibration_ids_cannot_be_configured_for_other_frames(void **state) {
+    (void)state;
+    td_params_t p;
+    td_params_default(&p);
+    p.command_id = TD_ID_PC_CAL_COMMAND; /* a catch test would be taken for a command */
+    assert_int_equal(td_params_validate(&p), TD_E_INCONSISTENT);
+    td_params_default(&p);
+    p.status_id = TD_ID_ECU_CAL_STATUS;
+    assert_int_equal(td_params_validate(&p), TD_E_INCONSISTENT);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_catch_test_runs_the_revolutions_standing_and_counts_the_coast),
@@ -212,6 +223,7 @@ int main(void) {
         cmocka_unit_test(test_blocked_meter_aborts_after_blocked_time),
         cmocka_unit_test(test_reset_aborts_a_running_test),
         cmocka_unit_test(test_bad_values_and_bad_frames),
+        cmocka_unit_test(test_calibration_ids_cannot_be_configured_for_other_frames),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

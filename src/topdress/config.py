@@ -194,6 +194,9 @@ class CanConfig:
             "cal_status": 0x18656465,
         }
     )
+    # The adapter's own options, passed to python-can as keyword arguments (slcan's
+    # tty_baudrate, pcan's fd, ...): [can.options] in the file.
+    options: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -355,6 +358,8 @@ def _value(f: dataclasses.Field[Any], raw: Any, key: str) -> Any:
         return _columns(raw, key)
     if f.name == "ids":
         return _can_ids(raw, key)
+    if f.name == "options":
+        return _can_options(raw, key)
     default = f.default
     if isinstance(default, bool):
         if not isinstance(raw, bool):
@@ -404,6 +409,20 @@ def _can_ids(raw: Any, key: str) -> dict[str, int]:
     if len(set(ids.values())) != len(ids):
         raise ConfigError(key, "two frames share one identifier")
     return ids
+
+
+def _can_options(raw: Any, key: str) -> dict[str, Any]:
+    table = _table(raw, key)
+    for name, value in table.items():
+        if not name.isidentifier():
+            raise ConfigError(f"{key}.{name}", "must be a python-can keyword argument name")
+        if name in ("interface", "channel", "bitrate"):
+            raise ConfigError(f"{key}.{name}", f"is set by can.{name}")
+        if not isinstance(value, bool | int | float | str):
+            raise ConfigError(
+                f"{key}.{name}", f"must be a string, number or boolean, not {value!r}"
+            )
+    return dict(table)
 
 
 def _ecu(table: dict[str, Any]) -> EcuConfig:
@@ -634,6 +653,9 @@ param_set = 0x0A606465
 param_ack = 0x18616465
 cal_command = 0x0A646465   # calibration (catch test) command and its status
 cal_status = 0x18656465
+
+[can.options]              # the adapter's own python-can options, e.g. for slcan:
+# tty_baudrate = 115200
 
 [log]
 dir = "topdress-sessions"  # one SQLite file per session

@@ -4,6 +4,7 @@ from topdress.ecu.core import Ecu, EcuCounters, EcuState, Outputs
 from topdress.ecu.helpers import (
     Pid,
     cv_pct,
+    meter_rate_kg_ha,
     meter_target_rpm,
     slip_measured_pct,
     slip_model_pct,
@@ -21,6 +22,7 @@ __all__ = [
     "Outputs",
     "Pid",
     "cv_pct",
+    "meter_rate_kg_ha",
     "meter_target_rpm",
     "slip_measured_pct",
     "slip_model_pct",

@@ -108,6 +108,8 @@ float td_slip_model_speed_kmh(float slip_pct);
 /* td_meter.h */
 float td_meter_target_rpm(float width_m, float rate_kg_ha, float v_kmh, float kg_per_rev,
                           float min_speed_kmh);
+float td_meter_rate_kg_ha(float width_m, float meter_rpm, float v_kmh, float kg_per_rev,
+                          float min_speed_kmh);
 
 /* td_pid.h */
 typedef struct {

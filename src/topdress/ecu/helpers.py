@@ -62,6 +62,24 @@ def meter_target_rpm(
     return r
 
 
+def meter_rate_kg_ha(
+    width_m: float,
+    meter_rpm: float,
+    v_kmh: float,
+    kg_per_rev: float,
+    min_speed_kmh: float = 0.0,
+) -> float:
+    """Eq. 4 inverted: q = 600*p*R / (w*v), kg/ha; zero at a standstill, below min_speed_kmh
+    or with the meter at rest."""
+    q = float(lib.td_meter_rate_kg_ha(width_m, meter_rpm, v_kmh, kg_per_rev, min_speed_kmh))
+    if q < 0:
+        raise EcuError(
+            lib.TD_E_ARG,
+            f"meter_rate_kg_ha: width {width_m} and kg_per_rev {kg_per_rev} must be > 0",
+        )
+    return q
+
+
 def speed_rule(
     mode: SpeedMode,
     compare: Compare,

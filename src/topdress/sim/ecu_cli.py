@@ -11,17 +11,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 from typing import Any
 
 from topdress.config import loads_config
 from topdress.errors import ConfigError, DeviceError
+from topdress.protocol import CAL_REASONS
 from topdress.sim.live import LiveMachine
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.canlink import open_bus
 
-_POLL_S = 0.5
+# Polled often enough that the meter has hardly turned when the start of a test is seen.
+_POLL_S = 0.02
+_SETTLE_S = 0.5  # the shaft coasts a little after the stop
 
 
 def register(sub: Any) -> None:
@@ -38,6 +42,14 @@ def register(sub: Any) -> None:
         help="python-can interface and channel, e.g. socketcan:vcan0, udp_multicast:239.0.0.1",
     )
     ecu.add_argument("--bitrate", type=int, default=250000, help="for hardware interfaces")
+    ecu.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="the adapter's own python-can option, as [can.options] (e.g. port=43200 for "
+        "udp_multicast, tty_baudrate=115200 for slcan); repeatable",
+    )
     ecu.add_argument(
         "--drive",
         choices=("field", "stand"),
@@ -60,13 +72,27 @@ def parse_can(text: str) -> tuple[str, str]:
     return interface, channel
 
 
-def terminal_snippet(gnss: str, crop: str, interface: str, channel: str) -> str:
+def parse_options(items: list[str]) -> str:
+    """KEY=VALUE items as the lines of a [can.options] table (a value that is a TOML number or
+    boolean stays one, anything else is a string)."""
+    lines = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError("--option", f"must be KEY=VALUE, not {item!r}")
+        literal = value if re.fullmatch(r"-?\d+(\.\d+)?|true|false", value) else json.dumps(value)
+        lines.append(f"{key} = {literal}\n")
+    return "".join(lines)
+
+
+def terminal_snippet(gnss: str, crop: str, interface: str, channel: str, options: str) -> str:
     """The configuration lines that point a terminal at this simulated machine."""
     q = json.dumps
     return (
         f"[gnss]\nport = {q(gnss)}\nbaud = 115200\n"
         f"[crop]\nport = {q(crop)}\nbaud = 115200\n"
         f"[can]\ninterface = {q(interface)}\nchannel = {q(channel)}\n"
+        + (f"[can.options]\n{options}" if options else "")
     )
 
 
@@ -74,6 +100,9 @@ def _run(args: argparse.Namespace) -> int:
     interface, channel = parse_can(args.can)
     toml = f"[can]\ninterface = {json.dumps(interface)}\nchannel = {json.dumps(channel)}\n"
     toml += f"bitrate = {args.bitrate}\n"
+    options = parse_options(args.option)
+    if options:
+        toml += f"[can.options]\n{options}"
     can_cfg = loads_config(toml).can
     if args.drive == "stand":
         drive = Drive([Segment("stop", duration_s=1e9)])
@@ -90,7 +119,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"topdress sim ecu: the simulated machine on CAN {interface}:{channel}")
         print(f"  GNSS NMEA (RMC, VTG, GGA at 5 Hz):  {g}")
         print(f"  crop sensors (4, at 2 Hz):          {c}")
-        print("a terminal reaches it with:\n" + terminal_snippet(g, c, interface, channel))
+        snippet = terminal_snippet(g, c, interface, channel, options)
+        print("a terminal reaches it with:\n" + snippet)
         print("Ctrl-C stops it.", flush=True)
         machine.start()
         try:
@@ -125,9 +155,11 @@ def _watch(machine: LiveMachine, duration_s: float | None) -> None:
         elif not running and start_kg is not None:
             layer = cal.layer if cal is not None else 0
             # the shaft coasts a little after the stop: let it settle before weighing
-            time.sleep(_POLL_S)
+            time.sleep(_SETTLE_S)
             kg = world.metered_kg(layer) - start_kg
             what = cal.state if cal is not None else "ended"
+            if cal is not None and cal.state == "aborted":
+                what += f" ({CAL_REASONS[cal.reason]})"
             print(
                 f"catch test {what}: the {('upper', 'lower')[layer]} meter let out {kg:.3f} kg "
                 "(what the scale shows)",

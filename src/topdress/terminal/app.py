@@ -95,6 +95,11 @@ class Snapshot:
     count_season: CounterView = field(default_factory=CounterView)
     calibration: CalibrationView | None = None
     settings_pending: bool = False
+    settings_state: dict[str, str] = field(default_factory=dict)  # key -> pending/ok/refused..
+    ndvi_per_sensor: tuple[float | None, ...] = ()  # sensor 1..n; None where not fresh
+    cv_threshold_pct: float = 4.2  # the speed rule's thresholds in force
+    switch_speed_kmh: float = 6.0
+    applied_kg_ha: tuple[float, float] = (0.0, 0.0)  # from the measured metering speeds
 
 
 class Terminal:

@@ -55,6 +55,7 @@ def open_bus(cfg: CanConfig, **extra: Any) -> can.BusABC:
         kwargs["fd"] = False  # classic CAN frames, like the real bus
     elif cfg.interface != "virtual":
         kwargs["bitrate"] = cfg.bitrate
+    kwargs.update(cfg.options)
     kwargs.update(extra)
     try:
         return can.Bus(**kwargs)

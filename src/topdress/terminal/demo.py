@@ -118,7 +118,11 @@ def run_terminal(
     if keyboard is not None:
         KeyboardCommands(term, keyboard, console.message).start()
     if not start:
-        console.message("meters stopped until the operator starts them; " + CONSOLE_HELP)
+        console.message(
+            "meters stopped until the operator starts them (type start, or the display)"
+        )
+        if keyboard is not None:
+            console.message(CONSOLE_HELP)
     rows = 0
 
     def on_tick(snapshot: Snapshot, now: float) -> None:

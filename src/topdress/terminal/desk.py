@@ -21,7 +21,7 @@ import can
 
 from topdress import protocol
 from topdress.config import TerminalConfig
-from topdress.ecu import EcuParams
+from topdress.ecu import EcuParams, meter_rate_kg_ha
 from topdress.errors import ConfigError, DeviceError, ProtocolError, SensorError
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.protocol import Fault, Source
@@ -39,7 +39,7 @@ from topdress.terminal.calibration import (
 )
 from topdress.terminal.canlink import CanLink, open_bus
 from topdress.terminal.counters import CounterView, WorkCounters
-from topdress.terminal.crop import parse_crop_line
+from topdress.terminal.crop import DistanceQueue, parse_crop_line
 from topdress.terminal.rate import build_rate_model
 from topdress.terminal.serial_io import open_line_source
 from topdress.terminal.settings import (
@@ -80,6 +80,11 @@ class DeskView:
     count_season: CounterView
     calibration: CalibrationView | None
     settings_pending: bool
+    settings_state: dict[str, str]
+    ndvi_per_sensor: tuple[float | None, ...]
+    cv_threshold_pct: float
+    switch_speed_kmh: float
+    applied_kg_ha: tuple[float, float]
 
 
 class OperatorDesk:
@@ -99,6 +104,8 @@ class OperatorDesk:
         self.wizard: Wizard | None = None
         self._cal_seq = 0
         self._pending: Future[op.CommandResult] | None = None  # settings awaiting the ECU
+        # The last settings change: dotted key -> pending, ok, refused: <reason>, put back.
+        self._settings_state: dict[str, str] = {}
         self._last_t: float | None = None
         self._model_rates = (0.0, 0.0)
         self._lines: dict[str, deque[tuple[float, Any]]] = {
@@ -290,6 +297,8 @@ class OperatorDesk:
         for text in self.alarms.update(snap.t_s, inputs):
             self.term._event(text)
         self._close_old_buses(now)
+        cfg = self.term.cfg
+        fresh = {r.sensor_id: r.ndvi for r in self.term.ndvi.sensors.fresh(now)}
         return DeskView(
             operator=self.op.state,
             manual=self.op.manual,
@@ -300,6 +309,11 @@ class OperatorDesk:
             count_season=self.counters.view("season"),
             calibration=self.wizard.view() if self.wizard is not None else None,
             settings_pending=self._pending is not None,
+            settings_state=dict(self._settings_state),
+            ndvi_per_sensor=tuple(fresh.get(i) for i in range(1, cfg.crop.sensors + 1)),
+            cv_threshold_pct=cfg.speed.cv_threshold_pct,
+            switch_speed_kmh=cfg.speed.switch_speed_kmh,
+            applied_kg_ha=applied_kg_ha(snap, cfg),
         )
 
     def _count(self, snap: Snapshot, dt_s: float) -> None:
@@ -353,6 +367,18 @@ class OperatorDesk:
             self._reopen(now, c.section, new)
         return self._commit(c, new)
 
+    def _retune(self, section: str, new: TerminalConfig) -> None:
+        """The keys of [gnss] and [crop] that are not the device's: taken at once."""
+        term = self.term
+        if section == "gnss":
+            term.tracker.rmc_timeout_s = new.gnss.rmc_timeout_s
+            term.tracker.stale_s = new.gnss.stale_s
+        elif section == "crop":
+            term.ndvi.sensors.cfg = new.crop  # columns, sensor count, NDVI range, stale_s
+            if new.crop.sensor_to_meter_m != term.cfg.crop.sensor_to_meter_m:
+                # NDVI queued for the old distance would be applied at the wrong spot.
+                term.ndvi.queue = DistanceQueue(new.crop.sensor_to_meter_m)
+
     def _commit(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
         term = self.term
@@ -395,6 +421,11 @@ class OperatorDesk:
             self._old_buses.append((now, old_bus))
             return
         src_cfg = new.gnss if section == "gnss" else new.crop
+        old_cfg = term.cfg.gnss if section == "gnss" else term.cfg.crop
+        self._retune(section, new)
+        device = ("source", "port", "baud", "path", "replay_interval_s")
+        if all(getattr(src_cfg, k) == getattr(old_cfg, k) for k in device):
+            return  # the same device: no reopening
         kind = "nmea" if section == "gnss" else "crop"
         source = open_line_source(src_cfg)
         old = term.gnss if section == "gnss" else term.crop
@@ -432,10 +463,13 @@ class OperatorDesk:
         old = term.cfg.ecu_params()
         pending: Future[op.CommandResult] = fut if fut is not None else Future()
         self._pending = pending
+        keys = {pid: PARAM_KEYS.get(pid, c.section) for pid in changed}
+        self._settings_state = dict.fromkeys(keys.values(), "pending")
 
         def done(error: str | None, accepted: list[int]) -> None:
             self._pending = None
             if error is None:
+                self._settings_state = dict.fromkeys(keys.values(), "ok")
                 try:
                     result = self._commit(c, new)
                 except (op.OperatorError, ConfigError) as exc:
@@ -448,6 +482,8 @@ class OperatorDesk:
             if back:
                 term.link.push_params(back, term.clock(), _log_rollback)
             key = PARAM_KEYS.get(refused, c.section) if refused is not None else c.section
+            self._settings_state = {keys[pid]: "put back" for pid in accepted if pid in keys}
+            self._settings_state[key] = f"refused: {error}"
             term._event(f"settings [{c.section}] refused: {error}")
             pending.set_result(op.CommandResult(False, error, {key: error}))
 
@@ -515,6 +551,19 @@ def _decode_can(ids: protocol.FrameIds) -> Callable[[Any], tuple[str, str]]:
             return raw, f"not ours or malformed: {exc}"
 
     return f
+
+
+def applied_kg_ha(snap: Snapshot, cfg: TerminalConfig) -> tuple[float, float]:
+    """The rate each layer applies now, from its measured metering speed and the ECU's
+    selected speed (eq. 4 inverted, in the C core); 0 standing or while the ECU is not heard."""
+    if not snap.ecu_live:
+        return (0.0, 0.0)
+    m = cfg.machine
+    lo = cfg.speed.min_work_speed_kmh
+    return (
+        meter_rate_kg_ha(m.width_m, snap.meter_rpm[0], snap.v_kmh, m.kg_per_rev_upper, lo),
+        meter_rate_kg_ha(m.width_m, snap.meter_rpm[1], snap.v_kmh, m.kg_per_rev_lower, lo),
+    )
 
 
 def speed_why(snap: Snapshot, cfg: TerminalConfig) -> str:

@@ -61,4 +61,7 @@ class KeyboardCommands:
         fut.add_done_callback(self._answer)
 
     def _answer(self, fut: Future[CommandResult]) -> None:
-        self._say(describe(fut.result()))
+        result = fut.result()
+        if result.ok and result.data is None:
+            return  # said already: the terminal's event for it
+        self._say(describe(result))

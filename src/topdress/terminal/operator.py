@@ -210,9 +210,10 @@ class Operator:
 
 # ---- typed commands (the console) -------------------------------------------------------------
 CONSOLE_HELP = (
-    "commands: start | stop | pause | manual off | manual fixed UPPER LOWER | manual percent P"
-    " | ack [NAME] | reset field|season | catch upper|lower [REV [RPM]] | weigh KG"
-    " | wheel [M] | finish [M] | fan [S] | close [apply] | test gnss|crop|can"
+    "commands: start | stop | pause | manual off | manual fixed UPPER LOWER\n"
+    "          manual percent P | ack [NAME] | reset field|season | test gnss|crop|can\n"
+    "          catch upper|lower [REV [RPM]] | weigh KG | wheel [M] | finish [M]\n"
+    "          fan [S] | close [apply]"
 )
 
 
