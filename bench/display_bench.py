@@ -28,13 +28,12 @@ import sys
 import tempfile
 import threading
 import time
-import urllib.request
 from pathlib import Path
 
 import numpy as np
 
 from terminal_bench import WARMUP_S, Machine
-from topdress.display.browser import chromium, free_port, missing_browser
+from topdress.display.browser import answers, chromium, free_port, missing_browser
 
 BROWSER_NICENESS = 10
 
@@ -95,14 +94,10 @@ def _status_kb(field: str, pid: int | None = None) -> int:
 
 def _wait_http(url: str, timeout_s: float) -> None:
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        try:
-            with urllib.request.urlopen(url, timeout=2) as response:
-                if response.status == 200:
-                    return
-        except OSError:
-            time.sleep(0.2)
-    raise RuntimeError(f"the display at {url} did not answer")
+    while not answers(url):
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the display at {url} did not answer")
+        time.sleep(0.2)
 
 
 def parent(duration_s: float) -> int:

@@ -14,6 +14,7 @@ import socket
 import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -70,6 +71,15 @@ def chromium(
     return webdriver.Chrome(options=opts, service=service)
 
 
+def answers(url: str) -> bool:
+    """Whether a page is served at `url`."""
+    try:
+        with urllib.request.urlopen(url, timeout=2) as response:
+            return bool(response.status == 200)
+    except OSError:
+        return False
+
+
 class DemoProcess:
     """`topdress demo` with its display on a free port, its output in a file."""
 
@@ -101,11 +111,11 @@ class DemoProcess:
         return self.log_path.read_text(errors="replace")
 
     def wait_served(self, timeout_s: float = 60.0) -> str:
-        """The address the demo printed, once it serves."""
+        """The address the demo printed, once it answers."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             found = re.search(r"display: (http://\S+)", self.output())
-            if found:
+            if found and answers(found.group(1)):
                 return found.group(1)
             if self.proc.poll() is not None:
                 break

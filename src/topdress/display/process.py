@@ -26,7 +26,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -42,7 +41,7 @@ from topdress.terminal.operator import CommandResult
 
 log = logging.getLogger(__name__)
 
-START_TIMEOUT_S = 30.0  # a fresh interpreter importing NiceGUI, on a busy 2-core machine
+STOP_WAIT_S = 2.0  # for the display process to end with its socket before it is terminated
 SNAPSHOT_BACKLOG = 600  # a minute of snapshots held while the display catches up
 DISPLAY_NICENESS = 5  # the display yields the CPU to the terminal
 
@@ -72,13 +71,13 @@ class DisplayLink:
         self._cfg: TerminalConfig | None = None
         self._proc: subprocess.Popen[bytes] | None = None
         self._conn: Connection | None = None
-        self._ready = threading.Event()
         self._error: str | None = None
         self._gone_told = False
 
     # ---- life cycle ----------------------------------------------------------------------
     def start(self) -> str:
-        """Start the display process; returns its address once it listens."""
+        """Start the display process and return its address at once: the terminal does not
+        wait for it (it listens within seconds; one that cannot is said on the console)."""
         check_security(self.opts)
         if not port_free(self.opts.host, self.opts.port):
             raise DisplayError(
@@ -104,9 +103,6 @@ class DisplayLink:
         self._cfg = self.term.cfg
         for target, name in ((self._receive, "display-rx"), (self._send, "display-tx")):
             threading.Thread(target=target, name=name, daemon=True).start()
-        if not self._ready.wait(START_TIMEOUT_S) or self._error is not None:
-            self.stop()
-            raise DisplayError(f"the display did not start: {self._error or 'timed out'}")
         return self.opts.url
 
     def stop(self) -> None:
@@ -117,9 +113,9 @@ class DisplayLink:
             self._conn.close()
         if self._proc is not None:
             try:
-                self._proc.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
+                self._proc.wait(timeout=STOP_WAIT_S)
+            except subprocess.TimeoutExpired:  # still importing NiceGUI, say
+                self._proc.terminate()
                 self._proc.wait()
 
     @property
@@ -159,11 +155,9 @@ class DisplayLink:
                 self._gone("the display process ended")
                 return
             kind = msg[0]
-            if kind == "ready":
-                self._ready.set()
-            elif kind == "error":
+            if kind == "error":
                 self._error = str(msg[1])
-                self._ready.set()
+                self.message(f"display not served: {self._error}")
             elif kind == "cmd":
                 self._command(int(msg[1]), msg[2])
             elif kind == "lang":
@@ -178,12 +172,9 @@ class DisplayLink:
         self.term.post(command).add_done_callback(done)
 
     def _gone(self, why: str) -> None:
-        if not self._ready.is_set():  # it never served
-            self._error = why
-        elif not self._stop.is_set() and not self._gone_told:
+        if not self._stop.is_set() and not self._gone_told and self._error is None:
             self._gone_told = True
             self.message(f"display stopped ({why}); the terminal works on")
-        self._ready.set()
 
 
 # ---- the display process ---------------------------------------------------------------------
@@ -219,13 +210,14 @@ class RemoteTerminal:
 
 
 def _serve(conn: Connection) -> int:
-    from nicegui import app
-    from nicegui.server import Server
 
     from topdress.display.hub import DisplayHub
     from topdress.display.server import run_server
 
-    hello = conn.recv()
+    try:
+        hello = conn.recv()
+    except EOFError:  # the terminal ended before the display started
+        return 0
     assert isinstance(hello, Hello)
     remote = RemoteTerminal(conn)
     remote.cfg = hello.cfg
@@ -246,13 +238,7 @@ def _serve(conn: Connection) -> int:
             pass  # the terminal is gone: so is the display
         os._exit(0)
 
-    def tell_ready() -> None:
-        while not getattr(getattr(Server, "instance", None), "started", False):
-            time.sleep(0.05)
-        remote.send("ready")
-
     threading.Thread(target=read, name="display-rx", daemon=True).start()
-    app.on_startup(lambda: threading.Thread(target=tell_ready, daemon=True).start())
     try:
         run_server(hub, hello.opts)
     except BaseException as exc:  # uvicorn's SystemExit on a port it cannot bind, too
