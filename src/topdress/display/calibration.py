@@ -100,7 +100,7 @@ class CalibrationScreen:
                 ui.button(
                     tr("cal.apply", setting=v.key),
                     on_click=lambda: send(op.CloseCalibration(apply=True)),
-                ).props("color=green-8").mark("cal_apply")
+                ).props("color=green-8 no-caps").mark("cal_apply")
             ui.button(
                 tr("cal.close"), on_click=lambda: send(op.CloseCalibration(apply=False))
             ).props("outline").mark("cal_close")

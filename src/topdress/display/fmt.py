@@ -28,7 +28,7 @@ def faults_text(s: Snapshot) -> str:
     return "; ".join(tr(f"fault.{n}") if not n.startswith("BIT") else n for n in names)
 
 
-def link_text(kind: str, state: str) -> str:
+def link_text(state: str) -> str:
     """A link state in words: "ok", "wait", "lost", "no fix", "silent", or "3/4" sensors."""
     if "/" in state:
         return tr("link.partial", fresh=state)

@@ -184,7 +184,7 @@ class MainScreen:
         self.why.set_text(s.speed_why if live else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
-        self.crop.set_text(f"{tr('main.crop_sensors')}: {fmt.link_text('crop', s.crop_link)}")
+        self.crop.set_text(f"{tr('main.crop_sensors')}: {fmt.link_text(s.crop_link)}")
         for (up, lo), (vu, vl), ecu_value in (
             (self.model, s.rate_model_kg_ha, False),
             (self.rate, s.rate_kg_ha, False),
@@ -197,7 +197,7 @@ class MainScreen:
             lo.set_text(fmt.ecu(s, vl, spec) if ecu_value else fmt.num(vl, spec))
         where = f" ({s.ecu_where})" if s.ecu_link == "wait" and s.ecu_where else ""
         for kind, state in (("ecu", s.ecu_link), ("gnss", s.gnss_link), ("crop", s.crop_link)):
-            text = f"{tr(f'link_name.{kind}')}: {fmt.link_text(kind, state)}"
+            text = f"{tr(f'link_name.{kind}')}: {fmt.link_text(state)}"
             self.links[kind].set_text(text + (where if kind == "ecu" else ""))
             ok = state == "ok"
             fmt.restyle(
