@@ -58,6 +58,8 @@ def working(t_s: float = 12.0, **kw: object) -> Snapshot:
         lon=LON0,
         operator="running",
         rate_model_kg_ha=(138.9, 138.9),
+        applied_kg_ha=(141.9, 141.2),
+        ndvi_per_sensor=(0.605, 0.621, None, 0.610),
         speed_why="gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h",
     )
     base.update(kw)
@@ -112,6 +114,8 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
     assert text_of(user, "ndvi_sensors") == "0.612"
     assert text_of(user, "ndvi_meters") == "0.587"
     assert text_of(user, "rate_upper") == "138.9"
+    assert text_of(user, "applied_lower") == "141.2"
+    assert text_of(user, "ndvi_per_sensor") == "1: 0.605  2: 0.621  3: --  4: 0.610"
     assert text_of(user, "target_lower") == "22.1"
     assert text_of(user, "meter_upper") == "22.7"
     assert text_of(user, "fan_lower") == "3020"
@@ -138,7 +142,15 @@ async def test_ecu_values_are_dashes_while_the_ecu_is_not_heard(user: User) -> N
     hub.publish(working(ecu_live=False, ecu_link="lost", gnss_link="ok"))
     register_pages(hub)
     await user.open("/")
-    for marker in ("v_selected", "v_wheel", "target_upper", "meter_lower", "fan_upper", "faults"):
+    for marker in (
+        "v_selected",
+        "v_wheel",
+        "target_upper",
+        "meter_lower",
+        "applied_upper",
+        "fan_upper",
+        "faults",
+    ):
         assert text_of(user, marker) == "--", marker
     # What the terminal knows by itself stays: the GNSS speed, the NDVI, the rate it commands.
     assert text_of(user, "v_gnss") == "8.0"
@@ -219,7 +231,7 @@ def test_track_points_every_metre_with_heading() -> None:
     assert total == len(points) == 10
     assert distance_m(points[0].lat, 0, points[-1].lat, 0) == pytest.approx(9.99, abs=1e-3)
     assert all(p.heading_deg == pytest.approx(0.0, abs=1e-6) for p in points[1:])
-    assert points[1].rate_kg_ha == pytest.approx(277.8)
+    assert points[1].rate_kg_ha == pytest.approx(283.1)  # applied, both layers
     again, none = hub.track_since(total)
     assert again == total and none == []
 

@@ -37,7 +37,7 @@ class TrackPoint:
     lat: float
     lon: float
     heading_deg: float  # clockwise from north, from the previous point
-    rate_kg_ha: float  # total rate (both layers) while metering, else 0
+    rate_kg_ha: float  # total rate applied (both layers, measured) while metering, else 0
     metering: bool
 
 
@@ -87,7 +87,7 @@ class DisplayHub:
             return None
         heading = bearing_deg(last.lat, last.lon, s.lat, s.lon) if last else 0.0
         metering = s.ecu_live and s.running and (s.meter_rpm[0] > 0 or s.meter_rpm[1] > 0)
-        rate = s.rate_kg_ha[0] + s.rate_kg_ha[1] if metering else 0.0
+        rate = s.applied_kg_ha[0] + s.applied_kg_ha[1] if metering else 0.0
         return TrackPoint(s.lat, s.lon, heading, rate, metering)
 
     # ---- the page's side -------------------------------------------------------------------

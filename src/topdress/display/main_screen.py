@@ -103,6 +103,7 @@ class MainScreen:
                 with ui.row().classes("gap-4"):
                     self.ndvi_sensors = _value(tr("main.ndvi_sensors"), "ndvi_sensors")
                     self.ndvi_meters = _value(tr("main.ndvi_meters"), "ndvi_meters")
+                self.per_sensor = ui.label("").classes("text-sm font-mono").mark("ndvi_per_sensor")
                 self.crop = ui.label("").classes("text-sm").mark("crop_sensors")
             with ui.card().classes("gap-2"):
                 ui.label(tr("main.metering")).classes("text-sm font-bold")
@@ -112,6 +113,7 @@ class MainScreen:
                     ui.label(tr("main.lower")).classes("text-xs text-gray-500")
                     self.model = self._pair(f"{tr('main.rate_model')} ({kgha})", "rate_model")
                     self.rate = self._pair(f"{tr('main.rate_set')} ({kgha})", "rate")
+                    self.applied = self._pair(f"{tr('main.rate_applied')} ({kgha})", "applied")
                     self.target = self._pair(f"{tr('main.target')} ({rpm})", "target")
                     self.meter = self._pair(f"{tr('main.measured')} ({rpm})", "meter")
                     self.fan = self._pair(f"{tr('main.fans')} ({rpm})", "fan")
@@ -184,10 +186,14 @@ class MainScreen:
         self.why.set_text(s.speed_why if live else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
+        self.per_sensor.set_text(
+            "  ".join(f"{i}: {fmt.num(v, '.3f')}" for i, v in enumerate(s.ndvi_per_sensor, 1))
+        )
         self.crop.set_text(f"{tr('main.crop_sensors')}: {fmt.link_text(s.crop_link)}")
         for (up, lo), (vu, vl), ecu_value in (
             (self.model, s.rate_model_kg_ha, False),
             (self.rate, s.rate_kg_ha, False),
+            (self.applied, s.applied_kg_ha, True),
             (self.target, s.target_rpm, True),
             (self.meter, s.meter_rpm, True),
             (self.fan, s.fan_rpm, True),

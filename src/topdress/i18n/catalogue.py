@@ -79,8 +79,8 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "chart.meter_lower": ("measured lower", "下层实测"),
     "map.title": ("Map", "作业地图"),
     "map.legend": (
-        "swath coloured by rate, blue 0 … red {max} {unit}",
-        "幅宽按施肥量着色：蓝 0 … 红 {max} {unit}",
+        "swath coloured by the rate applied, blue 0 … red {max} {unit}",
+        "幅宽按实际施肥量着色：蓝 0 … 红 {max} {unit}",
     ),
     # ---- operating
     "op.start": ("Start", "开始"),
@@ -97,6 +97,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "manual.shown_fixed": ("MANUAL {upper} / {lower} kg/ha", "手动 {upper} / {lower} kg/ha"),
     "manual.shown_percent": ("MANUAL model {percent} %", "手动 模型 {percent} %"),
     "main.rate_model": ("model rate", "模型施肥量"),
+    "main.rate_applied": ("rate applied", "实际施肥量"),
     "alarm.title": ("Alarms", "报警"),
     "alarm.ack": ("Acknowledge", "确认"),
     "alarm.ack_all": ("acknowledge all", "全部确认"),
