@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h) src/topdress/ecu/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps clean
+.PHONY: demo test ctest pytest lint bench sysdeps browser screenshots clean
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -21,6 +21,9 @@ demo: $(STAMP)
 
 sysdeps:
 	bash scripts/sysdeps.sh ctest
+
+browser:
+	bash scripts/sysdeps.sh browser
 
 ctest: sysdeps
 	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null
@@ -35,16 +38,21 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
 
-pytest: $(STAMP)
+pytest: $(STAMP) browser
 	$(BIN)/python -m pytest -q
+
+# The display's screenshots in docs/ (both languages), from its end-to-end test.
+screenshots: $(STAMP) browser
+	TOPDRESS_SCREENSHOTS=docs $(BIN)/python -m pytest -q tests/test_display_browser.py
 
 test: ctest lint pytest
 
-bench: $(STAMP)
+bench: $(STAMP) browser
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
 	$(BIN)/python bench/maps_bench.py
+	$(BIN)/python bench/display_bench.py
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c

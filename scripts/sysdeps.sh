@@ -2,6 +2,8 @@
 # System packages topdress needs, installed with apt-get when missing (as root).
 #   sysdeps.sh python   - what building the venv needs: venv/ensurepip and Python headers (cffi)
 #   sysdeps.sh ctest    - what the C tests need: cmocka and pkg-config
+#   sysdeps.sh browser  - what the display's end-to-end test needs: Debian's Chromium and its
+#                         chromedriver (nothing downloads a browser), a CJK font for Chinese
 set -euo pipefail
 what=${1:-ctest}
 python=${PYTHON:-python3}
@@ -22,8 +24,15 @@ ctest)
     command -v pkg-config >/dev/null || missing+=(pkg-config)
     command -v cmake >/dev/null || missing+=(cmake)
     ;;
+browser)
+    [ -x /usr/bin/chromium ] || missing+=(chromium)
+    [ -x /usr/bin/chromedriver ] || missing+=(chromium-driver)
+    if ! { command -v fc-list >/dev/null && [ -n "$(fc-list :lang=zh)" ]; }; then
+        missing+=(fonts-wqy-zenhei)
+    fi
+    ;;
 *)
-    echo "usage: $0 python|ctest" >&2
+    echo "usage: $0 python|ctest|browser" >&2
     exit 2
     ;;
 esac

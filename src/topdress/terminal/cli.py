@@ -34,6 +34,14 @@ def register(sub: Any) -> None:
     )
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
     demo.add_argument(
+        "--passes",
+        type=_passes,
+        default=30,
+        metavar="N",
+        help="passes of 40 m driven, then the machine stands (for calibrations; default 30)",
+    )
+    _display_args(demo)
+    demo.add_argument(
         "--start",
         action="store_true",
         help="start the meters at once (default: the operator's start)",
@@ -53,6 +61,7 @@ def register(sub: Any) -> None:
     run.add_argument(
         "--duration", type=_seconds, metavar="S", help="stop after S seconds (default: Ctrl-C)"
     )
+    _display_args(run)
     run.add_argument(
         "--start",
         action="store_true",
@@ -60,6 +69,33 @@ def register(sub: Any) -> None:
         "default: the operator's start, typed here or on the display",
     )
     run.set_defaults(func=_run)
+
+
+def _display_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--display",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="serve the operator display in the browser (default: display.enabled, on)",
+    )
+    parser.add_argument(
+        "--port", type=int, metavar="N", help="the display's port (default: display.port, 8080)"
+    )
+    parser.add_argument(
+        "--host",
+        metavar="ADDR",
+        help="the display's address (default: display.host, 127.0.0.1; others need display.pin)",
+    )
+
+
+def _passes(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number of passes: {text!r}") from None
+    if not 1 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"must be 1..1000 passes, not {text}")
+    return value
 
 
 def _seconds(text: str) -> float:
@@ -82,18 +118,29 @@ def _sigterm_stops() -> Iterator[None]:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from topdress.config import default_config
+    from topdress.display.serve import display_options
     from topdress.terminal.demo import run_demo
 
+    display = display_options(default_config(), args.display, args.host, args.port)
     with _sigterm_stops():
         return run_demo(
-            args.duration, args.out, seed=args.seed, start=args.start, keyboard=_keyboard()
+            args.duration,
+            args.out,
+            seed=args.seed,
+            start=args.start,
+            keyboard=_keyboard(),
+            display=display,
+            passes=args.passes,
         )
 
 
 def _run(args: argparse.Namespace) -> int:
+    from topdress.display.serve import display_options
     from topdress.terminal.demo import run_terminal
 
     cfg = load_config(args.config)
+    display = display_options(cfg, args.display, args.host, args.port)
     start = args.start or cfg.operator.autostart
     # A line source reading stdin owns it; else typed commands come from there.
     reads_stdin = "stdin" in (cfg.gnss.source, cfg.crop.source)
@@ -106,6 +153,7 @@ def _run(args: argparse.Namespace) -> int:
             start=start,
             config_path=args.config,
             keyboard=None if reads_stdin else _keyboard(),
+            display=display,
         )
     return 0 if result.ecu_ready else EXIT_NO_ECU
 

@@ -14,7 +14,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import can
 
@@ -30,6 +30,9 @@ from topdress.terminal.console import Console
 from topdress.terminal.keyboard import KeyboardCommands
 from topdress.terminal.operator import CONSOLE_HELP
 from topdress.terminal.serial_io import open_line_source
+
+if TYPE_CHECKING:
+    from topdress.display.server import DisplayOptions
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +90,7 @@ def run_terminal(
     start: bool = True,
     config_path: Path | None = None,
     keyboard: TextIO | None = None,
+    display: DisplayOptions | None = None,
 ) -> RunResult:
     """Open the devices of `cfg`, run the terminal with a live console, report where data went.
 
@@ -119,6 +123,11 @@ def run_terminal(
         on_event=console.message,
         config_path=config_path,
     )
+    shown = None
+    if display is not None:  # the web display beside the console (topdress.display)
+        from topdress.display.serve import serve_display
+
+        shown = serve_display(term, display, console.message)
     if keyboard is not None:
         KeyboardCommands(term, keyboard, console.message).start()
     if not start:
@@ -133,6 +142,8 @@ def run_terminal(
         nonlocal rows
         rows += 1
         console.update(snapshot, now)
+        if shown is not None:
+            shown.publish(snapshot)
         if machine is not None and machine.error is not None:
             raise DeviceError(f"the simulated machine failed: {machine.error}")
 
@@ -143,6 +154,8 @@ def run_terminal(
         console.message(f"stopped by {exc}" if exc.args else "stopped by the operator (Ctrl-C)")
     finally:
         # Also after an error: the operator needs to know where the data went.
+        if shown is not None:
+            shown.stop()
         _shutdown(bus)
         console.draw(term.snapshot)
         if not term.link.ready:
@@ -183,13 +196,15 @@ def run_demo(
     out: TextIO = sys.stdout,
     start: bool = True,
     keyboard: TextIO | None = None,
+    display: DisplayOptions | None = None,
+    passes: int = DEMO_PASSES,
 ) -> int:
     """The simulated machine in a thread, the terminal in front of it; returns the exit code.
 
     The demo's configuration is written to `out_dir/topdress-demo.toml`, where settings changed
     while it runs are saved."""
     _check_out_dir(out_dir)
-    drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
+    drive = Drive.field_passes(passes, DEMO_PASS_M, DEMO_SPEED_KMH)
     world = World(SimConfig(), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
     sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
@@ -209,7 +224,7 @@ def run_demo(
             f"{machine.crop_port.path} (crop sensors), CAN virtual:{channel}\n"
         )
         machine.start()
-        run_terminal(cfg, text, duration_s, out, machine, start, config_path, keyboard)
+        run_terminal(cfg, text, duration_s, out, machine, start, config_path, keyboard, display)
     finally:
         machine.stop()
         sim_bus.shutdown()

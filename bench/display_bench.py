@@ -1,0 +1,193 @@
+"""Display benchmark: the terminal with its display served and one browser watching it.
+
+    .venv/bin/python bench/display_bench.py [--duration 22]
+
+As bench/terminal_bench.py (this process plays the machine: 10 Hz GNSS and crop sensors on
+pseudo-terminals, the ECU's twin on a udp_multicast bus; the terminal runs in a child process,
+send_on_gnss on, session log on, meters started), plus the display served by the child and a
+headless Chromium (Debian's, through Selenium) showing its main screen the whole time.
+
+- `display_tick_late_p99_ms`: how late the control loop's 10 Hz tick ran (the child records
+  each tick against the loop's own grid);
+- `nmea_to_command_p99_ms_with_display`: writing an RMC line to the pty until the PcCommand
+  carrying its speed is on the bus;
+- `display_update_p95_ms`: from the control loop publishing a snapshot until the browser's
+  page shows it (a MutationObserver in the page timestamps each new snapshot's publication
+  mark; both clocks are this machine's wall clock);
+- `display_rss_mb`: peak resident memory (VmHWM) of the whole terminal: its process and the
+  display process it starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from terminal_bench import WARMUP_S, Machine
+from topdress.display.browser import answers, chromium, free_port, missing_browser
+
+BROWSER_NICENESS = 10
+
+#: In the page: every new snapshot drawn -> (now - its publication time) in ms.
+OBSERVER_JS = """
+window.tdLatencies = [];
+const clock = document.querySelector('[data-testid="clock"]');
+new MutationObserver(() => {
+  const published = parseFloat(clock.getAttribute('data-published'));
+  if (published) window.tdLatencies.push(Date.now() - published * 1000);
+}).observe(clock, {attributes: true, attributeFilter: ['data-published']});
+return clock !== null;
+"""
+
+
+def child(config: Path, duration_s: float, port: int) -> None:
+    """The terminal as `topdress run --start` runs it, with its display and no console."""
+    from topdress.config import load_config
+    from topdress.display.serve import serve_display
+    from topdress.display.server import DisplayOptions
+    from topdress.log.session import SessionLog
+    from topdress.terminal.app import TICK_S, Snapshot, Terminal
+    from topdress.terminal.canlink import open_bus
+    from topdress.terminal.serial_io import open_line_source
+
+    cfg = load_config(config)
+    session = SessionLog.create(cfg.log.dir, config.read_text())
+    bus = open_bus(cfg.can)
+    term = Terminal(cfg, open_line_source(cfg.gnss), open_line_source(cfg.crop), bus, session)
+    shown = serve_display(term, DisplayOptions(port=port), lambda m: print(m, file=sys.stderr))
+    late: list[float] = []
+    sched: list[float] = []
+
+    def on_tick(snapshot: Snapshot, now: float) -> None:
+        shown.publish(snapshot)
+        # The loop's grid: the next tick TICK_S after the last one due, or restarted after a
+        # stall of a whole tick (as Terminal._loop does).
+        due = sched[0] if sched else term._t0 or now  # the grid starts where the loop's did
+        late.append(now - due)
+        sched[:] = [due + TICK_S if now - due < TICK_S else now + TICK_S]
+
+    term.run(duration_s, on_tick=on_tick)
+    display_pid = shown.link.pid if shown.link is not None else None
+    # The whole terminal: its own process and the display process it started.
+    hwm = (_status_kb("VmHWM") + (_status_kb("VmHWM", display_pid) if display_pid else 0)) / 1024
+    shown.stop()
+    bus.shutdown()
+    print(json.dumps({"late_s": late, "rss_mb": hwm, "counters": term.snapshot.counters}))
+
+
+def _status_kb(field: str, pid: int | None = None) -> int:
+    status = Path(f"/proc/{pid if pid is not None else 'self'}/status")
+    for line in status.read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise RuntimeError(f"no {field} in /proc/self/status")
+
+
+def _wait_http(url: str, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not answers(url):
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"the display at {url} did not answer")
+        time.sleep(0.2)
+
+
+def parent(duration_s: float) -> int:
+    why = missing_browser()
+    if why is not None:
+        print(f"display bench needs a browser: {why}", file=sys.stderr)
+        return 1
+    group = f"239.74.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
+    port = free_port()
+    m = Machine(group)
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "terminal.toml"
+        cfg.write_text(
+            f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
+            f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
+            f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\nsend_on_gnss = true\n'
+            f'[log]\ndir = "{tmp}"\n'
+        )
+        for target in (m.run_ecu, m.run_spy):
+            threading.Thread(target=target, daemon=True).start()
+        proc = subprocess.Popen(
+            [sys.executable, __file__, "--child", str(cfg), "--duration", str(duration_s),
+             "--port", str(port)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        url = f"http://127.0.0.1:{port}/"
+        _wait_http(url, 30.0)
+        # The browser at a lower priority than the terminal, as docs/display.md sets up the
+        # cab PC's kiosk browser: on 2 cores its rendering would otherwise take the CPU from
+        # the control loop (the figures without: ~7-18 ms NMEA p99 on a busy machine).
+        driver = chromium(Path(tmp) / "profile", niceness=BROWSER_NICENESS)
+        try:
+            driver.get(url)
+            deadline = time.monotonic() + 20.0
+            while not driver.execute_script(
+                "return document.querySelector('[data-testid=\"clock\"]') !== null"
+            ):
+                if time.monotonic() > deadline:
+                    raise RuntimeError("the main screen did not load")
+                time.sleep(0.1)
+            driver.execute_script(OBSERVER_JS)
+            m.measure_after = time.perf_counter() + WARMUP_S
+            feeders = [
+                threading.Thread(target=m.run_gnss, args=(duration_s,), daemon=True),
+                threading.Thread(target=m.run_crop, args=(duration_s,), daemon=True),
+            ]
+            for th in feeders:
+                th.start()
+            time.sleep(max(1.0, duration_s - 6.0))
+            updates_ms = list(driver.execute_script("return window.tdLatencies"))
+        finally:
+            driver.quit()
+        out, _ = proc.communicate(timeout=duration_s + 60)
+        m.close()
+    if proc.returncode != 0:
+        print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
+        return 1
+    result = json.loads(out.strip().splitlines()[-1])
+    late_ms = np.array(result["late_s"][int(WARMUP_S * 10) :]) * 1e3
+    lat_ms = np.array(m.latencies_s) * 1e3
+    upd_ms = np.array(updates_ms[5:])  # after the page settled
+    if lat_ms.size < 50 or upd_ms.size < 20:
+        print(f"too few samples: {lat_ms.size} latencies, {upd_ms.size} updates", file=sys.stderr)
+        return 1
+    print(f"display_tick_late_p99_ms: {np.percentile(late_ms, 99):.2f}")
+    print(f"nmea_to_command_p99_ms_with_display: {np.percentile(lat_ms, 99):.2f}")
+    print(f"display_update_p95_ms: {np.percentile(upd_ms, 95):.1f}")
+    print(f"display_rss_mb: {result['rss_mb']:.1f}")
+    print(
+        f"# {late_ms.size} ticks (p50 late {np.percentile(late_ms, 50):.2f} ms), "
+        f"{lat_ms.size} NMEA latencies (p50 {np.percentile(lat_ms, 50):.2f} ms), "
+        f"{upd_ms.size} page updates (p50 {np.percentile(upd_ms, 50):.1f} ms); "
+        f"terminal counters {result['counters']}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--duration", type=float, default=22.0, help="seconds")
+    ap.add_argument("--child", type=Path, metavar="CONFIG", help=argparse.SUPPRESS)
+    ap.add_argument("--port", type=int, default=0, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child is not None:
+        child(args.child, args.duration, args.port)
+        return 0
+    return parent(args.duration)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

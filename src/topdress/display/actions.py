@@ -1,0 +1,73 @@
+"""Sending the operator's commands: the PIN when one is set, then the terminal's inbox.
+
+The page never blocks its event loop: it awaits the command's future. With a PIN set, a browser
+on another machine (a tablet on the cab's network) needs it to operate: start/stop, pause, the
+manual rate, alarms, counters, settings and calibrations ask for it once per browser tab (a
+reload locks again); viewing needs none, and neither does the cab PC's own screen (a loopback
+client). The PIN typed is compared in constant time and never logged or echoed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from nicegui import ui
+
+from topdress.display.hub import DisplayHub
+from topdress.i18n import tr
+from topdress.terminal.operator import CommandResult
+
+COMMAND_TIMEOUT_S = 15.0  # settings for the ECU wait for every acknowledgement
+
+
+class Actions:
+    """One browser tab's command path."""
+
+    def __init__(self, hub: DisplayHub, remote: bool) -> None:
+        self.hub = hub
+        self.remote = remote  # the browser is not on this machine
+        self.unlocked = False
+
+    async def unlock(self) -> bool:
+        """Ask for the PIN if one is set, the browser is remote and has not given it yet."""
+        if self.unlocked or not self.remote or not self.hub.pin_required:
+            return True
+        with ui.dialog() as dialog, ui.card():
+            ui.label(tr("pin.title")).classes("text-lg")
+            pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
+            wrong = ui.label("").classes("text-red-700")
+
+            def submit() -> None:
+                if self.hub.pin_ok(pin.value or ""):
+                    dialog.submit(True)
+                else:
+                    pin.value = ""
+                    wrong.set_text(tr("pin.wrong"))
+
+            pin.on("keydown.enter", submit)
+            with ui.row():
+                ui.button(tr("pin.ok"), on_click=submit).mark("pin_ok")
+                ui.button(tr("action.cancel"), on_click=lambda: dialog.submit(False)).props("flat")
+        ok = bool(await dialog)
+        dialog.delete()
+        self.unlocked = ok
+        return ok
+
+    async def send(self, command: Any, *, guarded: bool = True) -> CommandResult | None:
+        """Post `command`; None when not sent (PIN refused, no command path). A refused command
+        is told to the operator; the result is returned for the caller to show at its fields."""
+        if self.hub.post is None:
+            ui.notify(tr("action.view_only"), type="warning")
+            return None
+        if guarded and not await self.unlock():
+            return None
+        future = self.hub.post(command)
+        try:
+            result = await asyncio.wait_for(asyncio.wrap_future(future), COMMAND_TIMEOUT_S)
+        except TimeoutError:
+            ui.notify(tr("action.timeout"), type="negative")
+            return None
+        if not result.ok:
+            ui.notify(result.message or tr("action.refused"), type="negative", multi_line=True)
+        return result

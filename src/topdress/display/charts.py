@@ -1,0 +1,124 @@
+"""ECharts options for the live charts (last minute): speeds with the source, metering speeds."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from topdress.i18n import tr
+from topdress.terminal.app import Snapshot
+
+#: Every n-th snapshot of the history is charted (2.5 Hz of the loop's 10): over a minute the
+#: curves look the same, and the page update (and the browser's redraw) is a quarter as large.
+CHART_EVERY = 4
+
+SOURCE_COLOURS = {"gnss": "#1565c0", "wheel": "#ef6c00", "none": "#9e9e9e", "fused": "#6a1b9a"}
+
+
+def _series(name: str, points: list[list[float | None]], colour: str) -> dict[str, Any]:
+    return {
+        "name": name,
+        "type": "line",
+        "showSymbol": False,
+        "animation": False,
+        "data": points,
+        "lineStyle": {"color": colour},
+        "itemStyle": {"color": colour},
+        "connectNulls": False,
+    }
+
+
+def _axes(y_name: str, t_start: float, t_end: float, window_s: float) -> dict[str, Any]:
+    return {
+        "animation": False,
+        "grid": {"left": 50, "right": 24, "top": 40, "bottom": 28},
+        "legend": {"top": 0, "left": 60},
+        "tooltip": {"trigger": "axis"},
+        "xAxis": {
+            "type": "value",
+            "min": round(max(t_start, t_end - window_s), 1),
+            "max": round(t_end, 1),
+            "name": tr("unit.s"),
+            "axisLabel": {"formatter": "{value}"},
+        },
+        "yAxis": {
+            "type": "value",
+            "name": y_name,
+            "min": 0,
+            "nameLocation": "middle",
+            "nameGap": 32,
+        },
+    }
+
+
+def sampled(history: list[Snapshot]) -> list[Snapshot]:
+    """Every CHART_EVERY-th snapshot, ending with the latest."""
+    return history[(len(history) - 1) % CHART_EVERY :: CHART_EVERY] if history else []
+
+
+def speed_options(history: list[Snapshot], window_s: float = 60.0) -> dict[str, Any]:
+    """Wheel, GNSS and selected speed (km/h) against time, with bands naming the source the
+    ECU metered on."""
+    history = sampled(history)
+    t_end = history[-1].t_s if history else 0.0
+    wheel, gnss, selected, marks = [], [], [], []
+    for s in history:
+        t = round(s.t_s, 2)
+        wheel.append([t, round(s.v_wheel_kmh, 2) if s.ecu_live else None])
+        gnss.append([t, None if s.v_gnss_kmh is None else round(s.v_gnss_kmh, 2)])
+        selected.append([t, round(s.v_kmh, 2) if s.ecu_live else None])
+        marks.append(s.source if s.ecu_live else "none")
+    opts = _axes(tr("unit.kmh"), history[0].t_s if history else 0.0, t_end, window_s)
+    sel = _series(tr("chart.selected"), selected, "#2e7d32")
+    # Bands under the selected speed say which source drove it.
+    sel["markArea"] = {"silent": True, "data": _source_bands(history, marks)}
+    sel["lineStyle"] = {"color": "#2e7d32", "width": 3}
+    opts["series"] = [
+        _series(tr("chart.wheel"), wheel, SOURCE_COLOURS["wheel"]),
+        _series(tr("chart.gnss"), gnss, SOURCE_COLOURS["gnss"]),
+        sel,
+    ]
+    return opts
+
+
+def _source_bands(history: list[Snapshot], marks: list[str]) -> list[list[dict[str, Any]]]:
+    bands: list[list[dict[str, Any]]] = []
+    start = 0
+    for i in range(1, len(marks) + 1):
+        if i == len(marks) or marks[i] != marks[start]:
+            src = marks[start]
+            if src in ("gnss", "wheel", "fused"):
+                bands.append(
+                    [
+                        {
+                            "xAxis": round(history[start].t_s, 2),
+                            "name": tr(f"source.{src}"),
+                            "itemStyle": {"color": SOURCE_COLOURS[src], "opacity": 0.08},
+                            "label": {"position": "insideTop", "color": SOURCE_COLOURS[src]},
+                        },
+                        {"xAxis": round(history[i - 1].t_s, 2)},
+                    ]
+                )
+            start = i
+    return bands
+
+
+def meter_options(history: list[Snapshot], window_s: float = 60.0) -> dict[str, Any]:
+    """Target and measured metering speed (r/min) of each layer against time."""
+    history = sampled(history)
+    t_end = history[-1].t_s if history else 0.0
+    cols: list[list[list[float | None]]] = [[], [], [], []]
+    for s in history:
+        t = round(s.t_s, 2)
+        values = (*s.target_rpm, *s.meter_rpm)
+        for col, v in zip(cols, values, strict=True):
+            col.append([t, round(v, 2) if s.ecu_live else None])
+    opts = _axes(tr("unit.rpm"), history[0].t_s if history else 0.0, t_end, window_s)
+    opts["series"] = [
+        _series(tr("chart.target_upper"), cols[0], "#90caf9"),
+        _series(tr("chart.target_lower"), cols[1], "#ffcc80"),
+        _series(tr("chart.meter_upper"), cols[2], "#1565c0"),
+        _series(tr("chart.meter_lower"), cols[3], "#ef6c00"),
+    ]
+    for series in opts["series"][:2]:
+        series["lineStyle"]["type"] = "dashed"
+    return opts

@@ -1,0 +1,145 @@
+"""A form over one section of the configuration: its keys as the file names them.
+
+Values are shown as the configuration in force holds them and read back with their types;
+a refused value (ConfigError, or an error the terminal returns for a dotted key) is shown at
+its field. The checks are the configuration's own (`topdress.terminal.settings`), never a copy.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+from nicegui import ui
+
+from topdress.i18n import tr
+from topdress.i18n.catalogue import CATALOGUE
+
+#: Units from a key's suffix, as the configuration names its keys.
+_UNITS = (
+    ("_kg_ha", "unit.kgha"),
+    ("_kmh", "unit.kmh"),
+    ("_rpm", "unit.rpm"),
+    ("_pct", "unit.pct"),
+    ("_ms", "unit.ms"),
+    ("_s", "unit.s"),
+    ("_m", "unit.m"),
+)
+
+Widget = ui.input | ui.number | ui.switch | ui.select
+
+
+def unit_of(key: str) -> str:
+    name = key.rsplit(".", 1)[-1]
+    for suffix, unit in _UNITS:
+        if name.endswith(suffix):
+            return tr(unit)
+    return ""
+
+
+def label_of(key: str) -> str:
+    """The key in words (from the catalogue where it has them) with its unit."""
+    words = tr(f"key.{key}") if f"key.{key}" in CATALOGUE else key.rsplit(".", 1)[-1]
+    unit = unit_of(key)
+    return f"{words} ({unit})" if unit else words
+
+
+class SectionForm:
+    """Inputs for `values` (a section as `settings.section_values` gives it)."""
+
+    def __init__(
+        self,
+        section: str,
+        values: Mapping[str, Any],
+        keys: Iterable[str] | None = None,
+        choices: Mapping[str, list[Any] | dict[Any, str]] | None = None,
+        free_choice: Iterable[str] = (),
+        on_change: Callable[[], None] | None = None,
+    ) -> None:
+        self.section = section
+        self.widgets: dict[str, Widget] = {}
+        self._types: dict[str, type] = {}
+        self._choices = choices or {}
+        self._free = set(free_choice)
+        self._on_change = on_change
+        with ui.grid(columns=2).classes("gap-x-4 gap-y-1 items-start w-full"):
+            for key in keys if keys is not None else values:
+                self._add(key, _get(values, key))
+
+    def _add(self, key: str, value: Any) -> None:
+        if isinstance(value, Mapping):
+            for sub, v in value.items():
+                self._add(f"{key}.{sub}", v)
+            return
+        dotted = f"{self.section}.{key}"
+        label = label_of(dotted)
+        hook = self._on_change
+        changed = (lambda _e: hook()) if hook is not None else None
+        widget: Widget
+        if key in self._choices:
+            options = self._choices[key]
+            if isinstance(options, list) and value not in options:
+                options = [value, *options]
+            widget = ui.select(
+                options,
+                value=value,
+                label=label,
+                new_value_mode="add-unique" if key in self._free else None,
+                on_change=changed,
+            )
+        elif isinstance(value, bool):
+            widget = ui.switch(label, value=value, on_change=changed)
+        elif isinstance(value, int | float):
+            widget = ui.number(label, value=value, on_change=changed)
+            if isinstance(value, int):
+                widget.props("step=1")
+        elif isinstance(value, list):
+            widget = ui.input(label, value=json.dumps(value), on_change=changed)
+        else:
+            widget = ui.input(label, value="" if value is None else str(value), on_change=changed)
+        widget.classes("w-full").props("dense").mark(f"field_{dotted}")
+        self.widgets[key] = widget
+        self._types[key] = type(value)
+
+    def values(self) -> dict[str, Any]:
+        """What the form holds, nested as the file nests it, each value in its key's type; a
+        text that is not one (a number field left empty) is passed as it is, for the checks
+        to name."""
+        out: dict[str, Any] = {}
+        for key, widget in self.widgets.items():
+            raw = widget.value
+            kind = self._types[key]
+            value: Any = raw
+            if kind is int and isinstance(raw, float) and raw.is_integer():
+                value = int(raw)
+            elif kind is list and isinstance(raw, str):
+                try:
+                    value = json.loads(raw)
+                except ValueError:
+                    value = raw
+            _put(out, key, value)
+        return out
+
+    def show_errors(self, errors: Mapping[str, str]) -> None:
+        """Mark each field with its reason (dotted keys of this section); clear the others."""
+        prefix = f"{self.section}."
+        for key, widget in self.widgets.items():
+            reason = errors.get(prefix + key)
+            widget.props.set_bool("error", reason is not None)
+            widget.props.set_optional("error-message", reason)
+
+
+def _get(values: Mapping[str, Any], dotted: str) -> Any:
+    node: Any = values
+    for part in dotted.split("."):
+        node = node[part]
+    return node
+
+
+def _put(out: dict[str, Any], dotted: str, value: Any) -> None:
+    *parents, last = dotted.split(".")
+    node = out
+    for part in parents:
+        node = node.setdefault(part, {})
+    node[last] = value

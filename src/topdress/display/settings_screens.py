@@ -1,0 +1,302 @@
+"""The paper's two settings screens: communication (serial ports, CAN) and control (the NDVI ->
+rate model with its live plot, the layer split, the speed rule, the ECU's PID gains).
+
+Each section is checked with the configuration's own checks as it is typed (the refused value
+shown at its field), then applied by the terminal (`ApplySettings`: saved atomically, the
+device reopened or the ECU given the values with acknowledgement; nothing half-applied).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nicegui import ui
+
+from topdress.config import SPEED_MODE_IDS, SWITCH_COMPARE_IDS
+from topdress.display.actions import Actions
+from topdress.display.forms import SectionForm
+from topdress.display.hub import DisplayHub
+from topdress.ecu import EcuParams
+from topdress.errors import ConfigError
+from topdress.i18n import tr
+from topdress.terminal import operator as op
+from topdress.terminal.app import Snapshot
+from topdress.terminal.settings import (
+    list_serial_ports,
+    rate_curve,
+    section_values,
+    validate_section,
+)
+
+BAUDS = [4800, 9600, 19200, 38400, 57600, 115200]
+CAN_INTERFACES = [
+    "socketcan",
+    "slcan",
+    "pcan",
+    "kvaser",
+    "ixxat",
+    "vector",
+    "udp_multicast",
+    "virtual",
+]
+#: The ECU's tuning keys on the control screen (the [ecu] section); the rest stay in the file.
+ECU_TUNING = ("pid_kp", "pid_ki", "pid_kd", "pid_kff", "fan_min_rpm", "blocked_time_ms")
+
+
+def reason(exc: ConfigError) -> str:
+    """The message of a ConfigError without its key (shown at the key's field)."""
+    return str(exc).removeprefix(f"{exc.key}: ")
+
+
+class SectionCard:
+    """One section's form with its apply button and the terminal's answer."""
+
+    def __init__(
+        self,
+        hub: DisplayHub,
+        actions: Actions,
+        section: str,
+        form: SectionForm,
+        only_changed: bool = False,
+    ) -> None:
+        self.hub = hub
+        self.actions = actions
+        self.section = section
+        self.form = form
+        self._initial = form.values()
+        self._only_changed = only_changed
+        with ui.row().classes("items-center gap-2"):
+            self.button = ui.button(tr("action.save_apply"), on_click=self.apply).mark(
+                f"apply_{section}"
+            )
+            self.answer = ui.label("").classes("text-sm").mark(f"answer_{section}")
+
+    def values(self) -> dict[str, Any]:
+        values = self.form.values()
+        if self._only_changed:
+            values = {k: v for k, v in values.items() if self._initial.get(k) != v}
+        return values
+
+    def check(self) -> bool:
+        """The configuration's checks on what is typed; the refused value shown at its field."""
+        try:
+            validate_section(self.hub.config(), self.section, self.values())
+        except ConfigError as exc:
+            self.form.show_errors({exc.key: reason(exc)})
+            return False
+        self.form.show_errors({})
+        return True
+
+    async def apply(self) -> None:
+        if not self.check():
+            self.answer.set_text(tr("settings.refused_here"))
+            self.answer.classes(replace="text-sm text-red-700")
+            return
+        self.answer.set_text(tr("settings.sending"))
+        self.answer.classes(replace="text-sm")
+        result = await self.actions.send(op.ApplySettings(self.section, self.values()))
+        if result is None:
+            self.answer.set_text("")
+            return
+        self.form.show_errors(result.errors)
+        self.answer.set_text(result.message)
+        self.answer.classes(
+            replace="text-sm " + ("text-green-700" if result.ok else "text-red-700")
+        )
+        if result.ok:
+            self._initial = self.form.values()
+
+
+def _title(key: str) -> None:
+    ui.label(tr(key)).classes("text-base font-bold")
+
+
+class CommunicationScreen:
+    """Serial ports of the GNSS receiver and the crop sensors' logger, and the CAN adapter."""
+
+    def __init__(self, hub: DisplayHub, actions: Actions) -> None:
+        self.hub = hub
+        self.actions = actions
+        cfg = hub.config()
+        ports = [p.device for p in list_serial_ports()]
+        self.links: dict[str, ui.label] = {}
+        with ui.row().classes("w-full items-start gap-3"):
+            for section, keys in (
+                ("gnss", ["port", "baud", "stale_s"]),
+                ("crop", ["port", "baud", "sensors", "columns", "sensor_to_meter_m"]),
+                ("can", ["interface", "channel", "bitrate", "command_period_s", "send_on_gnss"]),
+            ):
+                with ui.card().classes("w-96 gap-2"):
+                    _title(f"comm.{section}")
+                    self.links[section] = ui.label("").classes("text-sm").mark(f"state_{section}")
+                    choices: dict[str, list[Any] | dict[Any, str]] = {
+                        "port": ports,
+                        "baud": BAUDS,
+                        "interface": CAN_INTERFACES,
+                    }
+                    form = SectionForm(
+                        section,
+                        section_values(cfg, section),
+                        keys,
+                        choices=choices,
+                        free_choice=("port", "interface"),
+                    )
+                    SectionCard(hub, actions, section, form)
+                    self._test_view(section)
+
+    def _test_view(self, device: str) -> None:
+        table = (
+            ui.table(
+                columns=[
+                    {"name": "t", "label": tr("unit.s"), "field": "t", "align": "right"},
+                    {"name": "raw", "label": tr("comm.raw"), "field": "raw", "align": "left"},
+                    {
+                        "name": "decoded",
+                        "label": tr("comm.decoded"),
+                        "field": "decoded",
+                        "align": "left",
+                    },
+                ],
+                rows=[],
+            )
+            .props("dense flat wrap-cells")
+            .classes("w-full text-xs")
+        )
+        table.set_visibility(False)
+
+        async def test() -> None:
+            result = await self.actions.send(op.TestDevice(device), guarded=False)
+            if result is None or not result.ok:
+                return
+            table.rows = [
+                {"t": f"{line.t_s:.1f}", "raw": line.raw, "decoded": line.decoded}
+                for line in result.data or []
+            ]
+            table.set_visibility(True)
+            table.update()
+
+        ui.button(tr("comm.test"), icon="search", on_click=test).props("outline").mark(
+            f"test_{device}"
+        )
+        table.mark(f"lines_{device}")
+
+    def update(self, s: Snapshot) -> None:
+        for section, state in (("gnss", s.gnss_link), ("crop", s.crop_link), ("can", s.ecu_link)):
+            self.links[section].set_text(f"{tr('comm.state')}: {state}")
+
+
+class ControlScreen:
+    """The NDVI -> rate model with its live plot, the layer split, the speed rule, PID gains."""
+
+    def __init__(self, hub: DisplayHub, actions: Actions) -> None:
+        self.hub = hub
+        self.actions = actions
+        cfg = hub.config()
+        with ui.row().classes("w-full items-start gap-3"):
+            with ui.card().classes("w-[28rem] gap-2"):
+                _title("control.rate")
+                self.rate_form = SectionForm(
+                    "rate",
+                    section_values(cfg, "rate"),
+                    ["model", "split_upper", "linear", "table.points"],
+                    choices={"model": ["linear", "table", "sufficiency"]},
+                    on_change=self._replot,
+                )
+                self.rate_card = SectionCard(hub, actions, "rate", self.rate_form)
+            with ui.card().classes("flex-1 min-w-96"):
+                _title("control.curve")
+                self.curve = ui.echart(self._curve_options([], None)).classes("w-full h-72")
+                self.point = ui.label("").classes("text-sm").mark("operating_point")
+            with ui.card().classes("w-80 gap-2"):
+                _title("control.speed")
+                speed = SectionForm(
+                    "speed",
+                    section_values(cfg, "speed"),
+                    choices={
+                        "mode": list(SPEED_MODE_IDS),
+                        "switch_compare": list(SWITCH_COMPARE_IDS),
+                    },
+                )
+                SectionCard(hub, actions, "speed", speed)
+            with ui.card().classes("w-80 gap-2"):
+                _title("control.ecu")
+                ui.label(tr("control.ecu_note")).classes("text-xs text-gray-600")
+                defaults = EcuParams.defaults()
+                overrides = cfg.ecu.overrides
+                values = {k: overrides.get(k, _round(defaults.get(k))) for k in ECU_TUNING}
+                ecu = SectionForm("ecu", values)
+                self.ecu_card = SectionCard(hub, actions, "ecu", ecu, only_changed=True)
+                self.pending = ui.label("").classes("text-sm text-amber-800").mark("pending")
+        self._curve: list[tuple[float, float]] = []
+        self._drawn_t = -1e9
+        self._replot()
+
+    def _replot(self) -> None:
+        """The curve of what is typed, checked as the file is (the last good one stays)."""
+        try:
+            new = validate_section(self.hub.config(), "rate", self.rate_form.values())
+        except ConfigError as exc:
+            self.rate_form.show_errors({exc.key: reason(exc)})
+            return
+        self.rate_form.show_errors({})
+        self._curve = rate_curve(new.rate)
+        self._draw(None)
+
+    def _draw(self, s: Snapshot | None) -> None:
+        point = None
+        if s is not None and s.ndvi is not None:
+            point = (s.ndvi, s.rate_model_kg_ha[0] + s.rate_model_kg_ha[1])
+        self.curve.options.update(self._curve_options(self._curve, point))
+        self.curve.update()
+
+    def _curve_options(
+        self, curve: list[tuple[float, float]], point: tuple[float, float] | None
+    ) -> dict[str, Any]:
+        return {
+            "animation": False,
+            "grid": {"left": 56, "right": 16, "top": 24, "bottom": 40},
+            "xAxis": {
+                "type": "value",
+                "min": 0,
+                "max": 1,
+                "name": "NDVI",
+                "nameLocation": "middle",
+                "nameGap": 26,
+            },
+            "yAxis": {
+                "type": "value",
+                "min": 0,
+                "name": tr("control.total_rate"),
+                "nameLocation": "middle",
+                "nameGap": 40,
+            },
+            "series": [
+                {
+                    "type": "line",
+                    "showSymbol": False,
+                    "data": [[round(x, 3), round(y, 1)] for x, y in curve],
+                },
+                {
+                    "type": "scatter",
+                    "symbolSize": 14,
+                    "itemStyle": {"color": "#c62828"},
+                    "data": [[round(point[0], 3), round(point[1], 1)]] if point else [],
+                },
+            ],
+        }
+
+    def update(self, s: Snapshot) -> None:
+        if s.ndvi is not None:
+            total = s.rate_model_kg_ha[0] + s.rate_model_kg_ha[1]
+            self.point.set_text(
+                tr("control.point", ndvi=f"{s.ndvi:.3f}", rate=f"{total:.1f}", unit=tr("unit.kgha"))
+            )
+        if abs(s.t_s - self._drawn_t) >= 1.0:  # the operating point once a second
+            self._drawn_t = s.t_s
+            self._draw(s)
+        self.pending.set_text(tr("control.pending") if s.settings_pending else "")
+
+
+def _round(value: float) -> float:
+    """An ECU default as float32 carries it (0.3 not 0.30000001)."""
+    return float(f"{value:.6g}")

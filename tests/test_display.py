@@ -1,0 +1,554 @@
+"""The operator display's screen logic, in NiceGUI's simulated browser (the `user` fixture)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import sys
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
+
+import pytest
+from nicegui import ui
+from nicegui.testing import User
+
+from topdress import i18n
+from topdress.config import TerminalConfig, default_config, loads_config
+from topdress.display import pages
+from topdress.display.charts import meter_options, speed_options
+from topdress.display.hub import DisplayHub, bearing_deg, distance_m
+from topdress.display.map_view import machine_arrow, rate_colour, swath_quad
+from topdress.display.pages import register_pages
+from topdress.display.server import DisplayError, DisplayOptions, check_security, is_loopback
+from topdress.terminal import operator as op
+from topdress.terminal.alarms import AlarmView
+from topdress.terminal.app import Snapshot
+from topdress.terminal.calibration import CalibrationView
+from topdress.terminal.counters import CounterView
+from topdress.terminal.desk import DeviceLine
+from topdress.terminal.operator import CommandResult, ManualView
+
+LAT0, LON0 = 43.8853, 125.3245
+
+
+def working(t_s: float = 12.0, **kw: object) -> Snapshot:
+    """The demo at 8 km/h on GNSS in uniform motion."""
+    base: dict[str, object] = dict(
+        t_s=t_s,
+        running=True,
+        source="gnss",
+        v_kmh=8.0,
+        v_wheel_kmh=7.61,
+        v_gnss_kmh=8.0,
+        cv_pct=2.51,
+        uniform=True,
+        ndvi_sensors=0.612,
+        ndvi=0.587,
+        rate_kg_ha=(138.9, 138.9),
+        target_rpm=(22.09, 22.09),
+        meter_rpm=(22.69, 22.59),
+        fan_rpm=(3020.0, 3020.0),
+        faults=0,
+        ecu_live=True,
+        ecu_link="ok",
+        gnss_link="ok",
+        crop_link="ok",
+        lat=LAT0,
+        lon=LON0,
+        operator="running",
+        rate_model_kg_ha=(138.9, 138.9),
+        applied_kg_ha=(141.9, 141.2),
+        ndvi_per_sensor=(0.605, 0.621, None, 0.610),
+        speed_why="gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h",
+    )
+    base.update(kw)
+    return Snapshot(**base)  # type: ignore[arg-type]
+
+
+@pytest.fixture(autouse=True)
+def keep_modules() -> Iterator[None]:
+    """NiceGUI's simulated browser, resetting itself, drops the modules that defined pages (and
+    their parents: `topdress`) from sys.modules; later tests would import a second copy of the
+    package beside the first. Put the first back."""
+    saved = {k: v for k, v in sys.modules.items() if k.split(".")[0] == "topdress"}
+    yield
+    sys.modules.update(saved)
+
+
+@pytest.fixture(autouse=True)
+def english() -> Iterator[None]:
+    i18n.set_language("en")
+    yield
+    i18n.set_language("en")
+
+
+def text_of(user: User, marker: str) -> str:
+    (element,) = user.find(marker=marker).elements
+    return str(element.text)  # type: ignore[attr-defined]
+
+
+async def shows(user: User, marker: str, expected: str, timeout_s: float = 3.0) -> None:
+    """Wait until the page's timer has drawn `expected` at `marker` (virtual clocks aside,
+    the page pulls the snapshot every 0.2 s)."""
+    for _ in range(round(timeout_s / 0.05)):
+        with contextlib.suppress(AssertionError):  # not drawn yet
+            if text_of(user, marker) == expected:
+                return
+        await asyncio.sleep(0.05)
+    assert text_of(user, marker) == expected
+
+
+async def test_main_screen_shows_the_snapshot(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "v_selected") == "8.0"
+    assert text_of(user, "v_wheel") == "7.6"
+    assert text_of(user, "v_gnss") == "8.0"
+    assert text_of(user, "source") == "GNSS"
+    assert text_of(user, "source_why") == "gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h"
+    assert text_of(user, "op_state") == "RUNNING"
+    assert text_of(user, "manual_state") == ""
+    assert text_of(user, "ndvi_sensors") == "0.612"
+    assert text_of(user, "ndvi_meters") == "0.587"
+    assert text_of(user, "rate_upper") == "138.9"
+    assert text_of(user, "applied_lower") == "141.2"
+    assert text_of(user, "ndvi_per_sensor") == "1: 0.605  2: 0.621  3: --  4: 0.610"
+    assert text_of(user, "target_lower") == "22.1"
+    assert text_of(user, "meter_upper") == "22.7"
+    assert text_of(user, "fan_lower") == "3020"
+    assert text_of(user, "faults") == "none"
+    assert text_of(user, "link_ecu") == "ECU: ok"
+    await user.should_see("km/h")
+    await user.should_see("kg/ha")
+
+
+async def test_main_screen_follows_new_snapshots(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(v_kmh=3.0, source="wheel", speed_why="wheel: CV 9.50 % ≥ 4.2 %"))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "source") == "wheel"
+    assert text_of(user, "source_why") == "wheel: CV 9.50 % ≥ 4.2 %"
+    hub.publish(working(t_s=12.1, v_kmh=6.5))
+    await shows(user, "v_selected", "6.5")
+    assert text_of(user, "source") == "GNSS"
+
+
+async def test_ecu_values_are_dashes_while_the_ecu_is_not_heard(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(ecu_live=False, ecu_link="lost", gnss_link="ok"))
+    register_pages(hub)
+    await user.open("/")
+    for marker in (
+        "v_selected",
+        "v_wheel",
+        "target_upper",
+        "meter_lower",
+        "applied_upper",
+        "fan_upper",
+        "faults",
+    ):
+        assert text_of(user, marker) == "--", marker
+    # What the terminal knows by itself stays: the GNSS speed, the NDVI, the rate it commands.
+    assert text_of(user, "v_gnss") == "8.0"
+    assert text_of(user, "rate_upper") == "138.9"
+    assert text_of(user, "link_ecu") == "ECU: lost"
+
+
+async def test_faults_in_plain_words_and_waiting_ecu_named(user: User) -> None:
+    hub = DisplayHub(default_config)
+    # bits 1 (GNSS_LOST) and 3 (UPPER_BLOCKED), and an undefined bit 12
+    hub.publish(working(faults=(1 << 1) | (1 << 3) | (1 << 12)))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "faults") == "GNSS speed lost; upper meter blocked; BIT12"
+    hub.publish(working(ecu_live=False, ecu_link="wait", ecu_where="socketcan:can0"))
+    await user.open("/")
+    assert text_of(user, "link_ecu") == "ECU: waiting (socketcan:can0)"
+
+
+async def test_language_switches_at_run_time(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(faults=1 << 3))
+    register_pages(hub)
+    await user.open("/")
+    await user.should_see("Speed")
+    user.find(marker="language").click()
+    user.find("简体中文").click()
+    assert i18n.language() == "zh"
+    await user.should_see("作业速度", retries=20)
+    await user.should_not_see("Speed, last minute")
+    await shows(user, "faults", "上层排肥器堵转")
+    assert text_of(user, "source") == "GNSS"
+    await user.should_see("km/h")  # units shown in both languages
+
+
+def test_speed_chart_marks_the_source_spans() -> None:
+    hist = [working(t_s=t / 10, source="wheel" if t < 30 else "gnss") for t in range(50)]
+    opts = speed_options(hist)
+    selected = opts["series"][2]
+    assert [p[1] for p in selected["data"][:2]] == [8.0, 8.0]
+    bands = selected["markArea"]["data"]
+    # charted at 2.5 Hz, ending with the latest snapshot: t 0.1, 0.5, ... 4.9
+    assert [(b[0]["name"], b[0]["xAxis"], b[1]["xAxis"]) for b in bands] == [
+        ("wheel", 0.1, 2.9),
+        ("GNSS", 3.3, 4.9),
+    ]
+    assert opts["xAxis"]["min"] == 0.1 and opts["xAxis"]["max"] == 4.9
+
+
+def test_charts_leave_gaps_while_the_ecu_is_not_heard() -> None:
+    hist = [working(t_s=1.0 + i / 10, ecu_live=i not in range(3, 7)) for i in range(9)]
+    sel = speed_options(hist)["series"][2]["data"]
+    assert [p[1] for p in sel] == [8.0, None, 8.0]  # t 1.0, 1.4, 1.8
+    meter = meter_options(hist)["series"][2]["data"]
+    assert [p[1] for p in meter] == [22.69, None, 22.69]
+
+
+def test_chart_window_is_the_last_minute() -> None:
+    hub = DisplayHub(default_config, history_s=60.0)
+    for i in range(700):
+        hub.publish(working(t_s=i / 10))
+    hist = hub.history()
+    assert len(hist) == 600
+    assert hist[0].t_s == pytest.approx(10.0) and hist[-1].t_s == pytest.approx(69.9)
+    opts = speed_options(hist)
+    assert opts["xAxis"]["min"] == pytest.approx(10.3)  # the first charted of the last minute
+    assert len(opts["series"][0]["data"]) == 150
+
+
+def test_track_points_every_metre_with_heading() -> None:
+    hub = DisplayHub(default_config)
+    # North at 2.22 m/s (8 km/h), 10 Hz: a point every metre, not every tick.
+    for i in range(50):
+        north = 0.222 * i
+        hub.publish(working(t_s=i / 10, lat=LAT0 + math.degrees(north / 6_371_000.0)))
+    total, points = hub.track_since(0)
+    # 0.222 m a tick: the first tick at or beyond 1 m from the last point is every 5th (1.11 m)
+    assert total == len(points) == 10
+    assert distance_m(points[0].lat, 0, points[-1].lat, 0) == pytest.approx(9.99, abs=1e-3)
+    assert all(p.heading_deg == pytest.approx(0.0, abs=1e-6) for p in points[1:])
+    assert points[1].rate_kg_ha == pytest.approx(283.1)  # applied, both layers
+    again, none = hub.track_since(total)
+    assert again == total and none == []
+
+
+def test_track_of_a_stopped_machine_is_not_metered() -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(meter_rpm=(0.0, 0.0), running=False))
+    (p,) = hub.track_since(0)[1]
+    assert not p.metering and p.rate_kg_ha == 0.0
+
+
+def test_swath_is_the_working_width_across_the_heading() -> None:
+    hub = DisplayHub(default_config)
+    for lat in (LAT0, LAT0 + math.degrees(2.0 / 6_371_000.0)):
+        hub.publish(working(lat=lat))
+    a, b = hub.track_since(0)[1]
+    quad = swath_quad(a, b, 3.6)
+    left, right = quad[0], quad[1]
+    assert distance_m(*left, *right) == pytest.approx(3.6, rel=1e-6)
+    assert bearing_deg(*left, *right) == pytest.approx(90.0)  # heading north: right is east
+    assert distance_m(*quad[1], *quad[2]) == pytest.approx(2.0, rel=1e-3)
+    tip, back_r, back_l = machine_arrow(LAT0, LON0, 90.0, 3.0)
+    assert tip == (LAT0, LON0)
+    mid = ((back_r[0] + back_l[0]) / 2, (back_r[1] + back_l[1]) / 2)
+    assert bearing_deg(*mid, *tip) == pytest.approx(90.0)  # points east, as headed
+    assert distance_m(*mid, *tip) == pytest.approx(3.0, rel=1e-6)
+    assert bearing_deg(*back_l, *back_r) == pytest.approx(180.0)  # right of east is south
+
+
+def test_rate_colour_scale() -> None:
+    assert rate_colour(0.0, 600.0) == "#bdbdbd"
+    assert rate_colour(1.0, 600.0) == "hsl(240, 80%, 45%)"
+    assert rate_colour(300.0, 600.0) == "hsl(120, 80%, 45%)"
+    assert rate_colour(900.0, 600.0) == "hsl(0, 80%, 45%)"
+
+
+@pytest.mark.parametrize(
+    ("host", "loopback"),
+    [
+        ("127.0.0.1", True),
+        ("127.0.0.2", True),
+        ("localhost", True),
+        ("::1", True),
+        ("0.0.0.0", False),
+        ("192.168.1.20", False),
+        ("cab-pc", False),
+    ],
+)
+def test_loopback_addresses(host: str, loopback: bool) -> None:
+    assert is_loopback(host) is loopback
+
+
+def test_any_other_address_needs_a_pin() -> None:
+    check_security(DisplayOptions("127.0.0.1", 8080, ""))
+    check_security(DisplayOptions("0.0.0.0", 8080, "4711"))
+    with pytest.raises(DisplayError, match=r"display\.pin"):
+        check_security(DisplayOptions("0.0.0.0", 8080, ""))
+    assert DisplayOptions("::1", 8081).url == "http://[::1]:8081"
+
+
+# ---- commands -------------------------------------------------------------------------------
+class Terminal:
+    """The terminal's command path as the display sees it: `post` answers at once."""
+
+    def __init__(self, answer: Callable[[object], CommandResult] | None = None) -> None:
+        self.sent: list[object] = []
+        self.answer = answer or (lambda c: CommandResult(True, f"{type(c).__name__} done"))
+
+    def post(self, command: object) -> Future[CommandResult]:
+        self.sent.append(command)
+        fut: Future[CommandResult] = Future()
+        fut.set_result(self.answer(command))
+        return fut
+
+
+async def settle(user: User, term: Terminal, count: int) -> None:
+    for _ in range(40):
+        if len(term.sent) >= count:
+            return
+        await asyncio.sleep(0.05)
+    assert len(term.sent) >= count, term.sent
+
+
+def pinned() -> TerminalConfig:
+    return loads_config('[display]\nhost = "0.0.0.0"\npin = "4711"\n')
+
+
+async def test_start_stop_pause_go_to_the_terminal(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "op_state") == "STOPPED"
+    user.find(marker="start").click()
+    user.find(marker="pause").click()
+    user.find(marker="stop").click()
+    await settle(user, term, 3)
+    assert term.sent == [op.Start(), op.Pause(), op.Stop()]
+
+
+async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/")
+    user.find(marker="manual_mode").click()  # the radio: pick "fixed"
+    (radio,) = user.find(marker="manual_mode").elements
+    radio.value = "fixed"  # type: ignore[attr-defined]
+    for marker, value in (("manual_upper", 120.0), ("manual_lower", 80.0)):
+        (field,) = user.find(marker=marker).elements
+        field.value = value  # type: ignore[attr-defined]
+    user.find(marker="manual_apply").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.SetManual("fixed", 120.0, 80.0, 0.0)]
+    hub.publish(working(t_s=13.0, manual=ManualView("fixed", 120.0, 80.0)))
+    await shows(user, "manual_state", "MANUAL 120.0 / 80.0 kg/ha")
+    hub.publish(working(t_s=13.1, manual=ManualView("percent", percent=-20.0)))
+    await shows(user, "manual_state", "MANUAL model -20 %")
+
+
+async def test_alarms_are_acknowledged(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    alarms = (
+        AlarmView("blocked_upper", "upper meter blocked (stopped by the ECU)", "active", 3.0),
+        AlarmView("gnss_lost", "GNSS lost: metering on the ground wheel", "acked", 1.0),
+    )
+    hub.publish(working(alarms=alarms))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "alarm_blocked_upper") == "upper meter blocked · active"
+    assert (
+        text_of(user, "alarm_gnss_lost") == "GNSS lost: metering on the ground wheel · acknowledged"
+    )
+    await user.should_not_see(marker="ack_gnss_lost")  # acknowledged already
+    user.find(marker="ack_blocked_upper").click()
+    user.find(marker="ack_all").click()
+    await settle(user, term, 2)
+    assert term.sent == [op.AckAlarm("blocked_upper"), op.AckAlarm(None)]
+    hub.publish(working(t_s=13.0, alarms=()))
+    await user.should_see(marker="alarm_none", retries=20)
+
+
+async def test_counters_shown_and_reset_apart(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    field = CounterView(area_ha=1.2345, kg=(170.2, 168.9), work_s=3725.0, distance_m=3429.0)
+    hub.publish(working(count_field=field, count_season=CounterView(area_ha=12.5)))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "count_field_area") == "1.234 ha"  # 1.2345 rounds half to even
+    assert text_of(user, "count_field_kg_upper") == "170.2 kg"
+    assert text_of(user, "count_field_time") == "1:02:05"
+    assert text_of(user, "count_field_distance") == "3429 m"
+    assert text_of(user, "count_season_area") == "12.500 ha"
+    user.find(marker="reset_season").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.ResetCounter("season")]
+
+
+async def test_a_remote_browser_needs_the_pin_to_operate(
+    user: User, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(pages, "client_is_remote", lambda: True)
+    term = Terminal()
+    hub = DisplayHub(pinned, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "v_selected") == "8.0"  # viewing needs no PIN
+    user.find(marker="start").click()
+    await user.should_see(marker="pin")
+    user.find(marker="pin").type("1234")
+    user.find(marker="pin_ok").click()
+    await user.should_see("wrong PIN")
+    assert term.sent == []
+    user.find(marker="pin").type("4711")
+    user.find(marker="pin_ok").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.Start()]
+    user.find(marker="stop").click()  # once per tab
+    await settle(user, term, 2)
+    assert term.sent == [op.Start(), op.Stop()]
+
+
+async def test_the_cab_screen_itself_needs_no_pin(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(pinned, term.post)
+    hub.publish(working(operator="running"))
+    register_pages(hub)
+    await user.open("/")  # the simulated browser is on 127.0.0.1, as the cab PC's is
+    user.find(marker="stop").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.Stop()]
+    await user.should_not_see(marker="pin")
+
+
+async def test_a_refused_value_is_shown_at_its_field_and_not_sent(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/control")
+    (split,) = user.find(marker="field_rate.split_upper").elements
+    split.value = 1.5  # type: ignore[attr-defined]
+    user.find(marker="apply_rate").click()
+    await shows(user, "answer_rate", "refused: see the field marked")
+    assert split.props["error"] is True
+    assert "1" in str(split.props["error-message"])  # the configuration's own reason
+    assert term.sent == []
+
+
+async def test_a_pid_gain_goes_to_the_ecu_and_its_answer_is_shown(user: User) -> None:
+    def answer(c: object) -> CommandResult:
+        assert isinstance(c, op.ApplySettings)
+        if c.values.get("pid_kp") == 9.0:
+            return CommandResult(False, "refused", {"ecu.pid_kp": "ECU: out of range"})
+        return CommandResult(True, "settings [ecu] applied, saved to demo-config.toml")
+
+    term = Terminal(answer)
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/control")
+    (kp,) = user.find(marker="field_ecu.pid_kp").elements
+    kp.value = 0.02  # type: ignore[attr-defined]
+    user.find(marker="apply_ecu").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.ApplySettings("ecu", {"pid_kp": 0.02})]  # the changed gain only
+    await shows(user, "answer_ecu", "settings [ecu] applied, saved to demo-config.toml")
+    kp.value = 9.0  # type: ignore[attr-defined]
+    user.find(marker="apply_ecu").click()
+    await settle(user, term, 2)
+    await shows(user, "answer_ecu", "refused")
+    assert kp.props["error-message"] == "ECU: out of range"
+    hub.publish(working(t_s=13.0, settings_pending=True))
+    await shows(user, "pending", "waiting for the ECU's acknowledgement …")
+
+
+async def test_rate_curve_follows_the_model_typed(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(ndvi=0.55, rate_model_kg_ha=(150.0, 150.0)))
+    register_pages(hub)
+    await user.open("/control")
+    (chart,) = user.find(kind=ui.echart).elements
+    line = chart.options["series"][0]["data"]
+    assert line[0] == [0.0, 600.0] and line[-1] == [1.0, 30.0]  # 450 at 0.3, 150 at 0.8
+    (r1,) = user.find(marker="field_rate.linear.rate_1_kg_ha").elements
+    r1.value = 250.0  # type: ignore[attr-defined]
+    line = chart.options["series"][0]["data"]
+    assert [p for p in line if p[0] == 0.8] == [[0.8, 250.0]]
+    await shows(user, "operating_point", "operating point: NDVI 0.550 → 300.0 kg/ha")
+
+
+async def test_catch_test_wizard(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/calibration")
+    assert text_of(user, "cal_state") == "no calibration running"
+    user.find(marker="start_catch").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.StartCatchTest("upper", 20.0, 20.0)]
+    view = CalibrationView("catch", "weigh", "upper meter: 20.000 revolutions", 1.0)
+    hub.publish(working(t_s=13.0, operator="calibrating", calibration=view))
+    await shows(user, "cal_state", "Metering catch test · weigh and enter kg")
+    (kg,) = user.find(marker="cal_kg").elements
+    kg.value = 6.02  # type: ignore[attr-defined]
+    user.find(marker="finish_catch").click()
+    await settle(user, term, 2)
+    assert term.sent[1] == op.FinishCatchTest(6.02)
+    done = CalibrationView(
+        "catch",
+        "done",
+        "upper: 0.3010 kg/rev",
+        1.0,
+        {"kg_per_rev": 0.301},
+        "machine.kg_per_rev_upper",
+    )
+    hub.publish(working(t_s=13.1, operator="calibrating", calibration=done))
+    await shows(user, "cal_result_kg_per_rev", "kg per revolution: 0.301")
+    user.find(marker="cal_apply").click()
+    await settle(user, term, 3)
+    assert term.sent[2] == op.CloseCalibration(apply=True)
+
+
+async def test_device_test_shows_the_last_lines(user: User) -> None:
+    lines = [DeviceLine(1.5, "$GNRMC,...*7A", "RMC 8.00 km/h")]
+    term = Terminal(lambda c: CommandResult(True, "", data=lines))
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/communication")
+    user.find(marker="test_gnss").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.TestDevice("gnss")]
+    (table,) = user.find(marker="lines_gnss").elements
+    for _ in range(20):
+        if table.rows:  # type: ignore[attr-defined]
+            break
+        await asyncio.sleep(0.05)
+    assert table.rows == [{"t": "1.5", "raw": "$GNRMC,...*7A", "decoded": "RMC 8.00 km/h"}]  # type: ignore[attr-defined]
+
+
+def test_a_taken_port_is_said_before_anything_starts() -> None:
+    import socket
+
+    from topdress.display.process import DisplayLink
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        link = DisplayLink(object(), DisplayOptions("127.0.0.1", port), print)  # type: ignore[arg-type]
+        with pytest.raises(DisplayError, match=f"127.0.0.1:{port} is in use"):
+            link.start()
+        assert link.pid is None  # no display process was started

@@ -1,0 +1,81 @@
+"""The one catalogue: both languages for every string, and every string the UI uses exists."""
+
+from __future__ import annotations
+
+import re
+import string
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from topdress import i18n
+from topdress.i18n import UnknownLanguage, parse_language, set_language, tr
+from topdress.i18n.catalogue import CATALOGUE
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "topdress"
+
+
+@pytest.fixture(autouse=True)
+def english() -> Iterator[None]:
+    set_language("en")
+    yield
+    set_language("en")
+
+
+def _fields(text: str) -> set[str]:
+    return {name for _, name, _, _ in string.Formatter().parse(text) if name}
+
+
+def test_every_entry_has_both_languages_with_the_same_placeholders() -> None:
+    for key, (en, zh) in CATALOGUE.items():
+        assert en.strip() and zh.strip(), key
+        assert _fields(en) == _fields(zh), key
+
+
+def test_chinese_entries_are_translated() -> None:
+    # Identical texts are allowed only where the term is the same in both (units, acronyms).
+    same = {k for k, (en, zh) in CATALOGUE.items() if en == zh}
+    assert all(
+        k.startswith("unit.") or re.fullmatch(r"[A-Za-z0-9/ ]+", CATALOGUE[k][0]) for k in same
+    )
+    assert len(same) < len(CATALOGUE) / 4
+
+
+def test_every_key_used_in_the_code_is_in_the_catalogue() -> None:
+    used: set[str] = set()
+    for path in [*(SRC / "display").rglob("*.py"), SRC / "terminal" / "console.py"]:
+        used |= set(re.findall(r"""\btr\(\s*["']([a-z_]+\.[A-Za-z0-9_.]+)["']""", path.read_text()))
+    assert used, "no tr() call found"
+    missing = sorted(k for k in used if k not in CATALOGUE)
+    assert missing == []
+
+
+def test_keys_built_at_run_time_exist() -> None:
+    from topdress.terminal.console import FAULT_NAMES
+
+    for name in FAULT_NAMES:
+        assert f"fault.{name}" in CATALOGUE
+    for state in ("ok", "wait", "lost", "no_fix", "silent"):
+        assert f"link.{state}" in CATALOGUE
+    for source in ("gnss", "wheel", "none"):
+        assert f"source.{source}" in CATALOGUE
+
+
+def test_switching_the_language() -> None:
+    v = i18n.version()
+    assert tr("screen.control") == "Control"
+    assert set_language("zh-CN") == "zh"
+    assert i18n.version() == v + 1
+    assert tr("screen.control") == "控制设置"
+    assert tr("screen.control", "en") == "Control"
+    assert tr("link.partial", fresh="3/4") == "3/4 有效"
+    set_language("zh")  # no change, no redraw
+    assert i18n.version() == v + 1
+
+
+@pytest.mark.parametrize("code", ["fr", "", "english"])
+def test_unknown_languages_are_refused(code: str) -> None:
+    with pytest.raises(UnknownLanguage, match="en, zh"):
+        parse_language(code)
+    assert i18n.language() == "en"
