@@ -60,6 +60,18 @@ def test_keys_built_at_run_time_exist() -> None:
         assert f"link.{state}" in CATALOGUE
     for source in ("gnss", "wheel", "none"):
         assert f"source.{source}" in CATALOGUE
+    # the console's: operator states, alarms and calibrations by their names
+    for state in ("stopped", "running", "paused", "calibrating"):
+        assert f"op.state.{state}" in CATALOGUE
+    for alarm in ("gnss_lost", "crop_lost", "ecu_lost"):
+        assert f"alarm.{alarm}" in CATALOGUE
+    for kind in ("off_rate", "blocked", "fan_low"):
+        assert f"alarm.{kind}_upper" in CATALOGUE and f"alarm.{kind}_lower" in CATALOGUE
+    for state in ("active", "acked", "cleared"):
+        assert f"alarm.state.{state}" in CATALOGUE
+    for cal in ("catch", "wheel", "fan", "step.running", "step.weigh", "step.drive", "step.done"):
+        assert f"cal.{cal}" in CATALOGUE
+    assert "cal.step.aborted" in CATALOGUE
 
 
 def test_switching_the_language() -> None:

@@ -217,7 +217,7 @@ def test_ecu_powered_after_the_terminal_is_waited_for_then_meters(tmp_path: Path
         s = rig.term.snapshot
         assert s.gnss_link == "ok" and s.crop_link == "ok" and s.rate_kg_ha[0] > 0
         assert f"ecu=wait(virtual:{channel})" in render_line(s)
-        assert f"ECU wait (virtual:{channel})" in render_lines(s)[0]
+        assert f"ECU waiting (virtual:{channel})" in render_lines(s)[0]
         assert not rig.world.ecu.state.running
         rig.ecu_off = False
         rig.run(12.0)

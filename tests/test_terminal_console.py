@@ -3,11 +3,20 @@
 from __future__ import annotations
 
 import io
+import unicodedata
+from collections.abc import Iterator
 from dataclasses import replace
+from pathlib import Path
 
+import pytest
+
+from topdress.i18n import set_language, tr
 from topdress.protocol import Fault
+from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
-from topdress.terminal.console import Console, fault_names, render_line, render_lines
+from topdress.terminal.calibration import CalibrationView
+from topdress.terminal.console import Console, fault_names, render_line, render_lines, width
+from topdress.terminal.operator import ManualView
 
 WORKING = Snapshot(
     t_s=12.3,
@@ -34,6 +43,18 @@ WORKING = Snapshot(
 )
 
 
+@pytest.fixture(autouse=True)
+def english() -> Iterator[None]:
+    set_language("en")
+    yield
+    set_language("en")
+
+
+def columns(line: str) -> int:
+    """Terminal columns, counted here independently of the console's own helper."""
+    return sum(2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in line)
+
+
 def test_fault_names_follow_the_fault_word() -> None:
     assert fault_names(0) == []
     assert fault_names(int(Fault.CMD_TIMEOUT | Fault.NO_SPEED)) == ["CMD_TIMEOUT", "NO_SPEED"]
@@ -45,7 +66,7 @@ def test_fault_names_follow_the_fault_word() -> None:
 def test_status_block_shows_every_figure() -> None:
     text = "\n".join(render_lines(WORKING))
     for part in (
-        "8.02 km/h from gnss",
+        "8.02 km/h from GNSS",
         "wheel  7.61",
         "GNSS  8.00 km/h",
         "CV 2.51 % (uniform)",
@@ -54,7 +75,7 @@ def test_status_block_shows_every_figure() -> None:
         "target  22.09 /  22.09 r/min",
         "actual  22.69 /  22.50 r/min",
         "3020 /  3000 rpm",
-        "faults: GNSS_LOST, UPPER_FAN_LOW",
+        "faults:  GNSS speed lost  upper fan too slow",
         "ECU ok",
         "GNSS ok",
         "CROP 3/4",
@@ -111,7 +132,7 @@ def test_ecu_values_are_dashes_while_the_ecu_is_lost() -> None:
     block = "\n".join(render_lines(lost))
     for stale in ("8.02", "7.61", "2.51", "uniform", "22.09", "22.69", "3020", "RUNNING"):
         assert stale not in block, stale
-    assert "GNSS_LOST" not in block and "faults: --" in block
+    assert "GNSS_LOST" not in block and "faults:  --" in block
     assert "speed      -- km/h from --    wheel    --" in block
     assert "target     -- /     -- r/min   actual     -- /     -- r/min" in block
     # the columns stay put: the figures where they were
@@ -130,42 +151,107 @@ def test_ecu_values_are_dashes_while_the_ecu_is_lost() -> None:
 
 def test_ecu_wait_says_where_the_terminal_listens() -> None:
     waiting = replace(Snapshot(), ecu_where="socketcan:can0")
-    assert "ECU wait (socketcan:can0)" in render_lines(waiting)[0]
+    assert "ECU waiting (socketcan:can0)" in render_lines(waiting)[0]
     assert " ecu=wait(socketcan:can0) " in render_line(waiting)
     # once it works the place is not repeated
     assert " ecu=ok " in render_line(replace(WORKING, ecu_where="socketcan:can0"))
 
 
 def test_the_block_fits_80_columns_and_shows_the_operator_state() -> None:
-    from topdress.terminal.alarms import AlarmView
-    from topdress.terminal.calibration import CalibrationView
-    from topdress.terminal.operator import ManualView
-
-    busy = replace(
-        WORKING,
-        ecu_link="wait",
-        ecu_where="socketcan:can0",
-        faults=0x1FF,
-        operator="running",
-        manual=ManualView("fixed", 200.0, 100.0),
-        speed_why="gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h",
-        alarms=(
-            AlarmView("blocked_lower", "lower meter blocked", "active", 3.0),
-            AlarmView("off_rate_upper", "upper meter off rate", "acked", 2.0),
-            AlarmView("crop_lost", "crop sensors lost", "cleared", 1.0),
-        ),
-        calibration=CalibrationView("catch", "weigh", "upper meter: 20.012 revolutions", 1.0),
-        counters={f"counter_{i}": i * 1000 for i in range(12)},
-        last_event="GNSS lost (serial:/dev/ttyUSB0: [Errno 2] could not open port " + "x" * 80,
-    )
-    lines = render_lines(busy)
-    assert max(len(x) for x in lines) <= 80
+    lines = render_lines(BUSY)
+    assert max(columns(x) for x in lines) <= 80
     text = "\n".join(lines)
-    assert "operator running      rate manual 200.0/100.0 kg/ha" in text
+    assert "operator RUNNING           rate MANUAL 200.0 / 100.0 kg/ha" in text
+    # waiting for the ECU with a long bus name, the first line packs so the run state shows
+    assert lines[0].endswith("  ECU waiting (socketcan:can0)  GNSS ok  CROP 3/4 fresh  RUNNING")
     assert "source  gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h" in text
-    assert "alarms  blocked_lower  off_rate_upper (acked)  crop_lost (cleared)" in text
-    assert "calib   catch weigh 100 %: upper meter: 20.012 revolutions" in text
-    # every counter is shown, on as many lines as it takes
+    assert "alarms  lower meter blocked  upper meter off rate (acknowledged)" in text
+    assert "crop sensors lost: no NDVI (gone, not acknowledged)" in text
+    assert "calib   Metering catch test weigh and enter kg 100 %: upper meter: 20.012" in text
+    # every fault and every counter is shown, on as many lines as it takes
+    for name in fault_names(0x1FF):
+        assert tr(f"fault.{name}") in text, name
     for i in range(12):
         assert f"counter_{i} {i * 1000}" in text
-    assert lines[-1].endswith("...")
+
+
+BUSY = replace(
+    WORKING,
+    ecu_link="wait",
+    ecu_where="socketcan:can0",
+    faults=0x1FF,
+    operator="running",
+    manual=ManualView("fixed", 200.0, 100.0),
+    speed_why="gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h",
+    alarms=(
+        AlarmView("blocked_lower", "lower meter blocked", "active", 3.0),
+        AlarmView("off_rate_upper", "upper meter off rate", "acked", 2.0),
+        AlarmView("crop_lost", "crop sensors lost", "cleared", 1.0),
+    ),
+    calibration=CalibrationView("catch", "weigh", "upper meter: 20.012 revolutions", 1.0),
+    counters={f"counter_{i}": i * 1000 for i in range(12)},
+    last_event="GNSS lost (serial:/dev/ttyUSB0: [Errno 2] could not open port " + "x" * 80,
+)
+
+
+def test_the_block_follows_the_language_and_fits_80_columns_in_chinese() -> None:
+    lost = replace(BUSY, ecu_live=False, ecu_link="lost", operator="stopped", manual=ManualView())
+    set_language("zh")
+    for snap in (WORKING, BUSY, lost, Snapshot()):
+        lines = render_lines(snap)
+        assert max(columns(x) for x in lines) <= 80, lines
+        assert [width(x) for x in lines] == [columns(x) for x in lines]
+    text = "\n".join(render_lines(BUSY))
+    for key in ("con.speed", "con.operator", "con.alarms", "count.field", "count.season"):
+        assert tr(key) in text, key
+    assert f"{tr('link_name.ecu')} {tr('link.wait')} (socketcan:can0)" in text
+    assert tr("op.state.running") == "作业中" and tr("op.state.running") in text
+    assert tr("alarm.blocked_lower") in text and tr("alarm.state.acked") in text
+    assert tr("manual.shown_fixed", upper="200.0", lower="100.0") in text
+    assert tr("cal.catch") in text and tr("cal.step.weigh") in text
+    working = "\n".join(render_lines(WORKING))
+    assert f"来自 {tr('source.gnss')}" in working and f"{tr('con.crop')} 3/4 有效" in working
+    assert tr("fault.GNSS_LOST") in working and tr("fault.UPPER_FAN_LOW") in working
+    assert "GNSS speed lost" not in working and "RUNNING" not in working
+    # the ECU stopped: the catalogue's word for it
+    stopped = "\n".join(render_lines(replace(WORKING, running=False)))
+    assert tr("op.state.stopped") == "已停止" and "已停止" in stopped
+    assert "alarms" not in working and tr("alarm.none") == "无报警" and "无报警" in working
+    # the compact line for logs stays English
+    assert render_line(WORKING).startswith("t=12.3s v=8.02km/h src=gnss cv=2.51%")
+
+
+def test_switching_back_to_english_at_the_next_redraw() -> None:
+    out = io.StringIO()
+    con = Console(out, tty=True, period_s=0.3)
+    set_language("zh")
+    con.update(WORKING, 0.0)
+    set_language("en")
+    con.update(WORKING, 0.3)
+    first, second = out.getvalue().split(f"\x1b[{len(render_lines(WORKING))}F")
+    assert "作业中" in first and "速度" in first
+    assert "RUNNING" not in first
+    assert "RUNNING" in second and "speed" in second and "作业中" not in second
+    assert not any("\u4e00" <= c <= "\u9fff" for c in second)
+
+
+def test_long_chinese_text_is_cut_by_columns() -> None:
+    set_language("zh")
+    long_event = replace(WORKING, last_event="控制器丢失" * 30)
+    last = render_lines(long_event)[-1]
+    assert last.endswith("...") and columns(last) in (79, 80)
+
+
+def test_the_configured_language_applies_at_start_without_the_display(tmp_path: Path) -> None:
+    from topdress.cli import main
+    from topdress.i18n import language
+
+    cfg = tmp_path / "t.toml"
+    # a CAN interface that does not exist: the run stops right after the language is applied
+    cfg.write_text(
+        f'[log]\ndir = "{tmp_path}"\n[display]\nlanguage = "zh"\n'
+        '[can]\ninterface = "no_such_interface"\n'
+    )
+    assert main(["run", "--config", str(cfg), "--no-display", "--duration", "1"]) == 2
+    assert language() == "zh"
+    assert "已停止" in "\n".join(render_lines(Snapshot()))

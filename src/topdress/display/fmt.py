@@ -6,7 +6,9 @@ from nicegui import ui
 
 from topdress.i18n import tr
 from topdress.terminal.app import Snapshot
-from topdress.terminal.console import fault_names
+from topdress.terminal.console import fault_texts, link_text
+
+__all__ = ["ecu", "faults_text", "link_text", "num", "restyle"]
 
 
 def num(value: float | None, spec: str) -> str:
@@ -22,17 +24,7 @@ def faults_text(s: Snapshot) -> str:
     """The fault word in plain words (the catalogue's), "--" while the ECU is not heard."""
     if not s.ecu_live:
         return "--"
-    names = fault_names(s.faults)
-    if not names:
-        return tr("fault.none")
-    return "; ".join(tr(f"fault.{n}") if not n.startswith("BIT") else n for n in names)
-
-
-def link_text(state: str) -> str:
-    """A link state in words: "ok", "wait", "lost", "no fix", "silent", or "3/4" sensors."""
-    if "/" in state:
-        return tr("link.partial", fresh=state)
-    return tr(f"link.{state.replace(' ', '_')}")
+    return "; ".join(fault_texts(s.faults)) or tr("fault.none")
 
 
 def restyle(element: ui.element, classes: str) -> None:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, TextIO
 
 import can
 
+from topdress import i18n
 from topdress.config import TerminalConfig, loads_config, redacted_text
 from topdress.errors import ConfigError, DeviceError
 from topdress.log.session import SessionLog
@@ -96,6 +97,8 @@ def run_terminal(
 
     `start`: the meters start at once; else at the operator's start (typed on `keyboard`, or
     from the display). `config_path`: where settings changed while running are saved."""
+    # The console speaks the configured language even without the display, which may switch it.
+    i18n.set_language(cfg.display.language)
     console = Console(out, period_s=cfg.display.refresh_s)
     if cfg.can.interface == "virtual" and machine is None:
         console.message(
