@@ -3,7 +3,9 @@
 Prints exactly:
     instructions_per_step: N   callgrind, collecting only inside td_app_step, td_app_rx and
                                td_app_tx_pop, over 20,000 steps of bench/ecu_bench_main.c
-                               (both motors running, command in every 500 ms, status drained)
+                               (both motors running, command and GNSS time in every 500 ms, wheel
+                               edge times, status drained), default speed mode
+    instructions_per_step_fused: N   the same in the fused speed mode
     cortex_m4_text_bytes: N    text of a linked Cortex-M4 image (bench/ecu_cm4_main.c + the core +
     cortex_m4_ram_bytes: N     what it needs of newlib-nano/libgcc; --gc-sections, nosys specs),
                                data + bss including the one static td_app_t a port owns
@@ -75,14 +77,14 @@ def ensure_tools() -> None:
     run(["apt-get", "install", "-y", "-qq", "--no-install-recommends", *missing], env=env)
 
 
-def instructions_per_step() -> int:
+def instructions_per_step(speed_mode: int) -> int:
     exe = BUILD / "ecu_bench"
     src = [str(p) for p in [*CORE, REPO / "bench" / "ecu_bench_main.c"]]
     run(["gcc", *WARN, "-O2", *INCLUDES, *src, "-lm", "-o", str(exe)])
     out_file = BUILD / "callgrind.out"
     toggles = [f"--toggle-collect={f}" for f in COLLECT]
     cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out_file}", *toggles]
-    printed = run([*cmd, str(exe), str(STEPS)])
+    printed = run([*cmd, str(exe), str(STEPS), str(speed_mode)])
     m = re.match(r"steps (\d+) frames (\d+) meter_rpm ([\d.]+) ([\d.]+)", printed)
     if m is None or int(m[1]) != STEPS:
         sys.exit(f"ecu_bench: unexpected driver output {printed!r}")
@@ -91,7 +93,10 @@ def instructions_per_step() -> int:
     totals = re.search(r"^totals:\s+(\d+)", out_file.read_text(), re.MULTILINE)
     if totals is None:
         sys.exit("ecu_bench: no totals in the callgrind output")
-    log(f"host gcc -O2: {totals[1]} instructions in {STEPS} steps; driver: {printed.strip()}")
+    log(
+        f"host gcc -O2, speed mode {speed_mode}: {totals[1]} instructions in {STEPS} steps; "
+        f"driver: {printed.strip()}"
+    )
     return round(int(totals[1]) / STEPS)
 
 
@@ -111,9 +116,11 @@ def cortex_m4_sizes() -> tuple[int, int]:
 def main() -> int:
     ensure_tools()
     BUILD.mkdir(parents=True, exist_ok=True)
-    ips = instructions_per_step()
+    ips = instructions_per_step(0)
+    ips_fused = instructions_per_step(3)
     text, ram = cortex_m4_sizes()
     print(f"instructions_per_step: {ips}")
+    print(f"instructions_per_step_fused: {ips_fused}")
     print(f"cortex_m4_text_bytes: {text}")
     print(f"cortex_m4_ram_bytes: {ram}")
     return 0

@@ -4,10 +4,11 @@
  *        callgrind, collecting only inside td_app_step, td_app_rx and td_app_tx_pop).
  *
  * The ECU is the port's one td_app_t; a small plant closes the loop: the tractor at 5 km/h
- * (ground wheel with 5 % slip), two metering motors (full duty = 60 r/min, tau 0.15 s,
+ * (ground wheel with 5 % slip, its last pulse's time from a capture timer), two metering motors (full duty = 60 r/min, tau 0.15 s,
  * 6400 counts/rev) and two fans (full duty = 4000 rpm, tau 0.5 s, 30 pulses/rev). The PC
  * command goes in every 500 ms; all frames are drained after every step.
- * Usage: ecu_bench [steps] (default 20000 steps of 10 ms). Prints "steps N frames M meter_rpm X".
+ * The PC also sends PcGnssTime with every command. Usage: ecu_bench [steps] [speed_mode]
+ * (default 20000 steps of 10 ms, mode 0). Prints "steps N frames M meter_rpm X Y".
  */
 #include <math.h>
 #include <stdio.h>
@@ -23,6 +24,7 @@ int main(int argc, char **argv) {
     const unsigned long steps = argc > 1 ? strtoul(argv[1], NULL, 10) : 20000ul;
     td_params_t p;
     td_params_default(&p);
+    p.speed_mode = argc > 2 ? (uint8_t)strtoul(argv[2], NULL, 10) : 0u;
     if (td_app_init(&app, &p, 0u) != TD_OK) {
         return 1;
     }
@@ -39,6 +41,9 @@ int main(int argc, char **argv) {
             td_can_frame_t f;
             (void)td_proto_encode_command(&c, &f);
             (void)td_app_rx(&app, &f, now);
+            const td_gnss_time_t g = { true, v_kmh, 250u, (uint8_t)(i / 50ul) };
+            (void)td_proto_encode_gnss_time(&g, &f);
+            (void)td_app_rx(&app, &f, now);
         }
         now += STEP_US;
         wheel += (double)(wheel_pulses_per_s * DT_S);
@@ -48,9 +53,13 @@ int main(int argc, char **argv) {
             meter[l] += (double)(meter_rpm[l] / 60.0f * DT_S * (float)p.meter_counts_per_rev);
             fan[l] += (double)(fan_rpm[l] / 60.0f * DT_S * (float)p.fan_ppr);
         }
+        /* the last pulse came frac(wheel) pulses ago */
+        const double back_us = (wheel - floor(wheel)) / (double)wheel_pulses_per_s * 1e6;
         const td_io_in_t in = { (uint32_t)wheel,
                                 { (uint32_t)meter[0], (uint32_t)meter[1] },
-                                { (uint32_t)fan[0], (uint32_t)fan[1] } };
+                                { (uint32_t)fan[0], (uint32_t)fan[1] },
+                                now - (uint32_t)back_us,
+                                1u };
         (void)td_app_step(&app, now, &in, &out);
         td_can_frame_t tx;
         while (td_app_tx_pop(&app, &tx)) {

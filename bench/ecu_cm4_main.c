@@ -10,6 +10,7 @@ static td_app_t app;
 
 volatile uint32_t hw_now_us;
 volatile uint32_t hw_counter[5];
+volatile uint32_t hw_wheel_capture_us;
 volatile float hw_pwm[4];
 volatile uint8_t hw_rx_ready;
 volatile uint32_t hw_tx_count;
@@ -26,7 +27,11 @@ int main(void) {
             td_can_frame_t rx = { 0x0A5C6465u, 1u, 8u, { 0x0A, 0, 0, 0, 0, 0, 0, 0 } };
             (void)td_app_rx(&app, &rx, now);
         }
-        const td_io_in_t in = { hw_counter[0], { hw_counter[1], hw_counter[2] }, { hw_counter[3], hw_counter[4] } };
+        const td_io_in_t in = { hw_counter[0],
+                                { hw_counter[1], hw_counter[2] },
+                                { hw_counter[3], hw_counter[4] },
+                                hw_wheel_capture_us,
+                                1u };
         td_io_out_t out;
         (void)td_app_step(&app, now, &in, &out);
         hw_pwm[0] = out.meter_duty[0];

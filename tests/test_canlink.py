@@ -380,7 +380,7 @@ def test_bad_frames_counted_and_ignored(rig: Rig) -> None:
         can.Message(arbitration_id=0x123, data=b"\x00" * 8),  # foreign
         can.Message(arbitration_id=ids.status, data=b"\x0a\x00"),  # short
         can.Message(arbitration_id=ids.status, data=b"\x07" + b"\x00" * 7),  # RunState 7
-        can.Message(arbitration_id=ids.diag, data=b"\x03" + b"\x00" * 7),  # source 3
+        can.Message(arbitration_id=ids.targets, data=bytes(4) + b"\xc9" + bytes(3)),  # duty 100.5
         can.Message(arbitration_id=ids.param_ack, data=b"\x01\x09" + b"\x00" * 6),  # result 9
     ]
     for msg in bad:

@@ -191,13 +191,15 @@ def test_source_decisions_happen_every_500_ms_and_status_every_100_ms() -> None:
     assert loop.t_us - T0_US == 5_000_000 and loop.t_us > U32
     # every 500 ms; the first step only starts the estimator: 9 updates in 5 s
     assert loop.ecu.state.wheel_updates == 9
-    # every 100 ms: status, diag, speeds, targets, in that order
+    # every 100 ms: status, diag, speeds, targets, fused, fused aux, in that order
     per_period = [i for t, i in ids if t == status_t[-1]]
     assert per_period == [
         DEFAULT_IDS.status,
         DEFAULT_IDS.diag,
         DEFAULT_IDS.speeds,
         DEFAULT_IDS.targets,
+        DEFAULT_IDS.fused,
+        DEFAULT_IDS.fused_aux,
     ]
 
 

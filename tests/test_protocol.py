@@ -52,6 +52,9 @@ def test_frame_ids_are_the_dbc_ids_and_the_papers() -> None:
         "EcuTargets": DEFAULT_IDS.targets,
         "PcParamSet": DEFAULT_IDS.param_set,
         "EcuParamAck": DEFAULT_IDS.param_ack,
+        "PcGnssTime": DEFAULT_IDS.gnss_time,
+        "EcuFused": DEFAULT_IDS.fused,
+        "EcuFusedAux": DEFAULT_IDS.fused_aux,
     }
     assert DEFAULT_IDS.status == 0x185C6465 and DEFAULT_IDS.command == 0x0A5C6465
     assert all(m.is_extended_frame and m.length == 8 for m in db.messages)
@@ -60,13 +63,14 @@ def test_frame_ids_are_the_dbc_ids_and_the_papers() -> None:
 def test_enum_codes_match_the_dbc_value_tables() -> None:
     diag = database().get_message_by_name("EcuDiag")
     sources = {int(k): str(v) for k, v in diag.get_signal_by_name("SpeedSource").choices.items()}
-    assert sources == {Source.WHEEL.code: "Wheel", Source.GNSS.code: "Gnss", 2: "None"}
-    assert Source.NONE.code == 2
+    assert sources == {Source.WHEEL.code: "Wheel", Source.GNSS.code: "Gnss", 2: "None", 3: "Fused"}
+    assert Source.NONE.code == 2 and Source.FUSED.code == 3
     modes = {int(k): str(v) for k, v in diag.get_signal_by_name("SpeedMode").choices.items()}
     assert modes == {
         SpeedMode.DUAL.code: "Dual",
         SpeedMode.WHEEL_ONLY.code: "WheelOnly",
         SpeedMode.GNSS_ONLY.code: "GnssOnly",
+        SpeedMode.FUSED.code: "Fused",
     }
     assert (Compare.GNSS.code, Compare.WHEEL.code) == (0, 1)
     ack = database().get_message_by_name("EcuParamAck").get_signal_by_name("AckResult")
@@ -176,8 +180,9 @@ def test_decode_diag_speeds_targets() -> None:
     d = decode((DEFAULT_IDS.diag, undefined_cv))
     assert isinstance(d, EcuDiag)
     assert d.cv_pct is None and d.source is Source.NONE and d.compare is Compare.WHEEL
-    with pytest.raises(ProtocolError, match="SpeedSource: undefined value 3"):
-        decode((DEFAULT_IDS.diag, bytes([0x03, 0, 0, 0, 0, 0, 0, 0])))
+    fused = decode((DEFAULT_IDS.diag, bytes([0x03 | 0x0C, 0, 0, 0, 0, 0, 0, 0])))
+    assert isinstance(fused, EcuDiag)
+    assert (fused.source, fused.mode) == (Source.FUSED, SpeedMode.FUSED)
 
     speeds = bytes([0x62, 0x02, 0xFF, 0xFF, 0x62, 0x02, 0x07, 0x00])  # 6.10, n/a, 6.10, 7
     assert decode((DEFAULT_IDS.speeds, speeds)) == EcuSpeeds(6.1, None, 6.1, 7)
@@ -191,8 +196,8 @@ def test_decode_diag_speeds_targets() -> None:
 
 def test_parameter_table_covers_every_id_once() -> None:
     specs = params()
-    assert [s.id for s in specs] == list(range(1, 28))
-    assert len({s.key for s in specs}) == 27
+    assert [s.id for s in specs] == list(range(1, 38))
+    assert len({s.key for s in specs}) == 37
     assert param("CvThreshold") is param(8) is param("cv_threshold_pct")
     assert param("kg_per_rev[1]").signal == "LowerKgPerRev"
     assert (param(8).unit, param(8).minimum, param(8).maximum, param(8).scale) == (
@@ -201,7 +206,7 @@ def test_parameter_table_covers_every_id_once() -> None:
         50.0,
         0.01,
     )
-    for bad in (0, 28, "kg_per_rev", "Nope"):
+    for bad in (0, 38, "kg_per_rev", "Nope"):
         with pytest.raises(ProtocolError, match="unknown ECU parameter"):
             param(bad)
 
@@ -237,7 +242,7 @@ def test_parameter_values_are_checked() -> None:
     with pytest.raises(ProtocolError, match=r"QueueLength = 17 outside 2..16"):
         decode((DEFAULT_IDS.param_set, bad_raw))
     with pytest.raises(ProtocolError, match="PcParamSet"):
-        decode((DEFAULT_IDS.param_set, bytes([28, 0, 0, 0, 1, 0, 0, 0])))
+        decode((DEFAULT_IDS.param_set, bytes([38, 0, 0, 0, 1, 0, 0, 0])))
 
 
 def test_parameter_ack() -> None:

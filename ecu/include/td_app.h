@@ -2,9 +2,11 @@
  * @file td_app.h
  * @brief The ECU application: commands in, speed selection, metering targets, PID, fail-safes, frames out.
  *
- * Timing (defaults): td_app_step() every control period (10 ms); wheel speed and the
+ * Timing (defaults): td_app_step() every control period (10 ms): edge-timed wheel speed, the
+ * fused estimate (GNSS speeds applied at the next step, at their time of validity), the
+ * look-ahead speed, fail-safes and the drives; the paper's wheel speed and the
  * source decision every wheel_update_ms (500 ms); EcuStatus, EcuDiag, EcuSpeeds and
- * EcuTargets every status_period_ms (100 ms); PcCommand expected every 500 ms, timeout
+ * EcuTargets, EcuFused and EcuFusedAux every status_period_ms (100 ms); PcCommand expected every 500 ms, timeout
  * cmd_timeout_ms (1.5 s). Metering speeds are measured over the last 100 ms of counts.
  *
  * Metering is allowed for a layer only when: running (last command was start), no
@@ -23,6 +25,9 @@
 #include <stdbool.h>
 #include <stdint.h>
 #include "td_common.h"
+#include "td_drive.h"
+#include "td_edge.h"
+#include "td_fused.h"
 #include "td_params.h"
 #include "td_pid.h"
 #include "td_port.h"
@@ -54,14 +59,30 @@ typedef struct {
     uint16_t faults;           /**< fault word, TD_FAULT_* bits */
     uint32_t wheel_updates;    /**< count of wheel-speed updates (each one a source decision) */
     uint32_t wheel_pulses;     /**< cumulative wheel pulses seen */
+    /* fused estimate, slip, look-ahead, drives (td_fused.h, td_edge.h, td_drive.h): every step, in every mode */
+    float v_fused_kmh;         /**< fused speed estimate, km/h, >= 0 */
+    float a_fused_ms2;         /**< fused acceleration, m/s^2 */
+    float slip_pct;            /**< wheel slip the estimate applies at its speed, (1 - wheel / ground speed) x 100, % */
+    float innov_kmh;           /**< last GNSS innovation (speed minus estimate at its time of validity), km/h */
+    float speed_std_kmh;       /**< 1 sigma of v_fused_kmh, km/h */
+    float v_edge_kmh;          /**< wheel speed from pulse timing, km/h, no slip correction */
+    float v_lead_kmh;          /**< speed predicted lead_meter_ms + lead_air_ms ahead, km/h: drives eq. 4 (= v_kmh without look-ahead) */
+    float drive_rpm_per_duty[2]; /**< metering drive slope in use (learned), r/min per unit duty */
+    uint16_t gnss_delay_ms;    /**< delay (age + lag) of the last GNSS speed applied to the estimate, ms */
+    bool slip_learning;        /**< the wheel scale is being learned now (GNSS good, motion steady) */
+    bool edge_timing;          /**< the port supplied a wheel edge time at the last step */
+    bool gnss_fused;           /**< the estimate accepted a GNSS speed within gnss_timeout_ms */
+    uint32_t gnss_fixes;       /**< GNSS speeds accepted by the estimate */
+    uint32_t gnss_rejected;    /**< GNSS speeds refused by the estimate's gate (frozen or wild receiver) */
+    uint32_t wheel_rejected;   /**< wheel measurements refused by the gate (bounce, cut cable) */
 } td_state_t;
 
 /** Frame counters, wrapping. Every received frame lands in exactly one of the rx_* counters. */
 typedef struct {
-    uint32_t rx_ok;              /**< acted on: a PcCommand, or a PcParamSet that was accepted */
+    uint32_t rx_ok;              /**< acted on: a PcCommand, a PcGnssTime, or a PcParamSet that was accepted */
     uint32_t rx_unknown_id;      /**< an identifier the ECU does not take (also 11-bit frames) */
     uint32_t rx_bad_length;      /**< a known identifier with DLC != 8 */
-    uint32_t rx_out_of_range;    /**< a PcCommand with a value outside its range or an undefined enum */
+    uint32_t rx_out_of_range;    /**< a PcCommand or PcGnssTime with a value outside its range or an undefined enum */
     uint32_t rx_param_rejected;  /**< a PcParamSet refused: unknown id, range, busy, inconsistent */
     uint32_t tx_dropped;         /**< frames dropped because the transmit queue was full */
 } td_counters_t;
@@ -72,7 +93,7 @@ typedef struct {
     td_counters_t cnt;
     td_wheel_t wheel;
     td_speedq_t q;
-    td_pid_t meter_pid[2];
+    td_drive_t meter_drive[2];
     td_pid_t fan_pid[2];
     /* timing */
     uint32_t last_step_us;
@@ -91,6 +112,16 @@ typedef struct {
     uint32_t time_hist[TD_RATE_WINDOW];
     uint8_t hist_head, hist_count;
     uint32_t wheel_last_count;
+    /* fused estimate */
+    td_edge_t edge;
+    td_fused_t fused;
+    float gnss_pend_ms;        /**< GNSS speed waiting for the next step, m/s */
+    uint32_t gnss_pend_us;     /**< its time of validity as the PC gave it (reception - age) */
+    uint32_t gnss_time_us;     /**< last PcGnssTime received */
+    uint32_t gnss_fused_us;    /**< last GNSS speed the estimate accepted */
+    uint32_t steady_since_us;  /**< start of the current steady motion */
+    uint8_t gnss_seq;          /**< GnssSeq of the last PcGnssTime applied */
+    bool gnss_pend, have_gnss_time, have_seq, have_fused, steady;
     /* transmit queue */
     td_can_frame_t txq[TD_TXQ_LEN];
     uint8_t tx_head, tx_count;

@@ -42,11 +42,17 @@
 /** Layers / metering motors and fans. */
 typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
 
-/** Speed sources, as sent in EcuDiag.SpeedSource. */
-typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2 } td_source_t;
+/** Speed sources, as sent in EcuDiag.SpeedSource. TD_SRC_FUSED: the fused estimate fed by both
+ *  the wheel and GNSS (in TD_MODE_FUSED, WHEEL and GNSS name the one sensor still feeding it). */
+typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED = 3 } td_source_t;
 
-/** Speed modes, as in parameter SpeedMode. */
-typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2 } td_speed_mode_t;
+/** Speed modes, as in parameter SpeedMode. TD_MODE_FUSED: the Kalman estimate of td_fused.h. */
+typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2, TD_MODE_FUSED = 3 } td_speed_mode_t;
+
+/** Slip compensation of the wheel speed (parameter SlipComp). Modes dual, wheel and GNSS: none,
+ *  the scale the fused estimate learned, eq. 5. The fused mode always compensates: eq. 5's shape
+ *  in speed times a learned factor, except with TD_SLIP_LEARNED (one learned constant scale). */
+typedef enum { TD_SLIP_OFF = 0, TD_SLIP_LEARNED = 1, TD_SLIP_MODEL = 2 } td_slip_comp_t;
 
 /** Which speed the dual rule compares with switch_speed_kmh (parameter SwitchCompare). */
 typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;

@@ -43,6 +43,19 @@ typedef struct {
     uint16_t enc_fault_time_ms;     /**< (25) 100..30000, default 2000 */
     uint16_t blocked_time_ms;       /**< (26) 100..30000, default 1000 */
     uint16_t status_period_ms;      /**< (27) 20..1000, default 100 */
+    /* fused speed estimate, slip compensation, look-ahead, metering drive (docs/speed.md) */
+    uint8_t slip_comp;              /**< (28) td_slip_comp_t, 0..2, default TD_SLIP_OFF: modes dual/wheel/GNSS: off, the learned
+                                         constant scale, eq. 5; the fused mode: eq. 5's shape x a learned factor, unless
+                                         TD_SLIP_LEARNED (a learned constant scale) */
+    uint16_t gnss_lag_ms;           /**< (29) added to every GNSS speed's age: receiver latency + velocity filter lag, 0..3000, default 0 */
+    uint16_t lead_meter_ms;         /**< (30) look-ahead: metering drive response, 0..3000, default 0 (off) */
+    uint16_t lead_air_ms;           /**< (31) look-ahead: air-line transport, 0..5000, default 0 (off) */
+    float fused_jerk_ms3;           /**< (32) process noise: white-jerk density sqrt, m/s^3 per sqrt(Hz), 0.01..50, default 0.3 */
+    float fused_gnss_std_kmh;       /**< (33) GNSS speed noise, 1 sigma, km/h, 0.01..10, default 0.2 */
+    float fused_wheel_noise_pct;    /**< (34) wheel speed noise (bounce), 1 sigma, % of speed, 0.1..50, default 15 */
+    uint16_t wheel_stop_ms;         /**< (35) no wheel edge for this long = standstill, 20..5000, default 300 */
+    uint8_t drive_adapt;            /**< (36) learn the metering drives' slope (feed-forward), 0..1, default 1 */
+    uint16_t meter_tau_ms;          /**< (37) time constant of the metering drive + speed window (reference model), 0..2000, default 200 */
     /* not on CAN: fixed properties of the build */
     float fan_rpm_at_full_duty;     /**< fan feed-forward scale, rpm, (0, 60000], default 4000 */
     uint16_t fan_spinup_ms;         /**< grace after start before FAN_LOW is flagged, default 3000 */
@@ -51,7 +64,7 @@ typedef struct {
 } td_params_t;
 
 /** Number of the highest parameter id. */
-#define TD_PARAM_COUNT 27u
+#define TD_PARAM_COUNT 37u
 
 /** Fill `p` with the defaults. */
 void td_params_default(td_params_t *p);

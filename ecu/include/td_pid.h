@@ -33,5 +33,12 @@ void td_pid_init(td_pid_t *pid, float kp, float ki, float kd, float kff, float o
 void td_pid_reset(td_pid_t *pid);
 /** One update over dt_s (> 0) seconds. Returns the clamped output; out_min, state untouched, if dt_s <= 0 or NaN. */
 float td_pid_step(td_pid_t *pid, float setpoint, float measured, float dt_s);
+/**
+ * Two degrees of freedom: the feed-forward acts on `setpoint`, P, I and D on the error from
+ * `reference` (the response the feed-forward should produce, e.g. the setpoint through a model
+ * of the drive), so the feedback corrects only what the feed-forward gets wrong.
+ * td_pid_step(pid, sp, m, dt) is td_pid_step_ref(pid, sp, sp, m, dt).
+ */
+float td_pid_step_ref(td_pid_t *pid, float setpoint, float reference, float measured, float dt_s);
 
 #endif /* TD_PID_H */

@@ -20,6 +20,9 @@
 #define TD_ID_ECU_TARGETS 0x185F6465u
 #define TD_ID_PC_PARAM_SET 0x0A606465u
 #define TD_ID_ECU_PARAM_ACK 0x18616465u
+#define TD_ID_PC_GNSS_TIME 0x0A626465u
+#define TD_ID_ECU_FUSED 0x18636465u
+#define TD_ID_ECU_FUSED_AUX 0x18666465u
 
 #define TD_RUN_STOPPED 0x00u
 #define TD_RUN_RUNNING 0x0Au
@@ -69,6 +72,34 @@ typedef struct {
     uint32_t raw;              /**< the value now in force, raw DBC units */
 } td_param_ack_t;
 
+/** PcGnssTime: the GNSS speed with its age, so that the ECU applies it at its time of validity. */
+typedef struct {
+    bool valid;                /**< GnssSpeedPrecise != 0xFFFF */
+    float speed_kmh;           /**< bytes 0-1, 0.01 km/h, 0..25; raw 2501..65534 rejected */
+    uint16_t age_ms;           /**< bytes 2-3, 1 ms, 0..10000: fix (its sentence's arrival at the PC) to sending */
+    uint8_t seq;               /**< byte 4, counts fixes; a repeated seq is not applied again */
+} td_gnss_time_t;
+
+/** EcuFused: the fused estimate (td_fused.h). */
+typedef struct {
+    float speed_kmh;           /**< 0.01 km/h, 0..655.35 */
+    float accel_ms2;           /**< 0.001 m/s^2, saturating at +-32.767 */
+    float slip_pct;            /**< slip applied at the current speed, (1 - wheel / ground) x 100, 0.01 %, signed */
+    float innov_kmh;           /**< last GNSS innovation, 0.05 km/h, saturating at -6.4..6.35 */
+    bool slip_learning;        /**< the scale is being learned now */
+    bool edge_timing;          /**< the port supplies wheel edge times */
+    bool gnss_fused;           /**< a GNSS speed was applied within gnss_timeout_ms */
+    float speed_std_kmh;       /**< 1 sigma of speed_kmh, 0.05 km/h, saturating at 1.55 */
+} td_fused_diag_t;
+
+/** EcuFusedAux: edge-timed wheel speed, look-ahead speed, learned drive slopes, GNSS delay. */
+typedef struct {
+    float wheel_edge_kmh;      /**< 0.01 km/h, raw wheel (no slip correction) */
+    float lead_kmh;            /**< speed predicted at t + lead, that drives eq. 4, 0.01 km/h */
+    float drive_rpm_per_duty[2]; /**< learned metering drive slope, 0.5 r/min per unit duty, 0..127.5 */
+    uint16_t gnss_delay_ms;    /**< delay (age + lag) of the last GNSS speed applied, ms, saturating */
+} td_fused_aux_t;
+
 int td_proto_decode_command(const td_can_frame_t *f, td_command_t *out);
 int td_proto_encode_command(const td_command_t *c, td_can_frame_t *f);
 int td_proto_encode_status(const td_status_t *s, td_can_frame_t *f);
@@ -77,6 +108,10 @@ int td_proto_encode_diag(const td_diag_t *d, td_can_frame_t *f);
 int td_proto_encode_speeds(const td_speeds_t *s, td_can_frame_t *f);
 int td_proto_encode_targets(const td_targets_t *t, td_can_frame_t *f);
 int td_proto_encode_param_ack(const td_param_ack_t *a, td_can_frame_t *f);
+int td_proto_decode_gnss_time(const td_can_frame_t *f, td_gnss_time_t *out);
+int td_proto_encode_gnss_time(const td_gnss_time_t *g, td_can_frame_t *f);
+int td_proto_encode_fused(const td_fused_diag_t *d, td_can_frame_t *f);
+int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f);
 /**
  * Decode PcParamSet into the parameter id and its physical value (units of td_params.h).
  * TD_E_UNKNOWN_PARAM for an id outside 1..TD_PARAM_COUNT, TD_E_RANGE outside the DBC range.

@@ -8,6 +8,8 @@
  * in uniform motion the GNSS speed is accurate); TD_CMP_WHEEL compares the wheel speed instead.
  * Both comparisons are strict, as in the paper: CV == threshold or v == switch speed -> wheel.
  *
+ * TD_MODE_FUSED: both usable -> TD_SRC_FUSED (the estimate of td_fused.h fed by both).
+ *
  * Fail-safes layered on top, in every mode: GNSS invalid -> wheel (GNSS_LOST);
  * wheel encoder fault -> GNSS; both unusable -> TD_SRC_NONE.
  */
@@ -19,7 +21,7 @@
 
 /**
  * The pure rule. cv_pct < 0 means "undefined" (-> not uniform). Returns TD_SRC_WHEEL,
- * TD_SRC_GNSS or TD_SRC_NONE.
+ * TD_SRC_GNSS, TD_SRC_FUSED or TD_SRC_NONE.
  */
 td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float cv_pct,
                              float cv_threshold_pct, float switch_speed_kmh, float v_wheel_kmh,

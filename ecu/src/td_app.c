@@ -5,9 +5,11 @@
  */
 #include "td_app.h"
 
+#include <math.h>
 #include <stddef.h>
 #include <string.h>
 #include "td_meter.h"
+#include "td_slip.h"
 #include "td_speedsel.h"
 
 /* Fan PI trim around the feed-forward target/fan_rpm_at_full_duty (duty per rpm, per rpm*s). */
@@ -22,20 +24,33 @@
 /* Longest dt fed to the controllers: a late step must not inject a big integral jump. */
 #define TD_MAX_DT_S 0.05f
 #define TD_BACKWARD_LIMIT 0x80000000u
+/* Longest dt the fused estimate predicts over in one step. */
+#define TD_MAX_PREDICT_S 1.0f
+/* Steady motion for slip learning: the paper's uniform motion (CV of queue G below its
+ * threshold), |a| below this, faster than TD_LEARN_MIN_MS, for TD_STEADY_US. */
+#define TD_STEADY_A_MS2 0.3f
+#define TD_LEARN_MIN_MS 0.5f
+#define TD_STEADY_US 1500000u
+/* An accepted GNSS speed younger than this backs the estimate against a disagreeing wheel. */
+#define TD_GNSS_BACKS_US 1000000u
+/* A GNSS speed older than this (age + lag) is not applied. */
+#define TD_GNSS_MAX_DELAY_US 10000000u
+#define TD_KMH_PER_MS 3.6f
+/* Eq. 5 compensation: the slip is taken within 0..50 %. */
+#define TD_SLIP_MAX 0.5f
 
 static uint32_t fwd_diff(uint32_t now_count, uint32_t then_count) {
     const uint32_t d = now_count - then_count;
     return d >= TD_BACKWARD_LIMIT ? 0u : d;
 }
 
-static void apply_gains(td_app_t *app) {
+/* Metering drives (re)configured from the parameters: the learned slope restarts. */
+static void config_drives(td_app_t *app) {
+    const td_params_t *p = &app->p;
     for (unsigned l = 0u; l < TD_LAYERS; l++) {
-        td_pid_t *m = &app->meter_pid[l];
-        m->kp = app->p.pid_kp;
-        m->ki = app->p.pid_ki;
-        m->kd = app->p.pid_kd;
-        m->kff = app->p.pid_kff;
-        app->fan_pid[l].kff = 1.0f / app->p.fan_rpm_at_full_duty;
+        td_drive_config(&app->meter_drive[l], p->pid_kp, p->pid_ki, p->pid_kd, p->pid_kff,
+                        (float)p->meter_tau_ms * 1.0e-3f, p->drive_adapt != 0u);
+        app->fan_pid[l].kff = 1.0f / p->fan_rpm_at_full_duty;
     }
 }
 
@@ -43,6 +58,7 @@ static void apply_gains(td_app_t *app) {
 static void init_speed_chain(td_app_t *app) {
     (void)td_wheel_init(&app->wheel, app->p.wheel_radius_m, app->p.wheel_ppr, app->p.wheel_samples,
                         app->p.wheel_update_ms);
+    (void)td_edge_init(&app->edge, app->p.wheel_radius_m, app->p.wheel_ppr, app->p.wheel_stop_ms);
     (void)td_speedq_init(&app->q, app->p.queue_len);
     app->st.cv_pct = -1.0f;
     app->st.uniform = false;
@@ -97,11 +113,15 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
     memset(app, 0, sizeof *app);
     app->p = *params;
     for (unsigned l = 0u; l < TD_LAYERS; l++) {
-        td_pid_init(&app->meter_pid[l], 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 1.0f);
+        td_drive_init(&app->meter_drive[l], 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, false);
         td_pid_init(&app->fan_pid[l], TD_FAN_KP, TD_FAN_KI, 0.0f, 0.0f, 0.0f, 1.0f);
     }
-    apply_gains(app);
+    config_drives(app);
     init_speed_chain(app);
+    (void)td_fused_init(&app->fused, app->p.fused_jerk_ms3, app->p.fused_gnss_std_kmh, app->p.fused_wheel_noise_pct);
+    app->fused.slip_shape = app->p.slip_comp != (uint8_t)TD_SLIP_LEARNED;
+    app->st.drive_rpm_per_duty[TD_UPPER] = td_drive_rpm_per_duty(&app->meter_drive[TD_UPPER]);
+    app->st.drive_rpm_per_duty[TD_LOWER] = td_drive_rpm_per_duty(&app->meter_drive[TD_LOWER]);
     app->last_step_us = now_us;
     app->last_cmd_us = now_us;
     app->last_gnss_us = now_us;
@@ -142,7 +162,7 @@ static void stop(td_app_t *app) {
     app->enc_suspect = false;
     for (unsigned l = 0u; l < TD_LAYERS; l++) {
         app->blocked_suspect[l] = false;
-        td_pid_reset(&app->meter_pid[l]);
+        td_drive_reset(&app->meter_drive[l]);
         td_pid_reset(&app->fan_pid[l]);
     }
 }
@@ -173,6 +193,12 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
         st->v_gnss_kmh = c.gnss_kmh;
         app->have_gnss = true;
         app->last_gnss_us = now_us;
+        /* a PC without PcGnssTime: the command's speed goes to the estimate as if fresh */
+        if (!(app->have_gnss_time && td_age_us(now_us, app->gnss_time_us) <= (uint32_t)app->p.gnss_timeout_ms * 1000u)) {
+            app->gnss_pend = true;
+            app->gnss_pend_ms = c.gnss_kmh / TD_KMH_PER_MS;
+            app->gnss_pend_us = now_us;
+        }
     } else {
         /* 0xFF: the PC says it has no GNSS speed; do not wait for the stale timeout */
         app->have_gnss = false;
@@ -188,6 +214,31 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
             decide_source(app);
         }
     }
+    return TD_OK;
+}
+
+/* PcGnssTime: the GNSS speed with its age; a new GnssSeq is applied at the next step. */
+static int apply_gnss_time(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
+    td_gnss_time_t g;
+    const int rc = td_proto_decode_gnss_time(frame, &g);
+    if (rc == TD_E_LENGTH) {
+        app->cnt.rx_bad_length++;
+        return rc;
+    }
+    if (rc != TD_OK) {
+        app->cnt.rx_out_of_range++;
+        return rc;
+    }
+    app->cnt.rx_ok++;
+    app->have_gnss_time = true;
+    app->gnss_time_us = now_us;
+    if (g.valid && !(app->have_seq && g.seq == app->gnss_seq)) {
+        app->gnss_pend = true;
+        app->gnss_pend_ms = g.speed_kmh / TD_KMH_PER_MS;
+        app->gnss_pend_us = now_us - (uint32_t)g.age_ms * 1000u;
+    }
+    app->gnss_seq = g.seq;
+    app->have_seq = true;
     return TD_OK;
 }
 
@@ -229,11 +280,16 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
         }
         if (rc == TD_OK) {
             app->cnt.rx_ok++;
-            apply_gains(app);
-            /* radius, ppr, N, update period, samples: the estimator and queue G restart */
-            if (id == 4u || id == 5u || id == 6u || id == 19u || id == 20u) {
+            /* PID gains, drive adaptation, drive model: the drives restart their learning */
+            if ((id >= 12u && id <= 15u) || id == 36u || id == 37u) {
+                config_drives(app);
+            }
+            /* radius, ppr, N, update period, samples, stop time: the estimators and queue G restart */
+            if (id == 4u || id == 5u || id == 6u || id == 19u || id == 20u || id == 35u) {
                 init_speed_chain(app);
             }
+            td_fused_tune(&app->fused, app->p.fused_jerk_ms3, app->p.fused_gnss_std_kmh, app->p.fused_wheel_noise_pct);
+            app->fused.slip_shape = app->p.slip_comp != (uint8_t)TD_SLIP_LEARNED;
             /* n, threshold, switch speed, mode, compare act at once, not at the next wheel update */
             refresh_cv_and_source(app);
         } else {
@@ -256,6 +312,9 @@ int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us) {
         }
         if (frame->id == TD_ID_PC_PARAM_SET) {
             return apply_param_set(app, frame);
+        }
+        if (frame->id == TD_ID_PC_GNSS_TIME) {
+            return apply_gnss_time(app, frame, now_us);
         }
     }
     app->cnt.rx_unknown_id++;
@@ -302,6 +361,115 @@ static void update_wheel(td_app_t *app, uint32_t now_us, uint32_t wheel_count) {
         st->uniform = st->cv_pct >= 0.0f && st->cv_pct < app->p.cv_threshold_pct;
         st->wheel_updates++;
         decide_source(app);
+    }
+}
+
+/* The wheel speed corrected for slip as parameter SlipComp says (modes dual, wheel, GNSS). */
+static float wheel_compensated_kmh(const td_app_t *app, float v_kmh) {
+    if (app->p.slip_comp == (uint8_t)TD_SLIP_LEARNED) {
+        return v_kmh / app->fused.scale;
+    }
+    if (app->p.slip_comp == (uint8_t)TD_SLIP_MODEL) {
+        /* eq. 5 is slip against true speed: two fixed-point passes from the wheel speed */
+        float v = v_kmh;
+        for (unsigned i = 0u; i < 2u; i++) {
+            float slip = td_slip_model_pct(v) * 0.01f;
+            slip = slip < 0.0f ? 0.0f : (slip > TD_SLIP_MAX ? TD_SLIP_MAX : slip);
+            v = v_kmh / (1.0f - slip);
+        }
+        return v;
+    }
+    return v_kmh;
+}
+
+/* The fused estimate: edge-timed wheel at every step, GNSS at its time of validity, the
+ * scale learned while GNSS is good and the motion steady. Runs in every mode. */
+static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, uint32_t dt_us) {
+    td_state_t *st = &app->st;
+    td_fused_t *f = &app->fused;
+    td_edge_t *e = &app->edge;
+    const float v_edge = td_edge_step(e, now_us, in->wheel_count, in->wheel_edge_us, in->wheel_edge_valid != 0u);
+    st->edge_timing = in->wheel_edge_valid != 0u;
+    st->v_edge_kmh = v_edge * TD_KMH_PER_MS;
+    float dt_s = (float)dt_us * 1.0e-6f;
+    td_fused_predict(f, dt_s > TD_MAX_PREDICT_S ? TD_MAX_PREDICT_S : dt_s);
+
+    const bool wheel_ok = (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
+    const bool gnss_ok = st->gnss_valid && (st->faults & TD_FAULT_GNSS_FROZEN) == 0u;
+    const bool backs = gnss_ok && app->have_fused && td_age_us(now_us, app->gnss_fused_us) < TD_GNSS_BACKS_US;
+    /* the paper's own test of uniform motion (the wheel's CV): the estimate's acceleration alone
+     * would not do, as an unlearned scale shows up in it */
+    if (st->uniform && fabsf(f->a_ms2) < TD_STEADY_A_MS2 && f->v_ms > TD_LEARN_MIN_MS) {
+        if (!app->steady) {
+            app->steady = true;
+            app->steady_since_us = now_us;
+        }
+    } else {
+        app->steady = false;
+    }
+    st->slip_learning =
+        wheel_ok && backs && app->steady && td_elapsed_us(now_us, app->steady_since_us) >= TD_STEADY_US;
+
+    if (wheel_ok && e->started) {
+        if (!e->moving) {
+            if (f->wheel_rejects == 0u) {
+                td_fused_standstill(f);
+            }
+        } else {
+            float r_extra = 0.0f;
+            if (e->span_s <= 0.0f) {
+                r_extra = 0.25f * v_edge * v_edge; /* a bound while slowing, not a period */
+            } else if (!e->timed) {
+                const float q = e->m_per_pulse / e->span_s; /* one pulse of quantization */
+                r_extra = q * q / 6.0f;
+            }
+            if (td_fused_wheel(f, v_edge, r_extra, false, backs) != TD_FUSED_ACCEPTED) {
+                st->wheel_rejected++;
+            }
+        }
+    }
+    if (app->gnss_pend) {
+        app->gnss_pend = false;
+        const uint32_t delay_us = td_age_us(now_us, app->gnss_pend_us) + (uint32_t)app->p.gnss_lag_ms * 1000u;
+        if (gnss_ok && delay_us <= TD_GNSS_MAX_DELAY_US) {
+            st->gnss_delay_ms = (uint16_t)(delay_us / 1000u);
+            if (td_fused_gnss(f, app->gnss_pend_ms, (float)delay_us * 1.0e-6f, st->slip_learning) ==
+                TD_FUSED_ACCEPTED) {
+                app->gnss_fused_us = now_us;
+                app->have_fused = true;
+                st->gnss_fixes++;
+            } else {
+                st->gnss_rejected++;
+            }
+            st->innov_kmh = f->innov_ms * TD_KMH_PER_MS;
+        }
+    }
+    st->gnss_fused = app->have_fused && gnss_ok &&
+                     td_age_us(now_us, app->gnss_fused_us) <= (uint32_t)app->p.gnss_timeout_ms * 1000u;
+    st->v_fused_kmh = f->v_ms * TD_KMH_PER_MS;
+    st->a_fused_ms2 = f->a_ms2;
+    st->slip_pct = (1.0f - f->scale * td_fused_shape(f, f->v_ms, NULL)) * 100.0f;
+    st->speed_std_kmh = td_fused_speed_std_ms(f) * TD_KMH_PER_MS;
+}
+
+/* The speed that drives eq. 4 now (v_kmh) and at landing (v_lead_kmh). */
+static void select_speed(td_app_t *app) {
+    td_state_t *st = &app->st;
+    if (st->source == TD_SRC_NONE) {
+        st->v_kmh = 0.0f;
+    } else if (app->p.speed_mode == (uint8_t)TD_MODE_FUSED) {
+        st->v_kmh = st->v_fused_kmh;
+    } else if (st->source == TD_SRC_GNSS) {
+        st->v_kmh = st->v_gnss_kmh;
+    } else {
+        st->v_kmh = wheel_compensated_kmh(app, st->v_wheel_kmh);
+    }
+    const float lead_s = (float)((uint32_t)app->p.lead_meter_ms + app->p.lead_air_ms) * 1.0e-3f;
+    if (lead_s > 0.0f && st->v_kmh > 0.0f) {
+        const float v = st->v_kmh + app->fused.a_ms2 * lead_s * TD_KMH_PER_MS;
+        st->v_lead_kmh = v > 0.0f ? v : 0.0f;
+    } else {
+        st->v_lead_kmh = st->v_kmh;
     }
 }
 
@@ -369,7 +537,7 @@ static void check_blocked(td_app_t *app, unsigned l, uint32_t now_us) {
     } else if (td_elapsed_us(now_us, app->blocked_since_us[l]) > (uint32_t)app->p.blocked_time_ms * 1000u) {
         st->faults |= (uint16_t)(TD_FAULT_UPPER_BLOCKED << l);
         app->blocked_suspect[l] = false;
-        td_pid_reset(&app->meter_pid[l]);
+        td_drive_reset(&app->meter_drive[l]);
         st->meter_duty[l] = 0.0f;
         st->target_rpm[l] = 0.0f;
     }
@@ -377,21 +545,23 @@ static void check_blocked(td_app_t *app, unsigned l, uint32_t now_us) {
 
 static void control_meters(td_app_t *app, uint32_t now_us, float dt_s, td_io_out_t *out) {
     td_state_t *st = &app->st;
+    /* with look-ahead the meters stop once the speed predicted at landing reaches a stop */
     const bool may_meter = st->running && (st->faults & (TD_FAULT_CMD_TIMEOUT | TD_FAULT_NO_SPEED)) == 0u &&
-                           st->v_kmh >= app->p.min_work_speed_kmh;
+                           st->v_lead_kmh >= app->p.min_work_speed_kmh;
     for (unsigned l = 0u; l < TD_LAYERS; l++) {
         const bool allowed = may_meter && st->fan_rpm[l] >= (float)app->p.fan_min_rpm &&
                              (st->faults & (uint16_t)(TD_FAULT_UPPER_BLOCKED << l)) == 0u;
-        st->target_rpm[l] = allowed ? td_meter_target_rpm(app->p.working_width_m, st->rate_kg_ha[l], st->v_kmh,
+        st->target_rpm[l] = allowed ? td_meter_target_rpm(app->p.working_width_m, st->rate_kg_ha[l], st->v_lead_kmh,
                                                           app->p.kg_per_rev[l], app->p.min_work_speed_kmh)
                                     : 0.0f;
         if (st->target_rpm[l] > 0.0f) {
             if (dt_s > 0.0f) { /* a repeated timestamp holds the duty: nothing to integrate */
-                st->meter_duty[l] = td_pid_step(&app->meter_pid[l], st->target_rpm[l], st->meter_rpm[l], dt_s);
+                st->meter_duty[l] = td_drive_step(&app->meter_drive[l], st->target_rpm[l], st->meter_rpm[l], dt_s);
+                st->drive_rpm_per_duty[l] = td_drive_rpm_per_duty(&app->meter_drive[l]);
             }
             check_blocked(app, l, now_us);
         } else {
-            td_pid_reset(&app->meter_pid[l]);
+            td_drive_reset(&app->meter_drive[l]);
             st->meter_duty[l] = 0.0f;
             app->blocked_suspect[l] = false;
         }
@@ -426,6 +596,16 @@ static void emit_status(td_app_t *app) {
                              { st->meter_duty[TD_UPPER] * 100.0f, st->meter_duty[TD_LOWER] * 100.0f },
                              { st->fan_duty[TD_UPPER] * 100.0f, st->fan_duty[TD_LOWER] * 100.0f } };
     (void)td_proto_encode_targets(&t, &f);
+    txq_push(app, &f);
+    const td_fused_diag_t fd = { st->v_fused_kmh, st->a_fused_ms2,  st->slip_pct,    st->innov_kmh,
+                                 st->slip_learning, st->edge_timing, st->gnss_fused, st->speed_std_kmh };
+    (void)td_proto_encode_fused(&fd, &f);
+    txq_push(app, &f);
+    const td_fused_aux_t fa = { st->v_edge_kmh,
+                                st->v_lead_kmh,
+                                { st->drive_rpm_per_duty[TD_UPPER], st->drive_rpm_per_duty[TD_LOWER] },
+                                st->gnss_delay_ms };
+    (void)td_proto_encode_fused_aux(&fa, &f);
     txq_push(app, &f);
 }
 
@@ -463,7 +643,8 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
     check_encoder(app, now_us);
 
     set_fault(app, TD_FAULT_NO_SPEED, st->source == TD_SRC_NONE);
-    st->v_kmh = st->source == TD_SRC_GNSS ? st->v_gnss_kmh : st->source == TD_SRC_WHEEL ? st->v_wheel_kmh : 0.0f;
+    update_fused(app, now_us, in, dt_us);
+    select_speed(app);
 
     /* also on a repeated timestamp: a stop or a fault between two steps of the same time
      * must still zero the outputs it gates */

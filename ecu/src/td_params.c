@@ -30,7 +30,7 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
     P(cv_window, U8, 1.0f, 2u, 16u),
     P(cv_threshold_pct, F32, 0.01f, 10u, 5000u),
     P(switch_speed_kmh, F32, 0.01f, 0u, 2500u),
-    P(speed_mode, U8, 1.0f, 0u, 2u),
+    P(speed_mode, U8, 1.0f, 0u, 3u),
     P(switch_compare, U8, 1.0f, 0u, 1u),
     P(pid_kp, F32, 0.0001f, 0u, 100000u),
     P(pid_ki, F32, 0.0001f, 0u, 100000u),
@@ -48,6 +48,16 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
     P(enc_fault_time_ms, U16, 1.0f, 100u, 30000u),
     P(blocked_time_ms, U16, 1.0f, 100u, 30000u),
     P(status_period_ms, U16, 1.0f, 20u, 1000u),
+    P(slip_comp, U8, 1.0f, 0u, 2u),
+    P(gnss_lag_ms, U16, 1.0f, 0u, 3000u),
+    P(lead_meter_ms, U16, 1.0f, 0u, 3000u),
+    P(lead_air_ms, U16, 1.0f, 0u, 5000u),
+    P(fused_jerk_ms3, F32, 0.01f, 1u, 5000u),
+    P(fused_gnss_std_kmh, F32, 0.01f, 1u, 1000u),
+    P(fused_wheel_noise_pct, F32, 0.01f, 10u, 5000u),
+    P(wheel_stop_ms, U16, 1.0f, 20u, 5000u),
+    P(drive_adapt, U8, 1.0f, 0u, 1u),
+    P(meter_tau_ms, U16, 1.0f, 0u, 2000u),
 };
 
 /* Float rounding of a value that went through raw * scale stays well inside this many raw units. */
@@ -57,7 +67,7 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
 /* A configurable identifier must not be that of another frame of the protocol. */
 static bool id_taken(uint32_t id) {
     return id == TD_ID_ECU_DIAG || id == TD_ID_ECU_SPEEDS || id == TD_ID_ECU_TARGETS || id == TD_ID_PC_PARAM_SET ||
-           id == TD_ID_ECU_PARAM_ACK;
+           id == TD_ID_ECU_PARAM_ACK || id == TD_ID_PC_GNSS_TIME || id == TD_ID_ECU_FUSED || id == TD_ID_ECU_FUSED_AUX;
 }
 
 void td_params_default(td_params_t *p) {
@@ -95,6 +105,16 @@ void td_params_default(td_params_t *p) {
     p->enc_fault_time_ms = 2000u;
     p->blocked_time_ms = 1000u;
     p->status_period_ms = 100u;
+    p->slip_comp = (uint8_t)TD_SLIP_OFF;
+    p->gnss_lag_ms = 0u;
+    p->lead_meter_ms = 0u;
+    p->lead_air_ms = 0u;
+    p->fused_jerk_ms3 = 0.3f;
+    p->fused_gnss_std_kmh = 0.2f;
+    p->fused_wheel_noise_pct = 15.0f;
+    p->wheel_stop_ms = 300u;
+    p->drive_adapt = 1u;
+    p->meter_tau_ms = 200u;
     p->fan_rpm_at_full_duty = 4000.0f;
     p->fan_spinup_ms = 3000u;
     p->status_id = 0x185C6465u;

@@ -34,10 +34,14 @@ void td_pid_reset(td_pid_t *pid) {
 }
 
 float td_pid_step(td_pid_t *pid, float setpoint, float measured, float dt_s) {
+    return td_pid_step_ref(pid, setpoint, setpoint, measured, dt_s);
+}
+
+float td_pid_step_ref(td_pid_t *pid, float setpoint, float reference, float measured, float dt_s) {
     if (!(dt_s > 0.0f)) {
         return pid->out_min;
     }
-    const float e = setpoint - measured;
+    const float e = reference - measured;
     if (!pid->primed) {
         pid->prev_meas = measured;
         pid->primed = true;

@@ -29,6 +29,21 @@ static uint32_t to_raw(float phys, float scale, uint32_t raw_max) {
     return (uint32_t)r;
 }
 
+/** round(phys / scale) clamped to [raw_min, raw_max] (signed fields); NaN gives 0. */
+static int32_t to_raw_signed(float phys, float scale, int32_t raw_min, int32_t raw_max) {
+    const float r = phys / scale;
+    if (!(r == r)) {
+        return 0;
+    }
+    if (r <= (float)raw_min) {
+        return raw_min;
+    }
+    if (r >= (float)raw_max) {
+        return raw_max;
+    }
+    return (int32_t)(r < 0.0f ? r - 0.5f : r + 0.5f);
+}
+
 static void frame_head(td_can_frame_t *f, uint32_t id) {
     f->id = id;
     f->extended = 1u;
@@ -119,7 +134,7 @@ int td_proto_decode_status(const td_can_frame_t *f, td_status_t *out) {
 }
 
 int td_proto_encode_diag(const td_diag_t *d, td_can_frame_t *f) {
-    if (d == NULL || f == NULL || d->source > 2u || d->mode > 2u || d->compare > 1u) {
+    if (d == NULL || f == NULL || d->source > 3u || d->mode > 3u || d->compare > 1u) {
         return TD_E_ARG;
     }
     struct td_can_ecu_diag_t m;
@@ -195,7 +210,7 @@ int td_proto_decode_param_set(const td_can_frame_t *f, uint8_t *param_id, float 
         return TD_E_UNKNOWN_PARAM;
     }
     /* Every multiplexed value of PcParamSet is the same unsigned little-endian 32-bit field
-     * (bits 32..63), so one read serves all 27; test_proto checks it against td_can_pc_param_set_unpack. */
+     * (bits 32..63), so one read serves all of them; test_proto checks it against td_can_pc_param_set_unpack. */
     const uint32_t raw = (uint32_t)f->data[4] | ((uint32_t)f->data[5] << 8) | ((uint32_t)f->data[6] << 16) |
                          ((uint32_t)f->data[7] << 24);
     if (raw < raw_min || raw > raw_max) {
@@ -212,4 +227,77 @@ uint32_t td_proto_param_raw(uint8_t param_id, float value) {
         return 0u;
     }
     return to_raw(value, scale, 0xFFFFFFFFu);
+}
+
+#define TD_GNSS_FINE_NA 0xFFFFu
+#define TD_GNSS_FINE_MAX 2500u /* 25.00 km/h, as PcCommand */
+
+int td_proto_decode_gnss_time(const td_can_frame_t *f, td_gnss_time_t *out) {
+    if (f == NULL || out == NULL) {
+        return TD_E_ARG;
+    }
+    if (f->dlc != TD_CAN_PC_GNSS_TIME_LENGTH) {
+        return TD_E_LENGTH;
+    }
+    struct td_can_pc_gnss_time_t m;
+    (void)td_can_pc_gnss_time_unpack(&m, f->data, TD_CAN_PC_GNSS_TIME_LENGTH);
+    if ((m.gnss_speed_precise > TD_GNSS_FINE_MAX && m.gnss_speed_precise != TD_GNSS_FINE_NA) ||
+        !td_can_pc_gnss_time_gnss_fix_age_is_in_range(m.gnss_fix_age)) {
+        return TD_E_RANGE;
+    }
+    out->valid = m.gnss_speed_precise != TD_GNSS_FINE_NA;
+    out->speed_kmh = out->valid ? (float)m.gnss_speed_precise * 0.01f : 0.0f;
+    out->age_ms = m.gnss_fix_age;
+    out->seq = m.gnss_seq;
+    return TD_OK;
+}
+
+int td_proto_encode_gnss_time(const td_gnss_time_t *g, td_can_frame_t *f) {
+    if (g == NULL || f == NULL) {
+        return TD_E_ARG;
+    }
+    if ((g->valid && !(g->speed_kmh >= 0.0f && g->speed_kmh <= 25.004f)) || g->age_ms > 10000u) {
+        return TD_E_RANGE;
+    }
+    struct td_can_pc_gnss_time_t m;
+    m.gnss_speed_precise =
+        g->valid ? (uint16_t)to_raw(g->speed_kmh, 0.01f, TD_GNSS_FINE_MAX) : (uint16_t)TD_GNSS_FINE_NA;
+    m.gnss_fix_age = g->age_ms;
+    m.gnss_seq = g->seq;
+    frame_head(f, TD_ID_PC_GNSS_TIME);
+    (void)td_can_pc_gnss_time_pack(f->data, &m, sizeof f->data);
+    return TD_OK;
+}
+
+int td_proto_encode_fused(const td_fused_diag_t *d, td_can_frame_t *f) {
+    if (d == NULL || f == NULL) {
+        return TD_E_ARG;
+    }
+    struct td_can_ecu_fused_t m;
+    m.fused_speed = (uint16_t)to_raw(d->speed_kmh, 0.01f, 0xFFFFu);
+    m.fused_accel = (int16_t)to_raw_signed(d->accel_ms2, 0.001f, -32768, 32767);
+    m.learned_slip = (int16_t)to_raw_signed(d->slip_pct, 0.01f, -32768, 32767);
+    m.gnss_innovation = (int8_t)to_raw_signed(d->innov_kmh, 0.05f, -128, 127);
+    m.slip_learning = d->slip_learning ? 1u : 0u;
+    m.edge_timing = d->edge_timing ? 1u : 0u;
+    m.gnss_fused = d->gnss_fused ? 1u : 0u;
+    m.speed_std = (uint8_t)to_raw(d->speed_std_kmh, 0.05f, 31u);
+    frame_head(f, TD_ID_ECU_FUSED);
+    (void)td_can_ecu_fused_pack(f->data, &m, sizeof f->data);
+    return TD_OK;
+}
+
+int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f) {
+    if (a == NULL || f == NULL) {
+        return TD_E_ARG;
+    }
+    struct td_can_ecu_fused_aux_t m;
+    m.wheel_edge_speed = (uint16_t)to_raw(a->wheel_edge_kmh, 0.01f, 0xFFFFu);
+    m.lead_speed = (uint16_t)to_raw(a->lead_kmh, 0.01f, 0xFFFFu);
+    m.upper_drive_slope = (uint8_t)to_raw(a->drive_rpm_per_duty[TD_UPPER], 0.5f, 0xFFu);
+    m.lower_drive_slope = (uint8_t)to_raw(a->drive_rpm_per_duty[TD_LOWER], 0.5f, 0xFFu);
+    m.gnss_delay = a->gnss_delay_ms;
+    frame_head(f, TD_ID_ECU_FUSED_AUX);
+    (void)td_can_ecu_fused_aux_pack(f->data, &m, sizeof f->data);
+    return TD_OK;
 }

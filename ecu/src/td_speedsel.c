@@ -19,6 +19,9 @@ td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float c
     if (mode == TD_MODE_GNSS_ONLY) {
         return TD_SRC_GNSS;
     }
+    if (mode == TD_MODE_FUSED) {
+        return TD_SRC_FUSED;
+    }
     const bool uniform = cv_pct >= 0.0f && cv_pct < cv_threshold_pct;
     const float v = (compare == TD_CMP_WHEEL) ? v_wheel_kmh : v_gnss_kmh;
     return (uniform && v > switch_speed_kmh) ? TD_SRC_GNSS : TD_SRC_WHEEL;

@@ -48,7 +48,7 @@ static inline void td_inv_check_step(const td_app_t *app, const td_io_out_t *out
             TD_CHECK((st->faults & (TD_FAULT_CMD_TIMEOUT | TD_FAULT_NO_SPEED)) == 0u);
             TD_CHECK((st->faults & (TD_FAULT_UPPER_BLOCKED << l)) == 0u);
             TD_CHECK(st->fan_rpm[l] >= (float)app->p.fan_min_rpm);
-            TD_CHECK(st->v_kmh >= app->p.min_work_speed_kmh);
+            TD_CHECK(st->v_lead_kmh >= app->p.min_work_speed_kmh);
             TD_CHECK(st->target_rpm[l] > 0.0f);
         }
         if (!st->running) {
@@ -62,12 +62,36 @@ static inline void td_inv_check_step(const td_app_t *app, const td_io_out_t *out
     TD_CHECK(isfinite(st->cv_pct) && (st->cv_pct >= 0.0f || st->cv_pct == -1.0f));
     TD_CHECK(st->uniform == (st->cv_pct >= 0.0f && st->cv_pct < app->p.cv_threshold_pct));
     TD_CHECK((st->faults & ~TD_INV_FAULT_BITS) == 0u);
-    TD_CHECK((unsigned)st->source <= (unsigned)TD_SRC_NONE);
+    TD_CHECK((unsigned)st->source <= (unsigned)TD_SRC_FUSED);
+    TD_CHECK(st->source != TD_SRC_FUSED || app->p.speed_mode == TD_MODE_FUSED);
     TD_CHECK((st->source == TD_SRC_NONE) == ((st->faults & TD_FAULT_NO_SPEED) != 0u));
     TD_CHECK(st->gnss_valid == ((st->faults & TD_FAULT_GNSS_LOST) == 0u));
-    TD_CHECK(st->v_kmh == (st->source == TD_SRC_GNSS    ? st->v_gnss_kmh
-                           : st->source == TD_SRC_WHEEL ? st->v_wheel_kmh
-                                                        : 0.0f));
+    if (st->source == TD_SRC_NONE) {
+        TD_CHECK(st->v_kmh == 0.0f);
+    } else if (app->p.speed_mode == TD_MODE_FUSED) {
+        TD_CHECK(st->v_kmh == st->v_fused_kmh);
+    } else if (st->source == TD_SRC_GNSS) {
+        TD_CHECK(st->v_kmh == st->v_gnss_kmh);
+    } else if (app->p.slip_comp == TD_SLIP_OFF) {
+        TD_CHECK(st->v_kmh == st->v_wheel_kmh);
+    }
+    /* the fused estimate and the look-ahead: finite, speeds >= 0, the scale in its bounds */
+    TD_CHECK(td_inv_finite_nonneg(st->v_fused_kmh));
+    TD_CHECK(isfinite(st->a_fused_ms2) && isfinite(st->slip_pct) && isfinite(st->innov_kmh));
+    TD_CHECK(st->slip_pct >= -50.0f && st->slip_pct <= 75.0f);
+    TD_CHECK(td_inv_finite_nonneg(st->speed_std_kmh));
+    TD_CHECK(td_inv_finite_nonneg(st->v_edge_kmh));
+    TD_CHECK(td_inv_finite_nonneg(st->v_lead_kmh));
+    if (app->p.lead_meter_ms == 0u && app->p.lead_air_ms == 0u) {
+        TD_CHECK(st->v_lead_kmh == st->v_kmh);
+    }
+    for (unsigned i = 0u; i < 6u; i++) {
+        TD_CHECK(isfinite(app->fused.p[i]));
+    }
+    TD_CHECK(app->fused.p[0] > 0.0f && app->fused.p[3] > 0.0f && app->fused.p[5] > 0.0f);
+    for (unsigned l = 0u; l < TD_LAYERS; l++) {
+        TD_CHECK(isfinite(st->drive_rpm_per_duty[l]) && st->drive_rpm_per_duty[l] > 0.0f);
+    }
     TD_CHECK(app->tx_count <= TD_TXQ_LEN && app->tx_head < TD_TXQ_LEN);
     TD_CHECK(td_params_validate(&app->p) == TD_OK);
 }
@@ -93,12 +117,17 @@ static inline void td_inv_check_rx(const td_app_t *before, const td_app_t *app, 
     const td_counters_t *c = &app->cnt;
     const bool param = f->extended != 0u && f->id == TD_ID_PC_PARAM_SET;
     const bool command = f->extended != 0u && f->id == app->p.command_id;
+    const bool gnss_time = f->extended != 0u && f->id == TD_ID_PC_GNSS_TIME;
     if (rc == TD_OK) {
         TD_CHECK(c->rx_ok == b->rx_ok + 1u);
         TD_CHECK(td_inv_rejections(c) == td_inv_rejections(b));
-        TD_CHECK(param || command);
-        TD_CHECK(command || !before->st.running); /* parameters change only while stopped */
-        if (command) {
+        TD_CHECK(param || command || gnss_time);
+        TD_CHECK(!param || !before->st.running); /* parameters change only while stopped */
+        if (gnss_time) {
+            td_gnss_time_t gt;
+            TD_CHECK(td_proto_decode_gnss_time(f, &gt) == TD_OK);
+            TD_CHECK(app->have_seq && app->gnss_seq == gt.seq);
+        } else if (command) {
             td_command_t cmd;
             TD_CHECK(td_proto_decode_command(f, &cmd) == TD_OK);
             TD_CHECK(app->st.rate_kg_ha[0] == cmd.rate_kg_ha[0] && app->st.rate_kg_ha[1] == cmd.rate_kg_ha[1]);

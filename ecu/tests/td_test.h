@@ -39,6 +39,7 @@ typedef struct {
     double wheel_kmh;          /* what the ground wheel turns at */
     double wheel_pos;          /* pulses, fractional */
     uint32_t wheel_base;       /* counter offset (to cross the wrap) */
+    bool edge_timing;          /* the port has a capture timer: it passes the last pulse's time */
     double meter_rpm[2], meter_pos[2];
     double fan_rpm[2], fan_pos[2];
     bool meter_blocked[2], fan_broken[2];
@@ -123,6 +124,11 @@ static inline void rig_step(rig_t *r) {
     }
     td_io_in_t in;
     in.wheel_count = r->wheel_base + (uint32_t)(uint64_t)r->wheel_pos;
+    /* the last pulse came frac(pos) pulses ago, at the wheel's current pulse rate */
+    const double rate_per_us = r->wheel_kmh / 3.6 / (2.0 * PI_D * r->p.wheel_radius_m) * r->p.wheel_ppr * 1e-6;
+    const double back_us = rate_per_us > 0.0 ? (r->wheel_pos - floor(r->wheel_pos)) / rate_per_us : 0.0;
+    in.wheel_edge_valid = r->edge_timing ? 1u : 0u;
+    in.wheel_edge_us = r->now_us - (uint32_t)(back_us < 4.0e9 ? back_us : 0.0);
     for (int l = 0; l < 2; l++) {
         in.meter_count[l] = (uint32_t)(uint64_t)r->meter_pos[l];
         in.fan_count[l] = (uint32_t)(uint64_t)r->fan_pos[l];

@@ -39,6 +39,8 @@ typedef struct {
     bool bus_off;          /* the port cannot send: the transmit queue is not drained */
     double v_kmh;          /* tractor speed */
     bool wheel_dead;
+    bool edge_timing;      /* the port supplies wheel edge times */
+    uint32_t now_us;       /* the time of the step being prepared */
     bool meter_jammed[2];
     bool fan_dead[2];
     double meter_rpm[2], fan_rpm[2];
@@ -48,7 +50,7 @@ typedef struct {
 
 typedef struct {
     uint32_t frames, rejected, steps, running_steps, metering_steps, tx_frames;
-    uint32_t cmd_ok, param_ok, faults_seen;
+    uint32_t cmd_ok, param_ok, gnss_time_ok, faults_seen, fused_steps, edge_steps;
 } tally_t;
 
 static void new_phase(rng_t *g, world_t *w) {
@@ -59,6 +61,7 @@ static void new_phase(rng_t *g, world_t *w) {
     const double speeds[] = { 0.0, 2.5, 4.0, 6.5, 8.0, 12.0, 30.0 };
     w->v_kmh = speeds[below(g, 7u)];
     w->wheel_dead = below(g, 8u) == 0u;
+    w->edge_timing = below(g, 2u) == 0u;
     for (int l = 0; l < 2; l++) {
         w->meter_jammed[l] = below(g, 8u) == 0u;
         w->fan_dead[l] = below(g, 10u) == 0u;
@@ -102,9 +105,18 @@ static void shape_param_set(rng_t *g, td_can_frame_t *f) {
     f->data[7] = (uint8_t)(raw >> 24);
 }
 
+static void shape_gnss_time(rng_t *g, const world_t *w, td_can_frame_t *f) {
+    const uint32_t k = below(g, 20u);
+    const uint32_t v100 = (uint32_t)(w->v_kmh * 100.0 + 0.5);
+    const uint32_t fine = k == 0u ? 0xFFFFu : k == 1u ? below(g, 65536u) : (v100 >= 2500u ? 2500u : v100 + below(g, 20u));
+    put_u16(&f->data[0], fine);
+    put_u16(&f->data[2], below(g, 10u) == 0u ? below(g, 65536u) : below(g, 1500u));
+    f->data[4] = (uint8_t)(w->gnss_frozen ? 7u : below(g, 256u));
+}
+
 static void random_frame(rng_t *g, const world_t *w, const td_app_t *app, td_can_frame_t *f) {
-    static const uint32_t ecu_ids[] = { TD_ID_ECU_STATUS, TD_ID_ECU_DIAG, TD_ID_ECU_SPEEDS, TD_ID_ECU_TARGETS,
-                                        TD_ID_ECU_PARAM_ACK };
+    static const uint32_t ecu_ids[] = { TD_ID_ECU_STATUS,    TD_ID_ECU_DIAG,  TD_ID_ECU_SPEEDS,   TD_ID_ECU_TARGETS,
+                                        TD_ID_ECU_PARAM_ACK, TD_ID_ECU_FUSED, TD_ID_ECU_FUSED_AUX };
     for (int i = 0; i < 8; i++) {
         f->data[i] = (uint8_t)rnd(g);
     }
@@ -120,8 +132,13 @@ static void random_frame(rng_t *g, const world_t *w, const td_app_t *app, td_can
         if (below(g, 8u) != 0u) {
             shape_param_set(g, f);
         }
+    } else if (k < 70u) {
+        f->id = TD_ID_PC_GNSS_TIME;
+        if (below(g, 8u) != 0u) {
+            shape_gnss_time(g, w, f);
+        }
     } else if (k < 75u) {
-        f->id = ecu_ids[below(g, 5u)];
+        f->id = ecu_ids[below(g, 7u)];
     } else if (k < 88u) {
         f->id = rnd(g) & 0x1FFFFFFFu;
     } else {
@@ -141,6 +158,8 @@ static void tally_rx(const td_app_t *app, const td_can_frame_t *f, int rc, tally
         t->rejected++;
     } else if (f->id == app->p.command_id) {
         t->cmd_ok++;
+    } else if (f->id == TD_ID_PC_GNSS_TIME) {
+        t->gnss_time_ok++;
     } else {
         t->param_ok++;
     }
@@ -171,6 +190,9 @@ static void plant_step(rng_t *g, world_t *w, const td_io_out_t *out, double dt_s
         }
     }
     in->wheel_count = (uint32_t)(uint64_t)fmod(w->wheel_pos, 4294967296.0) + w->wheel_off;
+    /* a capture timer in some phases: the edge at a random point of the step, or garbage */
+    in->wheel_edge_valid = w->edge_timing ? 1u : 0u;
+    in->wheel_edge_us = w->now_us - (below(g, 20u) == 0u ? rnd(g) : below(g, 10000u));
     for (int l = 0; l < 2; l++) {
         in->meter_count[l] = (uint32_t)(uint64_t)fmod(w->meter_pos[l], 4294967296.0) + w->meter_off[l];
         in->fan_count[l] = (uint32_t)(uint64_t)fmod(w->fan_pos[l], 4294967296.0) + w->fan_off[l];
@@ -207,13 +229,16 @@ static void drain(td_app_t *app, tally_t *t) {
         assert_int_equal(f.extended, 1);
         assert_int_equal(f.dlc, 8);
         assert_true(f.id == app->p.status_id || f.id == TD_ID_ECU_DIAG || f.id == TD_ID_ECU_SPEEDS ||
-                    f.id == TD_ID_ECU_TARGETS || f.id == TD_ID_ECU_PARAM_ACK);
+                    f.id == TD_ID_ECU_TARGETS || f.id == TD_ID_ECU_PARAM_ACK || f.id == TD_ID_ECU_FUSED ||
+                    f.id == TD_ID_ECU_FUSED_AUX);
     }
     assert_int_equal(app->tx_count, 0);
     t->tx_frames += n;
 }
 
 /* One frame through td_app_rx with the checks of every frame. */
+static void drain(td_app_t *app, tally_t *t);
+
 static void send(td_app_t *app, td_app_t *before, const td_can_frame_t *f, uint32_t stamp, tally_t *t) {
     memcpy(before, app, sizeof *before);
     const int rc = td_app_rx(app, f, stamp);
@@ -221,8 +246,21 @@ static void send(td_app_t *app, td_app_t *before, const td_can_frame_t *f, uint3
     tally_rx(app, f, rc, t);
 }
 
-/* The PC stops the ECU and writes every parameter back to its default. */
-static void restore_defaults(td_app_t *app, td_app_t *before, uint32_t now, tally_t *t) {
+static void write_param(td_app_t *app, td_app_t *before, uint8_t id, float v, uint32_t now, tally_t *t) {
+    const uint32_t raw = td_proto_param_raw(id, v);
+    const uint8_t data[8] = { id, 0, 0, 0, (uint8_t)raw, (uint8_t)(raw >> 8), (uint8_t)(raw >> 16), (uint8_t)(raw >> 24) };
+    td_can_frame_t f;
+    f.id = TD_ID_PC_PARAM_SET;
+    f.extended = 1u;
+    f.dlc = 8u;
+    memcpy(f.data, data, 8);
+    send(app, before, &f, now, t);
+    drain(app, t);
+}
+
+/* The PC stops the ECU and writes every parameter back to its default; then, in half the
+ * phases, the fused mode, and in some of them a look-ahead or slip compensation. */
+static void restore_defaults(rng_t *g, td_app_t *app, td_app_t *before, uint32_t now, tally_t *t) {
     td_params_t d;
     td_params_default(&d);
     td_can_frame_t f;
@@ -244,6 +282,15 @@ static void restore_defaults(td_app_t *app, td_app_t *before, uint32_t now, tall
         send(app, before, &f, now, t);
         drain(app, t);
     }
+    if (below(g, 2u) == 0u) {
+        write_param(app, before, 10u, (float)TD_MODE_FUSED, now, t);
+    }
+    if (below(g, 3u) == 0u) {
+        write_param(app, before, 31u, 800.0f, now, t); /* air line */
+    }
+    if (below(g, 3u) == 0u) {
+        write_param(app, before, 28u, (float)(1u + below(g, 2u)), now, t); /* slip learned or eq. 5 */
+    }
 }
 
 static void test_random_frames_steps_and_counters_keep_every_invariant(void **state) {
@@ -264,7 +311,7 @@ static void test_random_frames_steps_and_counters_keep_every_invariant(void **st
         if (i % PHASE_FRAMES == 0u) {
             new_phase(&g, &w);
             if (w.restore_defaults) {
-                restore_defaults(&app, &before, now, &t);
+                restore_defaults(&g, &app, &before, now, &t);
             }
         }
         td_can_frame_t f;
@@ -275,6 +322,7 @@ static void test_random_frames_steps_and_counters_keep_every_invariant(void **st
             const uint32_t dt_us = next_dt_us(&g);
             now += dt_us;
             td_io_in_t in;
+            w.now_us = now;
             plant_step(&g, &w, &out, dt_us < 0x80000000u ? dt_us * 1e-6 : 0.0, &in);
             assert_int_equal(td_app_step(&app, now, &in, &out), TD_OK);
             td_inv_check_step(&app, &out);
@@ -282,19 +330,24 @@ static void test_random_frames_steps_and_counters_keep_every_invariant(void **st
             t.running_steps += app.st.running;
             t.metering_steps += out.meter_duty[0] > 0.0f || out.meter_duty[1] > 0.0f;
             t.faults_seen |= app.st.faults;
+            t.fused_steps += app.st.source == TD_SRC_FUSED && (out.meter_duty[0] > 0.0f || out.meter_duty[1] > 0.0f);
+            t.edge_steps += app.st.edge_timing;
         }
         if (!w.bus_off && below(&g, 3u) != 0u) {
             drain(&app, &t);
         }
     }
     drain(&app, &t);
-    printf("fuzz: %u frames (%u acted on: %u commands, %u parameters; %u refused), %u steps "
-           "(%u running, %u metering), %u frames out, %u dropped, fault bits seen 0x%03X\n",
-           t.frames, t.cmd_ok + t.param_ok, t.cmd_ok, t.param_ok, t.rejected, t.steps, t.running_steps, t.metering_steps,
-           t.tx_frames, app.cnt.tx_dropped, t.faults_seen);
+    printf("fuzz: %u frames (%u acted on: %u commands, %u GNSS times, %u parameters; %u refused), %u steps "
+           "(%u running, %u metering, %u metering on the fused speed, %u with edge times), %u frames out, "
+           "%u dropped, fault bits seen 0x%03X\n",
+           t.frames, t.cmd_ok + t.gnss_time_ok + t.param_ok, t.cmd_ok, t.gnss_time_ok, t.param_ok, t.rejected, t.steps,
+           t.running_steps, t.metering_steps, t.fused_steps, t.edge_steps, t.tx_frames, app.cnt.tx_dropped,
+           t.faults_seen);
     /* every counter adds up, and the run did reach the interesting states */
     assert_true(t.frames >= FUZZ_FRAMES);
-    assert_int_equal(app.cnt.rx_ok, t.cmd_ok + t.param_ok);
+    assert_int_equal(app.cnt.rx_ok, t.cmd_ok + t.gnss_time_ok + t.param_ok);
+    assert_true(t.gnss_time_ok > 5000u && t.fused_steps > 1000u && t.edge_steps > 10000u);
     assert_int_equal(td_inv_rejections(&app.cnt), t.rejected);
     assert_true(app.cnt.rx_unknown_id > 10000u && app.cnt.rx_bad_length > 10000u);
     assert_true(app.cnt.rx_out_of_range > 5000u && app.cnt.rx_param_rejected > 5000u);

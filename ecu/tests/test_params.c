@@ -55,14 +55,19 @@ static void test_range_boundaries(void **state) {
     assert_int_equal(td_params_set(&p, 8, 0.1f), TD_OK);
     assert_int_equal(td_params_set(&p, 8, 0.09f), TD_E_RANGE);
     assert_int_equal(td_params_set(&p, 10, 2.0f), TD_OK);
-    assert_int_equal(td_params_set(&p, 10, 3.0f), TD_E_RANGE);
+    assert_int_equal(td_params_set(&p, 10, 3.0f), TD_OK); /* fused */
+    assert_int_equal(td_params_set(&p, 10, 4.0f), TD_E_RANGE);
     assert_int_equal(td_params_set(&p, 16, 99.0f), TD_E_RANGE);
     assert_int_equal(td_params_set(&p, 27, 1001.0f), TD_E_RANGE);
     assert_int_equal(td_params_set(&p, 12, -0.001f), TD_E_RANGE);
     assert_int_equal(td_params_set(&p, 0, 1.0f), TD_E_UNKNOWN_PARAM);
-    assert_int_equal(td_params_set(&p, 28, 1.0f), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(td_params_set(&p, 38, 1.0f), TD_E_UNKNOWN_PARAM);
     float v;
-    assert_int_equal(td_params_get(&p, 28, &v), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(td_params_get(&p, 38, &v), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(td_params_set(&p, 28, 2.0f), TD_OK); /* slip compensation by eq. 5 */
+    assert_int_equal(td_params_set(&p, 28, 3.0f), TD_E_RANGE);
+    assert_int_equal(td_params_set(&p, 32, 0.0f), TD_E_RANGE); /* the filter needs process noise */
+    assert_int_equal(td_params_set(&p, 35, 19.0f), TD_E_RANGE);
     assert_int_equal(td_params_validate(NULL), TD_E_ARG);
 }
 
@@ -116,7 +121,9 @@ static const struct {
     GEN(pid_kd), GEN(pid_kff), GEN(cmd_timeout), GEN(gnss_timeout), GEN(min_work_speed),
     GEN(wheel_update_period), GEN(wheel_samples), GEN(meter_counts_per_rev), GEN(fan_min_speed),
     GEN(fan_pulses_per_rev), GEN(enc_fault_gnss_speed), GEN(enc_fault_time), GEN(blocked_time),
-    GEN(status_period),
+    GEN(status_period), GEN(slip_comp), GEN(gnss_lag), GEN(lead_meter), GEN(lead_air_line),
+    GEN(fused_jerk), GEN(fused_gnss_std), GEN(fused_wheel_noise), GEN(wheel_stop_time),
+    GEN(drive_adapt), GEN(meter_tau),
 };
 
 /* The range table of td_params.c is the DBC's: same scale and raw limits as the generated codec. */

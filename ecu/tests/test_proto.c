@@ -117,7 +117,11 @@ static void test_diag_speeds_targets_layout(void **state) {
     assert_int_equal(td_proto_encode_diag(&d, &f), TD_OK);
     assert_int_equal(f.data[1], 0xFF);
     assert_int_equal(f.data[2], 0xFF);
-    d.source = 3;
+    d.source = TD_SRC_FUSED;
+    d.mode = TD_MODE_FUSED;
+    assert_int_equal(td_proto_encode_diag(&d, &f), TD_OK);
+    assert_int_equal(f.data[0] & 0x0F, 0x0F); /* source 3 | mode 3 << 2 */
+    d.source = 4;
     assert_int_equal(td_proto_encode_diag(&d, &f), TD_E_ARG);
 
     const td_speeds_t s = { 7.31f, -1.0f, 7.31f, 3u };
@@ -164,7 +168,7 @@ static void test_param_set_decode_matches_generated_unpack(void **state) {
         const td_can_frame_t g = raw_frame(TD_ID_PC_PARAM_SET, 8, e);
         assert_int_equal(td_proto_decode_param_set(&g, &got_id, &value), TD_E_RANGE);
     }
-    const uint8_t unknown[8] = { 28, 0, 0, 0, 1, 0, 0, 0 };
+    const uint8_t unknown[8] = { TD_PARAM_COUNT + 1, 0, 0, 0, 1, 0, 0, 0 };
     td_can_frame_t f = raw_frame(TD_ID_PC_PARAM_SET, 8, unknown);
     uint8_t id;
     float v;

@@ -35,11 +35,12 @@ static uint32_t take32(script_t *s) {
 }
 
 static void rx(td_app_t *app, script_t *s, uint32_t now) {
-    static const uint32_t ids[] = { TD_ID_PC_COMMAND,  TD_ID_PC_PARAM_SET, TD_ID_ECU_STATUS, TD_ID_ECU_DIAG,
-                                    TD_ID_ECU_SPEEDS,  TD_ID_ECU_TARGETS,  TD_ID_ECU_PARAM_ACK };
+    static const uint32_t ids[] = { TD_ID_PC_COMMAND,  TD_ID_PC_PARAM_SET, TD_ID_ECU_STATUS,   TD_ID_ECU_DIAG,
+                                    TD_ID_ECU_SPEEDS,  TD_ID_ECU_TARGETS,  TD_ID_ECU_PARAM_ACK, TD_ID_PC_GNSS_TIME,
+                                    TD_ID_ECU_FUSED,   TD_ID_ECU_FUSED_AUX };
     const uint8_t sel = take8(s);
     td_can_frame_t f;
-    f.id = (sel & 7u) < 7u ? ids[sel & 7u] : take32(s) & 0x1FFFFFFFu;
+    f.id = (sel & 15u) < 10u ? ids[sel & 15u] : take32(s) & 0x1FFFFFFFu;
     f.extended = (sel & 0x80u) != 0u ? 0u : 1u;
     const uint8_t dlc = take8(s);
     f.dlc = (dlc & 0x10u) != 0u ? (uint8_t)(dlc & 0x0Fu) : 8u; /* 0..15, as the binding passes */
@@ -62,6 +63,9 @@ static uint32_t step(td_app_t *app, script_t *s, uint32_t now, td_io_in_t *in) {
     }
     now += dt_us;
     in->wheel_count += take8(s);
+    const uint8_t e = take8(s); /* a capture timer or not, its edge somewhere in the step or wild */
+    in->wheel_edge_valid = (uint8_t)(e & 1u);
+    in->wheel_edge_us = (e & 2u) != 0u ? take32(s) : now - (uint32_t)(e >> 2) * 40u;
     for (int l = 0; l < 2; l++) {
         in->meter_count[l] += (uint32_t)take8(s) * 8u;
         in->fan_count[l] += (uint32_t)take8(s) * 4u;

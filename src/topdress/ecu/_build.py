@@ -33,15 +33,19 @@ CDEF = r"""
 #define TD_FAULT_GNSS_FROZEN ...
 #define TD_FAULT_LATCHED_MASK ...
 typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
-typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2 } td_source_t;
-typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2 } td_speed_mode_t;
+typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED = 3 } td_source_t;
+typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2, TD_MODE_FUSED = 3 }
+    td_speed_mode_t;
+typedef enum { TD_SLIP_OFF = 0, TD_SLIP_LEARNED = 1, TD_SLIP_MODEL = 2 } td_slip_comp_t;
 typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
 uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us);
 
 /* td_port.h */
 typedef struct { uint32_t id; uint8_t extended; uint8_t dlc; uint8_t data[8]; ...; } td_can_frame_t;
-typedef struct { uint32_t wheel_count; uint32_t meter_count[2]; uint32_t fan_count[2]; ...; }
-    td_io_in_t;
+typedef struct {
+    uint32_t wheel_count; uint32_t meter_count[2]; uint32_t fan_count[2];
+    uint32_t wheel_edge_us; uint8_t wheel_edge_valid; ...;
+} td_io_in_t;
 typedef struct { float meter_duty[2]; float fan_duty[2]; ...; } td_io_out_t;
 
 /* td_params.h */
@@ -72,6 +76,16 @@ typedef struct {
     uint16_t enc_fault_time_ms;
     uint16_t blocked_time_ms;
     uint16_t status_period_ms;
+    uint8_t slip_comp;
+    uint16_t gnss_lag_ms;
+    uint16_t lead_meter_ms;
+    uint16_t lead_air_ms;
+    float fused_jerk_ms3;
+    float fused_gnss_std_kmh;
+    float fused_wheel_noise_pct;
+    uint16_t wheel_stop_ms;
+    uint8_t drive_adapt;
+    uint16_t meter_tau_ms;
     float fan_rpm_at_full_duty;
     uint16_t fan_spinup_ms;
     uint32_t status_id;
@@ -91,6 +105,30 @@ float td_wheel_speed_kmh(float f_hz, float radius_m, uint16_t ppr);
 typedef struct { float speed_kmh; uint8_t n_freq; ...; } td_wheel_t;
 int td_wheel_init(td_wheel_t *w, float radius_m, uint16_t ppr, uint8_t samples, uint16_t update_ms);
 bool td_wheel_step(td_wheel_t *w, uint32_t now_us, uint32_t count, float *speed_kmh);
+
+/* td_edge.h */
+typedef struct {
+    float m_per_pulse; bool have_edge; bool started; bool moving; bool timed; float speed_ms;
+    float span_s; ...;
+} td_edge_t;
+int td_edge_init(td_edge_t *e, float radius_m, uint16_t ppr, uint16_t stop_ms);
+float td_edge_step(td_edge_t *e, uint32_t now_us, uint32_t count, uint32_t edge_us,
+                   bool edge_valid);
+
+/* td_fused.h */
+typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED = 2 }
+    td_fused_result_t;
+typedef struct {
+    float v_ms; float a_ms2; float scale; float p[6]; float innov_ms; uint8_t wheel_rejects; ...;
+} td_fused_t;
+int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct);
+void td_fused_predict(td_fused_t *f, float dt_s);
+td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn,
+                                 bool gnss_backs);
+td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn);
+void td_fused_standstill(td_fused_t *f);
+float td_fused_lead_ms(const td_fused_t *f, float lead_s);
+float td_fused_speed_std_ms(const td_fused_t *f);
 
 /* td_speedq.h */
 #define TD_SPEEDQ_MAX ...
@@ -125,6 +163,17 @@ void td_pid_init(td_pid_t *pid, float kp, float ki, float kd, float kff, float o
 void td_pid_reset(td_pid_t *pid);
 float td_pid_step(td_pid_t *pid, float setpoint, float measured, float dt_s);
 
+/* td_drive.h */
+typedef struct {
+    td_pid_t pid; float kff_cfg; float tau_s; bool adapt; float ref_rpm; float duty_lag;
+    float sn, su, sw, suu, suw; ...;
+} td_drive_t;
+void td_drive_init(td_drive_t *d, float kp, float ki, float kd, float kff, float tau_s,
+                   bool adapt);
+void td_drive_reset(td_drive_t *d);
+float td_drive_step(td_drive_t *d, float target_rpm, float meas_rpm, float dt_s);
+float td_drive_rpm_per_duty(const td_drive_t *d);
+
 /* td_speedsel.h */
 td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float cv_pct,
                              float cv_threshold_pct, float switch_speed_kmh, float v_wheel_kmh,
@@ -138,6 +187,9 @@ td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float c
 #define TD_ID_ECU_TARGETS ...
 #define TD_ID_PC_PARAM_SET ...
 #define TD_ID_ECU_PARAM_ACK ...
+#define TD_ID_PC_GNSS_TIME ...
+#define TD_ID_ECU_FUSED ...
+#define TD_ID_ECU_FUSED_AUX ...
 #define TD_RUN_STOPPED ...
 #define TD_RUN_RUNNING ...
 typedef struct {
@@ -187,6 +239,21 @@ typedef struct {
     uint16_t faults;
     uint32_t wheel_updates;
     uint32_t wheel_pulses;
+    float v_fused_kmh;
+    float a_fused_ms2;
+    float slip_pct;
+    float innov_kmh;
+    float speed_std_kmh;
+    float v_edge_kmh;
+    float v_lead_kmh;
+    float drive_rpm_per_duty[2];
+    uint16_t gnss_delay_ms;
+    bool slip_learning;
+    bool edge_timing;
+    bool gnss_fused;
+    uint32_t gnss_fixes;
+    uint32_t gnss_rejected;
+    uint32_t wheel_rejected;
     ...;
 } td_state_t;
 typedef struct {
@@ -198,7 +265,10 @@ typedef struct {
     uint32_t tx_dropped;
     ...;
 } td_counters_t;
-typedef struct { td_params_t p; td_state_t st; td_counters_t cnt; ...; } td_app_t;
+typedef struct {
+    td_params_t p; td_state_t st; td_counters_t cnt; td_drive_t meter_drive[2]; td_fused_t fused;
+    ...;
+} td_app_t;
 int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
 int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
 int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out);
@@ -207,7 +277,8 @@ const td_state_t *td_app_state(const td_app_t *app);
 
 /* fast paths of the binding (below): one C call per step, per frame in, per frame out */
 int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
-              uint32_t f0, uint32_t f1, float out[4]);
+              uint32_t f0, uint32_t f1, uint32_t wheel_edge_us, uint8_t wheel_edge_valid,
+              float out[4]);
 int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *data, size_t len,
             uint32_t now_us);
 int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
@@ -218,12 +289,16 @@ int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
 SHIMS = r"""
 #include <string.h>
 #include "td_app.h"
+#include "td_drive.h"
+#include "td_edge.h"
+#include "td_fused.h"
 #include "td_meter.h"
 #include "td_slip.h"
 #include "td_speedsel.h"
 
 static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
-                     uint32_t f0, uint32_t f1, float out[4]) {
+                     uint32_t f0, uint32_t f1, uint32_t wheel_edge_us, uint8_t wheel_edge_valid,
+                     float out[4]) {
     td_io_in_t in;
     td_io_out_t o;
     int rc;
@@ -232,6 +307,8 @@ static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0
     in.meter_count[1] = m1;
     in.fan_count[0] = f0;
     in.fan_count[1] = f1;
+    in.wheel_edge_us = wheel_edge_us;
+    in.wheel_edge_valid = wheel_edge_valid;
     rc = td_app_step(app, now_us, &in, &o);
     out[0] = o.meter_duty[0];
     out[1] = o.meter_duty[1];

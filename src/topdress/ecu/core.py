@@ -51,6 +51,22 @@ class EcuState:
     faults: Fault
     wheel_updates: int
     wheel_pulses: int
+    # the fused estimate, slip, look-ahead and drives (every step, in every mode)
+    v_fused_kmh: float
+    a_fused_ms2: float
+    slip_pct: float
+    innov_kmh: float
+    speed_std_kmh: float
+    v_edge_kmh: float
+    v_lead_kmh: float
+    drive_rpm_per_duty: tuple[float, float]
+    gnss_delay_ms: int
+    slip_learning: bool
+    edge_timing: bool
+    gnss_fused: bool
+    gnss_fixes: int
+    gnss_rejected: int
+    wheel_rejected: int
 
 
 @dataclass(frozen=True)
@@ -97,10 +113,19 @@ class Ecu:
         return int(lib.tdpy_rx(self._app, frame_id, ext, data, len(data), now_us & _U32))
 
     def step_raw(
-        self, now_us: int, wheel_count: int, m0: int, m1: int, f0: int, f1: int
+        self,
+        now_us: int,
+        wheel_count: int,
+        m0: int,
+        m1: int,
+        f0: int,
+        f1: int,
+        wheel_edge_us: int | None = None,
     ) -> tuple[float, float, float, float]:
         """One control step on plain values: (meter_duty_upper, meter_duty_lower,
-        fan_duty_upper, fan_duty_lower)."""
+        fan_duty_upper, fan_duty_lower). `wheel_edge_us`: the time (same clock as now_us) of
+        the wheel pulse that made wheel_count what it is, as a capture timer gives it; None for
+        a port that only counts."""
         out = self._out
         rc = self._step_fn(
             self._app,
@@ -110,6 +135,8 @@ class Ecu:
             m1 & _U32,
             f0 & _U32,
             f1 & _U32,
+            0 if wheel_edge_us is None else wheel_edge_us & _U32,
+            wheel_edge_us is not None,
             out,
         )
         if rc < 0:
@@ -122,9 +149,11 @@ class Ecu:
         wheel_count: int,
         meter_counts: tuple[int, int],
         fan_counts: tuple[int, int],
+        wheel_edge_us: int | None = None,
     ) -> Outputs:
-        """One control step: cumulative counters in, the duties to apply out."""
-        d = self.step_raw(now_us, wheel_count, *meter_counts, *fan_counts)
+        """One control step: cumulative counters (and the wheel's last edge time, if the port
+        captures it) in, the duties to apply out."""
+        d = self.step_raw(now_us, wheel_count, *meter_counts, *fan_counts, wheel_edge_us)
         return Outputs(meter_duty=(d[0], d[1]), fan_duty=(d[2], d[3]))
 
     def tx_raw(self) -> list[CanFrame]:
@@ -164,6 +193,21 @@ class Ecu:
             faults=Fault(int(s.faults)),
             wheel_updates=int(s.wheel_updates),
             wheel_pulses=int(s.wheel_pulses),
+            v_fused_kmh=float(s.v_fused_kmh),
+            a_fused_ms2=float(s.a_fused_ms2),
+            slip_pct=float(s.slip_pct),
+            innov_kmh=float(s.innov_kmh),
+            speed_std_kmh=float(s.speed_std_kmh),
+            v_edge_kmh=float(s.v_edge_kmh),
+            v_lead_kmh=float(s.v_lead_kmh),
+            drive_rpm_per_duty=_pair(s.drive_rpm_per_duty),
+            gnss_delay_ms=int(s.gnss_delay_ms),
+            slip_learning=bool(s.slip_learning),
+            edge_timing=bool(s.edge_timing),
+            gnss_fused=bool(s.gnss_fused),
+            gnss_fixes=int(s.gnss_fixes),
+            gnss_rejected=int(s.gnss_rejected),
+            wheel_rejected=int(s.wheel_rejected),
         )
 
     @property

@@ -64,6 +64,16 @@ class EcuParams:
     enc_fault_time_ms: int
     blocked_time_ms: int
     status_period_ms: int
+    slip_comp: int
+    gnss_lag_ms: int
+    lead_meter_ms: int
+    lead_air_ms: int
+    fused_jerk_ms3: float
+    fused_gnss_std_kmh: float
+    fused_wheel_noise_pct: float
+    wheel_stop_ms: int
+    drive_adapt: int
+    meter_tau_ms: int
     fan_rpm_at_full_duty: float
     fan_spinup_ms: int
     status_id: int

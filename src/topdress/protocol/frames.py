@@ -122,7 +122,55 @@ class EcuParamAck:
             return None
 
 
-Frame = PcCommand | EcuStatus | EcuDiag | EcuSpeeds | EcuTargets | PcParamSet | EcuParamAck
+@dataclass(frozen=True)
+class PcGnssTime:
+    """PC -> ECU: the GNSS speed (None = not available) with the age of its fix, ms, and the
+    fix counter; the ECU applies each new `seq` once, at the fix's time of validity."""
+
+    gnss_kmh: float | None
+    age_ms: int
+    seq: int
+
+
+@dataclass(frozen=True)
+class EcuFused:
+    """The ECU's fused speed estimate: speed, acceleration, learned slip (%), the last GNSS
+    innovation (km/h), flags and the 1-sigma speed uncertainty (km/h, saturates at 1.55)."""
+
+    speed_kmh: float
+    accel_ms2: float
+    slip_pct: float
+    innovation_kmh: float
+    slip_learning: bool
+    edge_timing: bool
+    gnss_fused: bool
+    speed_std_kmh: float
+
+
+@dataclass(frozen=True)
+class EcuFusedAux:
+    """Edge-timed wheel speed (no slip correction), the look-ahead speed that drives eq. 4,
+    the learned metering drive slopes (r/min per unit duty) and the last GNSS delay (ms)."""
+
+    wheel_edge_kmh: float
+    lead_kmh: float
+    drive_slope_upper: float
+    drive_slope_lower: float
+    gnss_delay_ms: int
+
+
+Frame = (
+    PcCommand
+    | EcuStatus
+    | EcuDiag
+    | EcuSpeeds
+    | EcuTargets
+    | PcParamSet
+    | EcuParamAck
+    | PcGnssTime
+    | EcuFused
+    | EcuFusedAux
+)
 
 
 def _frame_parts(frame: can.Message | CanFrame) -> tuple[int, bytes]:
@@ -239,6 +287,48 @@ def _decode_param_ack(data: bytes) -> EcuParamAck:
     return EcuParamAck(raw["AckParamId"], result, raw["AckRaw"])
 
 
+def _decode_gnss_time(data: bytes) -> PcGnssTime:
+    raw = _decode_raw("PcGnssTime", data)
+    g = raw["GnssSpeedPrecise"]
+    if GNSS_MAX_KMH / 0.01 < g < NA_RAW_16:
+        raise ProtocolError(
+            f"PcGnssTime.GnssSpeedPrecise raw {g} is out of range (0..2500, 65535 = n/a)"
+        )
+    age = _check("PcGnssTime", "GnssFixAge", raw["GnssFixAge"])
+    return PcGnssTime(
+        gnss_kmh=None if g == NA_RAW_16 else _check("PcGnssTime", "GnssSpeedPrecise", g),
+        age_ms=int(age),
+        seq=raw["GnssSeq"],
+    )
+
+
+def _decode_fused(data: bytes) -> EcuFused:
+    raw = _decode_raw("EcuFused", data)
+    v = {k: _check("EcuFused", k, r) for k, r in raw.items()}
+    return EcuFused(
+        speed_kmh=v["FusedSpeed"],
+        accel_ms2=v["FusedAccel"],
+        slip_pct=v["LearnedSlip"],
+        innovation_kmh=v["GnssInnovation"],
+        slip_learning=bool(raw["SlipLearning"]),
+        edge_timing=bool(raw["EdgeTiming"]),
+        gnss_fused=bool(raw["GnssFused"]),
+        speed_std_kmh=v["SpeedStd"],
+    )
+
+
+def _decode_fused_aux(data: bytes) -> EcuFusedAux:
+    raw = _decode_raw("EcuFusedAux", data)
+    v = {k: _check("EcuFusedAux", k, r) for k, r in raw.items()}
+    return EcuFusedAux(
+        wheel_edge_kmh=v["WheelEdgeSpeed"],
+        lead_kmh=v["LeadSpeed"],
+        drive_slope_upper=v["UpperDriveSlope"],
+        drive_slope_lower=v["LowerDriveSlope"],
+        gnss_delay_ms=raw["GnssDelay"],
+    )
+
+
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
     """True for the identifier of a frame of the protocol (to tell malformed from foreign)."""
     return frame_id in (
@@ -249,6 +339,9 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
         ids.targets,
         ids.param_set,
         ids.param_ack,
+        ids.gnss_time,
+        ids.fused,
+        ids.fused_aux,
     )
 
 
@@ -263,6 +356,9 @@ def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
         ids.targets: _decode_targets,
         ids.param_set: _decode_param_set,
         ids.param_ack: _decode_param_ack,
+        ids.gnss_time: _decode_gnss_time,
+        ids.fused: _decode_fused,
+        ids.fused_aux: _decode_fused_aux,
     }
     try:
         decoder = decoders[frame_id]
@@ -306,6 +402,22 @@ def encode_command(
         "GnssSpeed": GNSS_NA_RAW * 0.1 if gnss_kmh is None else float(gnss_kmh),
     }
     return _message(ids.command, _encode("PcCommand", signals))
+
+
+def encode_gnss_time(
+    gnss_kmh: float | None, age_ms: int, seq: int, *, ids: FrameIds = DEFAULT_IDS
+) -> can.Message:
+    """PcGnssTime: the GNSS speed at 0.01 km/h (None = not available), the time from its fix
+    (as the PC knows it: the arrival of its sentence) to now in ms (0..10000), and the fix
+    counter mod 256 (a new value for every new fix; a repeated one is not applied again)."""
+    if gnss_kmh is not None and not 0.0 <= gnss_kmh <= GNSS_MAX_KMH:
+        raise ProtocolError(f"PcGnssTime.GnssSpeedPrecise = {gnss_kmh} outside 0..25 km/h")
+    signals = {
+        "GnssSpeedPrecise": NA_RAW_16 * 0.01 if gnss_kmh is None else float(gnss_kmh),
+        "GnssFixAge": int(age_ms),
+        "GnssSeq": int(seq) & 0xFF,
+    }
+    return _message(ids.gnss_time, _encode("PcGnssTime", signals))
 
 
 def encode_param_set(key: int | str, value: float, *, ids: FrameIds = DEFAULT_IDS) -> can.Message:

@@ -14,11 +14,13 @@ CanFrame = tuple[int, bytes]
 
 
 class Source(StrEnum):
-    """Speed source in use (td_source_t; EcuDiag.SpeedSource)."""
+    """Speed source in use (td_source_t; EcuDiag.SpeedSource). FUSED: the fused estimate fed by
+    both sensors (in the fused mode WHEEL or GNSS name the one sensor still feeding it)."""
 
     WHEEL = "wheel"
     GNSS = "gnss"
     NONE = "none"
+    FUSED = "fused"
 
     @property
     def code(self) -> int:
@@ -30,11 +32,13 @@ class Source(StrEnum):
 
 
 class SpeedMode(StrEnum):
-    """Speed mode (td_speed_mode_t; parameter SpeedMode). DUAL is the paper's rule."""
+    """Speed mode (td_speed_mode_t; parameter SpeedMode). DUAL is the paper's rule, FUSED the
+    Kalman estimate over both sensors (docs/speed.md)."""
 
     DUAL = "dual"
     WHEEL_ONLY = "wheel"
     GNSS_ONLY = "gnss"
+    FUSED = "fused"
 
     @property
     def code(self) -> int:
@@ -60,8 +64,8 @@ class Compare(StrEnum):
         return _COMPARE_CODES[code]
 
 
-_SOURCE_CODES = (Source.WHEEL, Source.GNSS, Source.NONE)
-_MODE_CODES = (SpeedMode.DUAL, SpeedMode.WHEEL_ONLY, SpeedMode.GNSS_ONLY)
+_SOURCE_CODES = (Source.WHEEL, Source.GNSS, Source.NONE, Source.FUSED)
+_MODE_CODES = (SpeedMode.DUAL, SpeedMode.WHEEL_ONLY, SpeedMode.GNSS_ONLY, SpeedMode.FUSED)
 _COMPARE_CODES = (Compare.GNSS, Compare.WHEEL)
 
 
@@ -105,6 +109,9 @@ class FrameIds:
     targets: int = 0x185F6465
     param_set: int = 0x0A606465
     param_ack: int = 0x18616465
+    gnss_time: int = 0x0A626465
+    fused: int = 0x18636465
+    fused_aux: int = 0x18666465
 
 
 DEFAULT_IDS = FrameIds()

@@ -42,6 +42,16 @@ _FIELDS: dict[str, tuple[str, int | None]] = {
     "EncFaultTime": ("enc_fault_time_ms", None),
     "BlockedTime": ("blocked_time_ms", None),
     "StatusPeriod": ("status_period_ms", None),
+    "SlipComp": ("slip_comp", None),
+    "GnssLag": ("gnss_lag_ms", None),
+    "LeadMeter": ("lead_meter_ms", None),
+    "LeadAirLine": ("lead_air_ms", None),
+    "FusedJerk": ("fused_jerk_ms3", None),
+    "FusedGnssStd": ("fused_gnss_std_kmh", None),
+    "FusedWheelNoise": ("fused_wheel_noise_pct", None),
+    "WheelStopTime": ("wheel_stop_ms", None),
+    "DriveAdapt": ("drive_adapt", None),
+    "MeterTau": ("meter_tau_ms", None),
 }
 
 
@@ -94,7 +104,7 @@ class ParamSpec:
 
 @cache
 def params() -> tuple[ParamSpec, ...]:
-    """Every parameter, by id (1..27)."""
+    """Every parameter, by id (1..37)."""
     specs = []
     for sig in message("PcParamSet").signals:
         if sig.is_multiplexer:

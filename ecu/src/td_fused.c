@@ -1,0 +1,203 @@
+/**
+ * @file td_fused.c
+ * @brief 3-state EKF: speed, acceleration, wheel scale (td_fused.h for the model).
+ */
+#include "td_fused.h"
+
+#include <math.h>
+#include <stddef.h>
+#include "td_common.h"
+#include "td_slip.h"
+
+enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
+
+#define TD_KMH_PER_MS 3.6f
+#define P0_V 1.0f         /* initial speed variance, (m/s)^2 */
+#define P0_A 1.0f         /* initial acceleration variance */
+#define P0_S 0.01f        /* initial scale variance: 10 % slip, 1 sigma */
+#define P_S_MAX 0.01f     /* the scale's variance never grows beyond its initial value */
+#define Q_SCALE 2.0e-5f   /* scale random walk, 1/s: 0.45 % per sqrt(s) */
+#define Q_STEADY 0.01f    /* share of the jerk density over a GNSS delay in steady motion */
+#define WHEEL_FLOOR_MS 0.02f
+#define GATE_SIGMA2 25.0f /* 5 sigma */
+#define GATE_MIN_MS 0.3f
+#define WHEEL_RESTART 25u
+#define SCALE_MIN 0.5f
+#define SCALE_MAX 1.5f
+#define SHAPE_MIN 0.5f
+
+int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct) {
+    if (f == NULL || !(jerk_ms3 > 0.0f) || !(gnss_std_kmh > 0.0f) || !(wheel_noise_pct > 0.0f)) {
+        return TD_E_ARG;
+    }
+    f->v_ms = 0.0f;
+    f->a_ms2 = 0.0f;
+    f->scale = 1.0f;
+    f->p[VV] = P0_V;
+    f->p[VA] = 0.0f;
+    f->p[VS] = 0.0f;
+    f->p[AA] = P0_A;
+    f->p[AS] = 0.0f;
+    f->p[SS] = P0_S;
+    f->innov_ms = 0.0f;
+    f->wheel_rejects = 0u;
+    f->slip_shape = false;
+    td_fused_tune(f, jerk_ms3, gnss_std_kmh, wheel_noise_pct);
+    return TD_OK;
+}
+
+void td_fused_tune(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct) {
+    const float g = gnss_std_kmh / TD_KMH_PER_MS;
+    f->q_jerk = jerk_ms3 * jerk_ms3;
+    f->r_gnss = g * g;
+    f->wheel_rel = wheel_noise_pct * 0.01f;
+}
+
+void td_fused_predict(td_fused_t *f, float dt_s) {
+    if (!(dt_s > 0.0f)) {
+        return;
+    }
+    float *p = f->p;
+    const float q = f->q_jerk;
+    const float dt2 = dt_s * dt_s;
+    p[VV] += dt_s * (2.0f * p[VA] + dt_s * p[AA]) + q * dt2 * dt_s / 3.0f;
+    p[VA] += dt_s * p[AA] + q * dt2 * 0.5f;
+    p[VS] += dt_s * p[AS];
+    p[AA] += q * dt_s;
+    p[SS] += Q_SCALE * dt_s;
+    if (p[SS] > P_S_MAX) {
+        p[SS] = P_S_MAX;
+    }
+    f->v_ms += f->a_ms2 * dt_s;
+    if (f->v_ms < 0.0f) {
+        f->v_ms = 0.0f;
+    }
+}
+
+/* Scalar measurement with H = h, innovation y, variance r. The scale's gain is zeroed unless
+ * learning; the Joseph form P - K u' - u K' + S K K' keeps P right for that gain. */
+static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn) {
+    float *p = f->p;
+    const float u[3] = { p[VV] * h[0] + p[VA] * h[1] + p[VS] * h[2], p[VA] * h[0] + p[AA] * h[1] + p[AS] * h[2],
+                         p[VS] * h[0] + p[AS] * h[1] + p[SS] * h[2] };
+    const float s = h[0] * u[0] + h[1] * u[1] + h[2] * u[2] + r;
+    if (!(s > 0.0f) || (y * y > GATE_SIGMA2 * s && fabsf(y) > GATE_MIN_MS)) {
+        return false;
+    }
+    const float k[3] = { u[0] / s, u[1] / s, learn ? u[2] / s : 0.0f };
+    f->v_ms += k[0] * y;
+    f->a_ms2 += k[1] * y;
+    f->scale += k[2] * y;
+    static const uint8_t ij[6][2] = { { 0, 0 }, { 0, 1 }, { 0, 2 }, { 1, 1 }, { 1, 2 }, { 2, 2 } };
+    for (unsigned n = 0u; n < 6u; n++) {
+        const unsigned i = ij[n][0];
+        const unsigned j = ij[n][1];
+        p[n] += -k[i] * u[j] - u[i] * k[j] + s * k[i] * k[j];
+    }
+    /* keep the variances positive whatever the rounding */
+    if (p[VV] < 1.0e-8f) {
+        p[VV] = 1.0e-8f;
+    }
+    if (p[AA] < 1.0e-8f) {
+        p[AA] = 1.0e-8f;
+    }
+    if (p[SS] < 1.0e-10f) {
+        p[SS] = 1.0e-10f;
+    }
+    if (f->v_ms < 0.0f) {
+        f->v_ms = 0.0f;
+    }
+    if (f->scale < SCALE_MIN) {
+        f->scale = SCALE_MIN;
+    } else if (f->scale > SCALE_MAX) {
+        f->scale = SCALE_MAX;
+    }
+    return true;
+}
+
+float td_fused_shape(const td_fused_t *f, float v_ms, float *slope) {
+    if (!f->slip_shape) {
+        if (slope != NULL) {
+            *slope = 0.0f;
+        }
+        return 1.0f;
+    }
+    /* eq. 5: slip(%) = A v^2 + B v + C, v in km/h; g = 1 - slip/100, dg/dv per m/s */
+    const float vk = v_ms * 3.6f;
+    const float g = 1.0f - td_slip_model_pct(vk) * 0.01f;
+    if (g < SHAPE_MIN || g > 1.0f) {
+        if (slope != NULL) {
+            *slope = 0.0f;
+        }
+        return g < SHAPE_MIN ? SHAPE_MIN : 1.0f;
+    }
+    if (slope != NULL) {
+        *slope = -(td_slip_model_pct(vk + 0.5f) - td_slip_model_pct(vk - 0.5f)) * 0.01f * 3.6f;
+    }
+    return g;
+}
+
+td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs) {
+    float dg = 0.0f;
+    const float g = td_fused_shape(f, f->v_ms, &dg);
+    /* z = s * g(v) * v: dz/dv = s * (g + v * g'), dz/ds = g * v */
+    const float h[3] = { f->scale * (g + f->v_ms * dg), 0.0f, g * f->v_ms };
+    const float sd = f->wheel_rel * z_ms;
+    const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
+    const float y = z_ms - f->scale * g * f->v_ms;
+    /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
+     * again, not because the estimate grew uncertain without it */
+    const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
+    if (!held && update(f, h, y, r, learn)) {
+        f->wheel_rejects = 0u;
+        return TD_FUSED_ACCEPTED;
+    }
+    if (f->wheel_rejects < WHEEL_RESTART) {
+        f->wheel_rejects++;
+        return TD_FUSED_REJECTED;
+    }
+    if (gnss_backs) {
+        return TD_FUSED_REJECTED;
+    }
+    /* the wheel has disagreed for long and nothing says it is wrong: start again from it */
+    f->v_ms = z_ms / (f->scale * td_fused_shape(f, z_ms / f->scale, NULL));
+    f->a_ms2 = 0.0f;
+    f->p[VV] = r;
+    f->p[VA] = 0.0f;
+    f->p[VS] = 0.0f;
+    f->p[AA] = P0_A;
+    f->p[AS] = 0.0f;
+    f->wheel_rejects = 0u;
+    return TD_FUSED_RESTARTED;
+}
+
+td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn) {
+    const float d = delay_s > 0.0f ? delay_s : 0.0f;
+    const float h[3] = { 1.0f, -d, 0.0f };
+    const float y = z_ms - (f->v_ms - f->a_ms2 * d);
+    f->innov_ms = y;
+    /* the jerk over the delay; in steady motion (learn: steady for longer than the delay) a
+     * small share of it, or the GNSS speed would teach the scale almost nothing */
+    const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
+    return update(f, h, y, r, learn) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
+}
+
+void td_fused_standstill(td_fused_t *f) {
+    f->v_ms = 0.0f;
+    f->a_ms2 = 0.0f;
+    f->p[VV] = 1.0e-4f;
+    f->p[VA] = 0.0f;
+    f->p[VS] = 0.0f;
+    f->p[AA] = 1.0e-2f;
+    f->p[AS] = 0.0f;
+    f->wheel_rejects = 0u;
+}
+
+float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
+    const float v = f->v_ms + f->a_ms2 * lead_s;
+    return v > 0.0f ? v : 0.0f;
+}
+
+float td_fused_speed_std_ms(const td_fused_t *f) {
+    return sqrtf(f->p[VV]);
+}

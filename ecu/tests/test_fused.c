@@ -1,0 +1,205 @@
+/* The fused estimate on analytic cases: constant speed, a ramp, a step of acceleration, a GNSS
+ * speed delayed by 1.3 s, a GNSS outage, a change of slip, the gates (a frozen receiver, a cut
+ * encoder cable), the look-ahead. Truth: speed v(t), wheel scale s(t); the wheel reads s*v every
+ * 10 ms, GNSS reads v(t - d) every 200 ms, both with a little deterministic noise. */
+#include "td_test.h"
+
+#include "td_fused.h"
+
+#define DT 0.01
+
+typedef double (*speed_fn)(double t);
+
+typedef struct {
+    td_fused_t f;
+    double t;
+    double next_gnss;
+    uint32_t noise;
+} run_t;
+
+static double noise(run_t *r) { /* deterministic, uniform in [-1, 1) */
+    r->noise = r->noise * 1664525u + 1013904223u;
+    return (double)(r->noise >> 8) / 8388608.0 - 1.0;
+}
+
+static void run_init(run_t *r) {
+    memset(r, 0, sizeof *r);
+    assert_int_equal(td_fused_init(&r->f, 0.3f, 0.4f, 6.0f), TD_OK);
+    r->noise = 12345u;
+}
+
+/* Run for dur_s: truth v(t) and scale; GNSS (if on) reporting v(t - delay_true) with the filter
+ * told delay_told; learning as given. */
+static void run(run_t *r, double dur_s, speed_fn v, double scale, bool gnss, double delay_true, double delay_told,
+                bool learn) {
+    const double end = r->t + dur_s;
+    while (r->t < end - 1e-9) {
+        r->t += DT;
+        td_fused_predict(&r->f, (float)DT);
+        const double vt = v(r->t);
+        const double z = scale * vt * (1.0 + 0.02 * noise(r));
+        (void)td_fused_wheel(&r->f, (float)z, 0.0f, false, gnss);
+        if (gnss && r->t >= r->next_gnss) {
+            r->next_gnss = r->t + 0.2;
+            const double zg = v(r->t - delay_true) + 0.02 * noise(r);
+            (void)td_fused_gnss(&r->f, (float)zg, (float)delay_told, learn);
+        }
+    }
+}
+
+static double v_const(double t) {
+    (void)t;
+    return 2.0;
+}
+
+static double v_ramp(double t) { /* rest, 0.5 m/s^2 from t = 1 s to 5 s, then 2 m/s */
+    return t < 1.0 ? 0.0 : t < 5.0 ? 0.5 * (t - 1.0) : 2.0;
+}
+
+static double v_long_ramp(double t) { /* 0.25 m/s^2 from t = 1 s */
+    return t < 1.0 ? 0.0 : 0.25 * (t - 1.0);
+}
+
+static void test_constant_speed_learns_the_slip(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    run(&r, 60.0, v_const, 0.92, true, 1.3, 1.3, true);
+    assert_float_equal(r.f.v_ms, 2.0, 0.02);
+    assert_float_equal(r.f.a_ms2, 0.0, 0.05);
+    assert_float_equal(r.f.scale, 0.92, 0.005);
+    assert_true(td_fused_speed_std_ms(&r.f) < 0.06f);
+}
+
+/* Without learning the scale stays where it is: the speed is then the wheel's, slip and all. */
+static void test_no_learning_keeps_the_scale(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    run(&r, 30.0, v_const, 0.92, true, 0.0, 0.0, false);
+    assert_float_equal(r.f.scale, 1.0, 1e-6);
+}
+
+/* A ramp: speed and acceleration followed; a step of acceleration at its ends. */
+static void test_ramp_and_steps_of_acceleration(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    run(&r, 3.0, v_ramp, 1.0, true, 1.3, 1.3, false); /* t = 3 s: mid-ramp */
+    assert_float_equal(r.f.v_ms, 1.0, 0.05);
+    assert_float_equal(r.f.a_ms2, 0.5, 0.1);
+    run(&r, 2.5, v_ramp, 1.0, true, 1.3, 1.3, false); /* 0.5 s after the ramp ended */
+    assert_float_equal(r.f.v_ms, 2.0, 0.06);
+    assert_float_equal(r.f.a_ms2, 0.0, 0.35);
+    run(&r, 1.0, v_ramp, 1.0, true, 1.3, 1.3, false); /* 1.5 s after */
+    assert_float_equal(r.f.v_ms, 2.0, 0.03);
+    assert_float_equal(r.f.a_ms2, 0.0, 0.1);
+    /* predicted ahead: in the ramp v + a*tau, never below zero */
+    assert_true(td_fused_lead_ms(&r.f, 1.0f) >= 0.0f);
+}
+
+/* GNSS alone (a cut encoder cable) on a ramp, its speed 1.3 s old: told the delay, the estimate
+ * is where the machine is; taking the speed as fresh lags by a*d = 0.65 m/s. */
+static void test_delayed_gnss_applied_at_its_time_of_validity(void **state) {
+    (void)state;
+    double err[2];
+    for (int told = 0; told < 2; told++) {
+        td_fused_t f;
+        assert_int_equal(td_fused_init(&f, 0.3f, 0.4f, 6.0f), TD_OK);
+        double t = 0.0;
+        double next = 0.0;
+        while (t < 8.0 - 1e-9) {
+            t += DT;
+            td_fused_predict(&f, (float)DT);
+            if (t >= next) {
+                next = t + 0.2;
+                (void)td_fused_gnss(&f, (float)v_long_ramp(t - 1.3), told ? 1.3f : 0.0f, false);
+            }
+        }
+        err[told] = f.v_ms - v_long_ramp(t);
+    }
+    assert_float_equal(err[0], -0.25 * 1.3, 0.08); /* fresh: lags by a*d */
+    assert_float_equal(err[1], 0.0, 0.05);         /* at its time of validity */
+}
+
+/* A 10 s outage after learning: the scale is kept, the speed is the wheel's over it. */
+static void test_outage_keeps_the_learned_scale(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    run(&r, 60.0, v_const, 0.9, true, 0.3, 0.3, true);
+    const float learned = r.f.scale;
+    assert_float_equal(learned, 0.9, 0.005);
+    run(&r, 10.0, v_const, 0.9, false, 0.0, 0.0, false);
+    assert_float_equal(r.f.scale, learned, 1e-6);
+    assert_float_equal(r.f.v_ms, 2.0, 0.02);
+}
+
+/* Loose soil: the slip goes from 5 % to 15 %; learned again within 20 s. */
+static void test_slip_change_relearned(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    run(&r, 40.0, v_const, 0.95, true, 0.3, 0.3, true);
+    assert_float_equal(r.f.scale, 0.95, 0.005);
+    run(&r, 20.0, v_const, 0.85, true, 0.3, 0.3, true);
+    assert_float_equal(r.f.scale, 0.85, 0.01);
+    assert_float_equal(r.f.v_ms, 2.0, 0.03);
+}
+
+/* Gates: a frozen receiver at 8 km/h while the wheel stands is refused; a wheel that drops to 0
+ * while accepted GNSS says 2 m/s stays refused (cut cable), and restarts the speed once nothing
+ * backs the estimate. */
+static void test_gates(void **state) {
+    (void)state;
+    td_fused_t f;
+    assert_int_equal(td_fused_init(&f, 0.3f, 0.4f, 6.0f), TD_OK);
+    td_fused_standstill(&f);
+    for (int k = 0; k < 100; k++) {
+        td_fused_predict(&f, (float)DT);
+        (void)td_fused_wheel(&f, 0.0f, 0.0f, false, false);
+        if (k % 20 == 0) {
+            assert_int_equal(td_fused_gnss(&f, 8.0f / 3.6f, 0.3f, false), TD_FUSED_REJECTED);
+        }
+    }
+    assert_float_equal(f.v_ms, 0.0, 0.01);
+    run_t r;
+    run_init(&r);
+    run(&r, 20.0, v_const, 1.0, true, 0.3, 0.3, false);
+    for (int k = 0; k < 100; k++) { /* 1 s of a dead wheel, GNSS backing */
+        td_fused_predict(&r.f, (float)DT);
+        assert_int_equal(td_fused_wheel(&r.f, 0.0f, 0.0f, false, true), TD_FUSED_REJECTED);
+        if (k % 20 == 0) {
+            assert_int_equal(td_fused_gnss(&r.f, 2.0f, 0.3f, false), TD_FUSED_ACCEPTED);
+        }
+    }
+    assert_float_equal(r.f.v_ms, 2.0, 0.1);
+    for (int k = 0; k < 30; k++) { /* nothing backs it: the wheel wins within 25 steps */
+        td_fused_predict(&r.f, (float)DT);
+        (void)td_fused_wheel(&r.f, 0.0f, 0.0f, false, false);
+    }
+    assert_float_equal(r.f.v_ms, 0.0, 0.1);
+}
+
+static void test_init_rejects_bad_tuning(void **state) {
+    (void)state;
+    td_fused_t f;
+    assert_int_equal(td_fused_init(&f, 0.0f, 0.4f, 6.0f), TD_E_ARG);
+    assert_int_equal(td_fused_init(&f, 1.0f, -1.0f, 6.0f), TD_E_ARG);
+    assert_int_equal(td_fused_init(&f, 1.0f, 0.4f, NAN), TD_E_ARG);
+    assert_int_equal(td_fused_init(NULL, 1.0f, 0.4f, 6.0f), TD_E_ARG);
+}
+
+int main(void) {
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_constant_speed_learns_the_slip),
+        cmocka_unit_test(test_no_learning_keeps_the_scale),
+        cmocka_unit_test(test_ramp_and_steps_of_acceleration),
+        cmocka_unit_test(test_delayed_gnss_applied_at_its_time_of_validity),
+        cmocka_unit_test(test_outage_keeps_the_learned_scale),
+        cmocka_unit_test(test_slip_change_relearned),
+        cmocka_unit_test(test_gates),
+        cmocka_unit_test(test_init_rejects_bad_tuning),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
