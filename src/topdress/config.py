@@ -46,7 +46,7 @@ class MachineConfig:
 @dataclass(frozen=True)
 class SpeedConfig:
     # paper = the dual speed mode of the paper; wheel / gnss = one source only.
-    mode: str = _choice("paper", "paper", "wheel", "gnss")
+    mode: str = _choice("paper", "paper", "wheel", "gnss", "fused")
     queue_len: int = _num(5, 2, 16)
     cv_window: int = _num(5, 2, 16)
     cv_threshold_pct: float = _num(4.2, 0.1, 50.0)
@@ -76,7 +76,7 @@ ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
 
 # [ecu] keys that the terminal's own periods must agree with (see _check_timing).
 ECU_TIMING = ("cmd_timeout_ms", "gnss_timeout_ms", "status_period_ms")
-SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2}  # td_speed_mode_t
+SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2, "fused": 3}  # td_speed_mode_t
 SWITCH_COMPARE_IDS = {"gnss": 0, "wheel": 1}  # td_compare_t
 
 
@@ -190,6 +190,20 @@ class LogConfig:
 
 
 @dataclass(frozen=True)
+class LookaheadConfig:
+    # tau = command_ms + meter_ms + airline_ms: the terminal takes the rate where the outlets
+    # will be tau from now (docs/experiments.md measures each part). meter_ms and airline_ms
+    # also go to the ECU (LeadMeter, LeadAirLine), whose target speed looks ahead by them.
+    command_ms: int = _num(0, 0, 5000)
+    meter_ms: int = _num(0, 0, 5000)
+    airline_ms: int = _num(0, 0, 5000)
+
+    @property
+    def total_s(self) -> float:
+        return (self.command_ms + self.meter_ms + self.airline_ms) / 1000.0
+
+
+@dataclass(frozen=True)
 class DisplayConfig:
     refresh_s: float = _num(0.5, 0.2, 2.0)  # console redraw period on a TTY
 
@@ -205,6 +219,7 @@ class TerminalConfig:
     can: CanConfig = field(default_factory=CanConfig)
     log: LogConfig = field(default_factory=LogConfig)
     display: DisplayConfig = field(default_factory=DisplayConfig)
+    lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
 
     def ecu_params(self) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start.
@@ -227,6 +242,9 @@ class TerminalConfig:
             11: SWITCH_COMPARE_IDS[s.switch_compare],
             18: s.min_work_speed_kmh,
         }
+        if self.lookahead.meter_ms or self.lookahead.airline_ms:
+            params[30] = self.lookahead.meter_ms
+            params[31] = self.lookahead.airline_ms
         for name, value in self.ecu.overrides.items():
             params[ECU_KEYS[name][0]] = value
         return dict(sorted(params.items()))
@@ -535,7 +553,7 @@ wheel_ppr = 500            # ground-wheel encoder pulses per revolution
 fan_rpm = 3000             # fan target sent in every command frame, rpm
 
 [speed]
-mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss
+mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss | fused
 queue_len = 5              # N, wheel-speed queue length
 cv_window = 5              # n, last speeds of the queue used for the CV
 cv_threshold_pct = 4.2     # CV below this = uniform motion
@@ -629,4 +647,9 @@ dir = "topdress-sessions"  # one SQLite file per session
 
 [display]
 refresh_s = 0.5            # live status redrawn every 0.2..2 s on a terminal (1 line/s to a pipe)
+
+[lookahead]
+command_ms = 0             # the terminal's command path (program cycle + command period)
+meter_ms = 0               # meter response; also the ECU's LeadMeter
+airline_ms = 0             # air-line transport; also the ECU's LeadAirLine
 """
