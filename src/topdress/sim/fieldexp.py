@@ -11,13 +11,16 @@ track (`World.applied_by_bin`) beside the true NDVI under the outlets there.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import random
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from topdress.sim.experiments import FUSED
 from topdress.sim.sil import NdviRate, PcParams, Sil
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
@@ -27,16 +30,8 @@ WINDOW_M = 10.0  # the start and stop windows
 AFTER_M = 2.0  # after a stop: whatever lands before the machine has moved this far counts
 FINE_BIN_M = 0.05
 
-# The fused mode's ECU parameters, tuned on the simulator (docs/experiments.md): GnssLag =
-# receiver latency 0.3 s + its velocity filter 1.0 s; LeadMeter + LeadAirLine = the time
-# from a target change to product on the ground (drive reference model 0.2 s, air line and
-# release ~0.2 s).
-FUSED_SETTINGS: EcuSettings = (
-    ("SpeedMode", 3.0),
-    ("GnssLag", 1300.0),
-    ("LeadMeter", 200.0),
-    ("LeadAirLine", 400.0),
-)
+# the fused mode with the parameters tuned on the simulator (experiments.FUSED)
+FUSED_SETTINGS: EcuSettings = (("SpeedMode", 3.0), *FUSED)
 # The metering loop of the paper's ECU (the plain PID, before the learned drive slope).
 PAPER_DRIVE: EcuSettings = (("DriveAdapt", 0.0), ("MeterTau", 0.0))
 MODES: dict[str, EcuSettings] = {
@@ -298,3 +293,64 @@ def field_experiment(
 
 def metrics_json(result: Mapping[str, FieldMetrics]) -> dict[str, dict[str, float]]:
     return {mode: m.as_dict() for mode, m in result.items()}
+
+
+ROBUST_MODES = ("paper", "fused")
+
+
+def write_field(
+    out: Path,
+    seeds: list[int],
+    plan: FieldPlan,
+    robustness: bool = True,
+    baseline: bool = True,
+) -> Path:
+    """Run the field experiment (and the baseline reproduction and robustness runs) and write
+    field.md and field.json."""
+    setup = dataclasses.replace(FieldSetup(), plan=plan)
+    res = field_experiment(setup, seeds)
+    doc: dict[str, object] = {"modes": metrics_json(res), "seeds": seeds}
+    md = "# Field experiment\n\n"
+    md += (
+        f"{plan.passes} passes of {plan.length_m:g} m, {plan.changes} speeds per pass drawn from "
+        f"{plan.speed_kmh[0]:g}-{plan.speed_kmh[1]:g} km/h, headland stop, turn (metering "
+        f"paused), stop; one loose patch (radius {plan.loose_radius_m:g} m, wheel slip 15 %) per "
+        f"pass; seeds {seeds}. Rate error per metre of pass: landed vs prescribed at that spot. "
+        "Start: metres of rate missing over the first 10 m of a pass; stop: metres of rate in "
+        "excess over the last 10 m (plus what lands after). Speed error: ECU speed - true, "
+        "100 ms samples while moving.\n\n"
+    )
+    md += _table_md(res)
+    if baseline:
+        bplan = dataclasses.replace(BASELINE.plan, passes=plan.passes, length_m=plan.length_m)
+        base = field_experiment(
+            dataclasses.replace(BASELINE, plan=bplan), seeds, ("paper", "gnss", "wheel")
+        )
+        doc["baseline"] = metrics_json(base)
+        md += (
+            "\n## Baseline (the code before the fused mode)\n\n"
+            "Sensors at the outlets, counts-only wheel port, no PcGnssTime, no look-ahead, "
+            "the plain PID; one speed of 5-9 km/h per pass, no loose patches.\n\n"
+        )
+        md += _table_md(base)
+    if robustness:
+        rob: dict[str, dict[str, dict[str, float]]] = {}
+        md += f"\n## Robustness (seed {seeds[0]}; ECU and terminal settings unchanged)\n\n"
+        for name, change in robustness_variants().items():
+            r = field_experiment(setup, seeds[:1], ROBUST_MODES, change)
+            rob[name] = metrics_json(r)
+            md += f"\n### {name}\n\n" + _table_md(r)
+        doc["robustness"] = rob
+    (out / "field.json").write_text(json.dumps(doc, indent=2) + "\n")
+    path = out / "field.md"
+    path.write_text(md)
+    return path
+
+
+def _table_md(res: Mapping[str, FieldMetrics]) -> str:
+    keys = ("rate_rms_pct", "rate_p95_pct", "total_kg_err_pct", "start_m", "stop_m")
+    lines = ["| mode | " + " | ".join(keys) + " | speed_rms_kmh |", "|---" * 7 + "|"]
+    for mode, m in res.items():
+        vals = [f"{getattr(m, k):.2f}" for k in (*keys, "speed_rms_kmh")]
+        lines.append(f"| {mode} | " + " | ".join(vals) + " |")
+    return "\n".join(lines) + "\n"
