@@ -153,9 +153,12 @@ def test_fused_mode_in_the_configuration_and_the_replay() -> None:
     from topdress.config import default_config, loads_config
     from topdress.log.replay import ecu_params
 
-    cfg = loads_config('[speed]\nmode = "fused"\n[lookahead]\nmeter_ms = 200\nairline_ms = 400\n')
+    cfg = loads_config(
+        '[speed]\nmode = "fused"\n[lookahead]\nmeter_ms = 200\nairline_ms = 400\n'
+        "[ecu]\ngnss_lag_ms = 1300\n"
+    )
     pushed = cfg.ecu_params()
-    assert pushed[10] == 3 and pushed[30] == 200 and pushed[31] == 400
+    assert pushed[10] == 3 and pushed[30] == 200 and pushed[31] == 400 and pushed[29] == 1300
     assert cfg.lookahead.total_s == pytest.approx(0.6)
     assert 30 not in default_config().ecu_params()  # look-ahead off: the paper's behaviour
     assert int(ecu_params(default_config(), "fused").speed_mode) == 3

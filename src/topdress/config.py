@@ -72,6 +72,8 @@ ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
     "enc_fault_time_ms": (25, 100, 30000, True),
     "blocked_time_ms": (26, 100, 30000, True),
     "status_period_ms": (27, 20, 1000, True),
+    "slip_comp": (28, 0, 2, True),
+    "gnss_lag_ms": (29, 0, 3000, True),
 }
 
 # [ecu] keys that the terminal's own periods must agree with (see _check_timing).
@@ -195,7 +197,7 @@ class LookaheadConfig:
     # will be tau from now (docs/experiments.md measures each part). meter_ms and airline_ms
     # also go to the ECU (LeadMeter, LeadAirLine), whose target speed looks ahead by them.
     command_ms: int = _num(0, 0, 5000)
-    meter_ms: int = _num(0, 0, 5000)
+    meter_ms: int = _num(0, 0, 3000)
     airline_ms: int = _num(0, 0, 5000)
 
     @property
@@ -565,7 +567,7 @@ min_work_speed_kmh = 0.5   # below this the meters stop
 # ECU parameters by their td_params_t name; only the keys set here are pushed, the ECU
 # keeps its defaults for the others. Keys: pid_kp pid_ki pid_kd pid_kff cmd_timeout_ms
 # gnss_timeout_ms wheel_update_ms wheel_samples meter_counts_per_rev fan_min_rpm fan_ppr
-# enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms
+# enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms slip_comp gnss_lag_ms
 # pid_kp = 0.02
 
 [gnss]
