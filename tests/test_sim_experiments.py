@@ -177,11 +177,17 @@ def test_cli_writes_table2_json_and_report(tmp_path: Path) -> None:
             "tuned_accel_earlier_s",
             "tuned_decel_earlier_s",
             "tuned_delay_m",
+            "fused_delay_m",
+            "fused_stop_m",
+            "dual_stop_m",
+            "gnss_stop_m",
         }
-        assert r["tuned_delay_m"] < r["dual_delay_m"] < r["gnss_delay_m"]
+        assert r["fused_delay_m"] < r["tuned_delay_m"] < r["dual_delay_m"] < r["gnss_delay_m"]
+        assert abs(r["fused_stop_m"]) < r["dual_stop_m"] < r["gnss_stop_m"]
     md = (out / "table2.md").read_text()
     assert "| 3.5 |" in md and "(0.56)" in md
     assert "WheelUpdatePeriod = 250, WheelSamples = 2, CvThreshold = 5.6" in md
+    assert "## The fused mode" in md and "`GnssLag = 1300`" in md
     assert (out / "table2.png").stat().st_size > 1000
 
 

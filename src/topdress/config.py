@@ -51,7 +51,7 @@ class MachineConfig:
 @dataclass(frozen=True)
 class SpeedConfig:
     # paper = the dual speed mode of the paper; wheel / gnss = one source only.
-    mode: str = _choice("paper", "paper", "wheel", "gnss")
+    mode: str = _choice("paper", "paper", "wheel", "gnss", "fused")
     queue_len: int = _num(5, 2, 16)
     cv_window: int = _num(5, 2, 16)
     cv_threshold_pct: float = _num(4.2, 0.1, 50.0)
@@ -77,11 +77,13 @@ ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
     "enc_fault_time_ms": (25, 100, 30000, True),
     "blocked_time_ms": (26, 100, 30000, True),
     "status_period_ms": (27, 20, 1000, True),
+    "slip_comp": (28, 0, 2, True),
+    "gnss_lag_ms": (29, 0, 3000, True),
 }
 
 # [ecu] keys that the terminal's own periods must agree with (see _check_timing).
 ECU_TIMING = ("cmd_timeout_ms", "gnss_timeout_ms", "status_period_ms")
-SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2}  # td_speed_mode_t
+SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2, "fused": 3}  # td_speed_mode_t
 SWITCH_COMPARE_IDS = {"gnss": 0, "wheel": 1}  # td_compare_t
 
 
@@ -233,6 +235,20 @@ class BoundaryConfig:
 
 
 @dataclass(frozen=True)
+class LookaheadConfig:
+    # tau = command_ms + meter_ms + airline_ms: the terminal takes the rate where the outlets
+    # will be tau from now (docs/experiments.md measures each part). meter_ms and airline_ms
+    # also go to the ECU (LeadMeter, LeadAirLine), whose target speed looks ahead by them.
+    command_ms: int = _num(0, 0, 5000)
+    meter_ms: int = _num(0, 0, 3000)
+    airline_ms: int = _num(0, 0, 5000)
+
+    @property
+    def total_s(self) -> float:
+        return (self.command_ms + self.meter_ms + self.airline_ms) / 1000.0
+
+
+@dataclass(frozen=True)
 class DisplayConfig:
     refresh_s: float = _num(0.5, 0.2, 2.0)  # console redraw period on a TTY
     enabled: bool = True  # serve the operator display (web page)
@@ -276,6 +292,7 @@ class TerminalConfig:
     operator: OperatorConfig = field(default_factory=OperatorConfig)
     prescription: PrescriptionConfig = field(default_factory=PrescriptionConfig)
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
+    lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
 
     def ecu_params(self) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start.
@@ -298,6 +315,9 @@ class TerminalConfig:
             11: SWITCH_COMPARE_IDS[s.switch_compare],
             18: s.min_work_speed_kmh,
         }
+        if self.lookahead.meter_ms or self.lookahead.airline_ms:
+            params[30] = self.lookahead.meter_ms
+            params[31] = self.lookahead.airline_ms
         for name, value in self.ecu.overrides.items():
             params[ECU_KEYS[name][0]] = value
         return dict(sorted(params.items()))
@@ -649,7 +669,7 @@ outlet_along_m = 0.0       # meters' outlet from the GNSS antenna: forward (behi
 outlet_across_m = 0.0      # and to the right (left < 0), m
 
 [speed]
-mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss
+mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss | fused
 queue_len = 5              # N, wheel-speed queue length
 cv_window = 5              # n, last speeds of the queue used for the CV
 cv_threshold_pct = 4.2     # CV below this = uniform motion
@@ -661,7 +681,7 @@ min_work_speed_kmh = 0.5   # below this the meters stop
 # ECU parameters by their td_params_t name; only the keys set here are pushed, the ECU
 # keeps its defaults for the others. Keys: pid_kp pid_ki pid_kd pid_kff cmd_timeout_ms
 # gnss_timeout_ms wheel_update_ms wheel_samples meter_counts_per_rev fan_min_rpm fan_ppr
-# enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms
+# enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms slip_comp gnss_lag_ms
 # pid_kp = 0.02
 
 [gnss]
@@ -777,4 +797,9 @@ outside_kg_ha = 0.0        # outside every zone, and while the position is not k
 path = ""                  # .gpkg, .shp, .geojson polygons or ISOXML TASKDATA.XML
 layer = ""
 headland_m = 0.0           # headland strip inside the boundary, m
+
+[lookahead]
+command_ms = 0             # the terminal's command path (program cycle + command period)
+meter_ms = 0               # meter response; also the ECU's LeadMeter
+airline_ms = 0             # air-line transport; also the ECU's LeadAirLine
 """

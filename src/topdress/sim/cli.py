@@ -11,9 +11,10 @@ from tqdm import tqdm
 
 from topdress.errors import ConfigError
 from topdress.sim import experiments as ex
+from topdress.sim import fieldexp as fx
 from topdress.sim import report
 
-NAMES = ("cv", "slip", "table2", "table34", "table5", "fig10", "all")
+NAMES = ("cv", "slip", "table2", "table34", "table5", "fig10", "field", "all")
 T = TypeVar("T")
 
 
@@ -30,6 +31,7 @@ def register(sub: Any) -> None:
     p.add_argument("--reps", type=int, default=5, help="repetitions per speed (default 5)")
     p.add_argument("--seed", type=int, default=0, help="base seed of the runs")
     p.add_argument("--quick", action="store_true", help="reduced run: fewer reps and speeds")
+    p.add_argument("--passes", type=int, default=10, help="field: passes of 150 m (default 10)")
     p.set_defaults(func=run)
 
 
@@ -39,8 +41,19 @@ def _progress(items: Iterable[T], what: str) -> Iterable[T]:
 
 
 def _table2(out: Path, lab: ex.Lab, reps: int) -> Path:
-    rows = ex.table2(lab, ex.TARGETS_KMH, reps, ex.FASTER)
+    rows = ex.table2(lab, ex.TARGETS_KMH, reps, ex.FASTER, ex.FUSED)
     return report.write_table2(out, rows, ex.faster_check(lab, ex.TARGETS_KMH, reps))
+
+
+def _field(out: Path, args: argparse.Namespace) -> Path:
+    """Seeds seed..seed+reps-1; --quick: 2 passes of 60 m, one seed, no robustness runs."""
+    if args.quick:
+        plan = fx.FieldPlan(passes=2, length_m=60.0)
+        return fx.write_field(out, [args.seed], plan, robustness=False, baseline=False)
+    if args.passes < 1:
+        raise ConfigError("--passes", f"must be at least 1, got {args.passes}")
+    seeds = list(range(args.seed, args.seed + args.reps))
+    return fx.write_field(out, seeds, fx.FieldPlan(passes=args.passes))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
             out, ex.table5(lab, jumps), ex.table5(lab, jumps, ex.MATCHED_FF)
         ),
         "fig10": lambda: report.write_fig10(out, lab, targets),
+        "field": lambda: _field(out, args),
     }
     names = list(jobs) if args.name == "all" else [args.name]
     written = []

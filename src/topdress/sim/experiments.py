@@ -72,6 +72,16 @@ FASTER: tuple[tuple[str, float], ...] = (
 # of the simulated drive (66 r/min per unit duty instead of the default 60), so a step of the
 # target no longer over-steps the duty by 10 %. Table 5 reports it beside the defaults.
 MATCHED_FF: tuple[tuple[str, float], ...] = (("PidKff", 0.01515),)
+# The fused mode's ECU parameters, tuned on the simulator (docs/experiments.md): GnssLag =
+# the receiver's latency 0.3 s + its velocity filter 1.0 s; LeadMeter + LeadAirLine = the time
+# from a target change to product on the ground (drive reference model 0.2 s, release and air
+# line ~0.2 s, and the PID's share).
+FUSED: tuple[tuple[str, float], ...] = (
+    ("GnssLag", 1300.0),
+    ("LeadMeter", 200.0),
+    ("LeadAirLine", 400.0),
+)
+STOP_WINDOW_M = 10.0
 # a queue 'fluctuates' when the spread (SD) of its CV in uniform motion exceeds the longest
 # queue's by more than this: the spread is a steadier statistic than the largest value
 FLUCTUATION_RATIO = 1.35
@@ -89,13 +99,14 @@ class RunResult:
     working_width_m: float
     kg_per_rev: float
     rate_kg_ha: float
+    stop_m: float = math.nan  # metres of rate in excess over the last STOP_WINDOW_M
 
 
 @dataclass
 class Lab:
     """Runs experiments on one simulated machine; caches runs shared by several analyses."""
 
-    cfg: SimConfig = field(default_factory=SimConfig)
+    cfg: SimConfig = field(default_factory=lambda: SimConfig(bin_m=0.05))
     pc: PcParams = field(default_factory=PcParams)
     base_seed: int = 0
     progress: Callable[[Iterable[tuple[float, int]], str], Iterable[tuple[float, int]]] | None = (
@@ -142,9 +153,26 @@ class Lab:
             ecu.working_width_m,
             ecu.kg_per_rev[0],
             self.pc.rate_kg_ha[0],
+            stop_excess_m(
+                world.applied_by_bin[0],
+                world.cfg.bin_m,
+                world.tractor.odometer,
+                self.pc.rate_kg_ha[0] * ecu.working_width_m * 1e-4,
+            ),
         )
         self._cache[key] = res
         return res
+
+
+def stop_excess_m(
+    applied_by_bin: dict[int, float], bin_m: float, stop_odometer_m: float, kg_per_m: float
+) -> float:
+    """At a stop at constant rate (kg_per_m prescribed): the metres of rate applied in excess
+    over the last STOP_WINDOW_M, counting whatever landed at or after the stop point."""
+    first = int((stop_odometer_m - STOP_WINDOW_M) / bin_m)
+    kg = sum(m for b, m in applied_by_bin.items() if b >= first)
+    window_m = stop_odometer_m - first * bin_m
+    return kg / kg_per_m - window_m
 
 
 # ---------------------------------------------------------------- response (Table 2, Fig. 10)
@@ -181,6 +209,10 @@ class Table2Row:
     tuned_accel_earlier_s: float = math.nan
     tuned_decel_earlier_s: float = math.nan
     tuned_delay_m: float = math.nan
+    dual_stop_m: float = math.nan
+    gnss_stop_m: float = math.nan
+    fused_delay_m: float = math.nan
+    fused_stop_m: float = math.nan
 
 
 def _landing(run: RunResult) -> float:
@@ -192,9 +224,10 @@ def table2(
     targets: Iterable[float] = TARGETS_KMH,
     reps: int = 5,
     tuned: EcuSettings | None = None,
+    fused: EcuSettings | None = None,
 ) -> list[Table2Row]:
     """Relative response times and delay distances, dual mode vs GNSS only; with `tuned`,
-    also the dual mode under those settings."""
+    also the dual mode under those settings; with `fused`, the fused mode under those."""
     rows = []
     items = [(v, r) for v in targets for r in range(reps)]
     per: dict[float, list[tuple[float, ...]]] = {}
@@ -204,16 +237,38 @@ def table2(
         d_on, d_off = response_times(dual)
         g_on, g_off = response_times(gnss)
         vals = [g_on - d_on, g_off - d_off, _landing(dual), _landing(gnss)]
+        vals += [dual.stop_m, gnss.stop_m]
         if tuned is not None:
             fast = lab.paper_run(v, r, SpeedMode.DUAL, settings=tuned)
             f_on, f_off = response_times(fast)
             vals += [g_on - f_on, g_off - f_off, _landing(fast)]
+        else:
+            vals += [math.nan] * 3
+        if fused is not None:
+            fu = lab.paper_run(v, r, SpeedMode.FUSED, settings=fused)
+            vals += [_landing(fu), fu.stop_m]
+        else:
+            vals += [math.nan] * 2
         per.setdefault(v, []).append(tuple(vals))
     for v, runs in per.items():
-        m = [float(x) for x in np.nanmean(np.array(runs), axis=0)]
-        tuned_m = m[4:] if tuned is not None else [math.nan] * 3
+        a = np.array(runs, dtype=float)
+        m = [float(np.nanmean(c)) if not np.isnan(c).all() else math.nan for c in a.T]
         rows.append(
-            Table2Row(v, m[0], m[1], m[2], m[3], len(runs), tuned_m[0], tuned_m[1], tuned_m[2])
+            Table2Row(
+                v,
+                m[0],
+                m[1],
+                m[2],
+                m[3],
+                len(runs),
+                tuned_accel_earlier_s=m[6],
+                tuned_decel_earlier_s=m[7],
+                tuned_delay_m=m[8],
+                dual_stop_m=m[4],
+                gnss_stop_m=m[5],
+                fused_delay_m=m[9],
+                fused_stop_m=m[10],
+            )
         )
     return rows
 

@@ -62,9 +62,12 @@ class CropSensorParams:
 
 
 class CropSensor:
-    """Sensor `sensor_id` (1..4) mounted `offset_m` to the right of the machine centre."""
+    """Sensor `sensor_id` (1..4) mounted `offset_m` to the right of the machine centre and
+    `ahead_m` ahead of the outlets (the tractor's x, y is the outlets' position)."""
 
-    def __init__(self, sensor_id: int, offset_m: float, p: CropSensorParams, seed: int) -> None:
+    def __init__(
+        self, sensor_id: int, offset_m: float, p: CropSensorParams, seed: int, ahead_m: float = 0.0
+    ) -> None:
         self.sensor_id = sensor_id
         self.offset_m = offset_m
         self.p = p
@@ -72,6 +75,7 @@ class CropSensor:
         # stagger the four sensors so their lines interleave as on the logger
         self.next_t = p.period_s * sensor_id / 4.0
         self.last_ndvi = 0.0
+        self.ahead_m = ahead_m  # along-track distance ahead of the outlets (the reference point)
 
     def step(self, t: float, field: Field, x: float, y: float, heading: float) -> str | None:
         """Return a line when a reading is due."""
@@ -80,8 +84,9 @@ class CropSensor:
         self.next_t += self.p.period_s
         if 0.0 <= self.p.dead_at_s <= t:
             return None
-        sx = x + self.offset_m * math.cos(heading)
-        sy = y - self.offset_m * math.sin(heading)
+        a = self.ahead_m
+        sx = x + self.offset_m * math.cos(heading) + a * math.sin(heading)
+        sy = y - self.offset_m * math.sin(heading) + a * math.cos(heading)
         true_ndvi = field.ndvi(sx, sy)
         g = self._rng.gauss
         sd = self.p.refl_sd

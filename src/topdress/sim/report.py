@@ -53,6 +53,11 @@ def _table2_json(r: ex.Table2Row, tuned: bool) -> dict[str, float]:
         d["tuned_accel_earlier_s"] = round(r.tuned_accel_earlier_s, 3)
         d["tuned_decel_earlier_s"] = round(r.tuned_decel_earlier_s, 3)
         d["tuned_delay_m"] = round(r.tuned_delay_m, 3)
+    if not math.isnan(r.fused_delay_m):
+        d["fused_delay_m"] = round(r.fused_delay_m, 3)
+        d["fused_stop_m"] = round(r.fused_stop_m, 3)
+        d["dual_stop_m"] = round(r.dual_stop_m, 3)
+        d["gnss_stop_m"] = round(r.gnss_stop_m, 3)
     return d
 
 
@@ -106,6 +111,8 @@ def write_table2(out: Path, rows: list[ex.Table2Row], faster: ex.FasterCheck | N
     )
     if faster is not None:
         md += _faster_section(rows, faster)
+    if rows and not math.isnan(rows[0].fused_delay_m):
+        md += _fused_section(rows)
     md += "\n![delay distances](table2.png)\n"
     fig, ax = plt.subplots(figsize=(6, 3.5))
     x = np.arange(len(rows))
@@ -123,6 +130,31 @@ def write_table2(out: Path, rows: list[ex.Table2Row], faster: ex.FasterCheck | N
     path = out / "table2.md"
     path.write_text(md)
     return path
+
+
+def _fused_section(rows: list[ex.Table2Row]) -> str:
+    settings = ", ".join(f"`{k} = {v:g}`" for k, v in ex.FUSED)
+    md = (
+        "\n## The fused mode\n\n"
+        f"`SpeedMode = 3` (fused) with {settings}. Start = the delay distance as above; "
+        f"stop = the metres of rate applied in excess over the last {ex.STOP_WINDOW_M:g} m, "
+        "counting what lands after the machine stands (negative: short).\n\n"
+    )
+    body = [
+        (
+            f"{r.target_kmh:.1f}",
+            _f(r.dual_delay_m),
+            _f(r.gnss_delay_m),
+            _f(r.fused_delay_m),
+            _f(r.dual_stop_m),
+            _f(r.gnss_stop_m),
+            _f(r.fused_stop_m),
+        )
+        for r in rows
+    ]
+    head = ("target km/h", "start dual m", "start GNSS m", "start fused m")
+    md += _table((*head, "stop dual m", "stop GNSS m", "stop fused m"), body)
+    return md
 
 
 _T2_KEYS = ("accel_earlier_s", "decel_earlier_s", "dual_delay_m", "gnss_delay_m")

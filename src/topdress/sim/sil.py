@@ -16,9 +16,12 @@ import can
 import numpy as np
 
 from topdress import protocol
+from topdress.config import CropConfig, LinearRateConfig
 from topdress.errors import EcuParamError, ProtocolError
 from topdress.sim.nmea import parse_rmc_speed_kmh
 from topdress.sim.world import World
+from topdress.terminal.crop import CompensatedNdvi
+from topdress.terminal.rate import LinearRate
 
 _channels = itertools.count()
 
@@ -42,7 +45,23 @@ COLUMNS = (
     "wheel_pulses",
 )
 PHASES = ("rest", "accel", "uniform", "decel", "turn", "run")
-SOURCES = ("wheel", "gnss", "none")
+SOURCES = ("wheel", "gnss", "none", "fused")
+
+
+@dataclass(frozen=True)
+class NdviRate:
+    """The terminal's crop path run by the simulated PC: sensor lines -> distance queue (the
+    sensors sensor_to_meter_m ahead, the look-ahead) -> linear rate model; each layer gets
+    layer_share of the product rate."""
+
+    crop: CropConfig = field(default_factory=CropConfig)
+    rate: LinearRateConfig = field(default_factory=LinearRateConfig)
+    lookahead_s: float = 0.0
+    layer_share: float = 0.5
+
+    def kg_ha(self, ndvi: float) -> float:
+        """The rate of one layer for this NDVI (the prescription the metrics compare with)."""
+        return LinearRate(self.rate).rate_kg_ha(ndvi) * self.layer_share
 
 
 @dataclass(frozen=True)
@@ -55,6 +74,8 @@ class PcParams:
     rate_kg_ha: tuple[float, float] = (180.0, 180.0)
     ecu_params: tuple[tuple[str, float], ...] = ()  # PcParamSet writes before the start
     start_at_s: float = 0.0
+    gnss_time: bool = True  # send PcGnssTime (speed, fix age, seq) for every new RMC
+    ndvi_rate: NdviRate | None = None  # None: the fixed rate_kg_ha
 
 
 @dataclass
@@ -74,7 +95,10 @@ class CabPc:
     def __init__(self, p: PcParams) -> None:
         self.p = p
         self.gnss_kmh: float | None = None
-        self._serial: list[str] = []
+        self._serial: list[tuple[float, str]] = []
+        self._gnss_seq = 0
+        nr = p.ndvi_rate
+        self.ndvi = None if nr is None else CompensatedNdvi(nr.crop, nr.lookahead_s)
         self._next_cycle = p.cycle_s
         self._next_cmd = p.start_at_s
         self.status: protocol.EcuStatus | None = None
@@ -85,24 +109,53 @@ class CabPc:
         self.rejected_frames = 0
         self.rate_kg_ha = p.rate_kg_ha
         self.start = True
+        self.paused = False  # the operator's pause (headland turn): rate 0, fans kept running
 
-    def on_nmea(self, line: str) -> None:
-        self._serial.append(line)
+    def on_nmea(self, line: str, t: float = 0.0) -> None:
+        """A line reaching the serial port at t (its arrival is all the PC knows of its age)."""
+        self._serial.append((t, line))
 
-    def poll(self, t: float) -> can.Message | None:
-        """Run the program cycle and the command timer; the command when one is due."""
+    def on_crop(self, line: str, t: float) -> None:
+        if self.ndvi is not None:
+            self.ndvi.sensors.feed(t, line)
+
+    def poll(self, t: float) -> list[can.Message]:
+        """Run the program cycle and the command timer; the frames due now."""
+        out: list[can.Message] = []
         if t + 1e-9 >= self._next_cycle:
             self._next_cycle += self.p.cycle_s
-            for line in self._serial:
+            rmc_t: float | None = None
+            for t_line, line in self._serial:
                 if line[3:6] == "RMC":
                     self.gnss_kmh = parse_rmc_speed_kmh(line)
+                    rmc_t = t_line
             self._serial.clear()
+            if rmc_t is not None and self.p.gnss_time:
+                self._gnss_seq = (self._gnss_seq + 1) & 0xFF
+                age_ms = min(10000, round((t - rmc_t) * 1000.0))
+                kmh = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
+                out.append(protocol.encode_gnss_time(kmh, age_ms, self._gnss_seq))
+            self._update_rate(t)
         if t + 1e-9 < self._next_cmd:
-            return None
+            return out
         self._next_cmd += self.p.command_period_s
         gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
-        up, lo = self.rate_kg_ha
-        return protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss)
+        up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
+        out.append(protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss))
+        return out
+
+    def _update_rate(self, t: float) -> None:
+        """The NDVI where the outlets are (or will be, with the look-ahead) -> the rate."""
+        nr = self.p.ndvi_rate
+        if self.ndvi is None or nr is None:
+            return
+        v = 0.0 if self.speeds is None else self.speeds.selected_kmh
+        ndvi = self.ndvi.update(t, v)
+        if ndvi is None:  # the outlets have not reached the first spot sensed yet
+            ndvi = self.ndvi.sensors.mean_ndvi(t)
+        if ndvi is not None:
+            rate = min(nr.kg_ha(ndvi), 655.0)
+            self.rate_kg_ha = (rate, rate)
 
     def on_frame(self, msg: can.Message) -> bool:
         """Decode one ECU frame; True if it was an EcuStatus."""
@@ -180,8 +233,11 @@ class Sil:
         if out.nmea:
             self.nmea_lines += len(out.nmea)
             for line in out.nmea:
-                pc.on_nmea(line)
+                pc.on_nmea(line, out.t_s)
         self.crop_lines += len(out.crop)
+        if pc.ndvi is not None:
+            for line in out.crop:
+                pc.on_crop(line, out.t_s)
         if out.can:
             for fid, data in out.can:
                 self.ecu_bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=True))
@@ -190,9 +246,8 @@ class Sil:
                 status |= pc.on_frame(msg)
             if status and self.record is not None:
                 self._record(out.t_s)
-        cmd = pc.poll(out.t_s)
-        if cmd is not None:
-            self.pc_bus.send(cmd)
+        for msg in pc.poll(out.t_s):
+            self.pc_bus.send(msg)
             self._pending_to_ecu += 1
 
     def _record(self, t: float) -> None:

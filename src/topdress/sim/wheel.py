@@ -46,8 +46,9 @@ class GroundWheel:
         p = self.p
         return max(0.0, p.slip_a * v_kmh * v_kmh + p.slip_b * v_kmh + p.slip_c + self._slip_offset)
 
-    def step(self, t: float, dt: float, v_ms: float) -> int:
-        """Advance by dt at true ground speed v_ms; return the cumulative pulse count."""
+    def step(self, t: float, dt: float, v_ms: float, slip_floor_pct: float = 0.0) -> int:
+        """Advance by dt at true ground speed v_ms (on ground where the slip is at least
+        slip_floor_pct, e.g. a loose patch); return the cumulative pulse count."""
         p = self.p
         if v_ms <= 0.0 or (0.0 <= p.lifted_at_s <= t):
             return self.count
@@ -56,7 +57,7 @@ class GroundWheel:
             self._bounce += -k * self._bounce + p.bounce_sd * math.sqrt(2 * k) * self._rng.gauss(
                 0.0, 1.0
             )
-        slip = self.slip_pct(v_ms * 3.6) * 0.01
+        slip = max(self.slip_pct(v_ms * 3.6), slip_floor_pct) * 0.01
         self.revolutions += v_ms * dt * (1.0 - slip) * (1.0 + self._bounce) / self._circ
         if not 0.0 <= p.encoder_dead_at_s <= t:
             self.count = int(self.revolutions * p.ppr)

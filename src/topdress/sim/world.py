@@ -36,6 +36,14 @@ class SimConfig:
     kg_per_rev: tuple[float, float] = (0.3, 0.3)  # true fertilizer per metering revolution
     ecu: EcuParams | None = None  # None: the ECU's defaults
     bin_m: float = 0.5  # resolution of the applied-fertilizer record along the track
+    # where the crop sensors look: this far ahead of the outlets along the track (the
+    # terminal's crop.sensor_to_meter_m says the same of the real machine); 0 = at the outlets
+    crop_ahead_m: float = 2.0
+    # the ECU port captures the time of the wheel's last encoder edge (False: counts only)
+    wheel_edges: bool = True
+    # loose patches (x, y, radius m) where the ground wheel slips loose_slip_pct (at least)
+    loose_patches: tuple[tuple[float, float, float], ...] = ()
+    loose_slip_pct: float = 15.0
 
 
 @dataclass(frozen=True)
@@ -86,7 +94,7 @@ class World:
         self.airlines = (AirLine(cfg.airline[0]), AirLine(cfg.airline[1]))
         self.field = Field(cfg.field, seed * 7 + 4)
         self.sensors = [
-            CropSensor(i + 1, off, cfg.crop, seed * 7 + 5)
+            CropSensor(i + 1, off, cfg.crop, seed * 7 + 5, cfg.crop_ahead_m)
             for i, off in enumerate(cfg.crop_offsets_m)
         ]
         self.ecu = Ecu(cfg.ecu, now_us=0)
@@ -97,6 +105,11 @@ class World:
         self.first_landing_m: list[float | None] = [None, None]
         self.first_landing_t: list[float | None] = [None, None]
         self.applied_by_bin: tuple[dict[int, float], dict[int, float]] = ({}, {})
+        # mean true NDVI across the working width under the outlets, by bin (the spot's truth)
+        self.ndvi_by_bin: dict[int, float] = {}
+        self._bin = -1
+        self._wheel_pos = 0.0  # encoder position (pulses, fractional) at the last step
+        self._edge_us = 0
         self._crop_next = min(s.next_t for s in self.sensors)
 
     @property
@@ -117,7 +130,8 @@ class World:
         tr = self.tractor
         v_t, k = self.drive.command(tr, dt)
         tr.step(dt, v_t, k)
-        wc = self.wheel.step(t, dt, tr.v)
+        wc = self.wheel.step(t, dt, tr.v, self._loose(tr.x, tr.y))
+        self._record_ndvi()
         d = self._duty
         m0, m1 = self.meters
         f0, f1 = self.fans
@@ -136,8 +150,42 @@ class World:
                     crop.append(line)
             self._crop_next = min(s.next_t for s in self.sensors)
         now = (self._step_n * round(dt * 1e6)) & _U32
-        self._duty = self.ecu.step_raw(now, wc & _U32, c0 & _U32, c1 & _U32, g0 & _U32, g1 & _U32)
+        edge = self._wheel_edge(now, wc) if self.cfg.wheel_edges else None
+        self._duty = self.ecu.step_raw(
+            now, wc & _U32, c0 & _U32, c1 & _U32, g0 & _U32, g1 & _U32, edge
+        )
         return StepOutput(t, lines, crop, self.ecu.tx_raw())
+
+    def _loose(self, x: float, y: float) -> float:
+        """The wheel's slip floor here (%): loose_slip_pct inside a loose patch, else 0."""
+        for px, py, r in self.cfg.loose_patches:
+            if (x - px) ** 2 + (y - py) ** 2 <= r * r:
+                return self.cfg.loose_slip_pct
+        return 0.0
+
+    def _wheel_edge(self, now_us: int, count: int) -> int:
+        """The capture timer: the time of the last whole pulse crossed in this step, by
+        interpolating the wheel's position over the step (the previous edge if none)."""
+        w = self.wheel
+        pos = w.revolutions * w.p.ppr
+        prev = self._wheel_pos
+        self._wheel_pos = pos
+        if pos > prev and math.floor(pos) > math.floor(prev) and count == int(pos):
+            back_us = (pos - math.floor(pos)) / (pos - prev) * self.dt * 1e6
+            self._edge_us = (now_us - int(back_us)) & _U32
+        return self._edge_us
+
+    def _record_ndvi(self) -> None:
+        tr = self.tractor
+        b = int(tr.odometer / self.cfg.bin_m)
+        if b == self._bin:
+            return
+        self._bin = b
+        c, s = math.cos(tr.heading), math.sin(tr.heading)
+        offs = self.cfg.crop_offsets_m
+        self.ndvi_by_bin[b] = sum(self.field.ndvi(tr.x + o * c, tr.y - o * s) for o in offs) / len(
+            offs
+        )
 
     def _transport(self, i: int, t: float, rev: float, fan_rpm: float) -> None:
         d_rev = rev - self._rev_prev[i]

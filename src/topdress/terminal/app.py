@@ -145,7 +145,7 @@ class Terminal:
         )
         self.nmea = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
-        self.ndvi = CompensatedNdvi(cfg.crop)
+        self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
         self.model = build_rate_model(cfg.rate)
         # The prescription map and boundary files are read here: a bad one stops start-up.
         self.site = build_site_rate(cfg, self.model)
@@ -282,6 +282,7 @@ class Terminal:
         if self.tracker.update(t, fix) is not None:
             self._gnss_seen = True
             self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
+            self.link.send_gnss_time(self.tracker.current(t, self.gnss.connected), 0.0)
 
     def _on_crop(self, t: float, line: bytes) -> None:
         if self.session is not None:

@@ -191,6 +191,7 @@ class CanLink:
         self._waited = False  # the push had to wait for a silent ECU
         self._ready = False  # every parameter acknowledged once: the ECU works for us
         self._send_failing = False
+        self._gnss_seq = 0  # PcGnssTime: one number per new fix
 
     # ---- start-up: parameters -------------------------------------------------------------
     def begin(self, params: Mapping[int, float], now: float) -> None:
@@ -383,6 +384,17 @@ class CanLink:
         self.command = replace(self.command, gnss_kmh=kmh)
         if self.cfg.send_on_gnss:
             self.send_now()
+
+    def send_gnss_time(self, kmh: float | None, age_ms: float) -> None:
+        """PcGnssTime for a new fix: its speed (0.01 km/h) and how old it is now, so the ECU's
+        fused estimate applies it at its time of validity (docs/speed.md)."""
+        if not self.params_done:
+            return
+        if kmh is not None:
+            kmh = _clamp(kmh, MAX_GNSS_KMH)
+        self._gnss_seq = (self._gnss_seq + 1) & 0xFF
+        age = round(min(max(age_ms, 0.0), 10000.0))
+        self._send(protocol.encode_gnss_time(kmh, age, self._gnss_seq, ids=self.ids))
 
     def send_now(self) -> None:
         """Send the command at once (once the parameters are in force), off the period."""

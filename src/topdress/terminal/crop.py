@@ -211,15 +211,22 @@ class Odometer:
 
 
 class CompensatedNdvi:
-    """Sensors + odometer + distance queue: the NDVI to apply where the meters are now."""
+    """Sensors + odometer + distance queue: the NDVI to apply where the meters are now, or,
+    with a look-ahead of `lookahead_s` (command path + meter response + air line), where the
+    outlets will be when the product commanded now lands: speed x lookahead_s further on."""
 
-    def __init__(self, cfg: CropConfig) -> None:
+    def __init__(self, cfg: CropConfig, lookahead_s: float = 0.0) -> None:
+        if not 0.0 <= lookahead_s <= 5.0:
+            raise ConfigError("lookahead", f"total must be 0..5 s, not {lookahead_s}")
         self.sensors = CropSensors(cfg)
         self.odometer = Odometer()
         self.queue = DistanceQueue(cfg.sensor_to_meter_m)
+        self.lookahead_s = lookahead_s
 
     def update(self, t: float, speed_kmh: float) -> float | None:
         """Call every control tick with the selected speed."""
         position = self.odometer.advance(t, speed_kmh)
         self.queue.push(position, self.sensors.mean_ndvi(t))
-        return self.queue.at(position)
+        # never further ahead than the sensors have seen
+        ahead = min(max(0.0, speed_kmh) / 3.6 * self.lookahead_s, self.queue.offset_m)
+        return self.queue.at(position + ahead)
