@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -22,8 +22,10 @@ from topdress.config import (
     TerminalConfig,
 )
 from topdress.errors import MapError
-from topdress.geo.boundary import FieldBoundary, load_boundary
-from topdress.geo.prescription import RateMap, load_prescription
+
+if TYPE_CHECKING:  # GDAL, shapely and PROJ cost ~60 MB: loaded only when a map is configured
+    from topdress.geo.boundary import FieldBoundary
+    from topdress.geo.prescription import RateMap
 
 # Largest rate one layer's command field carries (PcCommand UpperRate/LowerRate, 0.01 kg/ha).
 MAX_LAYER_KG_HA = 600.0
@@ -225,12 +227,20 @@ class SiteRate:
 def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
     """Loads the configured prescription and boundary files (MapError naming the key, the
     file and the feature)."""
-    try:
-        presc = load_prescription(cfg.prescription) if cfg.prescription.path else None
-    except MapError as exc:
-        raise MapError(f"prescription.path: {exc}") from exc
-    try:
-        boundary = load_boundary(cfg.boundary) if cfg.boundary.path else None
-    except MapError as exc:
-        raise MapError(f"boundary.path: {exc}") from exc
+    presc: RateMap | None = None
+    boundary: FieldBoundary | None = None
+    if cfg.prescription.path:
+        from topdress.geo.prescription import load_prescription
+
+        try:
+            presc = load_prescription(cfg.prescription)
+        except MapError as exc:
+            raise MapError(f"prescription.path: {exc}") from exc
+    if cfg.boundary.path:
+        from topdress.geo.boundary import load_boundary
+
+        try:
+            boundary = load_boundary(cfg.boundary)
+        except MapError as exc:
+            raise MapError(f"boundary.path: {exc}") from exc
     return SiteRate(model, presc, boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha)
