@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from terminal_bench import WARMUP_S, Machine
+from terminal_bench import WARMUP_S, Machine, terminal_toml
 from topdress.display.browser import answers, chromium, free_port, missing_browser
 
 BROWSER_NICENESS = 10
@@ -110,12 +110,7 @@ def parent(duration_s: float) -> int:
     m = Machine(group)
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "terminal.toml"
-        cfg.write_text(
-            f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
-            f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
-            f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\nsend_on_gnss = true\n'
-            f'[log]\ndir = "{tmp}"\n'
-        )
+        cfg.write_text(terminal_toml(m, group, tmp, "send_on_gnss = true\n"))
         for target in (m.run_ecu, m.run_spy):
             threading.Thread(target=target, daemon=True).start()
         proc = subprocess.Popen(

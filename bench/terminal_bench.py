@@ -167,17 +167,22 @@ class Machine:
         self.crop.close()
 
 
+def terminal_toml(m: Machine, group: str, log_dir: str, can_extra: str = "") -> str:
+    """The terminal's configuration against this process's machine: its ptys and bus."""
+    return (
+        f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
+        f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
+        f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\n{can_extra}'
+        f'[log]\ndir = "{log_dir}"\n'
+    )
+
+
 def parent(duration_s: float) -> int:
     group = f"239.74.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
     m = Machine(group)
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "terminal.toml"
-        cfg.write_text(
-            f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
-            f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
-            f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\nsend_on_gnss = true\n'
-            f'[log]\ndir = "{tmp}"\n'
-        )
+        cfg.write_text(terminal_toml(m, group, tmp, "send_on_gnss = true\n"))
         threads = [
             threading.Thread(target=m.run_ecu, daemon=True),
             threading.Thread(target=m.run_spy, daemon=True),
@@ -224,13 +229,7 @@ def flood(flood_s: float) -> int:
     period_s = 0.5
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "terminal.toml"
-        cfg.write_text(
-            f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
-            f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
-            f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\n'
-            f"command_period_s = {period_s}\n"
-            f'[log]\ndir = "{tmp}"\n'
-        )
+        cfg.write_text(terminal_toml(m, group, tmp, f"command_period_s = {period_s}\n"))
         for target in (m.run_ecu, m.run_command_spy):
             threading.Thread(target=target, daemon=True).start()
         run_s = flood_s + WARMUP_S + 1.0
