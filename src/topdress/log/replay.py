@@ -4,7 +4,11 @@ Virtual time: the ECU steps every 10 ms from the first event's time; after each 
 event due by then is applied (the ECU sees its effect from the next step):
 - `nmea`: through the terminal's NmeaDecoder and GnssSpeedTracker; the speed is forwarded in a
   PcCommand every `can.command_period_s` (and on each new fix with `can.send_on_gnss`), as
-  the terminal does, carrying "not available" when the tracker has no fresh valid speed.
+  the terminal does, carrying "not available" when the tracker has no fresh valid speed;
+  and every new fix in a PcGnssTime with its age at that step (the sentence's recorded arrival
+  to the step that forwards it), as the terminal sends it, so the `fused` mode applies the
+  GNSS speed at its time of validity. The recorded PcGnssTime frames are not replayed: they
+  are made again from the NMEA, like the commands' speed.
 - `wheel_count`: the wheel encoder input, linearly interpolated between events (integer
   pulses, rounded down); held before the first and after the last. Between two events the
   wheel is taken to turn evenly, which is what a frequency input sees; events every 10 ms on
@@ -58,6 +62,7 @@ class ReplayRow:
 class ReplayStats:
     steps: int = 0
     commands: int = 0
+    gnss_times: int = 0  # PcGnssTime frames sent (one per new fix)
     nmea_rejected: int = 0
     bad_commands: int = 0  # recorded PcCommand frames that did not decode
     ecu_rx_refused: int = 0
@@ -156,6 +161,8 @@ class _Replayer:
         self.command = _Command(start=True, fan_rpm=float(cfg.machine.fan_rpm))
         self.period_us = round(cfg.can.command_period_s * 1e6)
         self.last_cmd_us: int | None = None
+        self.gnss_seq = 0
+        self.fix_us = 0  # replay time of the last sentence that gave a new speed
 
     def _cut_gaps(self) -> None:
         """`times`: the events' times on the replay clock, each pause cut to MAX_IDLE_S;
@@ -197,8 +204,12 @@ class _Replayer:
                 rows.append(_row(self._event_t(now_us), state))
             new_fix = False
             while next_event < len(self.events) and _us(self.times[next_event], self.t0) <= now_us:
-                new_fix |= self._take(self.events[next_event])
+                if self._take(self.events[next_event]):
+                    new_fix = True
+                    self.fix_us = _us(self.times[next_event], self.t0)
                 next_event += 1
+            if new_fix:
+                self._send_gnss_time(now_us)
             due = self.last_cmd_us is None or now_us - self.last_cmd_us >= self.period_us
             if due or (new_fix and self.cfg.can.send_on_gnss):
                 self._send_command(now_us)
@@ -215,6 +226,15 @@ class _Replayer:
         if isinstance(e, CanEvent) and e.dir != "rx" and e.can_id == self.ids.command:
             _take_command(self.command, e, self.ids, self.stats)
         return False
+
+    def _send_gnss_time(self, now_us: int) -> None:
+        gnss = _forwardable(self.tracker.current(self._event_t(now_us)))
+        self.gnss_seq = (self.gnss_seq + 1) & 0xFF
+        age_ms = min(round((now_us - self.fix_us) / 1000), 10000)
+        msg = protocol.encode_gnss_time(gnss, age_ms, self.gnss_seq, ids=self.ids)
+        if self.ecu.rx(msg, now_us) < 0:
+            self.stats.ecu_rx_refused += 1
+        self.stats.gnss_times += 1
 
     def _send_command(self, now_us: int) -> None:
         c = self.command
