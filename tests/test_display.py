@@ -521,6 +521,30 @@ async def test_catch_test_wizard(user: User) -> None:
     assert term.sent[2] == op.CloseCalibration(apply=True)
 
 
+async def test_lookahead_wizard_presses_seen_and_applies_both_times(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/calibration")
+    user.find(marker="start_lead").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.StartLeadCal("upper", 3)]
+    view = CalibrationView("lead", "running", "trial 1 of 3", 0.0, {}, "lookahead")
+    hub.publish(working(t_s=13.0, operator="calibrating", calibration=view))
+    await shows(user, "cal_state", "Look-ahead: meter to outlet · running")
+    user.find(marker="lead_seen").click()
+    await settle(user, term, 2)
+    assert term.sent[1] == op.LeadSeen()
+    result = {"meter_ms": 60.0, "airline_ms": 200.0}
+    done = CalibrationView("lead", "done", "meter 60 ms", 1.0, result, "lookahead")
+    hub.publish(working(t_s=20.0, operator="calibrating", calibration=done))
+    await shows(user, "cal_result_airline_ms", "air-line time ms: 200")
+    user.find(marker="cal_apply").click()
+    await settle(user, term, 3)
+    assert term.sent[2] == op.CloseCalibration(apply=True)
+
+
 async def test_device_test_shows_the_last_lines(user: User) -> None:
     lines = [DeviceLine(1.5, "$GNRMC,...*7A", "RMC 8.00 km/h")]
     term = Terminal(lambda c: CommandResult(True, "", data=lines))

@@ -21,6 +21,7 @@ from topdress.sim.actuators import MeterParams
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, StepOutput, World
 from topdress.terminal import operator as op
+from topdress.terminal.leadcal import LeadCal
 from topdress.terminal.operator import CommandResult
 
 CFG = loads_config(DEFAULT_TOML)
@@ -478,3 +479,93 @@ def test_a_command_is_served_before_a_flood_of_lines() -> None:
         assert rig.term.link.command.start is False
     finally:
         rig.close()
+
+
+def test_lookahead_calibration_measures_meter_and_air_line_times(tmp_path: Path) -> None:
+    """Standing with the fans on, the ECU runs the meter; the 'operator' presses seen 200 ms
+    (their reaction) after the simulated product first lands. The wizard's two times add up
+    to the simulated command-to-landing time and the air-line part to the plant's transport."""
+    path = _config_file(tmp_path)
+    rig = make_rig(drive(stand(200.0)))
+    rig.term.desk.config_path = path
+    world = rig.world
+    try:
+        rig.run(2.0)
+        res = post(rig, op.StartLeadCal("upper", trials=3, meter_rpm=20.0))
+        assert res.ok, res.message
+        assert not post(rig, op.LeadSeen()).ok  # nothing runs yet: the fans spin up first
+        lag_ms: list[float] = []
+        for k in range(3):
+            # wait for the ECU to start this trial's meter, then for the product at the outlet
+            t_cmd = None
+            while t_cmd is None:
+                rig.run(world.t_s + 0.01)
+                w = rig.term.desk.wizard
+                assert isinstance(w, LeadCal) and w.step == "running", w
+                if len(w.done) == k and w._pause_until is None:
+                    t_cmd = w._t_cmd
+            landed0 = world.airlines[0].landed_kg
+            rev0 = world.meters[0].revolutions
+            while world.airlines[0].landed_kg == landed0:
+                rig.run(world.t_s + 0.01)
+            rig.run(world.t_s + 0.2)  # the operator's reaction
+            # the plant's own meter delay: how far its turn is behind one that jumped at once
+            rpm = world.meters[0].rpm
+            lag_s = (world.t_s - t_cmd) - (world.meters[0].revolutions - rev0) / (rpm / 60.0)
+            lag_ms.append(lag_s * 1000.0)
+            seen = post(rig, op.LeadSeen(), settle_s=0.01)
+            assert seen.ok, seen.message
+            assert not post(rig, op.LeadSeen(), settle_s=0.01).ok  # one press per trial
+        rig.run(world.t_s + 0.2)  # the next snapshot
+        cal = rig.term.snapshot.calibration
+        assert cal is not None and cal.step == "done", cal.text
+        r = cal.result
+        # the meter: its flow's delay, as the plant turned (10 ms steps)
+        assert r["meter_ms"] == pytest.approx(sorted(lag_ms)[1], abs=15.0)
+        # the air line: drop 50 ms + 1.5 m at 11 m/s at the nominal fan
+        transport_ms = world.airlines[0].delay_s(CFG.machine.fan_rpm) * 1000.0
+        assert transport_ms == pytest.approx(186.4, abs=0.1)
+        assert r["airline_ms"] == pytest.approx(transport_ms, abs=40.0)
+        assert world.tractor.odometer == 0.0
+        meter_ms, airline_ms = round(r["meter_ms"]), round(r["airline_ms"])
+        print(
+            f"lead calibration: meter {r['meter_ms']:.1f} ms (plant {sorted(lag_ms)[1]:.1f}), "
+            f"air line {r['airline_ms']:.1f} ms (plant {transport_ms:.1f})"
+        )
+        fut = rig.term.post(op.CloseCalibration(apply=True))
+        rig.run(world.t_s + 0.5)
+        assert fut.result().ok, fut.result().message
+        assert rig.term.cfg.lookahead.meter_ms == meter_ms
+        assert rig.term.cfg.lookahead.airline_ms == airline_ms
+        assert rig.term.ndvi.lookahead_s == rig.term.cfg.lookahead.total_s
+        # and the ECU has them: its look-ahead runs on the measured machine
+        assert (world.ecu.params.lead_meter_ms, world.ecu.params.lead_air_ms) == (
+            meter_ms,
+            airline_ms,
+        )
+        assert rig.term.snapshot.operator == "stopped"
+    finally:
+        rig.close()
+    saved = loads_config(path.read_text())
+    assert (saved.lookahead.meter_ms, saved.lookahead.airline_ms) == (meter_ms, airline_ms)
+    assert saved.machine == CFG.machine  # nothing else changed
+
+
+def test_lookahead_trial_refuses_a_press_before_the_meter_turned() -> None:
+    from topdress.terminal.calibration import CalibrationError
+    from topdress.terminal.leadcal import trial
+
+    # A meter that starts 0.1 s after the command and then turns 0.5 rev/s at once: its flow
+    # is 0.1 s late; the product seen 0.55 s after the command, 0.2 s of it reaction.
+    reports = [(1.0 + k / 10, max(0.0, (k / 10 - 0.1) * 0.5)) for k in range(1, 8)]
+    t = trial(1.0, reports, t_seen=1.55, reaction_s=0.2)
+    assert t.meter_s == pytest.approx(0.1)
+    assert t.airline_s == pytest.approx(0.25)  # from the last still report (1.1 s) to 1.35 s
+    with pytest.raises(CalibrationError, match="before the meter turned"):
+        trial(1.0, reports, t_seen=1.25, reaction_s=0.2)
+    with pytest.raises(CalibrationError, match="too late"):
+        trial(1.0, reports, t_seen=12.0, reaction_s=0.2)
+    with pytest.raises(CalibrationError, match="not turned"):
+        trial(1.0, reports[:1], t_seen=1.5, reaction_s=0.2)
+    with pytest.raises(CalibrationError, match="long enough"):
+        trial(1.0, reports[:4], t_seen=1.5, reaction_s=0.2)

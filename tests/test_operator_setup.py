@@ -295,14 +295,14 @@ def test_calibration_frames_round_trip_and_range() -> None:
     assert msg.arbitration_id == 0x0A646465
     assert protocol.decode(msg) == protocol.PcCalCommand(1, 1, 12.5, 20.0, 44)
     with pytest.raises(ProtocolError):
-        protocol.encode_cal_command(2, 0, 1.0, 1.0)  # no such action
+        protocol.encode_cal_command(3, 0, 1.0, 1.0)  # no such action (2: the look-ahead test)
     with pytest.raises(ProtocolError):
         protocol.encode_cal_command(1, 0, 7000.0, 1.0)  # more revolutions than the frame
     status = bytes([0x12, 0, 0x10, 0x27, 0, 0xD0, 0x07, 9])  # lower, running, 10.000 rev
     got = protocol.decode((0x18656465, status))
     assert got == protocol.EcuCalStatus("done", 1, "none", 10.0, 20.0, 9)
     with pytest.raises(ProtocolError, match="CalReason"):
-        protocol.decode((0x18656465, bytes([0x02, 7, 0, 0, 0, 0, 0, 0])))
+        protocol.decode((0x18656465, bytes([0x02, 8, 0, 0, 0, 0, 0, 0])))
 
 
 def _udp_or_skip(group: str) -> None:

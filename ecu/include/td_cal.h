@@ -10,6 +10,12 @@
  * The revolutions reported are those counted on the meter encoder since the test began,
  * coasting after the stop included: what fell into the catch bag.
  *
+ * Action 2, the look-ahead test (terminal/leadcal.py): the same run, but accepted only while a
+ * start command is in force, so the fans run under their normal control and the product goes
+ * down the air line to the outlet; the machine stands, so td_app's own meter control holds the
+ * meters at 0 and only the layer under test turns. A stop command (fans off) aborts it
+ * (TD_CAL_R_FANS_OFF); the ground wheel turning aborts it as it does a catch test.
+ *
  * Timing: td_cal_step() once per td_app_step(), after the normal meter control; it overrides
  * the duty of the layer under test only while the test runs.
  */
@@ -40,7 +46,8 @@ typedef enum {
     TD_CAL_R_MOVING = 3,   /**< the ground wheel turns */
     TD_CAL_R_BLOCKED = 4,  /**< the meter does not turn */
     TD_CAL_R_TIMEOUT = 5,  /**< longer than the time budget */
-    TD_CAL_R_BAD_VALUE = 6 /**< revolutions or speed outside their range */
+    TD_CAL_R_BAD_VALUE = 6, /**< revolutions or speed outside their range */
+    TD_CAL_R_FANS_OFF = 7   /**< a look-ahead test without a start command in force (no fans) */
 } td_cal_reason_t;
 
 /** What the catch test reads each step (from td_app's inputs and state). */
@@ -67,6 +74,7 @@ typedef struct {
     bool counting;             /**< start_count holds the first count of the test */
     bool slow;                 /**< the meter turns below 10 % of its speed (blocked check) */
     bool announce;             /**< send a status frame at the next step */
+    bool with_fans;            /**< the look-ahead test: runs while started (fans on), standing */
     td_pid_t pid;
 } td_cal_t;
 

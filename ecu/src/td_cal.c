@@ -31,6 +31,7 @@ void td_cal_init(td_cal_t *cal) {
     cal->counting = false;
     cal->slow = false;
     cal->announce = false;
+    cal->with_fans = false;
     td_pid_init(&cal->pid, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 1.0f);
 }
 
@@ -78,8 +79,11 @@ int td_cal_rx(td_cal_t *cal, const td_can_frame_t *frame, bool running, uint32_t
     cal->counting = false;
     cal->slow = false;
     cal->start_us = now_us;
-    if (running) {
+    cal->with_fans = m.cal_action == TD_CAN_PC_CAL_COMMAND_CAL_ACTION_LEAD_TEST_CHOICE;
+    if (running && !cal->with_fans) {
         finish(cal, TD_CAL_ABORTED, TD_CAL_R_RUNNING);
+    } else if (!running && cal->with_fans) {
+        finish(cal, TD_CAL_ABORTED, TD_CAL_R_FANS_OFF);
     } else if (rev <= 0.0f || rev > TD_CAL_MAX_REV || rpm < TD_CAL_MIN_RPM || rpm > TD_CAL_MAX_RPM) {
         finish(cal, TD_CAL_ABORTED, TD_CAL_R_BAD_VALUE);
     } else {
@@ -118,8 +122,10 @@ static void check_running(td_cal_t *cal, uint32_t now_us, const td_params_t *p, 
         cal->slow = true;
         cal->slow_since_us = now_us;
     }
-    if (io->running) {
+    if (io->running && !cal->with_fans) {
         finish(cal, TD_CAL_ABORTED, TD_CAL_R_RUNNING);
+    } else if (!io->running && cal->with_fans) {
+        finish(cal, TD_CAL_ABORTED, TD_CAL_R_FANS_OFF);
     } else if (io->v_wheel_kmh > TD_CAL_MAX_WHEEL_KMH) {
         finish(cal, TD_CAL_ABORTED, TD_CAL_R_MOVING);
     } else if (cal->slow && td_elapsed_us(now_us, cal->slow_since_us) > (uint32_t)p->blocked_time_ms * 1000u) {

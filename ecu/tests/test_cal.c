@@ -101,6 +101,37 @@ static void test_refused_while_running(void **state) {
     assert_float_equal(rig_st(&r)->meter_rpm[TD_UPPER], before, 0.05 * before); /* work goes on */
 }
 
+/* The look-ahead test: only with a start command in force, so the fans run; the machine stands,
+ * so the meters' own control holds them at 0 and only the layer under test turns. */
+static void test_lead_test_runs_with_the_fans_and_a_stop_aborts_it(void **state) {
+    (void)state;
+    rig_t r;
+    rig_standing(&r);
+    const td_can_frame_t early = cal_frame(2, TD_UPPER, 2.0, 20.0, 3);
+    assert_int_equal(td_app_rx(&r.app, &early, r.now_us), TD_OK);
+    cal_seen_t s = { 0 };
+    run_collect(&r, 300, &s);
+    assert_int_equal(s.last.cal_state, TD_CAL_ABORTED); /* stopped: no fans, no air line */
+    assert_int_equal(s.last.cal_reason, TD_CAL_R_FANS_OFF);
+    r.pc_start = true;
+    run_collect(&r, 5000, &s); /* the fans spin up; standing, nothing is metered */
+    assert_true(r.fan_rpm[TD_UPPER] > 0.9 * r.pc_fan_rpm);
+    assert_float_equal(r.meter_rpm[TD_UPPER], 0.0, 1e-9);
+    const td_can_frame_t f = cal_frame(2, TD_UPPER, 2.0, 20.0, 4);
+    assert_int_equal(td_app_rx(&r.app, &f, r.now_us), TD_OK);
+    run_collect(&r, 3000, &s);
+    assert_int_equal(s.last.cal_state, TD_CAL_RUNNING);
+    assert_int_equal(s.last.cal_seq, 4);
+    assert_float_equal(r.meter_rpm[TD_UPPER], 20.0, 1.0);
+    assert_float_equal(r.meter_rpm[TD_LOWER], 0.0, 1e-9);
+    assert_true(r.fan_rpm[TD_UPPER] > 0.9 * r.pc_fan_rpm); /* the fans keep running */
+    r.pc_start = false; /* stop: the fans go off, the test ends */
+    run_collect(&r, 1000, &s);
+    assert_int_equal(s.last.cal_state, TD_CAL_ABORTED);
+    assert_int_equal(s.last.cal_reason, TD_CAL_R_FANS_OFF);
+    assert_float_equal(r.out.meter_duty[TD_UPPER], 0.0, 1e-9);
+}
+
 static void test_start_command_aborts_the_test(void **state) {
     (void)state;
     rig_t r;
@@ -192,7 +223,7 @@ static void test_bad_values_and_bad_frames(void **state) {
     assert_int_equal(td_app_rx(&r.app, &f, r.now_us), TD_E_LENGTH);
     assert_int_equal(r.app.cnt.rx_bad_length, 1u);
     f = cal_frame(1, TD_UPPER, 10.0, 20.0, 1);
-    f.data[0] = 2u; /* undefined action */
+    f.data[0] = 3u; /* undefined action */
     assert_int_equal(td_app_rx(&r.app, &f, r.now_us), TD_E_RANGE);
     f = cal_frame(1, TD_UPPER, 10.0, 20.0, 1);
     f.data[1] = 2u; /* no third layer */
@@ -219,6 +250,7 @@ int main(void) {
         cmocka_unit_test(test_catch_test_runs_the_revolutions_standing_and_counts_the_coast),
         cmocka_unit_test(test_refused_while_running),
         cmocka_unit_test(test_start_command_aborts_the_test),
+        cmocka_unit_test(test_lead_test_runs_with_the_fans_and_a_stop_aborts_it),
         cmocka_unit_test(test_moving_machine_aborts_the_test),
         cmocka_unit_test(test_blocked_meter_aborts_after_blocked_time),
         cmocka_unit_test(test_reset_aborts_a_running_test),

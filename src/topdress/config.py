@@ -275,6 +275,8 @@ class OperatorConfig:
     off_rate_pct: float = _num(10.0, 1.0, 100.0)  # metering speed this far off its target...
     off_rate_s: float = _num(5.0, 0.5, 120.0)  # ...for longer than this is an alarm
     fan_check_s: float = _num(10.0, 2.0, 120.0)  # how long the fan check runs the fans
+    # The look-ahead calibration takes this off each "seen" press (0 with a flow sensor).
+    reaction_ms: float = _num(200.0, 0.0, 1000.0)
     counters_file: str = "counters.json"  # field and season counters, relative to log.dir
 
 
@@ -781,6 +783,7 @@ autostart = false          # true: the meters start at once, without the operato
 off_rate_pct = 10.0        # a metering speed this far off its target...
 off_rate_s = 5.0           # ...for longer than this raises the off-rate alarm
 fan_check_s = 10.0         # how long the fan check runs the fans
+reaction_ms = 200.0        # look-ahead calibration: the operator's reaction, taken off each press
 counters_file = "counters.json"  # field and season counters, in log.dir
 
 [prescription]             # a prescription map as rate source (see docs/maps.md)

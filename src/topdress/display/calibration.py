@@ -1,4 +1,4 @@
-"""The calibration wizards: metering catch test, ground-wheel distance, fan check.
+"""The calibration wizards: metering catch test, ground-wheel distance, fan check, look-ahead.
 
 The wizards' logic is the terminal's (topdress.terminal.calibration, the catch test in the
 ECU): this screen starts them, shows their step and progress from the Snapshot, takes the
@@ -60,6 +60,21 @@ class CalibrationScreen:
                 ui.button(tr("cal.start"), on_click=lambda: send(op.StartFanCheck())).mark(
                     "start_fan"
                 )
+            with ui.card().classes("w-80 gap-2"):
+                ui.label(tr("cal.lead")).classes("text-base font-bold")
+                ui.label(tr("cal.lead_how")).classes("text-xs text-gray-600")
+                lead_layer = (
+                    ui.radio({"upper": tr("main.upper"), "lower": tr("main.lower")}, value="upper")
+                    .props("inline")
+                    .mark("lead_layer")
+                )
+                trials = ui.number(tr("cal.trials"), value=3, min=1, max=10).mark("lead_trials")
+                ui.button(
+                    tr("cal.start"),
+                    on_click=lambda: send(
+                        op.StartLeadCal(str(lead_layer.value), int(trials.value or 3))
+                    ),
+                ).mark("start_lead")
             with ui.card().classes("flex-1 min-w-96 gap-2"):
                 ui.label(tr("cal.now")).classes("text-base font-bold")
                 self.panel = ui.column().classes("w-full gap-2")
@@ -96,6 +111,10 @@ class CalibrationScreen:
                 ui.button(tr("cal.finish_drive"), on_click=lambda: send(op.FinishWheelCal())).mark(
                     "finish_wheel"
                 )
+            if v.kind == "lead" and v.step == "running":
+                ui.button(tr("cal.seen"), on_click=lambda: send(op.LeadSeen())).props(
+                    "color=orange-9 size=lg"
+                ).mark("lead_seen")
             if v.step == "done" and v.key:
                 ui.button(
                     tr("cal.apply", setting=v.key),

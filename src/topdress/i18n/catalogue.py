@@ -215,6 +215,20 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "Machine standing: the fans run to their speed, the meters stay off.",
         "机具静止：风机升至设定转速，排肥器不转。",
     ),
+    "cal.lead": ("Look-ahead: meter to outlet", "前瞻时间：排肥器到出肥口"),
+    "cal.lead_how": (
+        "Machine standing, fans on: the ECU runs one meter; press Seen the moment product "
+        "comes out of the outlet. Three trials give the meter and air-line times.",
+        "机具静止、风机运转：控制器使一个排肥器转动；出肥口一出肥即按“看到”。"
+        "三次试验得出排肥器与气力输送时间。",
+    ),
+    "cal.trials": ("trials", "试验次数"),
+    "cal.seen": ("Seen at the outlet", "看到出肥"),
+    "cal.result.meter_ms": ("meter time ms", "排肥器响应 ms"),
+    "cal.result.airline_ms": ("air-line time ms", "气力输送时间 ms"),
+    "cal.result.meter_spread_ms": ("meter spread ms", "排肥器时间极差 ms"),
+    "cal.result.airline_spread_ms": ("air-line spread ms", "输送时间极差 ms"),
+    "cal.result.trials": ("trials", "试验次数"),
     "cal.start": ("Start", "开始"),
     "cal.revolutions": ("revolutions", "转数"),
     "cal.meter_speed": ("meter speed", "排肥转速"),

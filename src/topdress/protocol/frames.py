@@ -135,7 +135,7 @@ class PcCalCommand:
 
 #: EcuCalStatus.CalState and CalReason (DBC value tables).
 CAL_STATES = ("idle", "running", "done", "aborted")
-CAL_REASONS = ("none", "reset", "running", "moving", "blocked", "timeout", "bad value")
+CAL_REASONS = ("none", "reset", "running", "moving", "blocked", "timeout", "bad value", "fans off")
 
 
 @dataclass(frozen=True)
@@ -351,7 +351,9 @@ def encode_cal_command(
     *,
     ids: FrameIds = DEFAULT_IDS,
 ) -> can.Message:
-    """PcCalCommand: action 1 = catch test of `layer`, 0 = reset/abort; range-checked."""
+    """PcCalCommand: action 1 = catch test of `layer` (standing, stopped), 2 = the look-ahead
+    test (the same run, with the fans of a started machine running), 0 = reset/abort;
+    range-checked."""
     signals = {
         "CalAction": action,
         "CalLayer": layer,

@@ -43,6 +43,7 @@ class CalInputs:
     gnss_kmh: float | None
     fan_rpm: tuple[float, float]
     dt_s: float
+    cal_t: float | None = None  # arrival time of cal_status
 
 
 @dataclass(frozen=True)

@@ -111,6 +111,7 @@ class EcuView:
     targets: protocol.EcuTargets | None = None
     status_t: float | None = None
     cal: protocol.EcuCalStatus | None = None  # the catch test's status (calibration)
+    cal_t: float | None = None  # when that status arrived (the terminal's clock)
 
 
 @dataclass
@@ -470,7 +471,7 @@ class CanLink:
         elif isinstance(decoded, protocol.EcuParamAck):
             self._on_ack(decoded, now)
         elif isinstance(decoded, protocol.EcuCalStatus):
-            self.ecu = replace(self.ecu, cal=decoded)
+            self.ecu = replace(self.ecu, cal=decoded, cal_t=now)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
     def _on_heard(self, now: float, back: bool) -> None:

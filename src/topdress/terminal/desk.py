@@ -40,6 +40,7 @@ from topdress.terminal.calibration import (
 from topdress.terminal.canlink import CanLink, open_bus
 from topdress.terminal.counters import CounterView, WorkCounters
 from topdress.terminal.crop import DistanceQueue, parse_crop_line
+from topdress.terminal.leadcal import LeadCal
 from topdress.terminal.rate import build_rate_model
 from topdress.terminal.serial_io import open_line_source
 from topdress.terminal.settings import (
@@ -101,7 +102,7 @@ class OperatorDesk:
         self.counters = WorkCounters(where / cfg.operator.counters_file if where else None)
         if self.counters.error:
             term._event(self.counters.error)
-        self.wizard: Wizard | None = None
+        self.wizard: Wizard | LeadCal | None = None
         self._cal_seq = 0
         self._pending: Future[op.CommandResult] | None = None  # settings awaiting the ECU
         # The last settings change: dotted key -> pending, ok, refused: <reason>, put back.
@@ -187,9 +188,14 @@ class OperatorDesk:
     def _calibration(
         self, now: float, c: Any, fut: Future[op.CommandResult]
     ) -> op.CommandResult | None:
-        if isinstance(c, op.StartCatchTest | op.StartWheelCal | op.StartFanCheck):
+        if isinstance(c, op.StartCatchTest | op.StartWheelCal | op.StartFanCheck | op.StartLeadCal):
             return self._start_wizard(now, c)
         w = self.wizard
+        if isinstance(c, op.LeadSeen):
+            if not isinstance(w, LeadCal):
+                return op.CommandResult(False, "no look-ahead calibration open")
+            w.seen(now)
+            return self._done(w.text)
         if isinstance(c, op.FinishCatchTest):
             if not isinstance(w, CatchTest):
                 return op.CommandResult(False, "no catch test open")
@@ -205,6 +211,8 @@ class OperatorDesk:
                 return op.CommandResult(False, "no calibration open")
             value = w.value()
             self._end_wizard()
+            if c.apply and isinstance(w, LeadCal) and w.values():
+                return self._apply(now, op.ApplySettings("lookahead", w.values()), fut)
             if c.apply and value is not None and w.key:
                 section, key = w.key.split(".")
                 return self._apply(now, op.ApplySettings(section, {key: value}), fut)
@@ -224,6 +232,23 @@ class OperatorDesk:
             self.wizard = CatchTest(c.layer, c.revolutions, c.meter_rpm, self._cal_seq, ids)
         elif isinstance(c, op.StartWheelCal):
             self.wizard = WheelCal(c.distance_m, m.wheel_radius_m, m.wheel_ppr)
+        elif isinstance(c, op.StartLeadCal):
+            self._cal_seq = (self._cal_seq + 1) % 256
+            reaction = c.reaction_ms
+            if reaction is None:
+                reaction = term.cfg.operator.reaction_ms
+            fan_min = term.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
+            self.wizard = LeadCal(
+                c.layer,
+                c.meter_rpm,
+                c.trials,
+                reaction,
+                c.run_s,
+                m.fan_rpm,
+                float(fan_min),
+                self._cal_seq,
+                term.link.ids,
+            )
         else:
             seconds = c.seconds if c.seconds is not None else term.cfg.operator.fan_check_s
             fan_min = term.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
@@ -252,6 +277,7 @@ class OperatorDesk:
         x = CalInputs(
             ecu_live=link.ecu_alive,
             cal_status=ecu.cal if ecu else None,
+            cal_t=ecu.cal_t if ecu else None,
             wheel_pulses=diag.wheel_pulses if diag else None,
             v_wheel_kmh=status.wheel_kmh if status else 0.0,
             gnss_kmh=link.command.gnss_kmh,
@@ -397,6 +423,8 @@ class OperatorDesk:
         term.cfg = new
         if c.section == "rate":
             term.model = build_rate_model(new.rate)
+        if c.section == "lookahead":
+            term.ndvi.lookahead_s = new.lookahead.total_s  # the NDVI looked up this far ahead
         if c.section == "operator":
             self.alarms.off_rate_pct = new.operator.off_rate_pct
             self.alarms.off_rate_s = new.operator.off_rate_s

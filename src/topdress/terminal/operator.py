@@ -96,6 +96,23 @@ class StartFanCheck:
 
 
 @dataclass(frozen=True)
+class StartLeadCal:
+    """Look-ahead calibration (terminal/leadcal.py): meter start to product at the outlet.
+    None: the meter speed is the catch test's default, the reaction time `operator`'s."""
+
+    layer: str  # upper | lower
+    trials: int = 3
+    meter_rpm: float = 20.0
+    reaction_ms: float | None = None
+    run_s: float = 4.0
+
+
+@dataclass(frozen=True)
+class LeadSeen:
+    """The operator saw product come out of the outlet."""
+
+
+@dataclass(frozen=True)
 class CloseCalibration:
     """Leave the wizard; apply=True saves its result (file and ECU) through the settings."""
 
@@ -213,7 +230,7 @@ CONSOLE_HELP = (
     "commands: start | stop | pause | manual off | manual fixed UPPER LOWER\n"
     "          manual percent P | ack [NAME] | reset field|season | test gnss|crop|can\n"
     "          catch upper|lower [REV [RPM]] | weigh KG | wheel [M] | finish [M]\n"
-    "          fan [S] | close [apply]"
+    "          fan [S] | lead upper|lower [TRIALS [RPM]] | seen | close [apply]"
 )
 
 
@@ -259,6 +276,13 @@ def parse_command(text: str) -> Any:
         return FinishWheelCal(*_floats(args, 0, 1))
     if verb == "fan":
         return StartFanCheck(*_floats(args, 0, 1))
+    if verb == "lead" and args and args[0] in LAYERS:
+        nums = _floats(args[1:], 0, 2)
+        if nums and not (nums[0].is_integer() and nums[0] >= 1):
+            raise OperatorError(f"trials must be a whole number >= 1, not {args[1]!r}")
+        return StartLeadCal(args[0], *[int(nums[0])] if nums else [], *nums[1:])
+    if verb == "seen" and not args:
+        return LeadSeen()
     if verb == "close" and args in ([], ["apply"]):
         return CloseCalibration(apply=bool(args))
     if verb == "test" and len(args) == 1:

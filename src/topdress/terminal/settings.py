@@ -31,7 +31,8 @@ from topdress.terminal.rate import RateModel, build_rate_model
 SECTIONS = tuple(f.name for f in dataclasses.fields(TerminalConfig))
 #: What applying a changed section takes, beyond the file.
 REOPEN = {"gnss": "gnss", "crop": "crop", "can": "can"}  # section -> device reopened
-ECU_SECTIONS = ("machine", "speed", "ecu")  # pushed to the ECU (meters stopped)
+# pushed to the ECU (meters stopped); [lookahead]'s meter and air-line times are ECU parameters
+ECU_SECTIONS = ("machine", "speed", "ecu", "lookahead")
 LIVE_SECTIONS = ("rate", "operator")  # taken at once by the loop
 RESTART_SECTIONS = ("log", "display")  # saved; in force at the next start
 
