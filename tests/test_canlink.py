@@ -311,6 +311,28 @@ def test_send_on_gnss_sends_at_once_and_none_is_not_available() -> None:
         rig.close()
 
 
+@pytest.mark.parametrize("on_rate", [True, False])
+def test_send_on_rate_sends_a_changed_rate_at_once_and_only_a_change(on_rate: bool) -> None:
+    rig = Rig(replace(CanConfig(), send_on_rate=on_rate))
+    try:
+        rig.link.begin({}, 0.0)
+        rig.run(0.1)  # parameters done, the first periodic command out at 0.01 s
+        assert len(rig.commands()) == 1
+        sent = rig.link.set_command(True, 3000.0, 200.0, 100.0)
+        same = rig.link.set_command(True, 3000.0, 200.0, 100.0)  # no change: nothing more
+        rig.run(0.2)
+        assert (sent, same) == (on_rate, False)
+        cmds = rig.commands()
+        # on: the new rate is on the bus 0.1 s after the period's frame; off: it waits for 0.51 s
+        assert len(cmds) == (2 if on_rate else 1)
+        rig.run(0.6)
+        cmds = rig.commands()
+        assert cmds[-1][1].rate_upper_kg_ha == 200.0 and cmds[-1][0] == pytest.approx(0.51)
+        assert len(cmds) == (3 if on_rate else 2)
+    finally:
+        rig.close()
+
+
 def test_gnss_speed_without_send_on_gnss_waits_for_the_period(rig: Rig) -> None:
     rig.link.begin({}, 0.0)
     rig.run(0.2)

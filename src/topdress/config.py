@@ -187,6 +187,7 @@ class CanConfig:
     bitrate: int = _num(250000, 10000, 1000000)
     command_period_s: float = _num(0.5, 0.02, 10.0)
     send_on_gnss: bool = False
+    send_on_rate: bool = False
     ecu_timeout_s: float = _num(0.5, 0.05, 60.0)
     ids: Mapping[str, int] = field(
         default_factory=lambda: {
@@ -751,6 +752,7 @@ channel = "topdress"
 bitrate = 250000
 command_period_s = 0.5     # command frame period
 send_on_gnss = false       # also send a command at once on each new GNSS speed
+send_on_rate = false       # also send it at once when a rate changes (at most every 100 ms)
 ecu_timeout_s = 0.5        # no ECU status for this long = ECU lost
 
 [can.ids]

@@ -124,7 +124,17 @@ class CommunicationScreen:
             for section, keys in (
                 ("gnss", ["port", "baud", "stale_s"]),
                 ("crop", ["port", "baud", "sensors", "columns", "sensor_to_meter_m"]),
-                ("can", ["interface", "channel", "bitrate", "command_period_s", "send_on_gnss"]),
+                (
+                    "can",
+                    [
+                        "interface",
+                        "channel",
+                        "bitrate",
+                        "command_period_s",
+                        "send_on_gnss",
+                        "send_on_rate",
+                    ],
+                ),
             ):
                 with ui.card().classes("w-96 gap-2"):
                     _title(f"comm.{section}")

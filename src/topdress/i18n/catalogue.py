@@ -185,6 +185,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "key.can.bitrate": ("bitrate", "波特率"),
     "key.can.command_period_s": ("command period", "指令周期"),
     "key.can.send_on_gnss": ("command on each GNSS speed", "每次 GNSS 速度即发送指令"),
+    "key.can.send_on_rate": ("command on each rate change", "速率变化即发送指令"),
     "key.rate.model": ("model", "模型"),
     "key.rate.split_upper": ("upper layer share", "上层比例"),
     "key.speed.mode": ("speed mode", "测速模式"),

@@ -9,8 +9,9 @@ seconds on any monotonic clock (virtual in tests). It
   a refusal fails at once naming the parameter; a silent ECU (not powered yet, the implement
   not hitched) is waited for, retrying with a backoff, and the push goes on at once when its
   first status frame is heard;
-- sends the paper's PcCommand every `command_period_s`, and at once on a new GNSS speed when
-  `send_on_gnss` is set;
+- sends the paper's PcCommand every `command_period_s`, at once on a new GNSS speed when
+  `send_on_gnss` is set, and at once when start, fan or a rate changes when `send_on_rate` is
+  set (the terminal sets the command once per 100 ms tick, so at most every 100 ms);
 - decodes EcuStatus, EcuDiag, EcuSpeeds and EcuTargets, counting foreign and malformed frames;
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
   and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
@@ -193,6 +194,8 @@ class CanLink:
         self._ready = False  # every parameter acknowledged once: the ECU works for us
         self._send_failing = False
         self._gnss_seq = 0  # PcGnssTime: one number per new fix
+        # start, fan, rates of the last command sent (send_on_rate compares against them)
+        self._sent: tuple[bool, float, float, float] | None = None
 
     # ---- start-up: parameters -------------------------------------------------------------
     def begin(self, params: Mapping[int, float], now: float) -> None:
@@ -366,8 +369,9 @@ class CanLink:
     # ---- running --------------------------------------------------------------------------
     def set_command(
         self, start: bool, fan_rpm: float, rate_upper_kg_ha: float, rate_lower_kg_ha: float
-    ) -> None:
-        """Set what the next PcCommand carries (sent on the period)."""
+    ) -> bool:
+        """Set what the next PcCommand carries (sent on the period; at once with send_on_rate
+        when start, fan or a rate changed). True when it was sent here."""
         values = (fan_rpm, rate_upper_kg_ha, rate_lower_kg_ha)
         limits = (MAX_FAN_RPM, MAX_RATE_KG_HA, MAX_RATE_KG_HA)
         fan, upper, lower = (_clamp(v, hi) for v, hi in zip(values, limits, strict=True))
@@ -376,6 +380,10 @@ class CanLink:
         self.command = replace(
             self.command, start=start, fan_rpm=fan, rate_upper_kg_ha=upper, rate_lower_kg_ha=lower
         )
+        changed = self._sent is not None and self._sent != (start, fan, upper, lower)
+        if self.cfg.send_on_rate and changed and self.params_done:
+            return self._send_command()
+        return False
 
     def set_gnss(self, kmh: float | None, now: float) -> None:
         """A new GNSS speed (None: not available). Sent at once when send_on_gnss is set."""
@@ -416,14 +424,17 @@ class CanLink:
             self._send_command()
         self._poll_liveness(now)
 
-    def _send_command(self) -> None:
+    def _send_command(self) -> bool:
         c = self.command
         msg = protocol.encode_command(
             c.start, c.fan_rpm, c.rate_upper_kg_ha, c.rate_lower_kg_ha, c.gnss_kmh, ids=self.ids
         )
         if self._send(msg):
             self.counters.tx_commands += 1
+            self._sent = (c.start, c.fan_rpm, c.rate_upper_kg_ha, c.rate_lower_kg_ha)
+            return True
         # A failed send is not retried early: the next period carries fresher values.
+        return False
 
     def _send(self, msg: can.Message) -> bool:
         try:

@@ -181,8 +181,8 @@ class OperatorDesk:
     def _send_command_now(self) -> None:
         link = self.term.link
         cmd = self.command()
-        link.set_command(cmd[0], cmd[1], cmd[2], cmd[3])
-        link.send_now()
+        if not link.set_command(cmd[0], cmd[1], cmd[2], cmd[3]):
+            link.send_now()
 
     # ---- calibration -------------------------------------------------------------------------
     def _calibration(
