@@ -225,6 +225,11 @@ class Ecu:
         )
 
     @property
+    def wheel_updates(self) -> int:
+        """Wheel-speed updates so far (EcuState.wheel_updates without the whole snapshot)."""
+        return int(lib.td_app_state(self._app).wheel_updates)
+
+    @property
     def cal_state(self) -> CalState | None:
         """The metering catch test (td_cal.h); None while idle."""
         c = self._app.cal

@@ -16,6 +16,7 @@ import cantools
 
 from topdress.errors import ProtocolError
 from topdress.protocol.dbc import message
+from topdress.protocol.layout import checks, layout
 from topdress.protocol.model import (
     DEFAULT_IDS,
     AckResult,
@@ -26,7 +27,7 @@ from topdress.protocol.model import (
     Source,
     SpeedMode,
 )
-from topdress.protocol.params import ParamSpec, decimals, param
+from topdress.protocol.params import ParamSpec, param
 
 GNSS_NA_RAW = 0xFF  # PcCommand.GnssSpeed: "not available"
 GNSS_MAX_KMH = 25.0  # raw 251..254 are out of range
@@ -214,6 +215,11 @@ def _frame_parts(frame: can.Message | CanFrame) -> tuple[int, bytes]:
 
 def _decode_raw(name: str, data: bytes) -> dict[str, int]:
     """Raw signal values of frame `name`, every one checked against the DBC."""
+    lay = layout(name)
+    if lay is not None:
+        if len(data) != lay.length:
+            raise ProtocolError(f"{name}: {len(data)} data bytes, expected {lay.length}")
+        return dict(zip(lay.names, lay.raw(data), strict=True))
     msg = message(name)
     if len(data) != msg.length:
         raise ProtocolError(f"{name}: {len(data)} data bytes, expected {msg.length}")
@@ -224,16 +230,21 @@ def _decode_raw(name: str, data: bytes) -> dict[str, int]:
     return raw
 
 
+def _decode_checked(name: str, data: bytes) -> tuple[dict[str, int], dict[str, float]]:
+    """Raw and physical values of every signal of plain frame `name`, each range-checked."""
+    lay = layout(name)
+    assert lay is not None, name  # only plain frames come here
+    if len(data) != lay.length:
+        raise ProtocolError(f"{name}: {len(data)} data bytes, expected {lay.length}")
+    raw = lay.raw(data)
+    return dict(zip(lay.names, raw, strict=True)), dict(
+        zip(lay.names, lay.values(raw), strict=True)
+    )
+
+
 def _check(name: str, signal: str, raw: int) -> float:
     """Physical value of a raw signal, or ProtocolError when outside its range or choices."""
-    sig = message(name).get_signal_by_name(signal)
-    value = float(round(raw * sig.scale + sig.offset, decimals(sig.scale)))
-    if sig.choices is not None and raw not in sig.choices:
-        raise ProtocolError(f"{name}.{signal}: undefined value {raw}")
-    tol = sig.scale / 2
-    if not sig.minimum - tol <= value <= sig.maximum + tol:
-        raise ProtocolError(f"{name}.{signal} = {value:g} outside {sig.minimum:g}..{sig.maximum:g}")
-    return value
+    return checks()[(name, signal)].check(raw)
 
 
 def _decode_command(data: bytes) -> PcCommand:
@@ -251,8 +262,7 @@ def _decode_command(data: bytes) -> PcCommand:
 
 
 def _decode_status(data: bytes) -> EcuStatus:
-    raw = _decode_raw("EcuStatus", data)
-    v = {k: _check("EcuStatus", k, r) for k, r in raw.items()}
+    raw, v = _decode_checked("EcuStatus", data)
     return EcuStatus(
         running=v["RunState"] == _RUN,
         meter_rpm_upper=v["UpperMeterSpeed"],
@@ -264,8 +274,7 @@ def _decode_status(data: bytes) -> EcuStatus:
 
 
 def _decode_diag(data: bytes) -> EcuDiag:
-    raw = _decode_raw("EcuDiag", data)
-    v = {k: _check("EcuDiag", k, r) for k, r in raw.items()}
+    raw, v = _decode_checked("EcuDiag", data)
     return EcuDiag(
         source=Source.from_code(raw["SpeedSource"]),
         mode=SpeedMode.from_code(raw["SpeedMode"]),
@@ -279,8 +288,7 @@ def _decode_diag(data: bytes) -> EcuDiag:
 
 
 def _decode_speeds(data: bytes) -> EcuSpeeds:
-    raw = _decode_raw("EcuSpeeds", data)
-    v = {k: _check("EcuSpeeds", k, r) for k, r in raw.items()}
+    raw, v = _decode_checked("EcuSpeeds", data)
     return EcuSpeeds(
         wheel_kmh=v["WheelSpeedFine"],
         gnss_kmh=None if raw["GnssSpeedFine"] == NA_RAW_16 else v["GnssSpeedFine"],
@@ -290,8 +298,7 @@ def _decode_speeds(data: bytes) -> EcuSpeeds:
 
 
 def _decode_targets(data: bytes) -> EcuTargets:
-    raw = _decode_raw("EcuTargets", data)
-    v = {k: _check("EcuTargets", k, r) for k, r in raw.items()}
+    raw, v = _decode_checked("EcuTargets", data)
     return EcuTargets(
         target_rpm_upper=v["UpperTargetSpeed"],
         target_rpm_lower=v["LowerTargetSpeed"],
@@ -378,8 +385,7 @@ def _decode_gnss_time(data: bytes) -> PcGnssTime:
 
 
 def _decode_fused(data: bytes) -> EcuFused:
-    raw = _decode_raw("EcuFused", data)
-    v = {k: _check("EcuFused", k, r) for k, r in raw.items()}
+    raw, v = _decode_checked("EcuFused", data)
     return EcuFused(
         speed_kmh=v["FusedSpeed"],
         accel_ms2=v["FusedAccel"],
@@ -393,8 +399,7 @@ def _decode_fused(data: bytes) -> EcuFused:
 
 
 def _decode_fused_aux(data: bytes) -> EcuFusedAux:
-    raw = _decode_raw("EcuFusedAux", data)
-    v = {k: _check("EcuFusedAux", k, r) for k, r in raw.items()}
+    raw, v = _decode_checked("EcuFusedAux", data)
     return EcuFusedAux(
         wheel_edge_kmh=v["WheelEdgeSpeed"],
         lead_kmh=v["LeadSpeed"],
