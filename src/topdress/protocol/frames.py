@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import can
@@ -237,9 +238,8 @@ def _decode_checked(name: str, data: bytes) -> tuple[dict[str, int], dict[str, f
     if len(data) != lay.length:
         raise ProtocolError(f"{name}: {len(data)} data bytes, expected {lay.length}")
     raw = lay.raw(data)
-    return dict(zip(lay.names, raw, strict=True)), dict(
-        zip(lay.names, lay.values(raw), strict=True)
-    )
+    names = lay.names
+    return dict(zip(names, raw, strict=True)), dict(zip(names, lay.values(raw), strict=True))
 
 
 def _check(name: str, signal: str, raw: int) -> float:
@@ -430,7 +430,18 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
 def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
     """Decode any frame of the protocol; ProtocolError if it is not one, or not a valid one."""
     frame_id, data = _frame_parts(frame)
-    decoders: dict[int, Callable[[bytes], Frame]] = {
+    # FrameIds hashes all its fields: look the default table up without hashing it
+    table = _DEFAULT_DECODERS if ids is DEFAULT_IDS else _decoders(ids)
+    try:
+        decoder = table[frame_id]
+    except KeyError:
+        raise ProtocolError(f"unknown CAN id 0x{frame_id:08X}") from None
+    return decoder(data)
+
+
+@cache
+def _decoders(ids: FrameIds) -> dict[int, Callable[[bytes], Frame]]:
+    return {
         ids.command: _decode_command,
         ids.status: _decode_status,
         ids.diag: _decode_diag,
@@ -444,11 +455,9 @@ def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
         ids.fused: _decode_fused,
         ids.fused_aux: _decode_fused_aux,
     }
-    try:
-        decoder = decoders[frame_id]
-    except KeyError:
-        raise ProtocolError(f"unknown CAN id 0x{frame_id:08X}") from None
-    return decoder(data)
+
+
+_DEFAULT_DECODERS = _decoders(DEFAULT_IDS)
 
 
 def _message(frame_id: int, data: bytes) -> can.Message:

@@ -38,6 +38,25 @@ class SignalCheck:
     choices: frozenset[int] | None
     raw_lo: int  # raw values in raw_lo..raw_hi are inside minimum..maximum (+- scale / 2)
     raw_hi: int
+    raw_all: tuple[int, int]  # every raw value the signal's bits can hold
+
+    @property
+    def always_valid(self) -> bool:
+        """No raw value can fail the check (no value table, the range spans every value)."""
+        return self.choices is None and self.raw_lo <= self.raw_all[0] <= self.raw_all[1] <= (
+            self.raw_hi
+        )
+
+    @property
+    def ratio(self) -> tuple[int, int] | None:
+        """(k, d) with physical = raw * k / d exactly, when the offset is 0 and the scale is
+        k / d with d = 10**decimals: the value rounded to its resolution (as `physical`) is
+        then the correctly rounded quotient of two integers. None otherwise."""
+        d = 10**self.decimals
+        k = round(self.scale * d)
+        if self.offset != 0 or k <= 0 or abs(self.scale * d - k) > 1e-9 * k:
+            return None
+        return k, d
 
     def physical(self, raw: int) -> float:
         """The value that was sent, rounded to the signal's resolution."""
@@ -45,7 +64,7 @@ class SignalCheck:
 
     def check(self, raw: int) -> float:
         """Physical value of a raw signal, or ProtocolError when outside its range or choices."""
-        value = float(round(raw * self.scale + self.offset, self.decimals))
+        value = self.physical(raw)
         if self.choices is not None and raw not in self.choices:
             raise ProtocolError(f"{self.frame}.{self.name}: undefined value {raw}")
         if not self.raw_lo <= raw <= self.raw_hi:
@@ -59,7 +78,7 @@ class SignalCheck:
 @dataclass(frozen=True)
 class FrameLayout:
     """Where each signal of a plain frame sits: raw = (payload >> shift) & mask, then
-    two's complement for a signed one."""
+    two's complement for a signed one; and how its values are checked and scaled."""
 
     name: str
     length: int
@@ -67,6 +86,8 @@ class FrameLayout:
     fields: tuple[tuple[int, int], ...]  # (shift, mask) per signal, in DBC order
     sign_bits: tuple[int, ...]  # 1 << (length - 1) of a signed signal, 0 of an unsigned one
     checks: tuple[SignalCheck, ...]
+    checked: tuple[int, ...]  # the signals a raw value can fail (the others need no check)
+    ratios: tuple[tuple[int, int], ...] | None  # SignalCheck.ratio of every signal, if all have one
 
     def raw(self, data: bytes) -> tuple[int, ...]:
         """Raw signal values in DBC order; the caller has checked the length."""
@@ -77,15 +98,28 @@ class FrameLayout:
         return tuple([r - ((r & b) << 1) for r, b in zip(raw, self.sign_bits, strict=True)])
 
     def values(self, raw: tuple[int, ...]) -> tuple[float, ...]:
-        """Physical values in DBC order, each checked as SignalCheck.check does."""
-        return tuple([c.check(r) for c, r in zip(self.checks, raw, strict=True)])
+        """Physical values in DBC order; ProtocolError as SignalCheck.check for the first
+        signal (in DBC order) outside its range or value table."""
+        checks = self.checks
+        for i in self.checked:
+            checks[i].check(raw[i])
+        ratios = self.ratios
+        if ratios is None:
+            return tuple([c.physical(r) for c, r in zip(checks, raw, strict=True)])
+        return tuple([r * k / d for r, (k, d) in zip(raw, ratios, strict=True)])
+
+
+def _raw_all(sig: Any) -> tuple[int, int]:
+    """The lowest and highest raw value of a signal's bits."""
+    if sig.is_signed:
+        return -(1 << (sig.length - 1)), (1 << (sig.length - 1)) - 1
+    return 0, (1 << sig.length) - 1
 
 
 def _raw_bounds(sig: Any, accepts: Callable[[int], bool]) -> tuple[int, int]:
     """The first and last raw value `accepts` (monotone scaling: the accepted values are one
     interval); an empty interval (lo > hi) when none is."""
-    lo_all = -(1 << (sig.length - 1)) if sig.is_signed else 0
-    hi_all = (1 << (sig.length - 1)) - 1 if sig.is_signed else (1 << sig.length) - 1
+    lo_all, hi_all = _raw_all(sig)
     # a raw value inside the range: the one nearest the middle of minimum..maximum
     mid = round(((sig.minimum + sig.maximum) / 2 - sig.offset) / sig.scale)
     mid = min(hi_all, max(lo_all, mid))
@@ -117,7 +151,17 @@ def signal_check(frame: str, sig: Any) -> SignalCheck:
     lo, hi = _raw_bounds(sig, accepts)
     choices = None if sig.choices is None else frozenset(int(k) for k in sig.choices)
     return SignalCheck(
-        frame, sig.name, sig.scale, sig.offset, dec, sig.minimum, sig.maximum, choices, lo, hi
+        frame,
+        sig.name,
+        sig.scale,
+        sig.offset,
+        dec,
+        sig.minimum,
+        sig.maximum,
+        choices,
+        lo,
+        hi,
+        _raw_all(sig),
     )
 
 
@@ -127,13 +171,18 @@ def _compile(msg: Any) -> FrameLayout | None:
     sigs = msg.signals
     if any(s.byte_order != "little_endian" or s.is_float for s in sigs):
         return None
+    checks = tuple(signal_check(msg.name, s) for s in sigs)
+    ratios = tuple(c.ratio for c in checks)
+    exact = tuple(r for r in ratios if r is not None)
     return FrameLayout(
         name=msg.name,
         length=msg.length,
         names=tuple(s.name for s in sigs),
         fields=tuple((s.start, (1 << s.length) - 1) for s in sigs),
         sign_bits=tuple(1 << (s.length - 1) if s.is_signed else 0 for s in sigs),
-        checks=tuple(signal_check(msg.name, s) for s in sigs),
+        checks=checks,
+        checked=tuple(i for i, c in enumerate(checks) if not c.always_valid),
+        ratios=exact if len(exact) == len(ratios) else None,
     )
 
 
