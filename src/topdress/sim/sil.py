@@ -116,6 +116,7 @@ class CabPc:
         self.ndvi = None if nr is None else CompensatedNdvi(nr.crop, nr.lookahead_s)
         self._next_cycle = p.cycle_s
         self._next_cmd = p.start_at_s
+        self.next_poll_s = min(self._next_cycle, self._next_cmd)  # poll() has nothing before
         self.status: protocol.EcuStatus | None = None
         self.diag: protocol.EcuDiag | None = None
         self.speeds: protocol.EcuSpeeds | None = None
@@ -151,12 +152,12 @@ class CabPc:
                 kmh = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
                 out.append(protocol.encode_gnss_time(kmh, age_ms, self._gnss_seq))
             self._update_rate(t)
-        if t + 1e-9 < self._next_cmd:
-            return out
-        self._next_cmd += self.p.command_period_s
-        gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
-        up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
-        out.append(protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss))
+        if t + 1e-9 >= self._next_cmd:
+            self._next_cmd += self.p.command_period_s
+            gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
+            up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
+            out.append(protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss))
+        self.next_poll_s = min(self._next_cycle, self._next_cmd)
         return out
 
     def _update_rate(self, t: float) -> None:
@@ -246,15 +247,17 @@ class Sil:
                 w.deliver_can(msg, now)
             self._pending_to_ecu = 0
         out = w.step()
+        t = out.t_s
         pc = self.pc
         if out.nmea:
             self.nmea_lines += len(out.nmea)
             for line in out.nmea:
-                pc.on_nmea(line, out.t_s)
-        self.crop_lines += len(out.crop)
-        if pc.ndvi is not None:
-            for line in out.crop:
-                pc.on_crop(line, out.t_s)
+                pc.on_nmea(line, t)
+        if out.crop:
+            self.crop_lines += len(out.crop)
+            if pc.ndvi is not None:
+                for line in out.crop:
+                    pc.on_crop(line, t)
         if out.can:
             for fid, data in out.can:
                 self.ecu_bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=True))
@@ -262,10 +265,11 @@ class Sil:
             while (msg := self.pc_bus.recv(0)) is not None:
                 status |= pc.on_frame(msg)
             if status and self.record is not None:
-                self._record(out.t_s)
-        for msg in pc.poll(out.t_s):
-            self.pc_bus.send(msg)
-            self._pending_to_ecu += 1
+                self._record(t)
+        if t + 1e-9 >= pc.next_poll_s:  # the PC's cycle or command timer is due
+            for msg in pc.poll(t):
+                self.pc_bus.send(msg)
+                self._pending_to_ecu += 1
 
     def _record(self, t: float) -> None:
         pc = self.pc

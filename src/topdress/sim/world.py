@@ -153,6 +153,7 @@ class World:
         g0 = f0.step(t, dt, d[2])
         g1 = f1.step(t, dt, d[3])
         # an air line with nothing metered into it and nothing in flight has nothing to do
+        # (_transport is called only for one that has)
         rev_prev = self._rev_prev
         if m0.revolutions > rev_prev[0] or self.airlines[0].in_flight_kg > 0.0:
             self._transport(0, t, m0.revolutions, f0.rpm)
@@ -205,9 +206,11 @@ class World:
         pos = w.revolutions * w.p.ppr
         prev = self._wheel_pos
         self._wheel_pos = pos
-        if pos > prev and math.floor(pos) > math.floor(prev) and count == int(pos):
-            back_us = (pos - math.floor(pos)) / (pos - prev) * self.dt * 1e6
-            self._edge_us = (now_us - int(back_us)) & _U32
+        if pos > prev:
+            whole = math.floor(pos)
+            if whole > math.floor(prev) and count == int(pos):
+                back_us = (pos - whole) / (pos - prev) * self.dt * 1e6
+                self._edge_us = (now_us - int(back_us)) & _U32
         return self._edge_us
 
     def _record_ndvi(self) -> None:
@@ -225,16 +228,13 @@ class World:
     def _transport(self, i: int, t: float, rev: float, fan_rpm: float) -> None:
         d_rev = rev - self._rev_prev[i]
         self._rev_prev[i] = rev
-        line = self.airlines[i]
-        if d_rev <= 0.0 and line.in_flight_kg <= 0.0:
-            return
-        landed = line.step(t, d_rev, self.cfg.kg_per_rev[i], fan_rpm)
+        landed = self.airlines[i].step(t, d_rev, self.cfg.kg_per_rev[i], fan_rpm)
         if landed > 0.0:
             odo = self.tractor.odometer
             if self.first_landing_m[i] is None:
                 self.first_landing_m[i] = odo
                 self.first_landing_t[i] = t
-            b = int(odo / self.cfg.bin_m)
+            b = int(odo / self._bin_m)
             bins = self.applied_by_bin[i]
             bins[b] = bins.get(b, 0.0) + landed
 
