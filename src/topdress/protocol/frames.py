@@ -17,7 +17,7 @@ import cantools
 
 from topdress.errors import ProtocolError
 from topdress.protocol.dbc import message
-from topdress.protocol.layout import checks, layout
+from topdress.protocol.layout import FrameLayout, checks, layout
 from topdress.protocol.model import (
     DEFAULT_IDS,
     AckResult,
@@ -231,15 +231,14 @@ def _decode_raw(name: str, data: bytes) -> dict[str, int]:
     return raw
 
 
-def _decode_checked(name: str, data: bytes) -> tuple[dict[str, int], dict[str, float]]:
-    """Raw and physical values of every signal of plain frame `name`, each range-checked."""
+@cache
+def _plain(name: str, *signals: str) -> FrameLayout:
+    """The layout of plain frame `name`, whose signals are `signals` in DBC order: the
+    decoders below unpack them by position, so a DBC that moves a signal stops them here."""
     lay = layout(name)
-    assert lay is not None, name  # only plain frames come here
-    if len(data) != lay.length:
-        raise ProtocolError(f"{name}: {len(data)} data bytes, expected {lay.length}")
-    raw = lay.raw(data)
-    names = lay.names
-    return dict(zip(names, raw, strict=True)), dict(zip(names, lay.values(raw), strict=True))
+    if lay is None or lay.names != signals:
+        raise ProtocolError(f"{name}: the DBC's signals are not {', '.join(signals)}")
+    return lay
 
 
 def _check(name: str, signal: str, raw: int) -> float:
@@ -262,51 +261,60 @@ def _decode_command(data: bytes) -> PcCommand:
 
 
 def _decode_status(data: bytes) -> EcuStatus:
-    raw, v = _decode_checked("EcuStatus", data)
-    return EcuStatus(
-        running=v["RunState"] == _RUN,
-        meter_rpm_upper=v["UpperMeterSpeed"],
-        meter_rpm_lower=v["LowerMeterSpeed"],
-        fan_rpm_upper=v["UpperFanSpeed"],
-        fan_rpm_lower=v["LowerFanSpeed"],
-        wheel_kmh=v["WheelSpeed"],
-    )
+    _, v = _plain(
+        "EcuStatus",
+        "RunState",
+        "UpperMeterSpeed",
+        "LowerMeterSpeed",
+        "UpperFanSpeed",
+        "LowerFanSpeed",
+        "WheelSpeed",
+    ).decode(data)
+    return EcuStatus(v[0] == _RUN, v[1], v[2], v[3], v[4], v[5])
 
 
 def _decode_diag(data: bytes) -> EcuDiag:
-    raw, v = _decode_checked("EcuDiag", data)
+    (source, mode, gnss_valid, uniform, compare, cv, faults, pulses), v = _plain(
+        "EcuDiag",
+        "SpeedSource",
+        "SpeedMode",
+        "GnssValid",
+        "Uniform",
+        "SwitchCompare",
+        "Cv",
+        "FaultWord",
+        "WheelPulses",
+    ).decode(data)
     return EcuDiag(
-        source=Source.from_code(raw["SpeedSource"]),
-        mode=SpeedMode.from_code(raw["SpeedMode"]),
-        gnss_valid=bool(raw["GnssValid"]),
-        uniform=bool(raw["Uniform"]),
-        compare=Compare.from_code(raw["SwitchCompare"]),
-        cv_pct=None if raw["Cv"] == NA_RAW_16 else v["Cv"],
-        faults=Fault(raw["FaultWord"]),
-        wheel_pulses=raw["WheelPulses"],
+        source=Source.from_code(source),
+        mode=SpeedMode.from_code(mode),
+        gnss_valid=bool(gnss_valid),
+        uniform=bool(uniform),
+        compare=Compare.from_code(compare),
+        cv_pct=None if cv == NA_RAW_16 else v[5],
+        faults=Fault(faults),
+        wheel_pulses=pulses,
     )
 
 
 def _decode_speeds(data: bytes) -> EcuSpeeds:
-    raw, v = _decode_checked("EcuSpeeds", data)
-    return EcuSpeeds(
-        wheel_kmh=v["WheelSpeedFine"],
-        gnss_kmh=None if raw["GnssSpeedFine"] == NA_RAW_16 else v["GnssSpeedFine"],
-        selected_kmh=v["SelectedSpeed"],
-        rx_rejected=raw["RxRejected"],
-    )
+    raw, v = _plain(
+        "EcuSpeeds", "WheelSpeedFine", "GnssSpeedFine", "SelectedSpeed", "RxRejected"
+    ).decode(data)
+    return EcuSpeeds(v[0], None if raw[1] == NA_RAW_16 else v[1], v[2], raw[3])
 
 
 def _decode_targets(data: bytes) -> EcuTargets:
-    raw, v = _decode_checked("EcuTargets", data)
-    return EcuTargets(
-        target_rpm_upper=v["UpperTargetSpeed"],
-        target_rpm_lower=v["LowerTargetSpeed"],
-        meter_duty_pct_upper=v["UpperDuty"],
-        meter_duty_pct_lower=v["LowerDuty"],
-        fan_duty_pct_upper=v["UpperFanDuty"],
-        fan_duty_pct_lower=v["LowerFanDuty"],
-    )
+    _, v = _plain(
+        "EcuTargets",
+        "UpperTargetSpeed",
+        "LowerTargetSpeed",
+        "UpperDuty",
+        "LowerDuty",
+        "UpperFanDuty",
+        "LowerFanDuty",
+    ).decode(data)
+    return EcuTargets(v[0], v[1], v[2], v[3], v[4], v[5])
 
 
 def _decode_param_set(data: bytes) -> PcParamSet:
@@ -385,28 +393,39 @@ def _decode_gnss_time(data: bytes) -> PcGnssTime:
 
 
 def _decode_fused(data: bytes) -> EcuFused:
-    raw, v = _decode_checked("EcuFused", data)
+    raw, v = _plain(
+        "EcuFused",
+        "FusedSpeed",
+        "FusedAccel",
+        "LearnedSlip",
+        "GnssInnovation",
+        "SlipLearning",
+        "EdgeTiming",
+        "GnssFused",
+        "SpeedStd",
+    ).decode(data)
     return EcuFused(
-        speed_kmh=v["FusedSpeed"],
-        accel_ms2=v["FusedAccel"],
-        slip_pct=v["LearnedSlip"],
-        innovation_kmh=v["GnssInnovation"],
-        slip_learning=bool(raw["SlipLearning"]),
-        edge_timing=bool(raw["EdgeTiming"]),
-        gnss_fused=bool(raw["GnssFused"]),
-        speed_std_kmh=v["SpeedStd"],
+        speed_kmh=v[0],
+        accel_ms2=v[1],
+        slip_pct=v[2],
+        innovation_kmh=v[3],
+        slip_learning=bool(raw[4]),
+        edge_timing=bool(raw[5]),
+        gnss_fused=bool(raw[6]),
+        speed_std_kmh=v[7],
     )
 
 
 def _decode_fused_aux(data: bytes) -> EcuFusedAux:
-    raw, v = _decode_checked("EcuFusedAux", data)
-    return EcuFusedAux(
-        wheel_edge_kmh=v["WheelEdgeSpeed"],
-        lead_kmh=v["LeadSpeed"],
-        drive_slope_upper=v["UpperDriveSlope"],
-        drive_slope_lower=v["LowerDriveSlope"],
-        gnss_delay_ms=raw["GnssDelay"],
-    )
+    raw, v = _plain(
+        "EcuFusedAux",
+        "WheelEdgeSpeed",
+        "LeadSpeed",
+        "UpperDriveSlope",
+        "LowerDriveSlope",
+        "GnssDelay",
+    ).decode(data)
+    return EcuFusedAux(v[0], v[1], v[2], v[3], raw[4])
 
 
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:

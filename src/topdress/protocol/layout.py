@@ -89,6 +89,14 @@ class FrameLayout:
     checked: tuple[int, ...]  # the signals a raw value can fail (the others need no check)
     ratios: tuple[tuple[int, int], ...] | None  # SignalCheck.ratio of every signal, if all have one
 
+    def decode(self, data: bytes) -> tuple[tuple[int, ...], tuple[float, ...]]:
+        """Raw and physical values in DBC order; ProtocolError for a wrong length or as
+        `values`."""
+        if len(data) != self.length:
+            raise ProtocolError(f"{self.name}: {len(data)} data bytes, expected {self.length}")
+        raw = self.raw(data)
+        return raw, self.values(raw)
+
     def raw(self, data: bytes) -> tuple[int, ...]:
         """Raw signal values in DBC order; the caller has checked the length."""
         x = int.from_bytes(data, "little")
