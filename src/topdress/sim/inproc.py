@@ -35,13 +35,17 @@ class InProcessBus(can.BusABC):
             if end is not self:
                 end._inbox.append(msg)
 
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """The oldest frame that passes the filters, or None (at once, whatever the timeout);
+        CanOperationError without a timeout on an empty end."""
         inbox = self._inbox
-        if inbox:
-            return inbox.popleft(), False
+        while inbox:
+            msg = inbox.popleft()
+            if self._matches_filters(msg):
+                return msg
         if timeout is None:
             raise can.CanOperationError(f"{self.channel_info}: nothing to receive, ever")
-        return None, False
+        return None
 
     def shutdown(self) -> None:
         if self in self._ends:
