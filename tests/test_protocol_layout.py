@@ -27,8 +27,14 @@ def _reference_check(frame: str, sig: Any, raw: int) -> float:
         raise ProtocolError(f"{frame}.{sig.name}: undefined value {raw}")
     tol = sig.scale / 2
     if not sig.minimum - tol <= value <= sig.maximum + tol:
-        raise ProtocolError(f"{frame}.{sig.name} = {value:g} outside {sig.minimum:g}..{sig.maximum:g}")
+        raise ProtocolError(
+            f"{frame}.{sig.name} = {value:g} outside {sig.minimum:g}..{sig.maximum:g}"
+        )
     return value
+
+
+def _reference_values(msg: Any, raw: tuple[int, ...]) -> tuple[float, ...]:
+    return tuple(_reference_check(msg.name, s, r) for s, r in zip(msg.signals, raw, strict=True))
 
 
 def _outcome(fn: Any, *args: Any) -> tuple[str, Any]:
@@ -41,9 +47,13 @@ def _outcome(fn: Any, *args: Any) -> tuple[str, Any]:
 def _raw_values(sig: Any, rng: random.Random) -> list[int]:
     """Every raw value of a signal up to 10 bits; else the ends, around the accepted range's
     bounds and a random sample."""
-    lo, hi = (-(1 << (sig.length - 1)), (1 << (sig.length - 1)) - 1) if sig.is_signed else (
-        0,
-        (1 << sig.length) - 1,
+    lo, hi = (
+        (-(1 << (sig.length - 1)), (1 << (sig.length - 1)) - 1)
+        if sig.is_signed
+        else (
+            0,
+            (1 << sig.length) - 1,
+        )
     )
     if sig.length <= 10:
         return list(range(lo, hi + 1))
@@ -93,10 +103,10 @@ def test_frame_values_equal_the_reference_first_error_included() -> None:
             data = rng.randbytes(msg.length)
             raw = lay.raw(data)
 
-            def reference(raw: tuple[int, ...] = raw) -> tuple[float, ...]:
-                return tuple(_reference_check(msg.name, s, r) for s, r in zip(msg.signals, raw))
-
-            assert _outcome(lay.values, raw) == _outcome(reference), (msg.name, data.hex())
+            assert _outcome(lay.values, raw) == _outcome(_reference_values, msg, raw), (
+                msg.name,
+                data.hex(),
+            )
 
 
 def test_the_exact_quotient_equals_the_rounded_value() -> None:
@@ -155,10 +165,13 @@ def test_typed_decode_is_refused_exactly_when_a_signal_check_fails() -> None:
 
 
 def test_typed_decode_of_the_status_frame() -> None:
-    data = bytes([0x0A]) + (2712).to_bytes(2, "little") + (1).to_bytes(2, "little") + bytes(
-        [150, 151, 65]
+    data = (
+        bytes([0x0A])
+        + (2712).to_bytes(2, "little")
+        + (1).to_bytes(2, "little")
+        + bytes([150, 151, 65])
     )
     st = protocol.decode((protocol.DEFAULT_IDS.status, data))
     assert st == protocol.EcuStatus(True, 27.12, 0.01, 3000.0, 3020.0, 6.5)
-    with pytest.raises(ProtocolError, match="EcuStatus.RunState: undefined value 3"):
+    with pytest.raises(ProtocolError, match=r"EcuStatus\.RunState: undefined value 3"):
         protocol.decode((protocol.DEFAULT_IDS.status, bytes([3]) + data[1:]))

@@ -46,7 +46,9 @@ def ref_tractor_step(tr: Tractor, st: dict[str, float], rng: random.Random, v_t:
     st["v"] = max(0.0, st["vb"] * (1.0 + st["ripple"]))
 
 
-def ref_wheel_step(p: WheelParams, st: dict[str, float], rng: random.Random, t: float, v: float, floor: float) -> None:
+def ref_wheel_step(
+    p: WheelParams, st: dict[str, float], rng: random.Random, t: float, v: float, floor: float
+) -> None:
     if v <= 0.0 or (0.0 <= p.lifted_at_s <= t):
         return
     k = DT / p.bounce_tau_s
@@ -74,7 +76,9 @@ def ref_meter_step(p: MeterParams, st: dict[str, float], t: float, duty: float) 
     st["rpm"] = w
 
 
-def ref_airline_step(p: AirLineParams, st: dict[str, object], t: float, d_rev: float, fan_rpm: float) -> float:
+def ref_airline_step(
+    p: AirLineParams, st: dict[str, object], t: float, d_rev: float, fan_rpm: float
+) -> float:
     q: deque[tuple[float, float]] = st["q"]  # type: ignore[assignment]
     if d_rev > 0.0:
         before = float(st["rev_in"])  # type: ignore[arg-type]
@@ -143,7 +147,9 @@ def test_tractor_speed_equals_the_plain_formulation(seed: int) -> None:
 @pytest.mark.parametrize("seed", range(4))
 def test_wheel_equals_the_plain_formulation(seed: int) -> None:
     rng = random.Random(seed)
-    p = WheelParams(bounce_sd=(0.036, 0.1, 0.0, 0.036)[seed], lifted_at_s=20.0 if seed == 3 else -1.0)
+    p = WheelParams(
+        bounce_sd=(0.036, 0.1, 0.0, 0.036)[seed], lifted_at_s=20.0 if seed == 3 else -1.0
+    )
     wheel = GroundWheel(p, seed)
     ref_rng = random.Random(seed)
     st = {"offset": ref_rng.gauss(0.0, p.slip_sd_pct), "bounce": 0.0, "rev": 0.0}
@@ -212,7 +218,9 @@ def test_wheel_edge_time_equals_the_pulse_by_pulse_capture(seed: int) -> None:
     captured = 0
     for n in range(1, 4000):
         # standing, creeping (no whole pulse), one pulse, several pulses per step
-        pos += rng.choice([0.0, rng.uniform(0.0, 0.3), rng.uniform(0.5, 1.5), rng.uniform(1.0, 9.0)])
+        pos += rng.choice(
+            [0.0, rng.uniform(0.0, 0.3), rng.uniform(0.5, 1.5), rng.uniform(1.0, 9.0)]
+        )
         world.wheel.revolutions = pos / ppr
         pos_seen = world.wheel.revolutions * ppr
         # an encoder that has stopped counting: the count lags the wheel
@@ -228,7 +236,9 @@ def test_wheel_edge_time_equals_the_pulse_by_pulse_capture(seed: int) -> None:
 
 def test_loose_patch_lookup_equals_the_plain_membership() -> None:
     rng = random.Random(11)
-    patches = tuple((rng.uniform(0, 60), rng.uniform(0, 60), rng.uniform(0.5, 8.0)) for _ in range(12))
+    patches = tuple(
+        (rng.uniform(0, 60), rng.uniform(0, 60), rng.uniform(0.5, 8.0)) for _ in range(12)
+    )
     world = World(SimConfig(loose_patches=patches, loose_slip_pct=15.0))
     x, y = 30.0, 30.0
     h = 0.3
@@ -266,12 +276,15 @@ def test_skipping_the_gnss_until_it_is_due_changes_nothing() -> None:
 
 def test_in_process_segment_hands_frames_over_in_order_without_copies() -> None:
     a, b, c = segment("test-seg", 3)
-    msgs = [can.Message(arbitration_id=0x18000000 + i, data=bytes([i]), is_extended_id=True) for i in range(5)]
+    msgs = [
+        can.Message(arbitration_id=0x18000000 + i, data=bytes([i]), is_extended_id=True)
+        for i in range(5)
+    ]
     for m in msgs:
         a.send(m)
     assert a.recv(0) is None  # not its own frames
     assert [b.recv(0) for _ in range(5)] == msgs
-    assert all(x is y for x, y in zip([c.recv(0.01) for _ in range(5)], msgs))
+    assert all(x is y for x, y in zip([c.recv(0.01) for _ in range(5)], msgs, strict=True))
     assert b.recv(0) is None and c.recv(0.5) is None
     with pytest.raises(can.CanOperationError, match="nothing to receive"):
         b.recv()

@@ -69,8 +69,7 @@ class SignalCheck:
             raise ProtocolError(f"{self.frame}.{self.name}: undefined value {raw}")
         if not self.raw_lo <= raw <= self.raw_hi:
             raise ProtocolError(
-                f"{self.frame}.{self.name} = {value:g} outside "
-                f"{self.minimum:g}..{self.maximum:g}"
+                f"{self.frame}.{self.name} = {value:g} outside {self.minimum:g}..{self.maximum:g}"
             )
         return value
 

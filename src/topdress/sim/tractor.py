@@ -235,7 +235,11 @@ class Tractor:
         self.a = acc
         self._vb = vb
         if vb > 0.0 and p.ripple_sd > 0.0:
-            if self._ripple_for is None or dt != self._ripple_for[0] or p is not self._ripple_for[1]:
+            if (
+                self._ripple_for is None
+                or dt != self._ripple_for[0]
+                or p is not self._ripple_for[1]
+            ):
                 self._ripple_for = (dt, p)
                 self._ripple_k = dt / p.ripple_tau_s
                 self._ripple_c = p.ripple_sd * math.sqrt(2 * self._ripple_k)

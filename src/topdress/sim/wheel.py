@@ -57,7 +57,11 @@ class GroundWheel:
         if v_ms <= 0.0 or (0.0 <= p.lifted_at_s <= t):
             return self.count
         if p.bounce_sd > 0.0:
-            if self._bounce_for is None or dt != self._bounce_for[0] or p is not self._bounce_for[1]:
+            if (
+                self._bounce_for is None
+                or dt != self._bounce_for[0]
+                or p is not self._bounce_for[1]
+            ):
                 self._bounce_for = (dt, p)
                 self._bounce_k = dt / p.bounce_tau_s
                 self._bounce_c = p.bounce_sd * math.sqrt(2 * self._bounce_k)
