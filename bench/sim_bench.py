@@ -30,19 +30,24 @@ def main() -> None:
             prof = cProfile.Profile()
             prof.enable()
         t0 = time.perf_counter()
+        c0 = time.process_time()
         for _ in range(steps):
             sil.step()
         wall = time.perf_counter() - t0
+        cpu = time.process_time() - c0
         if args.profile:
             prof.disable()
             pstats.Stats(prof).sort_stats("tottime").print_stats(15)
         print(f"simulated_s: {world.t_s:.0f}")
         print(f"wall_s: {wall:.2f}")
+        print(f"cpu_s: {cpu:.2f}")
         print(f"distance_m: {world.tractor.odometer:.0f}")
         print(f"nmea_lines: {sil.nmea_lines}")
         print(f"crop_lines: {sil.crop_lines}")
         print(f"status_samples: {len(sil.record.rows) if sil.record else 0}")
         print(f"sim_realtime_ratio: {world.t_s / wall:.0f}")
+        # the process's CPU time: the figure on a machine shared with other work
+        print(f"sim_cpu_ratio: {world.t_s / cpu:.0f}")
 
 
 if __name__ == "__main__":

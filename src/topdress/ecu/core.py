@@ -112,6 +112,8 @@ class Ecu:
         # bound once: step_raw is the simulator's inner loop
         self._step_fn = lib.tdpy_step
         self._pop_fn = lib.tdpy_tx_pop
+        #: frames in the transmit queue after the last step_raw (skip tx_raw when 0)
+        self.tx_pending = 0
 
     def rx(self, frame: can.Message | CanFrame, now_us: int) -> int:
         """Hand one received frame to the core. Returns TD_OK (0) when acted on, or the negative
@@ -155,6 +157,7 @@ class Ecu:
         )
         if rc < 0:
             check(rc, "Ecu.step")
+        self.tx_pending = rc
         return (out[0], out[1], out[2], out[3])
 
     def step(
@@ -176,6 +179,7 @@ class Ecu:
         id_p, data = self._tx_id, self._tx_data
         while (n := self._pop_fn(self._app, id_p, data)) >= 0:
             frames.append((int(id_p[0]), ffi.buffer(data, n)[:]))
+        self.tx_pending = 0
         return frames
 
     def tx(self) -> list[can.Message]:
@@ -223,6 +227,11 @@ class Ecu:
             gnss_rejected=int(s.gnss_rejected),
             wheel_rejected=int(s.wheel_rejected),
         )
+
+    @property
+    def wheel_updates(self) -> int:
+        """Wheel-speed updates so far (EcuState.wheel_updates without the whole snapshot)."""
+        return int(lib.td_app_state(self._app).wheel_updates)
 
     @property
     def cal_state(self) -> CalState | None:

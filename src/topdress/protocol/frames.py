@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import can
@@ -16,6 +17,7 @@ import cantools
 
 from topdress.errors import ProtocolError
 from topdress.protocol.dbc import message
+from topdress.protocol.layout import FrameLayout, checks, layout
 from topdress.protocol.model import (
     DEFAULT_IDS,
     AckResult,
@@ -26,7 +28,7 @@ from topdress.protocol.model import (
     Source,
     SpeedMode,
 )
-from topdress.protocol.params import ParamSpec, decimals, param
+from topdress.protocol.params import ParamSpec, param
 
 GNSS_NA_RAW = 0xFF  # PcCommand.GnssSpeed: "not available"
 GNSS_MAX_KMH = 25.0  # raw 251..254 are out of range
@@ -214,6 +216,11 @@ def _frame_parts(frame: can.Message | CanFrame) -> tuple[int, bytes]:
 
 def _decode_raw(name: str, data: bytes) -> dict[str, int]:
     """Raw signal values of frame `name`, every one checked against the DBC."""
+    lay = layout(name)
+    if lay is not None:
+        if len(data) != lay.length:
+            raise ProtocolError(f"{name}: {len(data)} data bytes, expected {lay.length}")
+        return dict(zip(lay.names, lay.raw(data), strict=True))
     msg = message(name)
     if len(data) != msg.length:
         raise ProtocolError(f"{name}: {len(data)} data bytes, expected {msg.length}")
@@ -224,16 +231,19 @@ def _decode_raw(name: str, data: bytes) -> dict[str, int]:
     return raw
 
 
+@cache
+def _plain(name: str, *signals: str) -> FrameLayout:
+    """The layout of plain frame `name`, whose signals are `signals` in DBC order: the
+    decoders below unpack them by position, so a DBC that moves a signal stops them here."""
+    lay = layout(name)
+    if lay is None or lay.names != signals:
+        raise ProtocolError(f"{name}: the DBC's signals are not {', '.join(signals)}")
+    return lay
+
+
 def _check(name: str, signal: str, raw: int) -> float:
     """Physical value of a raw signal, or ProtocolError when outside its range or choices."""
-    sig = message(name).get_signal_by_name(signal)
-    value = float(round(raw * sig.scale + sig.offset, decimals(sig.scale)))
-    if sig.choices is not None and raw not in sig.choices:
-        raise ProtocolError(f"{name}.{signal}: undefined value {raw}")
-    tol = sig.scale / 2
-    if not sig.minimum - tol <= value <= sig.maximum + tol:
-        raise ProtocolError(f"{name}.{signal} = {value:g} outside {sig.minimum:g}..{sig.maximum:g}")
-    return value
+    return checks()[(name, signal)].check(raw)
 
 
 def _decode_command(data: bytes) -> PcCommand:
@@ -251,55 +261,60 @@ def _decode_command(data: bytes) -> PcCommand:
 
 
 def _decode_status(data: bytes) -> EcuStatus:
-    raw = _decode_raw("EcuStatus", data)
-    v = {k: _check("EcuStatus", k, r) for k, r in raw.items()}
-    return EcuStatus(
-        running=v["RunState"] == _RUN,
-        meter_rpm_upper=v["UpperMeterSpeed"],
-        meter_rpm_lower=v["LowerMeterSpeed"],
-        fan_rpm_upper=v["UpperFanSpeed"],
-        fan_rpm_lower=v["LowerFanSpeed"],
-        wheel_kmh=v["WheelSpeed"],
-    )
+    _, v = _plain(
+        "EcuStatus",
+        "RunState",
+        "UpperMeterSpeed",
+        "LowerMeterSpeed",
+        "UpperFanSpeed",
+        "LowerFanSpeed",
+        "WheelSpeed",
+    ).decode(data)
+    return EcuStatus(v[0] == _RUN, v[1], v[2], v[3], v[4], v[5])
 
 
 def _decode_diag(data: bytes) -> EcuDiag:
-    raw = _decode_raw("EcuDiag", data)
-    v = {k: _check("EcuDiag", k, r) for k, r in raw.items()}
+    (source, mode, gnss_valid, uniform, compare, cv, faults, pulses), v = _plain(
+        "EcuDiag",
+        "SpeedSource",
+        "SpeedMode",
+        "GnssValid",
+        "Uniform",
+        "SwitchCompare",
+        "Cv",
+        "FaultWord",
+        "WheelPulses",
+    ).decode(data)
     return EcuDiag(
-        source=Source.from_code(raw["SpeedSource"]),
-        mode=SpeedMode.from_code(raw["SpeedMode"]),
-        gnss_valid=bool(raw["GnssValid"]),
-        uniform=bool(raw["Uniform"]),
-        compare=Compare.from_code(raw["SwitchCompare"]),
-        cv_pct=None if raw["Cv"] == NA_RAW_16 else v["Cv"],
-        faults=Fault(raw["FaultWord"]),
-        wheel_pulses=raw["WheelPulses"],
+        source=Source.from_code(source),
+        mode=SpeedMode.from_code(mode),
+        gnss_valid=bool(gnss_valid),
+        uniform=bool(uniform),
+        compare=Compare.from_code(compare),
+        cv_pct=None if cv == NA_RAW_16 else v[5],
+        faults=Fault(faults),
+        wheel_pulses=pulses,
     )
 
 
 def _decode_speeds(data: bytes) -> EcuSpeeds:
-    raw = _decode_raw("EcuSpeeds", data)
-    v = {k: _check("EcuSpeeds", k, r) for k, r in raw.items()}
-    return EcuSpeeds(
-        wheel_kmh=v["WheelSpeedFine"],
-        gnss_kmh=None if raw["GnssSpeedFine"] == NA_RAW_16 else v["GnssSpeedFine"],
-        selected_kmh=v["SelectedSpeed"],
-        rx_rejected=raw["RxRejected"],
-    )
+    raw, v = _plain(
+        "EcuSpeeds", "WheelSpeedFine", "GnssSpeedFine", "SelectedSpeed", "RxRejected"
+    ).decode(data)
+    return EcuSpeeds(v[0], None if raw[1] == NA_RAW_16 else v[1], v[2], raw[3])
 
 
 def _decode_targets(data: bytes) -> EcuTargets:
-    raw = _decode_raw("EcuTargets", data)
-    v = {k: _check("EcuTargets", k, r) for k, r in raw.items()}
-    return EcuTargets(
-        target_rpm_upper=v["UpperTargetSpeed"],
-        target_rpm_lower=v["LowerTargetSpeed"],
-        meter_duty_pct_upper=v["UpperDuty"],
-        meter_duty_pct_lower=v["LowerDuty"],
-        fan_duty_pct_upper=v["UpperFanDuty"],
-        fan_duty_pct_lower=v["LowerFanDuty"],
-    )
+    _, v = _plain(
+        "EcuTargets",
+        "UpperTargetSpeed",
+        "LowerTargetSpeed",
+        "UpperDuty",
+        "LowerDuty",
+        "UpperFanDuty",
+        "LowerFanDuty",
+    ).decode(data)
+    return EcuTargets(v[0], v[1], v[2], v[3], v[4], v[5])
 
 
 def _decode_param_set(data: bytes) -> PcParamSet:
@@ -380,30 +395,39 @@ def _decode_gnss_time(data: bytes) -> PcGnssTime:
 
 
 def _decode_fused(data: bytes) -> EcuFused:
-    raw = _decode_raw("EcuFused", data)
-    v = {k: _check("EcuFused", k, r) for k, r in raw.items()}
+    raw, v = _plain(
+        "EcuFused",
+        "FusedSpeed",
+        "FusedAccel",
+        "LearnedSlip",
+        "GnssInnovation",
+        "SlipLearning",
+        "EdgeTiming",
+        "GnssFused",
+        "SpeedStd",
+    ).decode(data)
     return EcuFused(
-        speed_kmh=v["FusedSpeed"],
-        accel_ms2=v["FusedAccel"],
-        slip_pct=v["LearnedSlip"],
-        innovation_kmh=v["GnssInnovation"],
-        slip_learning=bool(raw["SlipLearning"]),
-        edge_timing=bool(raw["EdgeTiming"]),
-        gnss_fused=bool(raw["GnssFused"]),
-        speed_std_kmh=v["SpeedStd"],
+        speed_kmh=v[0],
+        accel_ms2=v[1],
+        slip_pct=v[2],
+        innovation_kmh=v[3],
+        slip_learning=bool(raw[4]),
+        edge_timing=bool(raw[5]),
+        gnss_fused=bool(raw[6]),
+        speed_std_kmh=v[7],
     )
 
 
 def _decode_fused_aux(data: bytes) -> EcuFusedAux:
-    raw = _decode_raw("EcuFusedAux", data)
-    v = {k: _check("EcuFusedAux", k, r) for k, r in raw.items()}
-    return EcuFusedAux(
-        wheel_edge_kmh=v["WheelEdgeSpeed"],
-        lead_kmh=v["LeadSpeed"],
-        drive_slope_upper=v["UpperDriveSlope"],
-        drive_slope_lower=v["LowerDriveSlope"],
-        gnss_delay_ms=raw["GnssDelay"],
-    )
+    raw, v = _plain(
+        "EcuFusedAux",
+        "WheelEdgeSpeed",
+        "LeadSpeed",
+        "UpperDriveSlope",
+        "LowerDriveSlope",
+        "GnssDelay",
+    ).decode(data)
+    return EcuFusedAux(v[0], v[1], v[2], v[3], raw[4])
 
 
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
@@ -427,7 +451,18 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
 def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
     """Decode any frame of the protocol; ProtocolError if it is not one, or not a valid one."""
     frame_id, data = _frame_parts(frame)
-    decoders: dict[int, Callable[[bytes], Frame]] = {
+    # FrameIds hashes all its fields: look the default table up without hashing it
+    table = _DEFAULT_DECODERS if ids is DEFAULT_IDS else _decoders(ids)
+    try:
+        decoder = table[frame_id]
+    except KeyError:
+        raise ProtocolError(f"unknown CAN id 0x{frame_id:08X}") from None
+    return decoder(data)
+
+
+@cache
+def _decoders(ids: FrameIds) -> dict[int, Callable[[bytes], Frame]]:
+    return {
         ids.command: _decode_command,
         ids.status: _decode_status,
         ids.diag: _decode_diag,
@@ -441,11 +476,9 @@ def decode(frame: can.Message | CanFrame, ids: FrameIds = DEFAULT_IDS) -> Frame:
         ids.fused: _decode_fused,
         ids.fused_aux: _decode_fused_aux,
     }
-    try:
-        decoder = decoders[frame_id]
-    except KeyError:
-        raise ProtocolError(f"unknown CAN id 0x{frame_id:08X}") from None
-    return decoder(data)
+
+
+_DEFAULT_DECODERS = _decoders(DEFAULT_IDS)
 
 
 def _message(frame_id: int, data: bytes) -> can.Message:

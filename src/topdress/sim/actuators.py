@@ -43,10 +43,6 @@ class _Shaft:
         self.count = 0
 
 
-def _clamp_duty(duty: float) -> float:
-    return 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)
-
-
 class MeterMotor(_Shaft):
     def __init__(self, p: MeterParams, dt: float) -> None:
         super().__init__(p.tau_s, dt)
@@ -55,23 +51,25 @@ class MeterMotor(_Shaft):
     def step(self, t: float, dt: float, duty: float) -> int:
         """Apply duty for dt; return the cumulative encoder count."""
         p = self.p
-        duty = _clamp_duty(duty)
+        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)  # PWM saturates
         if 0.0 <= p.jammed_at_s <= t:
             self.rpm = 0.0
             return self.count
-        if self.rpm <= 0.0 and duty <= p.breakaway_duty + p.load_duty:
+        rpm = self.rpm
+        if rpm <= 0.0 and duty <= p.breakaway_duty + p.load_duty:
             return self.count
         load = p.load_duty
         if p.load_ripple:
             load *= 1.0 + p.load_ripple * math.sin(_TWO_PI * p.flutes * self.revolutions)
         w_ss = p.max_rpm * (duty - p.friction_duty - load)
-        w = w_ss + (self.rpm - w_ss) * self._decay
+        w = w_ss + (rpm - w_ss) * self._decay
         if w <= 0.0:
             w = 0.0  # friction holds the shaft; it does not turn backwards
-        self.revolutions += 0.5 * (self.rpm + w) * dt / 60.0
+        revolutions = self.revolutions + 0.5 * (rpm + w) * dt / 60.0
+        self.revolutions = revolutions
         self.rpm = w
         if not 0.0 <= p.encoder_dead_at_s <= t:
-            self.count = int(self.revolutions * p.counts_per_rev)
+            self.count = int(revolutions * p.counts_per_rev)
         return self.count
 
     def steady_rpm(self, duty: float) -> float:
@@ -101,11 +99,13 @@ class Fan(_Shaft):
     def step(self, t: float, dt: float, duty: float) -> int:
         """Apply duty for dt; return the cumulative tachometer count."""
         p = self.p
-        duty = _clamp_duty(duty)
+        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)  # PWM saturates
         if 0.0 <= p.failed_at_s <= t:
             duty = 0.0
         w_ss = p.max_rpm * duty * (1.0 - p.belt_slip)
-        self.rpm = w_ss + (self.rpm - w_ss) * self._decay
-        self.revolutions += self.rpm * dt / 60.0
-        self.count = int(self.revolutions * p.ppr)
+        rpm = w_ss + (self.rpm - w_ss) * self._decay
+        self.rpm = rpm
+        revolutions = self.revolutions + rpm * dt / 60.0
+        self.revolutions = revolutions
+        self.count = int(revolutions * p.ppr)
         return self.count

@@ -74,6 +74,9 @@ class GnssReceiver:
         self._hold_y = 0.0
         self._pending: deque[tuple[float, GnssFix]] = deque()
         self.last_fix: GnssFix | None = None
+        # the first time step() has anything to do: the next epoch or the next solution
+        # due at the port (the World skips the call before it)
+        self.next_due_s = self._next_epoch
         self._cos_lat0 = math.cos(math.radians(p.lat0_deg))
 
     def step(self, t: float, x: float, y: float, v: float, heading: float) -> list[str]:
@@ -81,13 +84,13 @@ class GnssReceiver:
         if t + 1e-9 >= self._next_epoch:
             self._epoch(self._next_epoch, x, y, v, heading)
             self._next_epoch += self._period
-        if not self._pending or self._pending[0][0] > t + 1e-9:
-            return []
         lines: list[str] = []
-        while self._pending and self._pending[0][0] <= t + 1e-9:
-            fix = self._pending.popleft()[1]
+        pending = self._pending
+        while pending and pending[0][0] <= t + 1e-9:
+            fix = pending.popleft()[1]
             self.last_fix = fix
             lines.extend(self.sentences(fix))
+        self.next_due_s = min(self._next_epoch, pending[0][0]) if pending else self._next_epoch
         return lines
 
     def _epoch(self, te: float, x: float, y: float, v: float, heading: float) -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from functools import reduce
+from operator import xor
 
 KNOTS_PER_MS = 3600.0 / 1852.0
 TALKERS = ("GP", "BD", "GB", "GN", "GL", "GA")
@@ -10,10 +12,7 @@ TALKERS = ("GP", "BD", "GB", "GN", "GL", "GA")
 
 def checksum(body: str) -> str:
     """XOR of the characters between '$' and '*', two upper-case hex digits."""
-    c = 0
-    for ch in body:
-        c ^= ord(ch)
-    return f"{c:02X}"
+    return f"{reduce(xor, map(ord, body), 0):02X}"
 
 
 def sentence(body: str) -> str:

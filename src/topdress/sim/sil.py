@@ -1,5 +1,6 @@
 """Software in the loop: the World's ECU and a simulated cab PC talk DBC frames over a
-python-can virtual bus, in virtual time, as the paper's machine does over its USB-CAN link.
+python-can bus (an in-process segment, sim.inproc), in virtual time, as the paper's machine
+does over its USB-CAN link.
 
 The cab PC reads the NMEA stream in its own program cycle (323 ms, as measured in the
 paper), keeps the speed of the last valid RMC, and sends the PcCommand every 500 ms. It
@@ -18,6 +19,7 @@ import numpy as np
 from topdress import protocol
 from topdress.config import CropConfig, LinearRateConfig
 from topdress.errors import EcuParamError, ProtocolError
+from topdress.sim.inproc import segment
 from topdress.sim.nmea import parse_rmc_speed_kmh
 from topdress.sim.world import World
 from topdress.terminal.crop import CompensatedNdvi
@@ -89,8 +91,21 @@ class Record:
         return {name: a[:, i] for i, name in enumerate(COLUMNS)}
 
 
+# The ECU frames the cab PC reads; the others (the fused estimate's, the catch test's) it
+# lets pass undecoded, as a PC that does not show them would.
+_PC_READS = frozenset(
+    {
+        protocol.DEFAULT_IDS.status,
+        protocol.DEFAULT_IDS.diag,
+        protocol.DEFAULT_IDS.speeds,
+        protocol.DEFAULT_IDS.targets,
+        protocol.DEFAULT_IDS.param_ack,
+    }
+)
+
+
 class CabPc:
-    """The PC side: NMEA in, PcCommand out every 500 ms, ECU frames decoded."""
+    """The PC side: NMEA in, PcCommand out every 500 ms, the ECU frames it reads decoded."""
 
     def __init__(self, p: PcParams) -> None:
         self.p = p
@@ -101,6 +116,7 @@ class CabPc:
         self.ndvi = None if nr is None else CompensatedNdvi(nr.crop, nr.lookahead_s)
         self._next_cycle = p.cycle_s
         self._next_cmd = p.start_at_s
+        self.next_poll_s = min(self._next_cycle, self._next_cmd)  # poll() has nothing before
         self.status: protocol.EcuStatus | None = None
         self.diag: protocol.EcuDiag | None = None
         self.speeds: protocol.EcuSpeeds | None = None
@@ -136,12 +152,12 @@ class CabPc:
                 kmh = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
                 out.append(protocol.encode_gnss_time(kmh, age_ms, self._gnss_seq))
             self._update_rate(t)
-        if t + 1e-9 < self._next_cmd:
-            return out
-        self._next_cmd += self.p.command_period_s
-        gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
-        up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
-        out.append(protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss))
+        if t + 1e-9 >= self._next_cmd:
+            self._next_cmd += self.p.command_period_s
+            gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
+            up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
+            out.append(protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss))
+        self.next_poll_s = min(self._next_cycle, self._next_cmd)
         return out
 
     def _update_rate(self, t: float) -> None:
@@ -158,7 +174,10 @@ class CabPc:
             self.rate_kg_ha = (rate, rate)
 
     def on_frame(self, msg: can.Message) -> bool:
-        """Decode one ECU frame; True if it was an EcuStatus."""
+        """Decode one ECU frame; True if it was an EcuStatus. A frame of the protocol the PC
+        does not read is skipped; anything else that does not decode is counted."""
+        if msg.arbitration_id not in _PC_READS and protocol.is_known_id(msg.arbitration_id):
+            return False
         try:
             f = protocol.decode(msg)
         except ProtocolError:
@@ -179,14 +198,13 @@ class CabPc:
 
 
 class Sil:
-    """World + cab PC over a virtual CAN bus; step() advances one control period."""
+    """World + cab PC over an in-process CAN segment; step() advances one control period."""
 
     def __init__(self, world: World, pc: PcParams | None = None, record: bool = True) -> None:
         self.world = world
         self.pc = CabPc(pc or PcParams())
         channel = f"topdress-sil-{next(_channels)}"
-        self.ecu_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-        self.pc_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.ecu_bus, self.pc_bus = segment(channel)
         self.record: Record | None = Record() if record else None
         self.nmea_lines = 0
         self.crop_lines = 0
@@ -229,15 +247,17 @@ class Sil:
                 w.deliver_can(msg, now)
             self._pending_to_ecu = 0
         out = w.step()
+        t = out.t_s
         pc = self.pc
         if out.nmea:
             self.nmea_lines += len(out.nmea)
             for line in out.nmea:
-                pc.on_nmea(line, out.t_s)
-        self.crop_lines += len(out.crop)
-        if pc.ndvi is not None:
-            for line in out.crop:
-                pc.on_crop(line, out.t_s)
+                pc.on_nmea(line, t)
+        if out.crop:
+            self.crop_lines += len(out.crop)
+            if pc.ndvi is not None:
+                for line in out.crop:
+                    pc.on_crop(line, t)
         if out.can:
             for fid, data in out.can:
                 self.ecu_bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=True))
@@ -245,10 +265,11 @@ class Sil:
             while (msg := self.pc_bus.recv(0)) is not None:
                 status |= pc.on_frame(msg)
             if status and self.record is not None:
-                self._record(out.t_s)
-        for msg in pc.poll(out.t_s):
-            self.pc_bus.send(msg)
-            self._pending_to_ecu += 1
+                self._record(t)
+        if t + 1e-9 >= pc.next_poll_s:  # the PC's cycle or command timer is due
+            for msg in pc.poll(t):
+                self.pc_bus.send(msg)
+                self._pending_to_ecu += 1
 
     def _record(self, t: float) -> None:
         pc = self.pc
@@ -273,7 +294,7 @@ class Sil:
                 float(SOURCES.index(str(dg.source))),
                 math.nan if dg.cv_pct is None else dg.cv_pct,
                 float(int(dg.faults)),
-                float(w.ecu.state.wheel_updates),
+                float(w.ecu.wheel_updates),
                 math.nan if pc.gnss_kmh is None else pc.gnss_kmh,
                 float(dg.wheel_pulses),
             )

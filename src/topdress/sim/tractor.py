@@ -122,18 +122,20 @@ class Drive:
 
     def command(self, tr: Tractor, dt: float) -> tuple[float, float]:
         """Advance the plan by one step; return (target speed m/s, curvature 1/m)."""
-        seg = self.segment
-        if seg is None:
+        if self.finished:
             return 0.0, 0.0
-        if seg.kind == "stop":
-            if tr.v < 0.01:
+        seg = self.segments[self.index]
+        kind = seg.kind
+        v = tr.v
+        if kind == "stop":
+            if v < 0.01:
                 self._progress += dt
             if self._progress >= seg.duration_s:
                 self._advance()
             return 0.0, 0.0
         v_t = seg.speed_kmh * KMH
-        ds = tr.v * dt
-        if seg.kind == "turn":
+        ds = v * dt
+        if kind == "turn":
             if self._progress == 0.0:
                 self._heading0 = tr.heading
             self._progress += ds / seg.radius_m
@@ -143,19 +145,22 @@ class Drive:
                 self._advance()
             return v_t, math.copysign(1.0 / seg.radius_m, seg.angle_deg)
         if seg.hold:
-            if not self.reached and tr.v >= 0.995 * v_t:
+            if not self.reached and v >= 0.995 * v_t:
                 self.reached = True
             if self.reached:
                 self._progress += ds
             if self._progress >= seg.length_m:
                 self._advance()
             return v_t, 0.0
-        self._progress += ds
-        remaining = seg.length_m - self._progress
+        progress = self._progress + ds
+        self._progress = progress
+        remaining = seg.length_m - progress
         v_next = self._next_speed_ms()
-        brake_m = max(0.0, (tr.v * tr.v - v_next * v_next) / (2.0 * tr.p.decel_ms2))
-        if remaining <= brake_m + tr.v * tr.p.decel_ms2 / tr.p.jerk_ms3:
-            v_t = min(v_t, v_next)
+        decel = tr.p.decel_ms2
+        brake_m = (v * v - v_next * v_next) / (2.0 * decel)
+        brake_m = brake_m if brake_m > 0.0 else 0.0  # max(0.0, brake_m)
+        if remaining <= brake_m + v * decel / tr.p.jerk_ms3:
+            v_t = v_next if v_next < v_t else v_t  # min(v_t, v_next)
         if remaining <= 0.0:
             self._advance()
         return v_t, 0.0
@@ -189,10 +194,17 @@ class Tractor:
 
     def __post_init__(self) -> None:
         self._rng = random.Random(self.seed)
+        self._gauss = self._rng.gauss
+        self._ripple_for: tuple[float, TractorParams] | None = None  # (dt, p) of the two below
+        self._ripple_k = 0.0
+        self._ripple_c = 0.0
 
+    # The inner loop of every simulation: plain locals, no min/max calls. `b if b > a else a`
+    # is max(a, b) and `b if b < a else a` is min(a, b), down to which operand is returned.
     def step(self, dt: float, v_target: float, curvature: float) -> None:
         p = self.p
-        self.t += dt
+        t = self.t + dt
+        self.t = t
         if v_target != self._target:
             # the driver picks gear and throttle for the new target speed
             self._target = v_target
@@ -202,25 +214,42 @@ class Tractor:
                 self._jerk = self._accel_limit / max(p.clutch_s, 1e-3)
             else:
                 self._jerk = p.jerk_ms3
-        if 0.0 <= p.stall_at_s <= self.t:
+        if 0.0 <= p.stall_at_s <= t:
             v_target = 0.0
-        a_des = (v_target - self._vb) / p.speed_tau_s
-        a_des = min(self._accel_limit, max(-p.decel_ms2, a_des))
-        if self.a >= self._accel_limit - 1e-9 or a_des < self.a:
+        vb = self._vb
+        acc = self.a
+        limit = self._accel_limit
+        a_des = (v_target - vb) / p.speed_tau_s
+        lo = -p.decel_ms2
+        a_des = a_des if a_des > lo else lo
+        a_des = a_des if a_des < limit else limit
+        if acc >= limit - 1e-9 or a_des < acc:
             self._jerk = p.jerk_ms3  # the clutch is in
         da = self._jerk * dt
-        self.a += min(da, max(-da, a_des - self.a))
-        self._vb += self.a * dt
-        if v_target <= 0.0 and self._vb < 0.02:
-            self._vb, self.a = 0.0, 0.0
-        if self._vb > 0.0 and p.ripple_sd > 0.0:
-            k = dt / p.ripple_tau_s
-            self._ripple += -k * self._ripple + p.ripple_sd * math.sqrt(2 * k) * self._rng.gauss(
-                0.0, 1.0
-            )
-        self.v = max(0.0, self._vb * (1.0 + self._ripple))
-        ds = self.v * dt
+        step_a = a_des - acc
+        step_a = step_a if step_a > -da else -da
+        acc += step_a if step_a < da else da
+        vb += acc * dt
+        if v_target <= 0.0 and vb < 0.02:
+            vb, acc = 0.0, 0.0
+        self.a = acc
+        self._vb = vb
+        if vb > 0.0 and p.ripple_sd > 0.0:
+            if (
+                self._ripple_for is None
+                or dt != self._ripple_for[0]
+                or p is not self._ripple_for[1]
+            ):
+                self._ripple_for = (dt, p)
+                self._ripple_k = dt / p.ripple_tau_s
+                self._ripple_c = p.ripple_sd * math.sqrt(2 * self._ripple_k)
+            self._ripple += -self._ripple_k * self._ripple + self._ripple_c * self._gauss(0.0, 1.0)
+        v = vb * (1.0 + self._ripple)
+        v = v if v > 0.0 else 0.0
+        self.v = v
+        ds = v * dt
         self.odometer += ds
-        self.heading += ds * curvature
-        self.x += ds * math.sin(self.heading)
-        self.y += ds * math.cos(self.heading)
+        h = self.heading + ds * curvature
+        self.heading = h
+        self.x += ds * math.sin(h)
+        self.y += ds * math.cos(h)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -44,19 +45,28 @@ class AirLine:
 
     def step(self, t: float, d_rev: float, kg_per_rev: float, fan_rpm: float) -> float:
         """Feed d_rev metering revolutions at time t; return kg landing in (t - dt, t]."""
+        q = self._q
+        p = self.p
         if d_rev > 0.0:
             before = self._rev_in
-            self._rev_in += d_rev
-            released = self._rev_in - max(before, self.p.release_rev)
+            rev_in = before + d_rev
+            self._rev_in = rev_in
+            release = p.release_rev
+            released = rev_in - (release if release > before else before)  # max(before, release)
             if released > 0.0:
                 m = released * kg_per_rev
                 self.in_flight_kg += m
-                self._q.append((t + self.delay_s(fan_rpm), m))
-        if not self._q or self._q[0][0] > t or self.p.blocked:
+                # delay_s(fan_rpm), inlined: every metering step comes here
+                if fan_rpm < p.min_fan_rpm:
+                    q.append((t + math.inf, m))
+                else:
+                    air_ms = p.air_speed_ms * fan_rpm / p.nominal_fan_rpm
+                    q.append((t + (p.drop_s + p.line_length_m / air_ms), m))
+        if not q or q[0][0] > t or p.blocked:
             return 0.0
         landed = 0.0
-        while self._q and self._q[0][0] <= t:
-            landed += self._q.popleft()[1]
+        while q and q[0][0] <= t:
+            landed += q.popleft()[1]
         self.in_flight_kg -= landed
         self.landed_kg += landed
         return landed

@@ -35,9 +35,13 @@ class GroundWheel:
     def __init__(self, p: WheelParams, seed: int) -> None:
         self.p = p
         self._rng = random.Random(seed)
+        self._gauss = self._rng.gauss
         self._circ = 2.0 * math.pi * p.radius_m
         self._slip_offset = self._rng.gauss(0.0, p.slip_sd_pct)
         self._bounce = 0.0
+        self._bounce_for: tuple[float, WheelParams] | None = None  # (dt, p) of the two below
+        self._bounce_k = 0.0
+        self._bounce_c = 0.0
         self.revolutions = 0.0
         self.count = 0
 
@@ -52,12 +56,21 @@ class GroundWheel:
         p = self.p
         if v_ms <= 0.0 or (0.0 <= p.lifted_at_s <= t):
             return self.count
-        k = dt / p.bounce_tau_s
         if p.bounce_sd > 0.0:
-            self._bounce += -k * self._bounce + p.bounce_sd * math.sqrt(2 * k) * self._rng.gauss(
-                0.0, 1.0
-            )
-        slip = max(self.slip_pct(v_ms * 3.6), slip_floor_pct) * 0.01
+            if (
+                self._bounce_for is None
+                or dt != self._bounce_for[0]
+                or p is not self._bounce_for[1]
+            ):
+                self._bounce_for = (dt, p)
+                self._bounce_k = dt / p.bounce_tau_s
+                self._bounce_c = p.bounce_sd * math.sqrt(2 * self._bounce_k)
+            self._bounce += -self._bounce_k * self._bounce + self._bounce_c * self._gauss(0.0, 1.0)
+        # slip_pct inlined (the simulator's inner loop): max(0, eq. 5), then max(that, floor)
+        v_kmh = v_ms * 3.6
+        slip = p.slip_a * v_kmh * v_kmh + p.slip_b * v_kmh + p.slip_c + self._slip_offset
+        slip = slip if slip > 0.0 else 0.0
+        slip = (slip_floor_pct if slip_floor_pct > slip else slip) * 0.01
         self.revolutions += v_ms * dt * (1.0 - slip) * (1.0 + self._bounce) / self._circ
         if not 0.0 <= p.encoder_dead_at_s <= t:
             self.count = int(self.revolutions * p.ppr)

@@ -111,10 +111,16 @@ class World:
         self._wheel_pos = 0.0  # encoder position (pulses, fractional) at the last step
         self._edge_us = 0
         self._crop_next = min(s.next_t for s in self.sensors)
+        self._dt_us = round(dt * 1e6)
+        self._bin_m = cfg.bin_m
+        self._patches = cfg.loose_patches
+        # _loose's last answer: (x, y) where asked, the squared distance from there within
+        # which it stands (< 0: none), the floor
+        self._loose_last = (0.0, 0.0, -1.0, 0.0)
 
     @property
     def now_us(self) -> int:
-        return (self._step_n * round(self.dt * 1e6)) & _U32
+        return (self._step_n * self._dt_us) & _U32
 
     def deliver_can(self, frame: Any, now_us: int | None = None) -> int:
         """Hand a PC -> ECU frame (can.Message or (id, bytes)) to the ECU; its return code."""
@@ -124,14 +130,21 @@ class World:
     def step(self) -> StepOutput:
         """Advance one control period: plant under the last duties, then one ECU step."""
         dt = self.dt
-        self._step_n += 1
-        t = self._step_n * dt
+        n = self._step_n + 1
+        self._step_n = n
+        t = n * dt
         self.t_s = t
         tr = self.tractor
         v_t, k = self.drive.command(tr, dt)
         tr.step(dt, v_t, k)
-        wc = self.wheel.step(t, dt, tr.v, self._loose(tr.x, tr.y))
-        self._record_ndvi()
+        wheel = self.wheel
+        if tr.v > 0.0:  # a standing wheel does not turn (GroundWheel.step returns at once)
+            floor = self._loose(tr.x, tr.y) if self._patches else 0.0
+            wc = wheel.step(t, dt, tr.v, floor)
+        else:
+            wc = wheel.count
+        if int(tr.odometer / self._bin_m) != self._bin:
+            self._record_ndvi()
         d = self._duty
         m0, m1 = self.meters
         f0, f1 = self.fans
@@ -139,9 +152,19 @@ class World:
         c1 = m1.step(t, dt, d[1])
         g0 = f0.step(t, dt, d[2])
         g1 = f1.step(t, dt, d[3])
-        self._transport(0, t, m0.revolutions, f0.rpm)
-        self._transport(1, t, m1.revolutions, f1.rpm)
-        lines = self.gnss.step(t, tr.x, tr.y, tr.v, tr.heading)
+        # an air line with nothing metered into it and nothing in flight has nothing to do
+        # (_transport is called only for one that has)
+        rev_prev = self._rev_prev
+        if m0.revolutions > rev_prev[0] or self.airlines[0].in_flight_kg > 0.0:
+            self._transport(0, t, m0.revolutions, f0.rpm)
+        else:
+            rev_prev[0] = m0.revolutions
+        if m1.revolutions > rev_prev[1] or self.airlines[1].in_flight_kg > 0.0:
+            self._transport(1, t, m1.revolutions, f1.rpm)
+        else:
+            rev_prev[1] = m1.revolutions
+        gnss = self.gnss
+        lines = gnss.step(t, tr.x, tr.y, tr.v, tr.heading) if t + 1e-9 >= gnss.next_due_s else []
         crop: list[str] = []
         if t + 1e-9 >= self._crop_next:
             for s in self.sensors:
@@ -149,19 +172,32 @@ class World:
                 if line is not None:
                     crop.append(line)
             self._crop_next = min(s.next_t for s in self.sensors)
-        now = (self._step_n * round(dt * 1e6)) & _U32
+        now = (n * self._dt_us) & _U32
         edge = self._wheel_edge(now, wc) if self.cfg.wheel_edges else None
-        self._duty = self.ecu.step_raw(
-            now, wc & _U32, c0 & _U32, c1 & _U32, g0 & _U32, g1 & _U32, edge
-        )
-        return StepOutput(t, lines, crop, self.ecu.tx_raw())
+        ecu = self.ecu
+        self._duty = ecu.step_raw(now, wc, c0, c1, g0, g1, edge)
+        return StepOutput(t, lines, crop, ecu.tx_raw() if ecu.tx_pending else [])
 
     def _loose(self, x: float, y: float) -> float:
-        """The wheel's slip floor here (%): loose_slip_pct inside a loose patch, else 0."""
-        for px, py, r in self.cfg.loose_patches:
-            if (x - px) ** 2 + (y - py) ** 2 <= r * r:
-                return self.cfg.loose_slip_pct
-        return 0.0
+        """The wheel's slip floor here (%): loose_slip_pct inside a loose patch, else 0.
+
+        Which patch the wheel is in can only change after it has moved as far as the nearest
+        patch edge: until then the last answer stands (the tractor moves a few cm a step)."""
+        ax, ay, reach2, floor = self._loose_last
+        if (x - ax) ** 2 + (y - ay) ** 2 < reach2:
+            return floor
+        floor = 0.0
+        edge = math.inf  # distance to the nearest patch edge
+        for px, py, r in self._patches:
+            d2 = (x - px) ** 2 + (y - py) ** 2
+            if d2 <= r * r:
+                floor = self.cfg.loose_slip_pct
+            edge = min(edge, abs(math.sqrt(d2) - r))
+        # half of it, less a margin for rounding: near an edge the patches are looked at
+        # again every step
+        reach = edge * 0.5 - 1e-6
+        self._loose_last = (x, y, reach * reach if reach > 0.0 else -1.0, floor)
+        return floor
 
     def _wheel_edge(self, now_us: int, count: int) -> int:
         """The capture timer: the time of the last whole pulse crossed in this step, by
@@ -170,9 +206,11 @@ class World:
         pos = w.revolutions * w.p.ppr
         prev = self._wheel_pos
         self._wheel_pos = pos
-        if pos > prev and math.floor(pos) > math.floor(prev) and count == int(pos):
-            back_us = (pos - math.floor(pos)) / (pos - prev) * self.dt * 1e6
-            self._edge_us = (now_us - int(back_us)) & _U32
+        if pos > prev:
+            whole = math.floor(pos)
+            if whole > math.floor(prev) and count == int(pos):
+                back_us = (pos - whole) / (pos - prev) * self.dt * 1e6
+                self._edge_us = (now_us - int(back_us)) & _U32
         return self._edge_us
 
     def _record_ndvi(self) -> None:
@@ -190,16 +228,13 @@ class World:
     def _transport(self, i: int, t: float, rev: float, fan_rpm: float) -> None:
         d_rev = rev - self._rev_prev[i]
         self._rev_prev[i] = rev
-        line = self.airlines[i]
-        if d_rev <= 0.0 and line.in_flight_kg <= 0.0:
-            return
-        landed = line.step(t, d_rev, self.cfg.kg_per_rev[i], fan_rpm)
+        landed = self.airlines[i].step(t, d_rev, self.cfg.kg_per_rev[i], fan_rpm)
         if landed > 0.0:
             odo = self.tractor.odometer
             if self.first_landing_m[i] is None:
                 self.first_landing_m[i] = odo
                 self.first_landing_t[i] = t
-            b = int(odo / self.cfg.bin_m)
+            b = int(odo / self._bin_m)
             bins = self.applied_by_bin[i]
             bins[b] = bins.get(b, 0.0) + landed
 
