@@ -75,11 +75,13 @@ MATCHED_FF: tuple[tuple[str, float], ...] = (("PidKff", 0.01515),)
 # The fused mode's ECU parameters, tuned on the simulator (docs/experiments.md): GnssLag =
 # the receiver's latency 0.3 s + its velocity filter 1.0 s; LeadMeter + LeadAirLine = the time
 # from a target change to product on the ground (drive reference model 0.2 s, release and air
-# line ~0.2 s, and the PID's share).
+# line ~0.2 s, and the PID's share); LeadStop = the look-ahead while the speed falls, longer as
+# the meters' run-down and the estimate's lag at the braking land the last product later.
 FUSED: tuple[tuple[str, float], ...] = (
     ("GnssLag", 1300.0),
     ("LeadMeter", 200.0),
     ("LeadAirLine", 400.0),
+    ("LeadStop", 800.0),
 )
 STOP_WINDOW_M = 10.0
 # a queue 'fluctuates' when the spread (SD) of its CV in uniform motion exceeds the longest
@@ -595,7 +597,14 @@ def step_response(
     else:
         settle = math.nan  # never settled within the window
     return StepResponse(
-        jump_rpm, 100.0 * under / jump_rpm, ss, settle, t, meas, target, 100.0 * under_median / jump_rpm
+        jump_rpm,
+        100.0 * under / jump_rpm,
+        ss,
+        settle,
+        t,
+        meas,
+        target,
+        100.0 * under_median / jump_rpm,
     )
 
 
