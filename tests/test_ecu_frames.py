@@ -178,8 +178,8 @@ def test_parameter_frames_refused() -> None:
     ack = _param_round_trip(ecu, db.encode_message("PcParamSet", {"ParamId": 7, "CvWindow": 6}))
     assert (ack["AckResult"], ack["AckRaw"], ack["rc"]) == (4, 5, lib.TD_E_INCONSISTENT)
     # unknown parameter id
-    ack = _param_round_trip(ecu, bytes([38, 0, 0, 0, 1, 0, 0, 0]))
-    assert (ack["AckParamId"], ack["AckResult"]) == (38, 1)
+    ack = _param_round_trip(ecu, bytes([39, 0, 0, 0, 1, 0, 0, 0]))
+    assert (ack["AckParamId"], ack["AckResult"]) == (39, 1)
     # wrong length
     ack = _param_round_trip(ecu, bytes([8, 0, 0, 0, 1, 0]))
     assert (ack["AckParamId"], ack["AckResult"], ack["rc"]) == (8, 5, lib.TD_E_LENGTH)
@@ -294,7 +294,7 @@ def test_parameter_encodings_agree() -> None:
         assert scale[0] == pytest.approx(spec.scale, rel=1e-6)
         assert (lo[0], hi[0]) == (spec.to_raw(spec.minimum), spec.to_raw(spec.maximum))
         assert lib.td_proto_param_raw(spec.id, spec.maximum) == spec.to_raw(spec.maximum)
-    assert lib.td_params_encoding(38, scale, lo, hi) == lib.TD_E_UNKNOWN_PARAM
+    assert lib.td_params_encoding(39, scale, lo, hi) == lib.TD_E_UNKNOWN_PARAM
 
 
 def _c_frame(fn: Any, value: Any) -> tuple[int, bytes]:

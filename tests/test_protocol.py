@@ -198,8 +198,8 @@ def test_decode_diag_speeds_targets() -> None:
 
 def test_parameter_table_covers_every_id_once() -> None:
     specs = params()
-    assert [s.id for s in specs] == list(range(1, 38))
-    assert len({s.key for s in specs}) == 37
+    assert [s.id for s in specs] == list(range(1, 39))
+    assert len({s.key for s in specs}) == 38
     assert param("CvThreshold") is param(8) is param("cv_threshold_pct")
     assert param("kg_per_rev[1]").signal == "LowerKgPerRev"
     assert (param(8).unit, param(8).minimum, param(8).maximum, param(8).scale) == (
@@ -208,7 +208,8 @@ def test_parameter_table_covers_every_id_once() -> None:
         50.0,
         0.01,
     )
-    for bad in (0, 38, "kg_per_rev", "Nope"):
+    assert (param("LeadStop").id, param(38).unit, param(38).maximum) == (38, "ms", 5000.0)
+    for bad in (0, 39, "kg_per_rev", "Nope"):
         with pytest.raises(ProtocolError, match="unknown ECU parameter"):
             param(bad)
 
@@ -244,7 +245,7 @@ def test_parameter_values_are_checked() -> None:
     with pytest.raises(ProtocolError, match=r"QueueLength = 17 outside 2..16"):
         decode((DEFAULT_IDS.param_set, bad_raw))
     with pytest.raises(ProtocolError, match="PcParamSet"):
-        decode((DEFAULT_IDS.param_set, bytes([38, 0, 0, 0, 1, 0, 0, 0])))
+        decode((DEFAULT_IDS.param_set, bytes([39, 0, 0, 0, 1, 0, 0, 0])))
 
 
 def test_parameter_ack() -> None:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from topdress.config import CropConfig
+from topdress.errors import ConfigError
 from topdress.protocol import SpeedMode
 from topdress.sim import experiments as ex
 from topdress.sim import fieldexp as fx
@@ -154,11 +155,15 @@ def test_fused_mode_in_the_configuration_and_the_replay() -> None:
     from topdress.log.replay import ecu_params
 
     cfg = loads_config(
-        '[speed]\nmode = "fused"\n[lookahead]\nmeter_ms = 200\nairline_ms = 400\n'
+        '[speed]\nmode = "fused"\n[lookahead]\nmeter_ms = 200\nairline_ms = 400\nstop_ms = 900\n'
         "[ecu]\ngnss_lag_ms = 1300\n"
     )
     pushed = cfg.ecu_params()
     assert pushed[10] == 3 and pushed[30] == 200 and pushed[31] == 400 and pushed[29] == 1300
-    assert cfg.lookahead.total_s == pytest.approx(0.6)
-    assert 30 not in default_config().ecu_params()  # look-ahead off: the paper's behaviour
+    assert pushed[38] == 900  # LeadStop
+    assert cfg.lookahead.total_s == pytest.approx(0.6)  # the stop lead is not the rate's tau
+    off = default_config().ecu_params()
+    assert 30 not in off and 38 not in off  # look-ahead off: the paper's behaviour
+    with pytest.raises(ConfigError):
+        loads_config("[lookahead]\nstop_ms = 5001\n")
     assert int(ecu_params(default_config(), "fused").speed_mode) == 3

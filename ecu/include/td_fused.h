@@ -18,6 +18,12 @@
  * unless `learn` is set: the caller learns the scale only while GNSS is good and the motion
  * steady, and keeps it through GNSS outages.
  * Scale random walk 2e-5/s; its variance never grows beyond the initial (10 %)^2.
+ * Loose ground: GNSS innovations of one sign (beyond 0.05 m/s) for 1 s or longer while
+ * |a| < 0.3 m/s^2, with a mean beyond 2 GNSS sigmas, say the wheel's scale has changed (a slip
+ * step): learning re-opens (`reopened`). The scale's variance rises to at least (5 %)^2, its
+ * random walk to 0.01/s, and the GNSS updates learn it, weighted as in steady motion, until a GNSS innovation changes sign or falls within 1 GNSS sigma; then the
+ * slow walk and the caller's learning rule are back. A 15 % slip step is followed within ~1-2 s, and so is
+ * the way back after the patch.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
@@ -41,6 +47,11 @@ typedef struct {
     float r_gnss;              /**< GNSS speed variance, (m/s)^2 */
     float wheel_rel;           /**< wheel noise, share of speed */
     float innov_ms;            /**< last GNSS innovation (z - prediction at its time of validity), m/s */
+    float since_gnss_s;        /**< time since the last GNSS update, s */
+    float run_s;               /**< how long GNSS innovations have kept one sign, s */
+    float run_sum;             /**< their integral over that time, m */
+    int8_t run_sign;           /**< their sign (0: none) */
+    bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
 } td_fused_t;
@@ -65,6 +76,12 @@ void td_fused_standstill(td_fused_t *f);
 float td_fused_shape(const td_fused_t *f, float v_ms, float *slope);
 /** Speed predicted lead_s ahead, m/s, >= 0 (0 once the prediction reaches a stop). */
 float td_fused_lead_ms(const td_fused_t *f, float lead_s);
+/**
+ * The acceleration the look-ahead uses, m/s^2: the estimate's, with its wheel-bounce noise
+ * (a few 0.01 m/s^2 in steady motion) shrunk away, a^3 / (a^2 + 0.1^2), and bounded to
+ * +-3 m/s^2. Above ~0.3 m/s^2 it is the estimate's within 10 %.
+ */
+float td_fused_lead_accel_ms2(const td_fused_t *f);
 /** 1-sigma uncertainty of the speed, m/s. */
 float td_fused_speed_std_ms(const td_fused_t *f);
 

@@ -56,6 +56,8 @@ typedef struct {
     uint16_t wheel_stop_ms;         /**< (35) no wheel edge for this long = standstill, 20..5000, default 300 */
     uint8_t drive_adapt;            /**< (36) learn the metering drives' slope (feed-forward), 0..1, default 1 */
     uint16_t meter_tau_ms;          /**< (37) time constant of the metering drive + speed window (reference model), 0..2000, default 200 */
+    uint16_t lead_stop_ms;          /**< (38) look-ahead while the speed falls (slowing, the stop), 0..5000, default 0:
+                                         the same as rising, lead_meter_ms + lead_air_ms */
     /* not on CAN: fixed properties of the build */
     float fan_rpm_at_full_duty;     /**< fan feed-forward scale, rpm, (0, 60000], default 4000 */
     uint16_t fan_spinup_ms;         /**< grace after start before FAN_LOW is flagged, default 3000 */
@@ -64,7 +66,7 @@ typedef struct {
 } td_params_t;
 
 /** Number of the highest parameter id. */
-#define TD_PARAM_COUNT 37u
+#define TD_PARAM_COUNT 38u
 
 /** Fill `p` with the defaults. */
 void td_params_default(td_params_t *p);

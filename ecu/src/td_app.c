@@ -468,9 +468,14 @@ static void select_speed(td_app_t *app) {
     } else {
         st->v_kmh = wheel_compensated_kmh(app, st->v_wheel_kmh);
     }
-    const float lead_s = (float)((uint32_t)app->p.lead_meter_ms + app->p.lead_air_ms) * 1.0e-3f;
-    if (lead_s > 0.0f && st->v_kmh > 0.0f) {
-        const float v = st->v_kmh + app->fused.a_ms2 * lead_s * TD_KMH_PER_MS;
+    /* the estimate's acceleration without its bounce noise; a falling speed (slowing, the
+     * stop) looks ahead by LeadStop, as the meters' run-down and the stop take longer to
+     * land than a start (docs/speed.md) */
+    const float a = td_fused_lead_accel_ms2(&app->fused);
+    const uint32_t rise_ms = (uint32_t)app->p.lead_meter_ms + app->p.lead_air_ms;
+    const uint32_t lead_ms = a < 0.0f && app->p.lead_stop_ms > 0u ? app->p.lead_stop_ms : rise_ms;
+    if (lead_ms > 0u && st->v_kmh > 0.0f) {
+        const float v = st->v_kmh + a * (float)lead_ms * 1.0e-3f * TD_KMH_PER_MS;
         st->v_lead_kmh = v > 0.0f ? v : 0.0f;
     } else {
         st->v_lead_kmh = st->v_kmh;

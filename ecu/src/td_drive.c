@@ -88,8 +88,10 @@ float td_drive_step(td_drive_t *d, float target_rpm, float meas_rpm, float dt_s)
         return 0.0f;
     }
     if (!d->pid.primed) {
-        /* (re)started: the model starts where the drive is (it may still be turning) */
-        d->ref_rpm = meas_rpm;
+        /* (re)started, the target leaving 0: the reference steps with it, so P and I push the
+         * drive off breakaway as the plain PID does (a start from rest is not a step the
+         * feed-forward alone makes); the model shapes only the changes that follow */
+        d->ref_rpm = target_rpm;
         d->duty_lag = d->pid.kff * meas_rpm;
     }
     const float a = d->tau_s > 0.0f ? dt_s / (d->tau_s + dt_s) : 1.0f;

@@ -25,6 +25,17 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define SCALE_MIN 0.5f
 #define SCALE_MAX 1.5f
 #define SHAPE_MIN 0.5f
+/* re-opened learning on loose ground (td_fused.h) */
+#define REOPEN_SIGMA2 4.0f    /* a mean beyond 2 GNSS sigmas */
+#define REOPEN_MIN_MS 0.05f   /* innovations smaller than this have no sign */
+#define CLOSE_SIGMA2 1.0f     /* closed again within 1 GNSS sigma, or on a change of sign */
+#define REOPEN_S 1.0f         /* one sign for this long */
+#define REOPEN_A_MS2 0.3f     /* in motion this steady */
+#define P_S_REOPEN 0.0009f    /* the scale's variance at least (5 %)^2 when re-opened */
+#define Q_SCALE_OPEN 2.0e-5f  /* scale random walk while re-opened, 1/s */
+/* look-ahead acceleration: noise shrink and bound */
+#define LEAD_A_SHRINK2 0.01f  /* (0.1 m/s^2)^2 */
+#define LEAD_A_MAX 3.0f
 
 int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct) {
     if (f == NULL || !(jerk_ms3 > 0.0f) || !(gnss_std_kmh > 0.0f) || !(wheel_noise_pct > 0.0f)) {
@@ -40,6 +51,11 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->p[AS] = 0.0f;
     f->p[SS] = P0_S;
     f->innov_ms = 0.0f;
+    f->since_gnss_s = 0.0f;
+    f->run_s = 0.0f;
+    f->run_sum = 0.0f;
+    f->run_sign = 0;
+    f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
     td_fused_tune(f, jerk_ms3, gnss_std_kmh, wheel_noise_pct);
@@ -64,13 +80,16 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     p[VA] += dt_s * p[AA] + q * dt2 * 0.5f;
     p[VS] += dt_s * p[AS];
     p[AA] += q * dt_s;
-    p[SS] += Q_SCALE * dt_s;
+    p[SS] += (f->reopened ? Q_SCALE_OPEN : Q_SCALE) * dt_s;
     if (p[SS] > P_S_MAX) {
         p[SS] = P_S_MAX;
     }
     f->v_ms += f->a_ms2 * dt_s;
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
+    }
+    if (f->since_gnss_s < 60.0f) {
+        f->since_gnss_s += dt_s;
     }
 }
 
@@ -176,10 +195,37 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float h[3] = { 1.0f, -d, 0.0f };
     const float y = z_ms - (f->v_ms - f->a_ms2 * d);
     f->innov_ms = y;
+    /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
+     * REOPEN_SIGMA GNSS sigmas (the estimate's own variance is mostly the wheel's bounce and
+     * would hide a slip step of 15 %) */
+    const float r_steady = f->r_gnss + Q_STEADY * f->q_jerk * d * d * d / 3.0f;
+    const int8_t sign = y > REOPEN_MIN_MS ? 1 : (y < -REOPEN_MIN_MS ? -1 : 0);
+    if (sign != 0 && sign == f->run_sign && fabsf(f->a_ms2) < REOPEN_A_MS2) {
+        f->run_s += f->since_gnss_s;
+        f->run_sum += y * f->since_gnss_s;
+    } else {
+        f->reopened = false; /* the run is over */
+        f->run_s = 0.0f;
+        f->run_sum = 0.0f;
+        f->run_sign = sign;
+    }
+    if (!f->reopened && f->run_s >= REOPEN_S) {
+        const float mean = f->run_sum / f->run_s;
+        if (mean * mean > REOPEN_SIGMA2 * f->r_gnss) {
+            f->reopened = true;
+            if (f->p[SS] < P_S_REOPEN) {
+                f->p[SS] = P_S_REOPEN;
+            }
+        }
+    } else if (f->reopened && y * y < CLOSE_SIGMA2 * f->r_gnss) {
+        f->reopened = false;
+    }
+    f->since_gnss_s = 0.0f;
+    const bool learning = learn || f->reopened;
     /* the jerk over the delay; in steady motion (learn: steady for longer than the delay) a
      * small share of it, or the GNSS speed would teach the scale almost nothing */
-    const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
-    return update(f, h, y, r, learn) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
+    const float r = learn ? r_steady : f->r_gnss + f->q_jerk * d * d * d / 3.0f;
+    return update(f, h, y, r, learning) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
 }
 
 void td_fused_standstill(td_fused_t *f) {
@@ -191,11 +237,21 @@ void td_fused_standstill(td_fused_t *f) {
     f->p[AA] = 1.0e-2f;
     f->p[AS] = 0.0f;
     f->wheel_rejects = 0u;
+    f->run_s = 0.0f;
+    f->run_sum = 0.0f;
+    f->run_sign = 0;
 }
 
 float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
     const float v = f->v_ms + f->a_ms2 * lead_s;
     return v > 0.0f ? v : 0.0f;
+}
+
+float td_fused_lead_accel_ms2(const td_fused_t *f) {
+    const float a = f->a_ms2;
+    const float a2 = a * a;
+    const float s = a * a2 / (a2 + LEAD_A_SHRINK2);
+    return s > LEAD_A_MAX ? LEAD_A_MAX : (s < -LEAD_A_MAX ? -LEAD_A_MAX : s);
 }
 
 float td_fused_speed_std_ms(const td_fused_t *f) {

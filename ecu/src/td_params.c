@@ -59,6 +59,7 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
     P(wheel_stop_ms, U16, 1.0f, 20u, 5000u),
     P(drive_adapt, U8, 1.0f, 0u, 1u),
     P(meter_tau_ms, U16, 1.0f, 0u, 2000u),
+    P(lead_stop_ms, U16, 1.0f, 0u, 5000u),
 };
 
 /* Float rounding of a value that went through raw * scale stays well inside this many raw units. */
@@ -117,6 +118,7 @@ void td_params_default(td_params_t *p) {
     p->wheel_stop_ms = 300u;
     p->drive_adapt = 1u;
     p->meter_tau_ms = 200u;
+    p->lead_stop_ms = 0u;
     p->fan_rpm_at_full_duty = 4000.0f;
     p->fan_spinup_ms = 3000u;
     p->status_id = 0x185C6465u;

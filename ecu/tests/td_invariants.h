@@ -82,7 +82,7 @@ static inline void td_inv_check_step(const td_app_t *app, const td_io_out_t *out
     TD_CHECK(td_inv_finite_nonneg(st->speed_std_kmh));
     TD_CHECK(td_inv_finite_nonneg(st->v_edge_kmh));
     TD_CHECK(td_inv_finite_nonneg(st->v_lead_kmh));
-    if (app->p.lead_meter_ms == 0u && app->p.lead_air_ms == 0u) {
+    if (app->p.lead_meter_ms == 0u && app->p.lead_air_ms == 0u && app->p.lead_stop_ms == 0u) {
         TD_CHECK(st->v_lead_kmh == st->v_kmh);
     }
     for (unsigned i = 0u; i < 6u; i++) {

@@ -415,7 +415,7 @@ static void test_parameter_frames_and_acks(void **state) {
     assert_float_equal(r.app.p.working_width_m, 4.0, 1e-5);
     assert_int_equal(param_set(&r, 1, 400u, 8, 2, 4000u), TD_E_RANGE); /* 0.4 m: out of range */
     assert_int_equal(param_set(&r, 1, 30001u, 8, 2, 4000u), TD_E_RANGE);
-    assert_int_equal(param_set(&r, 38, 1u, 8, 1, 0u), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(param_set(&r, 39, 1u, 8, 1, 0u), TD_E_UNKNOWN_PARAM);
     assert_int_equal(param_set(&r, 7, 6u, 8, 4, 5u), TD_E_INCONSISTENT); /* n = 6 > N = 5 */
     assert_int_equal(param_set(&r, 1, 4000u, 5, 5, 0u), TD_E_LENGTH);
     assert_int_equal(param_set(&r, 9, 900u, 8, 0, 900u), TD_OK); /* switch speed 9.00 km/h */

@@ -128,12 +128,43 @@ static void test_learned_slope_bounded(void **state) {
     assert_float_equal(td_drive_rpm_per_duty(&d), 60.0, 1e-3);
 }
 
+/* A start from rest (the target leaves 0): no model lag. While the target holds, the drive
+ * with the model gives the plain PID's duties bit for bit, the first one kff*T + kp*T + ki*T*dt
+ * (P and I push the drive off its breakaway at once); a later change is shaped by the model. */
+static void test_start_from_rest_without_model_lag(void **state) {
+    (void)state;
+    td_drive_t d;
+    td_drive_init(&d, 0.015f, 0.01f, 0.0f, 1.0f / 60.0f, 0.2f, false);
+    td_pid_t pid;
+    td_pid_init(&pid, 0.015f, 0.01f, 0.0f, 1.0f / 60.0f, 0.0f, 1.0f);
+    plant_t p = { 0.0, { 0.0 }, 0, 66.0, 0.04 };
+    const float t0 = 3.0f;
+    const float first = td_drive_step(&d, t0, 0.0f, (float)DT);
+    assert_float_equal(first, t0 / 60.0f + 0.015f * t0 + 0.01f * t0 * (float)DT, 1e-6);
+    assert_float_equal(d.ref_rpm, t0, 0.0);
+    assert_true(first == td_pid_step(&pid, t0, 0.0f, (float)DT));
+    float meas = plant_step(&p, first);
+    for (int k = 1; k < 100; k++) {
+        const float a = td_drive_step(&d, t0, meas, (float)DT);
+        assert_true(a == td_pid_step(&pid, t0, meas, (float)DT));
+        meas = plant_step(&p, a);
+    }
+    /* an in-run step: the reference follows with tau 0.2 s (one step: a = dt / (tau + dt)) */
+    (void)td_drive_step(&d, 10.0f, meas, (float)DT);
+    assert_float_equal(d.ref_rpm, t0 + (10.0f - t0) * (float)(DT / (0.2 + DT)), 1e-4);
+    /* a stop and a new start: again no lag */
+    td_drive_reset(&d);
+    (void)td_drive_step(&d, 5.0f, meas, (float)DT);
+    assert_float_equal(d.ref_rpm, 5.0, 0.0);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_slope_learned_on_the_start_up_ramp),
         cmocka_unit_test(test_reference_model_against_plain_pid),
         cmocka_unit_test(test_plain_pid_without_model),
         cmocka_unit_test(test_learned_slope_bounded),
+        cmocka_unit_test(test_start_from_rest_without_model_lag),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

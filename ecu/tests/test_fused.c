@@ -190,6 +190,51 @@ static void test_init_rejects_bad_tuning(void **state) {
     assert_int_equal(td_fused_init(NULL, 1.0f, 0.4f, 6.0f), TD_E_ARG);
 }
 
+/* Loose ground without the caller's learning (the wheel's CV rises there): a slip step from 5 %
+ * to 15 % makes the GNSS innovations one-signed; learning re-opens after 1 s of them and the
+ * scale moves towards the new slip; before the step, with the scale right, it stays closed. */
+static void test_slip_step_reopens_learning(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f); /* the defaults of td_params.h */
+    run(&r, 40.0, v_const, 0.95, true, 0.3, 0.3, true);
+    assert_float_equal(r.f.scale, 0.95, 0.005);
+    run(&r, 5.0, v_const, 0.95, true, 0.3, 0.3, false);
+    assert_false(r.f.reopened);
+    assert_float_equal(r.f.scale, 0.95, 0.005);
+    double opened_at = -1.0;
+    double half_at = -1.0;
+    for (int k = 0; k < 800; k++) { /* 8 s on loose ground */
+        run(&r, DT, v_const, 0.85, true, 0.3, 0.3, false);
+        if (opened_at < 0.0 && r.f.reopened) {
+            opened_at = (k + 1) * DT;
+        }
+        if (half_at < 0.0 && r.f.scale < 0.90f) {
+            half_at = (k + 1) * DT;
+        }
+    }
+    assert_true(opened_at >= 1.0 && opened_at <= 2.0);
+    assert_true(half_at > 0.0 && half_at <= 3.0);
+    assert_float_equal(r.f.v_ms, 2.0, 0.1);
+    /* back on firm ground: re-opened the other way, the scale returns */
+    run(&r, 8.0, v_const, 0.95, true, 0.3, 0.3, false);
+    assert_true(r.f.scale > 0.92f);
+}
+
+/* The look-ahead's acceleration: bounce-sized values shrunk away, braking kept, bounded. */
+static void test_lead_acceleration_shrink(void **state) {
+    (void)state;
+    td_fused_t f;
+    assert_int_equal(td_fused_init(&f, 0.3f, 0.4f, 6.0f), TD_OK);
+    const float a[5] = { 0.0f, 0.05f, -0.1f, -0.8f, 5.0f };
+    const float want[5] = { 0.0f, 0.01f, -0.05f, -0.8f * 0.64f / 0.65f, 3.0f };
+    for (int i = 0; i < 5; i++) {
+        f.a_ms2 = a[i];
+        assert_float_equal(td_fused_lead_accel_ms2(&f), want[i], 1e-5);
+    }
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_constant_speed_learns_the_slip),
@@ -200,6 +245,8 @@ int main(void) {
         cmocka_unit_test(test_slip_change_relearned),
         cmocka_unit_test(test_gates),
         cmocka_unit_test(test_init_rejects_bad_tuning),
+        cmocka_unit_test(test_slip_step_reopens_learning),
+        cmocka_unit_test(test_lead_acceleration_shrink),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

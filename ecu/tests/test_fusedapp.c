@@ -220,6 +220,57 @@ static void test_look_ahead_stops_the_meters_before_standstill(void **state) {
     assert_true(stop_margin[1] > 0.6);
 }
 
+/* LeadStop: a falling speed looks ahead by LeadStop, a rising one by LeadMeter + LeadAirLine.
+ * The estimate does not depend on the leads, so at every step of a launch and a braking the
+ * look-ahead's share v - v_lead is the same for LeadStop 0 and 1000 while accelerating, and
+ * 1000 / 400 times as large while braking; the meters stop earlier with it. */
+static void test_stop_lead_for_falling_speed(void **state) {
+    (void)state;
+    enum { N = 600 };
+    static float ahead[2][N];
+    static float lead[2][N];
+    int meters_off[2] = { -1, -1 };
+    for (int m = 0; m < 2; m++) {
+        td_params_t p = fused_params();
+        p.lead_meter_ms = 200u;
+        p.lead_air_ms = 200u;
+        p.lead_stop_ms = m == 0 ? 0u : 1000u;
+        rig_t r;
+        start_fused(&r, &p);
+        for (int k = 0; k < N; k++) {
+            /* 0.5 m/s^2 up to 8 km/h (4.4 s), hold, brake at 1 m/s^2 from k = 300 */
+            const double t = k * 0.01;
+            double v = t < 4.44 ? 1.8 * t : 8.0;
+            if (k >= 300) {
+                v = 8.0 - 3.6 * (t - 3.0);
+                v = v > 0.0 ? v : 0.0;
+            }
+            r.pc_gnss_kmh = v;
+            r.wheel_kmh = v * 0.93;
+            rig_step(&r);
+            (void)rig_drain(&r, 0u);
+            ahead[m][k] = rig_st(&r)->v_kmh - rig_st(&r)->v_lead_kmh;
+            lead[m][k] = rig_st(&r)->v_lead_kmh;
+            if (k >= 300 && meters_off[m] < 0 && rig_st(&r)->target_rpm[TD_UPPER] == 0.0f) {
+                meters_off[m] = k;
+            }
+        }
+    }
+    int rising = 0;
+    int falling = 0;
+    for (int k = 0; k < N; k++) {
+        if (ahead[0][k] < -1e-3f) { /* v_lead above v: accelerating */
+            assert_float_equal(ahead[1][k], ahead[0][k], 1e-6);
+            rising++;
+        } else if (ahead[0][k] > 1e-2f && lead[1][k] > 0.0f) { /* falling, not yet predicted to stand */
+            assert_float_equal(ahead[1][k], ahead[0][k] * 2.5f, 1e-3f * ahead[1][k] + 1e-4f);
+            falling++;
+        }
+    }
+    assert_true(rising > 100 && falling > 30);
+    assert_true(meters_off[0] > 0 && meters_off[1] > 0 && meters_off[1] < meters_off[0] - 20);
+}
+
 /* Edge timing in the application: two pulses from standstill are motion; standstill within the
  * stop time after the last pulse. */
 static void test_edge_timing_first_pulse_and_standstill(void **state) {
@@ -280,6 +331,7 @@ int main(void) {
         cmocka_unit_test(test_fused_frozen_receiver_at_standstill),
         cmocka_unit_test(test_gnss_time_frame),
         cmocka_unit_test(test_look_ahead_stops_the_meters_before_standstill),
+        cmocka_unit_test(test_stop_lead_for_falling_speed),
         cmocka_unit_test(test_edge_timing_first_pulse_and_standstill),
         cmocka_unit_test(test_slip_compensation_in_wheel_mode),
     };

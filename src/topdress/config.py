@@ -243,6 +243,9 @@ class LookaheadConfig:
     command_ms: int = _num(0, 0, 5000)
     meter_ms: int = _num(0, 0, 3000)
     airline_ms: int = _num(0, 0, 5000)
+    # the ECU's speed look-ahead while the speed falls (slowing, the stop: LeadStop); 0 = the
+    # same as rising (meter_ms + airline_ms). Not part of the rate's tau.
+    stop_ms: int = _num(0, 0, 5000)
 
     @property
     def total_s(self) -> float:
@@ -321,6 +324,8 @@ class TerminalConfig:
         if self.lookahead.meter_ms or self.lookahead.airline_ms:
             params[30] = self.lookahead.meter_ms
             params[31] = self.lookahead.airline_ms
+        if self.lookahead.stop_ms:
+            params[38] = self.lookahead.stop_ms
         for name, value in self.ecu.overrides.items():
             params[ECU_KEYS[name][0]] = value
         return dict(sorted(params.items()))
@@ -807,4 +812,5 @@ headland_m = 0.0           # headland strip inside the boundary, m
 command_ms = 0             # the terminal's command path (program cycle + command period)
 meter_ms = 0               # meter response; also the ECU's LeadMeter
 airline_ms = 0             # air-line transport; also the ECU's LeadAirLine
+stop_ms = 0                # the ECU's look-ahead while the speed falls (LeadStop); 0 = as rising
 """

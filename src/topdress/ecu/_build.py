@@ -86,6 +86,7 @@ typedef struct {
     uint16_t wheel_stop_ms;
     uint8_t drive_adapt;
     uint16_t meter_tau_ms;
+    uint16_t lead_stop_ms;
     float fan_rpm_at_full_duty;
     uint16_t fan_spinup_ms;
     uint32_t status_id;
@@ -119,7 +120,8 @@ float td_edge_step(td_edge_t *e, uint32_t now_us, uint32_t count, uint32_t edge_
 typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED = 2 }
     td_fused_result_t;
 typedef struct {
-    float v_ms; float a_ms2; float scale; float p[6]; float innov_ms; uint8_t wheel_rejects; ...;
+    float v_ms; float a_ms2; float scale; float p[6]; float innov_ms; float run_s; int8_t run_sign;
+    bool reopened; uint8_t wheel_rejects; ...;
 } td_fused_t;
 int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct);
 void td_fused_predict(td_fused_t *f, float dt_s);

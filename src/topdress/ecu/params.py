@@ -74,6 +74,7 @@ class EcuParams:
     wheel_stop_ms: int
     drive_adapt: int
     meter_tau_ms: int
+    lead_stop_ms: int
     fan_rpm_at_full_duty: float
     fan_spinup_ms: int
     status_id: int

@@ -52,6 +52,7 @@ _FIELDS: dict[str, tuple[str, int | None]] = {
     "WheelStopTime": ("wheel_stop_ms", None),
     "DriveAdapt": ("drive_adapt", None),
     "MeterTau": ("meter_tau_ms", None),
+    "LeadStop": ("lead_stop_ms", None),
 }
 
 

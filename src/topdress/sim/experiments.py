@@ -75,11 +75,13 @@ MATCHED_FF: tuple[tuple[str, float], ...] = (("PidKff", 0.01515),)
 # The fused mode's ECU parameters, tuned on the simulator (docs/experiments.md): GnssLag =
 # the receiver's latency 0.3 s + its velocity filter 1.0 s; LeadMeter + LeadAirLine = the time
 # from a target change to product on the ground (drive reference model 0.2 s, release and air
-# line ~0.2 s, and the PID's share).
+# line ~0.2 s, and the PID's share); LeadStop = the look-ahead while the speed falls, longer as
+# the meters' run-down and the estimate's lag at the braking land the last product later.
 FUSED: tuple[tuple[str, float], ...] = (
     ("GnssLag", 1300.0),
     ("LeadMeter", 200.0),
     ("LeadAirLine", 400.0),
+    ("LeadStop", 800.0),
 )
 STOP_WINDOW_M = 10.0
 # a queue 'fluctuates' when the spread (SD) of its CV in uniform motion exceeds the longest
@@ -536,6 +538,8 @@ class StepResponse:
     t: np.ndarray
     meter_rpm: np.ndarray
     target_rpm: np.ndarray
+    # below the median target after the jump (the first definition; counts the target's moves)
+    overshoot_median_pct: float = math.nan
 
 
 def step_response(
@@ -575,10 +579,16 @@ def step_response(
     target = tr["target_rpm_upper"]
     after = t > 0.5  # the command with the new rate reaches the ECU within 500 ms
     r1 = float(np.median(target[t > 1.0]))
-    under = max(0.0, r1 - float(meas[after].min()))
+    under_median = max(0.0, r1 - float(meas[after].min()))
+    # The target itself moves after the jump (the GNSS speed's 0.1 km/h steps are 0.27 r/min
+    # here, ~4 % of a jump): the overshoot is how far the speed goes below every target the
+    # ECU has had since the jump, so a later move of the target is not counted as overshoot.
+    i_cmd = int(np.argmax(np.abs(target - target[0]) > 0.5 * jump_rpm))
+    t_cmd = float(t[i_cmd])
+    floor = np.minimum.accumulate(target[i_cmd:])
+    under = max(0.0, float(np.max(floor - meas[i_cmd:])))
     last = t > settle_s - 1.0
     ss = float(np.mean(np.abs(meas[last] - target[last])))
-    t_cmd = float(t[np.argmax(np.abs(target - target[0]) > 0.5 * jump_rpm)])
     outside = np.nonzero(np.abs(meas - r1) > 0.05 * r1)[0]
     if outside.size == 0:
         settle = 0.0
@@ -586,7 +596,16 @@ def step_response(
         settle = float(t[outside[-1] + 1]) - t_cmd
     else:
         settle = math.nan  # never settled within the window
-    return StepResponse(jump_rpm, 100.0 * under / jump_rpm, ss, settle, t, meas, target)
+    return StepResponse(
+        jump_rpm,
+        100.0 * under / jump_rpm,
+        ss,
+        settle,
+        t,
+        meas,
+        target,
+        100.0 * under_median / jump_rpm,
+    )
 
 
 def table5(
