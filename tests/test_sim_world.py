@@ -11,7 +11,7 @@ from topdress import protocol
 from topdress.errors import EcuParamError
 from topdress.protocol import Fault, Source
 from topdress.sim.gnss import GnssParams
-from topdress.sim.sil import PcParams, Sil
+from topdress.sim.sil import CabPc, PcParams, Sil
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
 
@@ -113,3 +113,22 @@ def test_rejected_parameter_raises_with_its_name() -> None:
     w = World(seed=1)
     with pytest.raises(EcuParamError, match="CvWindow"):
         Sil(w, PcParams(ecu_params=(("CvWindow", 9.0),)))
+
+
+@pytest.mark.parametrize("on_rate", [True, False])
+def test_the_simulated_pc_sends_a_changed_rate_at_its_cycle_with_send_on_rate(
+    on_rate: bool,
+) -> None:
+    pc = CabPc(PcParams(cycle_s=0.1, send_on_rate=on_rate))
+    first = pc.poll(0.0)  # the command period's first frame
+    assert [m.arbitration_id for m in first] == [protocol.DEFAULT_IDS.command]
+    pc.rate_kg_ha = (200.0, 90.0)
+    out = pc.poll(0.1)  # the next cycle, 0.4 s before the period's next frame
+    cmds = [protocol.decode(m) for m in out if m.arbitration_id == protocol.DEFAULT_IDS.command]
+    assert len(cmds) == (1 if on_rate else 0)
+    if on_rate:
+        assert isinstance(cmds[0], protocol.PcCommand)
+        assert (cmds[0].rate_upper_kg_ha, cmds[0].rate_lower_kg_ha) == (200.0, 90.0)
+    assert pc.poll(0.2) == []  # unchanged: nothing more until the period
+    pc.paused = True  # the pause is a change of rate too (0, 0)
+    assert len(pc.poll(0.3)) == (1 if on_rate else 0)

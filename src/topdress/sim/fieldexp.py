@@ -207,6 +207,8 @@ class FieldSetup:
     lookahead_s: float = LOOKAHEAD_S
     gnss_time: bool = True
     ecu_params: EcuSettings = ()  # on top of the mode's settings
+    pc_cycle_s: float = 0.323  # the PC's program cycle (the paper's; the terminal ticks 0.1 s)
+    send_on_rate: bool = False  # the PC sends a changed rate at once (can.send_on_rate)
 
     def ndvi_rate(self, lookahead: bool) -> NdviRate:
         return NdviRate(lookahead_s=self.lookahead_s if lookahead else 0.0)
@@ -257,6 +259,8 @@ def field_run(setup: FieldSetup, mode: str, seed: int, lookahead: bool = True) -
         ecu_params=(*setup.ecu_params, *MODES[mode]),
         gnss_time=setup.gnss_time,
         ndvi_rate=setup.ndvi_rate(lookahead and mode == "fused"),
+        cycle_s=setup.pc_cycle_s,
+        send_on_rate=setup.send_on_rate,
     )
     passes: list[tuple[float, float]] = []
     start: float | None = None

@@ -78,6 +78,8 @@ class PcParams:
     start_at_s: float = 0.0
     gnss_time: bool = True  # send PcGnssTime (speed, fix age, seq) for every new RMC
     ndvi_rate: NdviRate | None = None  # None: the fixed rate_kg_ha
+    # the terminal's `can.send_on_rate`: a changed rate goes out at the cycle that computed it
+    send_on_rate: bool = False
 
 
 @dataclass
@@ -126,6 +128,7 @@ class CabPc:
         self.rate_kg_ha = p.rate_kg_ha
         self.start = True
         self.paused = False  # the operator's pause (headland turn): rate 0, fans kept running
+        self._sent: tuple[bool, float, float] | None = None  # start and rates last sent
 
     def on_nmea(self, line: str, t: float = 0.0) -> None:
         """A line reaching the serial port at t (its arrival is all the PC knows of its age)."""
@@ -152,13 +155,22 @@ class CabPc:
                 kmh = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
                 out.append(protocol.encode_gnss_time(kmh, age_ms, self._gnss_seq))
             self._update_rate(t)
+            if self.p.send_on_rate and self._sent not in (None, self._command_values()):
+                out.append(self._command())
         if t + 1e-9 >= self._next_cmd:
             self._next_cmd += self.p.command_period_s
-            gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
-            up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
-            out.append(protocol.encode_command(self.start, self.p.fan_rpm, up, lo, gnss))
+            out.append(self._command())
         self.next_poll_s = min(self._next_cycle, self._next_cmd)
         return out
+
+    def _command_values(self) -> tuple[bool, float, float]:
+        up, lo = (0.0, 0.0) if self.paused else self.rate_kg_ha
+        return (self.start, up, lo)
+
+    def _command(self) -> can.Message:
+        self._sent = start, up, lo = self._command_values()
+        gnss = None if self.gnss_kmh is None else min(self.gnss_kmh, 25.0)
+        return protocol.encode_command(start, self.p.fan_rpm, up, lo, gnss)
 
     def _update_rate(self, t: float) -> None:
         """The NDVI where the outlets are (or will be, with the look-ahead) -> the rate."""
