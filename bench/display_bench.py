@@ -1,11 +1,12 @@
 """Display benchmark: the terminal with its display served and one browser watching it.
 
-    .venv/bin/python bench/display_bench.py [--duration 22]
+    .venv/bin/python bench/display_bench.py [--duration 60]
 
 As bench/terminal_bench.py (this process plays the machine: 10 Hz GNSS and crop sensors on
 pseudo-terminals, the ECU's twin on a udp_multicast bus; the terminal runs in a child process,
 send_on_gnss on, session log on, meters started), plus the display served by the child and a
-headless Chromium (Debian's, through Selenium) showing its main screen the whole time.
+headless Chromium (Debian's, through Selenium; at nice 10 and off the first CPU, as the kiosk
+set-up of docs/display.md) showing its main screen the whole time.
 
 - `display_tick_late_p99_ms`: how late the control loop's 10 Hz tick ran (the child records
   each tick against the loop's own grid);
@@ -174,7 +175,7 @@ def parent(duration_s: float) -> int:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--duration", type=float, default=22.0, help="seconds")
+    ap.add_argument("--duration", type=float, default=60.0, help="seconds")
     ap.add_argument("--child", type=Path, metavar="CONFIG", help=argparse.SUPPRESS)
     ap.add_argument("--port", type=int, default=0, help=argparse.SUPPRESS)
     args = ap.parse_args()

@@ -18,6 +18,8 @@ import urllib.request
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from topdress.display.cpu import leave_first_cpu
+
 if TYPE_CHECKING:
     from selenium.webdriver.remote.webdriver import WebDriver
 
@@ -55,7 +57,8 @@ def chromium(
     profile_dir: Path, width: int = 1400, height: int = 1200, niceness: int = 0
 ) -> WebDriver:
     """A fresh headless Chromium (its own profile directory); `niceness` > 0 runs it (and its
-    driver) at a lower CPU priority than the terminal, as a cab PC's kiosk browser should."""
+    driver) at a lower CPU priority than the terminal and off the first CPU, as a cab PC's
+    kiosk browser should run."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -65,9 +68,12 @@ def chromium(
         opts.add_argument(flag)
     opts.add_argument(f"--user-data-dir={profile_dir}")
     opts.add_argument(f"--window-size={width},{height}")
-    service = Service(
-        CHROMEDRIVER, popen_kw={"preexec_fn": (lambda: os.nice(niceness)) if niceness else None}
-    )
+
+    def lower() -> None:
+        os.nice(niceness)
+        leave_first_cpu()
+
+    service = Service(CHROMEDRIVER, popen_kw={"preexec_fn": lower if niceness else None})
     return webdriver.Chrome(options=opts, service=service)
 
 
