@@ -8,6 +8,7 @@ import math
 import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
+from itertools import pairwise
 
 import pytest
 from nicegui import ui
@@ -234,6 +235,39 @@ def test_track_points_every_metre_with_heading() -> None:
     assert points[1].rate_kg_ha == pytest.approx(283.1)  # applied, both layers
     again, none = hub.track_since(total)
     assert again == total and none == []
+
+
+def test_track_heading_is_the_receivers_course_when_it_has_one() -> None:
+    hub = DisplayHub(default_config)
+    # North along the track, but each fix 0.3 m off sideways (alternating): the bearing between
+    # points swings by about 31 degrees, the course over ground does not.
+    for i in range(30):
+        north = 0.222 * i
+        east = 0.3 if (i // 5) % 2 else -0.3
+        hub.publish(
+            working(
+                t_s=i / 10,
+                lat=LAT0 + math.degrees(north / 6_371_000.0),
+                lon=LON0 + math.degrees(east / (6_371_000.0 * math.cos(math.radians(LAT0)))),
+                heading_deg=2.0,
+            )
+        )
+    _, points = hub.track_since(0)
+    assert len(points) == 6
+    assert [p.heading_deg for p in points] == [2.0] * 6
+    swing = [bearing_deg(a.lat, a.lon, b.lat, b.lon) for a, b in pairwise(points)]
+    assert max(abs((b + 180.0) % 360.0 - 180.0) for b in swing) > 25.0
+
+
+def test_track_heading_falls_back_to_the_bearing_without_a_course() -> None:
+    hub = DisplayHub(default_config)
+    for i in range(20):
+        east = 0.222 * i  # due east, no course in the snapshot
+        lon = LON0 + math.degrees(east / (6_371_000.0 * math.cos(math.radians(LAT0))))
+        hub.publish(working(t_s=i / 10, lon=lon, heading_deg=None))
+    _, points = hub.track_since(0)
+    assert points[0].heading_deg == 0.0  # nothing to take a bearing from yet
+    assert all(p.heading_deg == pytest.approx(90.0, abs=1e-3) for p in points[1:])
 
 
 def test_track_of_a_stopped_machine_is_not_metered() -> None:

@@ -36,7 +36,7 @@ class TrackPoint:
 
     lat: float
     lon: float
-    heading_deg: float  # clockwise from north, from the previous point
+    heading_deg: float  # clockwise from north: the receiver's course, else from the last point
     rate_kg_ha: float  # total rate applied (both layers, measured) while metering, else 0
     metering: bool
 
@@ -85,7 +85,12 @@ class DisplayHub:
         last = self._track[-1] if self._track else None
         if last is not None and distance_m(last.lat, last.lon, s.lat, s.lon) < TRACK_STEP_M:
             return None
-        heading = bearing_deg(last.lat, last.lon, s.lat, s.lon) if last else 0.0
+        # The receiver's course (held below walking pace) is smoother than the bearing between
+        # two noisy fixes a metre apart; the bearing is for logs and feeds without a course.
+        if s.heading_deg is not None:
+            heading = s.heading_deg
+        else:
+            heading = bearing_deg(last.lat, last.lon, s.lat, s.lon) if last else 0.0
         metering = s.ecu_live and s.running and (s.meter_rpm[0] > 0 or s.meter_rpm[1] > 0)
         rate = s.applied_kg_ha[0] + s.applied_kg_ha[1] if metering else 0.0
         return TrackPoint(s.lat, s.lon, heading, rate, metering)
