@@ -597,6 +597,60 @@ async def test_device_test_shows_the_last_lines(user: User) -> None:
     assert table.rows == [{"t": "1.5", "raw": "$GNRMC,...*7A", "decoded": "RMC 8.00 km/h"}]  # type: ignore[attr-defined]
 
 
+def slcan_config() -> TerminalConfig:
+    return loads_config(
+        '[can]\ninterface = "slcan"\nchannel = "/dev/ttyACM0"\n'
+        "[can.options]\ntty_baudrate = 115200\n"
+    )
+
+
+async def test_can_adapter_options_are_edited_as_name_value_lines(user: User) -> None:
+    def answer(c: object) -> CommandResult:
+        assert isinstance(c, op.ApplySettings)
+        if c.values["options"].get("tty_baudrate") == 9600:  # the adapter did not open
+            reason = "cannot open CAN interface 'slcan' channel '/dev/ttyACM0': no reply"
+            return CommandResult(False, reason, {"can.options": reason})
+        return CommandResult(True, "settings [can] applied")
+
+    term = Terminal(answer)
+    hub = DisplayHub(slcan_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/communication")
+    (options,) = user.find(marker="field_can.options").elements
+    assert options.value == "tty_baudrate = 115200\n"  # type: ignore[attr-defined]
+    # not name = value lines: said at the field, nothing sent
+    options.value = "tty_baudrate 115200"  # type: ignore[attr-defined]
+    user.find(marker="apply_can").click()
+    await shows(user, "answer_can", "refused: see the field marked")
+    assert options.props["error"] is True and term.sent == []
+    # a name the configuration refuses, named by its own check
+    options.value = "bitrate = 250000"  # type: ignore[attr-defined]
+    user.find(marker="apply_can").click()
+    for _ in range(40):  # the click's handler runs as a task
+        if options.props["error-message"] != "bitrate: is set by can.bitrate":
+            await asyncio.sleep(0.05)
+    assert options.props["error-message"] == "bitrate: is set by can.bitrate"
+    assert term.sent == []
+    # typed values (TOML): a number and a boolean; one line removed, one added
+    options.value = "tty_baudrate = 921600\nrtscts = true\n"  # type: ignore[attr-defined]
+    user.find(marker="apply_can").click()
+    await settle(user, term, 1)
+    (sent,) = term.sent
+    assert isinstance(sent, op.ApplySettings) and sent.section == "can"
+    assert sent.values["options"] == {"tty_baudrate": 921600, "rtscts": True}
+    await shows(user, "answer_can", "settings [can] applied")
+    assert not options.props.get("error")
+    # the terminal could not reopen the adapter: its reason at the options, the old bus kept
+    options.value = "tty_baudrate = 9600"  # type: ignore[attr-defined]
+    user.find(marker="apply_can").click()
+    await settle(user, term, 2)
+    await shows(
+        user, "answer_can", "cannot open CAN interface 'slcan' channel '/dev/ttyACM0': no reply"
+    )
+    assert "no reply" in str(options.props["error-message"])
+
+
 def test_a_taken_port_is_said_before_anything_starts() -> None:
     import socket
 

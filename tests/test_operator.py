@@ -415,8 +415,16 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         assert post(rig, op.ApplySettings("gnss", {"stale_s": 5.0})).ok
         assert rig.term.tracker.stale_s == 5.0 and rig.term.gnss is rig.gnss
         res = post(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
-        assert not res.ok and list(res.errors) == ["can"]
+        assert not res.ok and list(res.errors) == ["can.interface"]
+        assert "no_such_interface" in res.errors["can.interface"]
         assert rig.term.cfg.can.interface == "virtual"
+        # an slcan adapter that is not plugged in: said at every key changed, the old bus kept
+        bus = rig.term.bus
+        slcan = {"interface": "slcan", "channel": str(tmp_path / "ttyACM9")}
+        res = post(rig, op.ApplySettings("can", {**slcan, "options": {"tty_baudrate": 115200}}))
+        assert not res.ok
+        assert list(res.errors) == ["can.interface", "can.channel", "can.options"]
+        assert rig.term.bus is bus and rig.term.cfg.can.options == {}
         rig.gnss.emit(rig.world.t_s, make_sentence("GPGGA,,,,,,0,,,,,,,,"))
         gnss = post(rig, op.TestDevice("gnss")).data
         assert len(gnss) == 20

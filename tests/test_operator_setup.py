@@ -194,6 +194,37 @@ def test_save_section_keeps_comments_and_a_backup(tmp_path: Path) -> None:
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+def test_can_options_are_given_whole_and_checked_by_name(tmp_path: Path) -> None:
+    path = tmp_path / "t.toml"
+    path.write_text(
+        '[can]\ninterface = "slcan"\nchannel = "/dev/ttyACM0"\n\n'
+        "[can.options]\ntty_baudrate = 115200   # the adapter's serial speed\n"
+        "sleep_after_open = 2\n"
+    )
+    cfg = load_config(path)
+    assert settings.section_values(cfg, "can")["options"] == {
+        "tty_baudrate": 115200,
+        "sleep_after_open": 2,
+    }
+    # a name left out is removed, the kept one keeps its comment, a new one is added
+    new = settings.save_section(path, "can", {"options": {"tty_baudrate": 921600, "rtscts": True}})
+    assert dict(new.can.options) == {"tty_baudrate": 921600, "rtscts": True}
+    text = path.read_text()
+    assert "sleep_after_open" not in text and "# the adapter's serial speed" in text
+    assert settings.validate_section(new, "can", {"options": {}}).can.options == {}
+    with pytest.raises(ConfigError) as exc:
+        settings.validate_section(new, "can", {"options": {"bitrate": 250000}})
+    assert str(exc.value) == "can.options.bitrate: is set by can.bitrate"
+    with pytest.raises(ConfigError) as exc:
+        settings.validate_section(new, "can", {"options": {"tty-baud": 1}})
+    assert exc.value.key == "can.options.tty-baud"
+    # which keys a device is opened with, as changed between two configurations
+    moved = settings.validate_section(new, "can", {"channel": "/dev/ttyACM1", "bitrate": 500000})
+    assert settings.changed_device_keys(new, moved, "can") == ["can.channel", "can.bitrate"]
+    assert settings.changed_device_keys(new, new, "can") == []
+    assert settings.changed_device_keys(new, moved, "rate") == []
+
+
 def test_rate_curve_is_the_model_over_ndvi() -> None:
     curve = settings.rate_curve(default_config().rate, n=11)
     assert len(curve) == 11 and curve[0][0] == 0.0 and curve[-1][0] == 1.0

@@ -8,9 +8,11 @@ its field. The checks are the configuration's own (`topdress.terminal.settings`)
 from __future__ import annotations
 
 import json
+import tomllib
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+import tomlkit
 from nicegui import ui
 
 from topdress.i18n import tr
@@ -27,7 +29,7 @@ _UNITS = (
     ("_m", "unit.m"),
 )
 
-Widget = ui.input | ui.number | ui.switch | ui.select
+Widget = ui.input | ui.number | ui.switch | ui.select | ui.textarea
 
 
 def unit_of(key: str) -> str:
@@ -56,18 +58,24 @@ class SectionForm:
         choices: Mapping[str, list[Any] | dict[Any, str]] | None = None,
         free_choice: Iterable[str] = (),
         on_change: Callable[[], None] | None = None,
+        tables_as_text: Iterable[str] = (),
     ) -> None:
         self.section = section
         self.widgets: dict[str, Widget] = {}
         self._types: dict[str, type] = {}
         self._choices = choices or {}
         self._free = set(free_choice)
+        # Tables of free names (the CAN adapter's options): `name = value` lines, TOML-typed.
+        self._text_tables = set(tables_as_text)
         self._on_change = on_change
         with ui.grid(columns=2).classes("gap-x-4 gap-y-1 items-start w-full"):
             for key in keys if keys is not None else values:
                 self._add(key, _get(values, key))
 
     def _add(self, key: str, value: Any) -> None:
+        if key in self._text_tables:
+            self._add_text_table(key, value)
+            return
         if isinstance(value, Mapping):
             for sub, v in value.items():
                 self._add(f"{key}.{sub}", v)
@@ -102,6 +110,28 @@ class SectionForm:
         self.widgets[key] = widget
         self._types[key] = type(value)
 
+    def _add_text_table(self, key: str, value: Mapping[str, Any]) -> None:
+        dotted = f"{self.section}.{key}"
+        hook = self._on_change
+        widget = ui.textarea(
+            label_of(dotted),
+            value=tomlkit.dumps(dict(value)),
+            on_change=(lambda _e: hook()) if hook is not None else None,
+        )
+        widget.classes("w-full font-mono").props("dense autogrow").mark(f"field_{dotted}")
+        self.widgets[key] = widget
+        self._types[key] = dict
+
+    def text_errors(self) -> dict[str, str]:
+        """Tables typed as text that are not `name = value` lines (dotted key -> reason)."""
+        out: dict[str, str] = {}
+        for key in self._text_tables & self.widgets.keys():
+            try:
+                tomllib.loads(str(self.widgets[key].value or ""))
+            except tomllib.TOMLDecodeError as exc:
+                out[f"{self.section}.{key}"] = f"not name = value lines: {exc}"
+        return out
+
     def values(self) -> dict[str, Any]:
         """What the form holds, nested as the file nests it, each value in its key's type; a
         text that is not one (a number field left empty) is passed as it is, for the checks
@@ -118,6 +148,11 @@ class SectionForm:
                     value = json.loads(raw)
                 except ValueError:
                     value = raw
+            elif kind is dict:
+                try:
+                    value = tomllib.loads(str(raw or ""))
+                except tomllib.TOMLDecodeError:
+                    value = raw  # text_errors() says why
             _put(out, key, value)
         return out
 
@@ -126,6 +161,14 @@ class SectionForm:
         prefix = f"{self.section}."
         for key, widget in self.widgets.items():
             reason = errors.get(prefix + key)
+            if reason is None and key in self._text_tables:  # a name inside the table
+                inner = prefix + key + "."
+                named = [
+                    f"{k.removeprefix(inner)}: {r}"
+                    for k, r in errors.items()
+                    if k.startswith(inner)
+                ]
+                reason = "; ".join(named) or None
             widget.props.set_bool("error", reason is not None)
             widget.props.set_optional("error-message", reason)
 

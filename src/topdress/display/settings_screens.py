@@ -79,6 +79,10 @@ class SectionCard:
 
     def check(self) -> bool:
         """The configuration's checks on what is typed; the refused value shown at its field."""
+        unreadable = self.form.text_errors()
+        if unreadable:
+            self.form.show_errors(unreadable)
+            return False
         try:
             validate_section(self.hub.config(), self.section, self.values())
         except ConfigError as exc:
@@ -133,6 +137,7 @@ class CommunicationScreen:
                         "command_period_s",
                         "send_on_gnss",
                         "send_on_rate",
+                        "options",
                     ],
                 ),
             ):
@@ -150,6 +155,7 @@ class CommunicationScreen:
                         keys,
                         choices=choices,
                         free_choice=("port", "interface"),
+                        tables_as_text=("options",),
                     )
                     SectionCard(hub, actions, section, form)
                     self._test_view(section)

@@ -186,6 +186,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "key.can.command_period_s": ("command period", "指令周期"),
     "key.can.send_on_gnss": ("command on each GNSS speed", "每次 GNSS 速度即发送指令"),
     "key.can.send_on_rate": ("command on each rate change", "速率变化即发送指令"),
+    "key.can.options": (
+        "adapter options (name = value, one per line)",
+        "适配器选项（每行一项：名称 = 值）",
+    ),
     "key.rate.model": ("model", "模型"),
     "key.rate.split_upper": ("upper layer share", "上层比例"),
     "key.speed.mode": ("speed mode", "测速模式"),

@@ -44,9 +44,11 @@ from topdress.terminal.leadcal import LeadCal
 from topdress.terminal.rate import build_rate_model
 from topdress.terminal.serial_io import open_line_source
 from topdress.terminal.settings import (
+    DEVICE_KEYS,
     ECU_SECTIONS,
     PARAM_KEYS,
     RESTART_SECTIONS,
+    changed_device_keys,
     changed_ecu_params,
     save_section,
     validate_section,
@@ -135,9 +137,6 @@ class OperatorDesk:
             result = op.CommandResult(False, str(exc))
         except ConfigError as exc:
             result = op.CommandResult(False, str(exc), {exc.key: _reason(exc)})
-        except DeviceError as exc:  # a reopened device that cannot be opened: the old one stays
-            section = command.section if isinstance(command, op.ApplySettings) else "device"
-            result = op.CommandResult(False, str(exc), {section: str(exc)})
         if result is not None and not fut.done():
             fut.set_result(result)
 
@@ -389,8 +388,12 @@ class OperatorDesk:
             changed = changed_ecu_params(term.cfg, new)
             if changed:
                 return self._push(now, c, new, changed, fut)
-        elif c.section in ("gnss", "crop", "can"):
-            self._reopen(now, c.section, new)
+        elif c.section in DEVICE_KEYS:
+            try:
+                self._reopen(now, c.section, new)
+            except DeviceError as exc:  # the old device stays; the keys that made it fail said
+                keys = changed_device_keys(term.cfg, new, c.section) or [c.section]
+                return op.CommandResult(False, str(exc), dict.fromkeys(keys, str(exc)))
         return self._commit(c, new)
 
     def _retune(self, section: str, new: TerminalConfig) -> None:

@@ -30,7 +30,15 @@ from topdress.terminal.rate import RateModel, build_rate_model
 
 SECTIONS = tuple(f.name for f in dataclasses.fields(TerminalConfig))
 #: What applying a changed section takes, beyond the file.
-REOPEN = {"gnss": "gnss", "crop": "crop", "can": "can"}  # section -> device reopened
+#: The keys a device is opened with: a change reopens it, and a failure to open is shown at the
+#: keys changed (the old device stays).
+DEVICE_KEYS: dict[str, tuple[str, ...]] = {
+    "gnss": ("source", "port", "baud", "path", "replay_interval_s"),
+    "crop": ("source", "port", "baud", "path", "replay_interval_s"),
+    "can": ("interface", "channel", "bitrate", "options"),
+}
+#: Tables a form gives whole: a name left out of the new values is removed from the table.
+WHOLE_TABLES = ("ids", "options")
 # pushed to the ECU (meters stopped); [lookahead]'s meter and air-line times are ECU parameters
 ECU_SECTIONS = ("machine", "speed", "ecu", "lookahead")
 LIVE_SECTIONS = ("rate", "operator")  # taken at once by the loop
@@ -100,7 +108,11 @@ def config_document(cfg: TerminalConfig) -> dict[str, Any]:
 def _merge(base: dict[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
     out = dict(base)
     for key, value in changes.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), dict) and key not in ("ids",):
+        if (
+            isinstance(value, Mapping)
+            and isinstance(out.get(key), dict)
+            and key not in WHOLE_TABLES
+        ):
             out[key] = _merge(out[key], value)
         else:
             out[key] = _plain(value)
@@ -144,9 +156,23 @@ def save_section(path: Path, section: str, values: Mapping[str, Any]) -> Termina
 def _merge_into(table: Any, values: Mapping[str, Any]) -> None:
     for key, value in values.items():
         if isinstance(value, Mapping) and key in table and isinstance(table[key], Mapping):
+            if key in WHOLE_TABLES:  # removed names go; the kept ones keep their comments
+                for gone in [k for k in table[key] if k not in value]:
+                    del table[key][gone]
             _merge_into(table[key], value)
         else:
             table[key] = _plain(value)
+
+
+def changed_device_keys(old: TerminalConfig, new: TerminalConfig, section: str) -> list[str]:
+    """The dotted keys a device of `section` is opened with that differ between two
+    configurations (none for a section without a device)."""
+    before, after = getattr(old, section), getattr(new, section)
+    return [
+        f"{section}.{k}"
+        for k in DEVICE_KEYS.get(section, ())
+        if _plain(getattr(before, k)) != _plain(getattr(after, k))
+    ]
 
 
 def changed_ecu_params(old: TerminalConfig, new: TerminalConfig) -> dict[int, float]:
