@@ -35,7 +35,7 @@ class Rig:
             self.pc_bus,
             self.cfg,
             fan_rpm=3000,
-            on_event=lambda text: self.events.append((self.t, text)),
+            on_event=lambda text: self.events.append((self.t, str(text))),
             **link_kw,  # type: ignore[arg-type]
         )
         self.twin = SimulatedEcu(self.ecu_bus)
@@ -488,7 +488,7 @@ def test_udp_multicast_is_warned_about_at_start() -> None:
     bus = can.Bus(interface="virtual", channel="test-canlink-udp-warning")
     events: list[str] = []
     try:
-        link = CanLink(bus, cfg, fan_rpm=3000, on_event=events.append)
+        link = CanLink(bus, cfg, fan_rpm=3000, on_event=lambda e: events.append(str(e)))
         link.begin({}, 0.0)
         link.begin({}, 1.0)  # a re-push: said once
     finally:

@@ -22,6 +22,7 @@ from topdress.display.hub import DisplayHub, bearing_deg, distance_m
 from topdress.display.map_view import machine_arrow, rate_colour, swath_quad
 from topdress.display.pages import register_pages
 from topdress.display.server import DisplayError, DisplayOptions, check_security, is_loopback
+from topdress.i18n import text
 from topdress.terminal import operator as op
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
@@ -61,7 +62,14 @@ def working(t_s: float = 12.0, **kw: object) -> Snapshot:
         rate_model_kg_ha=(138.9, 138.9),
         applied_kg_ha=(141.9, 141.2),
         ndvi_per_sensor=(0.605, 0.621, None, 0.610),
-        speed_why="gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h",
+        speed_why=text(
+            "why.gnss",
+            cv=text("why.cv", cv=2.51),
+            threshold=4.2,
+            compare=text("source.gnss"),
+            speed=8.0,
+            switch=6.0,
+        ),
     )
     base.update(kw)
     return Snapshot(**base)  # type: ignore[arg-type]
@@ -109,7 +117,7 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
     assert text_of(user, "v_wheel") == "7.6"
     assert text_of(user, "v_gnss") == "8.0"
     assert text_of(user, "source") == "GNSS"
-    assert text_of(user, "source_why") == "gnss: CV 2.51 % < 4.2 %, GNSS 8.0 > 6.0 km/h"
+    assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 > 6 km/h"
     assert text_of(user, "op_state") == "RUNNING"
     assert text_of(user, "manual_state") == ""
     assert text_of(user, "ndvi_sensors") == "0.612"
@@ -128,11 +136,19 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
 
 async def test_main_screen_follows_new_snapshots(user: User) -> None:
     hub = DisplayHub(default_config)
-    hub.publish(working(v_kmh=3.0, source="wheel", speed_why="wheel: CV 9.50 % ≥ 4.2 %"))
+    why = text(
+        "why.not_uniform",
+        cv=text("why.cv", cv=9.5),
+        threshold=4.2,
+        compare=text("source.gnss"),
+        speed=3.0,
+        switch=6.0,
+    )
+    hub.publish(working(v_kmh=3.0, source="wheel", speed_why=why))
     register_pages(hub)
     await user.open("/")
     assert text_of(user, "source") == "wheel"
-    assert text_of(user, "source_why") == "wheel: CV 9.50 % ≥ 4.2 %"
+    assert text_of(user, "source_why") == "wheel: CV 9.50 % ≥ 4.2 % (not uniform)"
     hub.publish(working(t_s=12.1, v_kmh=6.5))
     await shows(user, "v_selected", "6.5")
     assert text_of(user, "source") == "GNSS"
@@ -173,10 +189,11 @@ async def test_faults_in_plain_words_and_waiting_ecu_named(user: User) -> None:
 
 async def test_language_switches_at_run_time(user: User) -> None:
     hub = DisplayHub(default_config)
-    hub.publish(working(faults=1 << 3))
+    hub.publish(working(faults=1 << 3, last_event=text("event.ecu_lost", s=1.0)))
     register_pages(hub)
     await user.open("/")
     await user.should_see("Speed")
+    assert text_of(user, "last_event") == "ECU lost: no status for 1.0 s"
     user.find(marker="language").click()
     user.find("简体中文").click()
     assert i18n.language() == "zh"
@@ -184,6 +201,9 @@ async def test_language_switches_at_run_time(user: User) -> None:
     await user.should_not_see("Speed, last minute")
     await shows(user, "faults", "上层排肥器堵转")
     assert text_of(user, "source") == "GNSS"
+    # the terminal's messages too: why this source, the last event
+    assert text_of(user, "source_why") == "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 > 6 km/h"
+    assert text_of(user, "last_event") == "控制器丢失：1.0 秒无状态帧"
     await user.should_see("km/h")  # units shown in both languages
 
 
@@ -392,13 +412,15 @@ async def test_alarms_are_acknowledged(user: User) -> None:
     term = Terminal()
     hub = DisplayHub(default_config, term.post)
     alarms = (
-        AlarmView("blocked_upper", "upper meter blocked (stopped by the ECU)", "active", 3.0),
-        AlarmView("gnss_lost", "GNSS lost: metering on the ground wheel", "acked", 1.0),
+        AlarmView("blocked_upper", text("alarm.text.blocked_upper"), "active", 3.0),
+        AlarmView("gnss_lost", text("alarm.gnss_lost"), "acked", 1.0),
     )
     hub.publish(working(alarms=alarms))
     register_pages(hub)
     await user.open("/")
-    assert text_of(user, "alarm_blocked_upper") == "upper meter blocked · active"
+    assert (
+        text_of(user, "alarm_blocked_upper") == "upper meter blocked (stopped by the ECU) · active"
+    )
     assert (
         text_of(user, "alarm_gnss_lost") == "GNSS lost: metering on the ground wheel · acknowledged"
     )

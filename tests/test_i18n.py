@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from topdress import i18n
-from topdress.i18n import UnknownLanguage, parse_language, set_language, tr
+from topdress.i18n import UnknownLanguage, parse_language, render, set_language, text, tr
 from topdress.i18n.catalogue import CATALOGUE
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "topdress"
@@ -44,11 +44,39 @@ def test_chinese_entries_are_translated() -> None:
 
 def test_every_key_used_in_the_code_is_in_the_catalogue() -> None:
     used: set[str] = set()
-    for path in [*(SRC / "display").rglob("*.py"), SRC / "terminal" / "console.py"]:
-        used |= set(re.findall(r"""\btr\(\s*["']([a-z_]+\.[A-Za-z0-9_.]+)["']""", path.read_text()))
-    assert used, "no tr() call found"
+    for path in SRC.rglob("*.py"):
+        used |= set(
+            re.findall(r"""\b(?:tr|text)\(\s*["']([a-z_]+\.[A-Za-z0-9_.]+)["']""", path.read_text())
+        )
+    assert len(used) > 150, "tr() and text() calls not found"
     missing = sorted(k for k in used if k not in CATALOGUE)
     assert missing == []
+
+
+def test_the_terminals_messages_are_keyed_with_their_values() -> None:
+    why = text(
+        "why.gnss",
+        cv=text("why.cv", cv=2.514),
+        threshold=4.2,
+        compare=text("source.wheel"),
+        speed=7.96,
+        switch=6.0,
+    )
+    # str() is the English of the program log; render() follows the language in force
+    assert str(why) == "GNSS: CV 2.51 % < 4.2 %, wheel 8.0 > 6 km/h"
+    set_language("zh")
+    assert render(why) == "GNSS：变异系数 2.51 % < 4.2 %，地轮 8.0 > 6 km/h"
+    assert str(why) == "GNSS: CV 2.51 % < 4.2 %, wheel 8.0 > 6 km/h"  # the log stays English
+    assert render(why, "en") == str(why)
+    # a library's or the system's own words pass as they are; nothing is empty
+    assert render("[Errno 2] No such file") == "[Errno 2] No such file" and render(None) == ""
+    assert render(text("event.gnss_lost", why="serial:/dev/ttyUSB0: gone")) == (
+        "GNSS 丢失（serial:/dev/ttyUSB0: gone）"
+    )
+    # values, not sentences: equal messages compare equal (the console prints each once)
+    assert text("event.ecu_lost", s=1.0) == text("event.ecu_lost", s=1.0)
+    with pytest.raises(KeyError):
+        render(text("event.no_such_event"))
 
 
 def test_keys_built_at_run_time_exist() -> None:
@@ -72,6 +100,21 @@ def test_keys_built_at_run_time_exist() -> None:
     for cal in ("catch", "wheel", "fan", "step.running", "step.weigh", "step.drive", "step.done"):
         assert f"cal.{cal}" in CATALOGUE
     assert "cal.step.aborted" in CATALOGUE
+    # the terminal's messages by their parts
+    for layer in ("upper", "lower"):
+        assert f"main.{layer}" in CATALOGUE
+        for kind in ("off_rate", "blocked", "fan_low"):
+            assert f"alarm.text.{kind}_{layer}" in CATALOGUE
+    for state in ("ok", "wait", "lost", "no_fix"):  # GNSS states, "no fix" as no_fix
+        assert f"link.{state}" in CATALOGUE
+    for name in ("resumed", "started", "stopped", "paused"):
+        assert f"op.done.{name}" in CATALOGUE
+    for end in ("ok", "low"):
+        assert f"cal.text.fan_{end}" in CATALOGUE
+    for state in ("ok", "silent"):
+        assert f"event.crop_{state}" in CATALOGUE
+    for which in ("field", "season"):
+        assert f"count.{which}" in CATALOGUE
 
 
 def test_switching_the_language() -> None:

@@ -45,7 +45,7 @@ class VirtualRig:
             self.pc_bus,
             session,
             clock=lambda: self.world.t_s,
-            on_event=lambda e: self.events.append((self.world.t_s, e)),
+            on_event=lambda e: self.events.append((self.world.t_s, str(e))),
         )
         self.term.open()
         self.snapshots: list[tuple[float, Snapshot]] = []
@@ -325,7 +325,14 @@ def test_crop_sensors_falling_silent_or_lost_are_reported() -> None:
     bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
     crop = FakeLineSource()
     events: list[str] = []
-    term = Terminal(cfg, FakeLineSource(), crop, bus, clock=lambda: 0.0, on_event=events.append)
+    term = Terminal(
+        cfg,
+        FakeLineSource(),
+        crop,
+        bus,
+        clock=lambda: 0.0,
+        on_event=lambda e: events.append(str(e)),
+    )
     try:  # not opened: no parameter push, so no ECU is needed for the loop's own logic
         term.tick(0.0)
         assert term.snapshot.crop_link == "wait"
@@ -368,7 +375,9 @@ def test_a_sensor_a_moment_late_is_not_announced() -> None:
     cfg = loads_config("")
     bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
     events: list[str] = []
-    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, on_event=events.append)
+    term = Terminal(
+        cfg, FakeLineSource(), FakeLineSource(), bus, on_event=lambda e: events.append(str(e))
+    )
     try:
         for k in range(100):  # 10 s of 10 Hz ticks
             t = k * 0.1
@@ -415,7 +424,9 @@ def test_can_receive_errors_are_counted_and_reported_once_per_spell() -> None:
     cfg = loads_config("")
     bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
     events: list[str] = []
-    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, on_event=events.append)
+    term = Terminal(
+        cfg, FakeLineSource(), FakeLineSource(), bus, on_event=lambda e: events.append(str(e))
+    )
     try:
         for k in range(3):  # the reader retries every 0.5 s while the adapter is gone
             term.handle("can_error", k * 0.5, "Could not read from serial device")
@@ -459,7 +470,9 @@ def test_input_that_never_gives_what_is_needed_is_explained_once(
     cfg = loads_config("")
     bus = open_bus(replace(cfg.can, channel=f"test-terminal-{next(_channels)}"))
     events: list[str] = []
-    term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, on_event=events.append)
+    term = Terminal(
+        cfg, FakeLineSource(), FakeLineSource(), bus, on_event=lambda e: events.append(str(e))
+    )
     try:
         for k in range(40):
             term.handle(kind, k * 0.1, line.rstrip(b"\r\n"))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from topdress.i18n import set_language, tr
+from topdress.i18n import set_language, text, tr
 from topdress.protocol import Fault
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
@@ -39,7 +39,7 @@ WORKING = Snapshot(
     gnss_link="ok",
     crop_link="3/4",
     counters={"nmea": 120, "nmea_bad": 2},
-    last_event="GNSS ok",
+    last_event=text("event.gnss", state=text("link.ok")),
 )
 
 
@@ -164,7 +164,7 @@ def test_the_block_fits_80_columns_and_shows_the_operator_state() -> None:
     assert "operator RUNNING           rate MANUAL 200.0 / 100.0 kg/ha" in text
     # waiting for the ECU with a long bus name, the first line packs so the run state shows
     assert lines[0].endswith("  ECU waiting (socketcan:can0)  GNSS ok  CROP 3/4 fresh  RUNNING")
-    assert "source  gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h" in text
+    assert "source  GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 > 6 km/h" in text
     assert "alarms  lower meter blocked  upper meter off rate (acknowledged)" in text
     assert "crop sensors lost: no NDVI (gone, not acknowledged)" in text
     assert "calib   Metering catch test weigh and enter kg 100 %: upper meter: 20.012" in text
@@ -182,15 +182,26 @@ BUSY = replace(
     faults=0x1FF,
     operator="running",
     manual=ManualView("fixed", 200.0, 100.0),
-    speed_why="gnss: CV 2.51 % < 4.2 %, gnss 8.0 > 6 km/h",
-    alarms=(
-        AlarmView("blocked_lower", "lower meter blocked", "active", 3.0),
-        AlarmView("off_rate_upper", "upper meter off rate", "acked", 2.0),
-        AlarmView("crop_lost", "crop sensors lost", "cleared", 1.0),
+    speed_why=text(
+        "why.gnss",
+        cv=text("why.cv", cv=2.51),
+        threshold=4.2,
+        compare=text("source.gnss"),
+        speed=8.0,
+        switch=6.0,
     ),
-    calibration=CalibrationView("catch", "weigh", "upper meter: 20.012 revolutions", 1.0),
+    alarms=(
+        AlarmView("blocked_lower", text("alarm.text.blocked_lower"), "active", 3.0),
+        AlarmView("off_rate_upper", text("alarm.text.off_rate_upper"), "acked", 2.0),
+        AlarmView("crop_lost", text("alarm.text.crop_lost", state="lost"), "cleared", 1.0),
+    ),
+    calibration=CalibrationView(
+        "catch", "weigh", text("cal.text.catch_weigh", layer=text("main.upper"), rev=20.012), 1.0
+    ),
     counters={f"counter_{i}": i * 1000 for i in range(12)},
-    last_event="GNSS lost (serial:/dev/ttyUSB0: [Errno 2] could not open port " + "x" * 80,
+    last_event=text(
+        "event.gnss_lost", why="serial:/dev/ttyUSB0: [Errno 2] could not open port " + "x" * 80
+    ),
 )
 
 
@@ -209,6 +220,10 @@ def test_the_block_follows_the_language_and_fits_80_columns_in_chinese() -> None
     assert tr("alarm.blocked_lower") in text and tr("alarm.state.acked") in text
     assert tr("manual.shown_fixed", upper="200.0", lower="100.0") in text
     assert tr("cal.catch") in text and tr("cal.step.weigh") in text
+    # the terminal's own messages in the language: why the source, the wizard, the last event
+    assert "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 > 6 km/h" in text
+    assert "上层排肥器：已转" in text
+    assert "GNSS 丢失（serial:/dev/ttyUSB0" in text
     working = "\n".join(render_lines(WORKING))
     assert f"来自 {tr('source.gnss')}" in working and f"{tr('con.crop')} 3/4 有效" in working
     assert tr("fault.GNSS_LOST") in working and tr("fault.UPPER_FAN_LOW") in working

@@ -32,7 +32,7 @@ def test_vanished_gnss_port_forwards_not_available_at_once() -> None:
     gnss = SerialLineSource(port.path, 115200)
     bus = open_bus(cfg.can)
     events: list[str] = []
-    term = Terminal(cfg, gnss, FakeLineSource(), bus, on_event=events.append)
+    term = Terminal(cfg, gnss, FakeLineSource(), bus, on_event=lambda e: events.append(str(e)))
     term.open()
     try:
         assert _wait_for(lambda: gnss.connected)

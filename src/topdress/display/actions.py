@@ -15,7 +15,7 @@ from typing import Any
 from nicegui import ui
 
 from topdress.display.hub import DisplayHub
-from topdress.i18n import tr
+from topdress.i18n import render, tr
 from topdress.terminal.operator import CommandResult
 
 COMMAND_TIMEOUT_S = 15.0  # settings for the ECU wait for every acknowledgement
@@ -69,5 +69,7 @@ class Actions:
             ui.notify(tr("action.timeout"), type="negative")
             return None
         if not result.ok:
-            ui.notify(result.message or tr("action.refused"), type="negative", multi_line=True)
+            ui.notify(
+                render(result.message) or tr("action.refused"), type="negative", multi_line=True
+            )
         return result

@@ -12,7 +12,7 @@ from nicegui import ui
 
 from topdress.display.actions import Actions
 from topdress.display.hub import DisplayHub
-from topdress.i18n import tr
+from topdress.i18n import render, tr
 from topdress.i18n.catalogue import CATALOGUE
 from topdress.terminal import operator as op
 from topdress.terminal.app import Snapshot
@@ -96,7 +96,7 @@ class CalibrationScreen:
             "text-lg font-bold"
         ).mark("cal_state")
         ui.linear_progress(value=v.progress, show_value=False).classes("w-full")
-        ui.label(v.text).classes("text-sm text-gray-700").mark("cal_text")
+        ui.label(render(v.text)).classes("text-sm text-gray-700").mark("cal_text")
         for name, value in v.result.items():
             label = tr(f"cal.result.{name}") if f"cal.result.{name}" in CATALOGUE else name
             ui.label(f"{label}: {value:.4g}").classes("font-mono").mark(f"cal_result_{name}")

@@ -9,8 +9,7 @@ from topdress.display.actions import Actions
 from topdress.display.charts import meter_options, speed_options
 from topdress.display.hub import DisplayHub
 from topdress.display.map_view import LiveMap
-from topdress.i18n import tr
-from topdress.i18n.catalogue import CATALOGUE
+from topdress.i18n import render, tr
 from topdress.terminal import operator as op
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
@@ -183,7 +182,7 @@ class MainScreen:
         colour = "primary" if source == "gnss" else "orange"
         if self.source.props.get("color") != colour:
             self.source.props["color"] = colour
-        self.why.set_text(s.speed_why if live else "")
+        self.why.set_text(render(s.speed_why) if live else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
         self.per_sensor.set_text(
@@ -211,7 +210,7 @@ class MainScreen:
                 "text-base " + ("text-green-700" if ok else "text-red-700 font-bold"),
             )
         self.faults.set_text(fmt.faults_text(s))
-        self.event.set_text(s.last_event or "")
+        self.event.set_text(render(s.last_event))
         if s.t_s - self._chart_t >= CHART_PERIOD_S or s.t_s < self._chart_t:
             self._chart_t = s.t_s
             history = self.hub.history()
@@ -262,8 +261,7 @@ class MainScreen:
             if not alarms:
                 ui.label(tr("alarm.none")).classes("text-green-700").mark("alarm_none")
             for a in alarms:
-                key = f"alarm.{a.name}"
-                text = tr(key) if key in CATALOGUE else a.text
+                text = render(a.text)  # with its figures
                 colour = {"active": "text-red-700 font-bold", "acked": "text-amber-800"}.get(
                     a.state, "text-gray-600"
                 )

@@ -18,7 +18,7 @@ from topdress.display.forms import SectionForm
 from topdress.display.hub import DisplayHub
 from topdress.ecu import EcuParams
 from topdress.errors import ConfigError
-from topdress.i18n import tr
+from topdress.i18n import render, tr
 from topdress.terminal import operator as op
 from topdress.terminal.app import Snapshot
 from topdress.terminal.settings import (
@@ -103,7 +103,7 @@ class SectionCard:
             self.answer.set_text("")
             return
         self.form.show_errors(result.errors)
-        self.answer.set_text(result.message)
+        self.answer.set_text(render(result.message))
         self.answer.classes(
             replace="text-sm " + ("text-green-700" if result.ok else "text-red-700")
         )

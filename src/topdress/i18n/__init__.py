@@ -1,5 +1,11 @@
 """Operator-facing text in English and Simplified Chinese, from one catalogue.
 
+Messages the terminal makes (why a speed source, an event, a calibration step, a command's
+answer) are `Text` values: a catalogue key and the values that fill it. The console and the
+display render them in the language in force (`render`); `str()` gives the English, for the
+program log, the session log and scripts. The catalogue is plain data below the terminal and
+the display, so the terminal's domain code can name its messages without any UI code.
+
 The language is one process-wide setting (the display's language menu and the console read the
 same one), switchable at run time: `set_language("zh")` bumps `version()`, which a page polls to
 redraw its static text.
@@ -9,7 +15,8 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping
-from typing import Literal, get_args
+from dataclasses import dataclass
+from typing import Any, Literal, get_args
 
 from topdress.i18n.catalogue import CATALOGUE
 
@@ -68,14 +75,45 @@ def tr(key: str, lang: Language | None = None, **values: object) -> str:
     return text.format(**values) if values else text
 
 
+@dataclass(frozen=True, slots=True)
+class Text:
+    """A message as a catalogue key and its values (numbers, names, nested Texts); the values
+    are formatted by the catalogue's `{name:spec}` so each language places them its own way."""
+
+    key: str
+    values: tuple[tuple[str, Any], ...] = ()
+
+    def __str__(self) -> str:
+        return render(self, "en")
+
+
+def text(key: str, **values: Any) -> Text:
+    """`Text(key, values)`; an unknown key fails when rendered (the catalogue test finds them)."""
+    return Text(key, tuple(values.items()))
+
+
+def render(message: Text | str | None, lang: Language | None = None) -> str:
+    """A message in `lang` (default: the language in force); a plain string (a library's or the
+    operating system's own words) as it is, None as empty."""
+    if message is None:
+        return ""
+    if isinstance(message, str):
+        return message
+    values = {k: render(v, lang) if isinstance(v, Text) else v for k, v in message.values}
+    return tr(message.key, lang, **values)
+
+
 __all__ = [
     "LANGUAGES",
     "LANGUAGE_NAMES",
     "Language",
+    "Text",
     "UnknownLanguage",
     "language",
     "parse_language",
+    "render",
     "set_language",
+    "text",
     "tr",
     "version",
 ]

@@ -48,6 +48,29 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "source.wheel": ("wheel", "地轮"),
     "source.fused": ("fused", "融合"),
     "source.none": ("none", "无"),
+    # why the ECU meters on its speed source (the paper's rule)
+    "why.mode": ("{source}: speed mode {mode}", "{source}：速度模式 {mode}"),
+    "why.none": ("none: no usable speed", "无：没有可用的速度"),
+    "why.encoder_fault": ("GNSS: wheel encoder fault", "GNSS：地轮编码器故障"),
+    "why.gnss_frozen": (
+        "wheel: GNSS speed frozen while the wheel stands",
+        "地轮：地轮静止时 GNSS 速度冻结",
+    ),
+    "why.no_gnss": ("{source}: no valid GNSS speed", "{source}：无有效 GNSS 速度"),
+    "why.cv": ("CV {cv:.2f} %", "变异系数 {cv:.2f} %"),
+    "why.cv_none": ("CV --", "变异系数 --"),
+    "why.gnss": (
+        "GNSS: {cv} < {threshold:g} %, {compare} {speed:.1f} > {switch:g} km/h",
+        "GNSS：{cv} < {threshold:g} %，{compare} {speed:.1f} > {switch:g} km/h",
+    ),
+    "why.not_uniform": (
+        "wheel: {cv} ≥ {threshold:g} % (not uniform)",
+        "地轮：{cv} ≥ {threshold:g} %（非匀速）",
+    ),
+    "why.slow": (
+        "wheel: {compare} {speed:.1f} ≤ {switch:g} km/h",
+        "地轮：{compare} {speed:.1f} ≤ {switch:g} km/h",
+    ),
     "link_name.ecu": ("ECU", "控制器"),
     "link_name.gnss": ("GNSS", "GNSS"),
     "link_name.crop": ("crop sensors", "作物传感器"),
@@ -68,6 +91,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "fault.NO_SPEED": ("no speed at all", "无速度信号"),
     "fault.GNSS_FROZEN": ("GNSS speed frozen", "GNSS 速度冻结"),
     # ---- the terminal's console (labels of its status block, padded to 8 columns there)
+    "con.refused": ("refused: {message}", "被拒绝：{message}"),
     "con.speed": ("speed", "速度"),
     "con.from": ("from", "来自"),
     "con.uniform": ("uniform", "匀速"),
@@ -111,6 +135,137 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "manual.fixed": ("fixed kg/ha", "固定施肥量"),
     "manual.percent": ("± % on the model", "模型 ± %"),
     "manual.shown_fixed": ("MANUAL {upper} / {lower} kg/ha", "手动 {upper} / {lower} kg/ha"),
+    "manual.fixed_is": (
+        "manual {upper:.1f}/{lower:.1f} kg/ha",
+        "手动 {upper:.1f}/{lower:.1f} kg/ha",
+    ),
+    "manual.percent_is": ("manual {percent:+.0f} % on the model", "手动 模型 {percent:+.0f} %"),
+    "manual.model_is": ("model", "模型"),
+    # ---- answers to the operator's commands
+    "op.done.started": ("started", "已开始"),
+    "op.done.resumed": ("resumed", "已继续"),
+    "op.done.stopped": ("stopped", "已停止"),
+    "op.done.paused": ("paused: meters stopped, fans kept", "已暂停：排肥器停止，风机保持"),
+    "op.done.rate": ("rate: {rate}", "施肥量：{rate}"),
+    "op.done.acked": ("{n} acknowledged", "已确认 {n} 项"),
+    "op.done.reset": ("{which} counter reset", "{which}统计已清零"),
+    "op.done.cal_closed": ("calibration closed, nothing changed", "标定已关闭，未做更改"),
+    "op.done.test": ("{device} on {where}: {n} recent", "{device}（{where}）：最近 {n} 条"),
+    "op.done.saved": (", saved to {path}", "，已保存到 {path}"),
+    "op.done.not_saved": (" (not saved: no configuration file)", "（未保存：无配置文件）"),
+    "op.done.later": (" (in force at the next start)", "（下次启动时生效）"),
+    "op.done.settings": (
+        "settings [{section}] applied{saved}{later}",
+        "设置 [{section}] 已应用{saved}{later}",
+    ),
+    "op.done.pushing": ("pushing to the ECU", "正在发送到控制器"),
+    "op.error.manual_mode": ("manual mode must be one of {modes}", "手动模式必须为 {modes} 之一"),
+    "op.error.rate_range": (
+        "{name}: {value:g} is outside 0..{max:g} kg/ha",
+        "{name}：{value:g} 超出 0..{max:g} kg/ha",
+    ),
+    "op.error.percent_range": (
+        "percent: {value:g} is outside {lo:g}..{hi:g} %",
+        "百分比：{value:g} 超出 {lo:g}..{hi:g} %",
+    ),
+    "op.error.calibrating": ("a calibration is running: close it first", "正在标定：请先关闭标定"),
+    "op.error.pause": (
+        "only running meters can be paused (now {state})",
+        "只有作业中才能暂停（当前：{state}）",
+    ),
+    "op.error.no_alarm": ("no alarm {name!r}", "没有报警 {name!r}"),
+    "op.error.no_cal": ("no {cal} open", "未打开{cal}"),
+    "op.error.stop_first": ("stop the meters first (now {state})", "请先停止排肥（当前：{state}）"),
+    "op.error.ecu_for_cal": (
+        "the ECU is {state}: calibration needs it",
+        "控制器{state}：标定需要控制器",
+    ),
+    "op.error.no_device": (
+        "no device {device!r} (gnss, crop, can)",
+        "没有设备 {device!r}（gnss、crop、can）",
+    ),
+    "op.error.settings_busy": (
+        "settings are being applied: wait for the ECU's answer",
+        "正在应用设置：请等待控制器应答",
+    ),
+    "op.error.save": ("cannot save {path}: {error}", "无法保存 {path}：{error}"),
+    "op.error.not_saved": (
+        "applied in the ECU, not saved: {error}",
+        "已应用到控制器，但未保存：{error}",
+    ),
+    "op.error.ecu_stopped": (
+        "the ECU takes [{section}] only with the meters stopped (now {state})",
+        "控制器只在排肥停止时接受 [{section}]（当前：{state}）",
+    ),
+    "op.error.ecu_params": (
+        "the ECU is {state}: its parameters cannot be changed",
+        "控制器{state}：无法修改其参数",
+    ),
+    # ---- events (the console's lines, the display's last event, the log)
+    "event.operator": ("operator: {what}", "操作：{what}"),
+    "event.calibration": ("calibration: {what}", "标定：{what}"),
+    "event.alarm": ("alarm: {alarm}", "报警：{alarm}"),
+    "event.settings_refused": (
+        "settings [{section}] refused: {error}",
+        "设置 [{section}] 被拒绝：{error}",
+    ),
+    "event.can_rx_error": ("CAN receive error: {error}", "CAN 接收错误：{error}"),
+    "event.can_tx_failed": ("CAN send failed: {error}", "CAN 发送失败：{error}"),
+    "event.can_tx_again": ("CAN send works again", "CAN 发送已恢复"),
+    "event.ecu_ready": (
+        "ECU ready: every parameter acknowledged, {s:.1f} s after start",
+        "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",
+    ),
+    "event.ecu_back": ("ECU back", "控制器已恢复"),
+    "event.ecu_lost": ("ECU lost: no status for {s:.1f} s", "控制器丢失：{s:.1f} 秒无状态帧"),
+    "event.ecu_wait_silent": (
+        "ECU wait: {name} unacknowledged after {tries} tries on CAN {where}; still trying (is "
+        "the ECU powered, on this bus?)",
+        "等待控制器：参数 {name} 在 CAN {where} 上发送 {tries} 次未确认；继续重试（控制器是否通电、"
+        "是否在此总线上？）",
+    ),
+    "event.ecu_wait_deaf": (
+        "ECU wait: {name} unacknowledged after {tries} tries on CAN {where}; the ECU sends "
+        "status but does not answer (check [can.ids]); still trying",
+        "等待控制器：参数 {name} 在 CAN {where} 上发送 {tries} 次未确认；控制器发送状态帧但不应答"
+        "（请检查 [can.ids]）；继续重试",
+    ),
+    "event.udp_multicast": (
+        "warning: CAN over udp_multicast: any host on this network can read and inject frames "
+        "(no authentication); use it only on a private network or this machine",
+        "警告：CAN 经 udp_multicast 传输：本网络上任何主机都能读取和注入报文（无认证）；"
+        "仅在专用网络或本机使用",
+    ),
+    "event.gnss": ("GNSS {state}", "GNSS：{state}"),
+    "event.gnss_silent": (
+        "GNSS lost (no speed sentence for {s:g} s)",
+        "GNSS 丢失（{s:g} 秒无速度语句）",
+    ),
+    "event.gnss_lost": ("GNSS lost ({why})", "GNSS 丢失（{why}）"),
+    "event.gnss_no_speed": (
+        "GNSS: {lines} lines, none with a speed: the receiver must send RMC (or VTG)",
+        "GNSS：{lines} 行，均无速度：接收机须输出 RMC（或 VTG）",
+    ),
+    "event.gnss_no_decode": (
+        "GNSS: {lines} lines, none with a speed: none decodes, check gnss.baud",
+        "GNSS：{lines} 行，均无速度：无法解码，请检查 gnss.baud",
+    ),
+    "event.crop_lost": ("crop sensors lost ({why})", "作物传感器丢失（{why}）"),
+    "event.crop_ok": ("crop sensors ok", "作物传感器正常"),
+    "event.crop_silent": (
+        "crop sensors silent: no NDVI, rate 0",
+        "作物传感器无数据：无 NDVI，施肥量为 0",
+    ),
+    "event.crop_fresh": (
+        "crop sensors: {fresh} of {n} fresh",
+        "作物传感器：{n} 个中 {fresh} 个有效",
+    ),
+    "event.crop_unusable": (
+        "crop sensors: {lines} lines, none usable (last: {last}): check crop.baud and "
+        "[crop.columns]",
+        "作物传感器：{lines} 行，均不可用（最后一条：{last}）：请检查 crop.baud 和 [crop.columns]",
+    ),
+    "event.counters_error": ("counters: {error}", "作业统计：{error}"),
     "manual.shown_percent": ("MANUAL model {percent} %", "手动 模型 {percent} %"),
     "main.rate_model": ("model rate", "模型施肥量"),
     "main.rate_applied": ("rate applied", "实际施肥量"),
@@ -130,6 +285,34 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "alarm.gnss_lost": ("GNSS lost: metering on the ground wheel", "GNSS 丢失：按地轮速度排肥"),
     "alarm.crop_lost": ("crop sensors lost: no NDVI", "作物传感器丢失：无 NDVI"),
     "alarm.ecu_lost": ("ECU lost: no status frames", "控制器丢失：无状态帧"),
+    "alarm.text.off_rate_upper": (
+        "upper meter off rate: {rpm:.1f} r/min for {target:.1f} (more than {pct:g} % for {s:g} s)",
+        "上层排肥转速偏离：{rpm:.1f} r/min，目标 {target:.1f}（偏差超过 {pct:g} % 达 {s:g} 秒）",
+    ),
+    "alarm.text.off_rate_lower": (
+        "lower meter off rate: {rpm:.1f} r/min for {target:.1f} (more than {pct:g} % for {s:g} s)",
+        "下层排肥转速偏离：{rpm:.1f} r/min，目标 {target:.1f}（偏差超过 {pct:g} % 达 {s:g} 秒）",
+    ),
+    "alarm.text.blocked_upper": (
+        "upper meter blocked (stopped by the ECU)",
+        "上层排肥器堵转（控制器已停机）",
+    ),
+    "alarm.text.blocked_lower": (
+        "lower meter blocked (stopped by the ECU)",
+        "下层排肥器堵转（控制器已停机）",
+    ),
+    "alarm.text.fan_low_upper": (
+        "upper fan low: the upper meter is held",
+        "上层风机转速低：上层排肥器暂停",
+    ),
+    "alarm.text.fan_low_lower": (
+        "lower fan low: the lower meter is held",
+        "下层风机转速低：下层排肥器暂停",
+    ),
+    "alarm.text.crop_lost": (
+        "crop sensors {state}: no NDVI, rate 0 (unless manual)",
+        "作物传感器{state}：无 NDVI，施肥量为 0（手动模式除外）",
+    ),
     "count.title": ("Counters", "作业统计"),
     "count.field": ("field", "本地块"),
     "count.season": ("season", "本季"),
@@ -250,6 +433,145 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "cal.step.drive": ("drive the distance", "行驶标定距离"),
     "cal.step.done": ("done", "完成"),
     "cal.step.aborted": ("aborted", "已中止"),
+    "cal.text.catch_running": (
+        "{layer} meter: {rev:g} revolutions at {rpm:g} r/min",
+        "{layer}排肥器：以 {rpm:g} r/min 转 {rev:g} 圈",
+    ),
+    "cal.text.catch_weigh": (
+        "{layer} meter: {rev:.3f} revolutions; weigh what was caught and enter kg",
+        "{layer}排肥器：已转 {rev:.3f} 圈；请称量接到的肥料并输入 kg",
+    ),
+    "cal.text.catch_aborted": (
+        "catch test aborted by the ECU: {reason}",
+        "接肥试验被控制器中止：{reason}",
+    ),
+    "cal.text.no_answer": (
+        "the ECU does not answer the calibration command (firmware too old?)",
+        "控制器未响应标定指令（固件版本过旧？）",
+    ),
+    "cal.text.catch_done": (
+        "{layer}: {kg_per_rev:.4f} kg/rev ({kg:g} kg over {rev:.3f} rev)",
+        "{layer}：{kg_per_rev:.4f} kg/转（{rev:.3f} 转共 {kg:g} kg）",
+    ),
+    "cal.text.wheel_drive": (
+        "drive {distance:g} m (measured on the ground), then finish",
+        "行驶 {distance:g} m（地面实测距离）后点击结束",
+    ),
+    "cal.text.wheel_done": (
+        "radius {radius_mm:.1f} mm ({rev:.2f} rev), GNSS {gnss_m:.1f} m, slip {slip:.1f} %",
+        "半径 {radius_mm:.1f} mm（{rev:.2f} 转），GNSS {gnss_m:.1f} m，滑移率 {slip:.1f} %",
+    ),
+    "cal.text.wheel_done_no_gnss": (
+        "radius {radius_mm:.1f} mm ({rev:.2f} rev), no GNSS distance (GNSS lost meanwhile)",
+        "半径 {radius_mm:.1f} mm（{rev:.2f} 转），无 GNSS 距离（期间 GNSS 丢失）",
+    ),
+    "cal.text.fan_running": (
+        "fans to {rpm:g} r/min for {s:g} s, meters off",
+        "风机升至 {rpm:g} r/min 运行 {s:g} 秒，排肥器关闭",
+    ),
+    "cal.text.fan_no_ecu": (
+        "fan check aborted: the ECU is not heard",
+        "风机检查中止：收不到控制器",
+    ),
+    "cal.text.fan_moves": ("fan check aborted: the machine moves", "风机检查中止：机器在移动"),
+    "cal.text.fan_ok": ("{layer} {rpm:.0f} r/min ok", "{layer} {rpm:.0f} r/min 正常"),
+    "cal.text.fan_low": ("{layer} {rpm:.0f} r/min LOW", "{layer} {rpm:.0f} r/min 偏低"),
+    "cal.text.fan_done": (
+        "fans (target {target:g}, min {min:g} r/min): {upper}, {lower}",
+        "风机（目标 {target:g}，最低 {min:g} r/min）：{upper}，{lower}",
+    ),
+    "cal.error.not_weighing": (
+        "the catch test is {step}, not waiting for a weight",
+        "接肥试验{step}，不在等待输入重量",
+    ),
+    "cal.error.wheel_step": ("the wheel calibration is {step}", "地轮标定{step}"),
+    "cal.error.distance": (
+        "distance must be > 0 m, not {distance:g}",
+        "距离必须 > 0 m，而不是 {distance:g}",
+    ),
+    "cal.error.distance_range": (
+        "distance must be 1..1000 m, not {distance:g}",
+        "距离必须在 1..1000 m 之间，而不是 {distance:g}",
+    ),
+    "lead.text.trial": (
+        "trial {n} of {trials}: {layer} meter at {rpm:g} r/min; press seen when product comes "
+        "out of the outlet",
+        "第 {n}/{trials} 次试验：{layer}排肥器 {rpm:g} r/min；看到出肥口出肥时按“看到出肥”",
+    ),
+    "lead.text.no_ecu": (
+        "look-ahead calibration aborted: the ECU is not heard",
+        "前瞻标定中止：收不到控制器",
+    ),
+    "lead.text.fans": ("fans spinning up ({rpm:.0f} r/min)", "风机加速中（{rpm:.0f} r/min）"),
+    "lead.text.aborted": (
+        "look-ahead calibration aborted by the ECU: {reason}",
+        "前瞻标定被控制器中止：{reason}",
+    ),
+    "lead.text.no_press": (
+        "no press within {s:g} s: the trial is repeated",
+        "{s:g} 秒内未按键：重做本次试验",
+    ),
+    "lead.text.seen": ("seen; timing the meter", "已看到出肥；正在测排肥器时间"),
+    "lead.text.done": (
+        "meter {meter:.0f} ms (spread {meter_spread:.0f}), air line {air:.0f} ms (spread "
+        "{air_spread:.0f}) over {trials} trials",
+        "排肥器 {meter:.0f} ms（极差 {meter_spread:.0f}），气力输送 {air:.0f} ms（极差 "
+        "{air_spread:.0f}），共 {trials} 次试验",
+    ),
+    "lead.error.late": (
+        "seen {s:.1f} s after the start: too late",
+        "开始后 {s:.1f} 秒才看到：太晚",
+    ),
+    "lead.error.not_turned": (
+        "the meter has not turned yet: press when product comes out",
+        "排肥器尚未转动：出肥时再按",
+    ),
+    "lead.error.early": (
+        "seen before the meter turned (less the reaction time): press when product comes out "
+        "of the outlet",
+        "排肥器转动前（扣除反应时间）就按了：出肥口出肥时再按",
+    ),
+    "lead.error.short": (
+        "the meter has not run long enough to time it: wait a moment",
+        "排肥器运行时间不足以计时：请稍候",
+    ),
+    "lead.error.unsteady": (
+        "the meter does not turn steadily: no meter time",
+        "排肥器转速不稳：无法得到排肥器时间",
+    ),
+    "lead.error.trials": (
+        "trials must be 1..{max}, not {trials}",
+        "试验次数必须为 1..{max}，而不是 {trials}",
+    ),
+    "lead.error.reaction": (
+        "reaction time must be 0..1000 ms, not {ms:g}",
+        "反应时间必须为 0..1000 ms，而不是 {ms:g}",
+    ),
+    "lead.error.run": (
+        "run time must be 1..30 s, not {s:g}",
+        "运行时间必须为 1..30 秒，而不是 {s:g}",
+    ),
+    "lead.error.no_trial": (
+        "no trial running: wait for the meter to start",
+        "没有进行中的试验：请等待排肥器启动",
+    ),
+    "lead.error.already": ("already seen: the meter is being timed", "已按过：正在测排肥器时间"),
+    "cal.error.no_revolutions": (
+        "the meter did not turn: no revolutions counted",
+        "排肥器未转动：未计到转数",
+    ),
+    "cal.error.weight": (
+        "weighed mass must be > 0 kg, not {kg:g}",
+        "称重质量必须 > 0 kg，而不是 {kg:g}",
+    ),
+    "cal.error.no_pulses": (
+        "the ground wheel did not turn: no pulses counted",
+        "地轮未转动：未计到脉冲",
+    ),
+    "cal.error.layer": (
+        "layer must be upper or lower, not {layer!r}",
+        "层必须为 upper 或 lower，而不是 {layer!r}",
+    ),
     "cal.result.kg_per_rev": ("kg per revolution", "每转排肥量 kg"),
     "cal.result.weighed_kg": ("weighed kg", "称重 kg"),
     "cal.result.revolutions": ("revolutions", "转数"),

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from topdress.i18n import Text, text
 from topdress.protocol import Fault
 
 ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
@@ -34,14 +35,14 @@ class AlarmInputs:
 @dataclass(frozen=True)
 class AlarmView:
     name: str
-    text: str
+    text: Text  # the alarm with its figures
     state: str  # active | acked | cleared
     since_s: float  # terminal time the alarm came
 
 
 @dataclass
 class _Alarm:
-    text: str
+    text: Text
     since_s: float
     active: bool = True
     acked: bool = False
@@ -53,7 +54,7 @@ _FAN_LOW = (Fault.UPPER_FAN_LOW, Fault.LOWER_FAN_LOW)
 
 
 class AlarmBook:
-    """The alarms of one run. `update` once per tick; returns the texts of new alarms."""
+    """The alarms of one run. `update` once per tick; returns the events of new alarms."""
 
     def __init__(self, off_rate_pct: float, off_rate_s: float) -> None:
         self.off_rate_pct = off_rate_pct
@@ -61,14 +62,14 @@ class AlarmBook:
         self._alarms: dict[str, _Alarm] = {}
         self._off_since: list[float | None] = [None, None]
 
-    def update(self, t_s: float, x: AlarmInputs) -> list[str]:
+    def update(self, t_s: float, x: AlarmInputs) -> list[Text]:
         conditions = dict(self._conditions(t_s, x))
-        new: list[str] = []
-        for name, text in conditions.items():
+        new: list[Text] = []
+        for name, what in conditions.items():
             a = self._alarms.get(name)
             if a is None or not a.active:
-                self._alarms[name] = _Alarm(text, t_s)
-                new.append(f"alarm: {text}")
+                self._alarms[name] = _Alarm(what, t_s)
+                new.append(text("event.alarm", alarm=what))
         for name, a in list(self._alarms.items()):
             if a.active and name not in conditions:
                 a.active = False
@@ -76,25 +77,29 @@ class AlarmBook:
                     del self._alarms[name]
         return new
 
-    def _conditions(self, t_s: float, x: AlarmInputs) -> Iterator[tuple[str, str]]:
+    def _conditions(self, t_s: float, x: AlarmInputs) -> Iterator[tuple[str, Text]]:
         for i, layer in enumerate(_LAYERS):
             if self._off_rate(i, t_s, x):
                 yield (
                     f"off_rate_{layer}",
-                    f"{layer} meter off rate: {x.meter_rpm[i]:.1f} r/min for "
-                    f"{x.target_rpm[i]:.1f} (more than {self.off_rate_pct:g} % for "
-                    f"{self.off_rate_s:g} s)",
+                    text(
+                        f"alarm.text.off_rate_{layer}",
+                        rpm=x.meter_rpm[i],
+                        target=x.target_rpm[i],
+                        pct=self.off_rate_pct,
+                        s=self.off_rate_s,
+                    ),
                 )
             if x.faults & _BLOCKED[i]:
-                yield f"blocked_{layer}", f"{layer} meter blocked (stopped by the ECU)"
+                yield f"blocked_{layer}", text(f"alarm.text.blocked_{layer}")
             if x.faults & _FAN_LOW[i]:
-                yield f"fan_low_{layer}", f"{layer} fan low: the {layer} meter is held"
+                yield f"fan_low_{layer}", text(f"alarm.text.fan_low_{layer}")
         if x.gnss_link == "lost":
-            yield "gnss_lost", "GNSS lost: metering on the ground wheel"
+            yield "gnss_lost", text("alarm.gnss_lost")
         if x.crop_link in ("lost", "silent"):
-            yield "crop_lost", f"crop sensors {x.crop_link}: no NDVI, rate 0 (unless manual)"
+            yield "crop_lost", text("alarm.text.crop_lost", state=text(f"link.{x.crop_link}"))
         if x.ecu_link == "lost":
-            yield "ecu_lost", "ECU lost: no status frames"
+            yield "ecu_lost", text("alarm.ecu_lost")
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]

@@ -34,6 +34,7 @@ from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.gnss.utc import UtcClock
+from topdress.i18n import Text, text
 from topdress.log.model import StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
@@ -87,12 +88,13 @@ class Snapshot:
     lon: float | None = None
     distance_m: float = 0.0
     counters: dict[str, int] = field(default_factory=dict)
-    last_event: str | None = None
+    last_event: Text | None = None
     # The operator's side (topdress.terminal.desk): run state, manual mode, alarms, counters.
     operator: str = "stopped"  # stopped, running, paused, calibrating
     manual: ManualView = field(default_factory=ManualView)
     rate_model_kg_ha: tuple[float, float] = (0.0, 0.0)  # the NDVI model's, before manual/pause
-    speed_why: str = "--"  # why the ECU meters on its source (CV and speed against thresholds)
+    # why the ECU meters on its source (CV and speed against thresholds); None: ECU not heard
+    speed_why: Text | None = None
     alarms: tuple[AlarmView, ...] = ()
     count_field: CounterView = field(default_factory=CounterView)  # this field's counter
     count_season: CounterView = field(default_factory=CounterView)
@@ -123,7 +125,7 @@ class Terminal:
         session: SessionLog | None = None,
         clock: Callable[[], float] = time.monotonic,
         start: bool = True,
-        on_event: Callable[[str], None] | None = None,
+        on_event: Callable[[Text], None] | None = None,
         config_path: Path | None = None,
     ) -> None:
         """`start`: the meters start at once (headless); else at the operator's Start.
@@ -161,7 +163,7 @@ class Terminal:
         self._can_failing = False
         self._hinted: set[str] = set()
         self._crop_ok_once = False
-        self._last_event: str | None = None
+        self._last_event: Text | None = None
         self._stop = threading.Event()
         self._can_thread: threading.Thread | None = None
         self.desk = OperatorDesk(self, start, config_path)
@@ -264,13 +266,12 @@ class Terminal:
             self.counters["can_rx_errors"] += 1
             if not self._can_failing:  # once per failure spell (the reader retries every 0.5 s)
                 self._can_failing = True
-                self._event(f"CAN receive error: {payload}")
+                self._event(text("event.can_rx_error", error=str(payload)))
         self.link.poll(t)
 
     def _on_nmea(self, t: float, line: bytes) -> None:
-        text = line.decode("latin-1")
         if self.session is not None:
-            self.session.raw("nmea", t, text)
+            self.session.raw("nmea", t, line.decode("latin-1"))
         fix = self.nmea.decode(line)
         if not fix.ok:
             return
@@ -348,10 +349,12 @@ class Terminal:
             state = "lost"  # the port is open but the receiver fell silent
         if state != self._gnss_state:
             if self._gnss_state != "wait" or state != "ok":
-                why = f"no speed sentence for {self.tracker.stale_s:g} s"
-                if not self.gnss.connected:
-                    why = _why(self.gnss)
-                self._event(f"GNSS {state}" + (f" ({why})" if state == "lost" else ""))
+                if state != "lost":
+                    self._event(text("event.gnss", state=text(f"link.{state.replace(' ', '_')}")))
+                elif self.gnss.connected:
+                    self._event(text("event.gnss_silent", s=self.tracker.stale_s))
+                else:
+                    self._event(text("event.gnss_lost", why=_why(self.gnss)))
             self._gnss_state = state
 
     def _track_crop_state(self, now: float) -> None:
@@ -377,10 +380,12 @@ class Terminal:
         self._crop_ok_once |= state == "ok"
         # Sensors come up one by one at start: report changes once all were there, or a loss.
         if state == "lost":
-            self._event(f"crop sensors lost ({_why(self.crop)})")
+            self._event(text("event.crop_lost", why=_why(self.crop)))
         elif was_ok:
-            text = {"ok": "crop sensors ok", "silent": "crop sensors silent: no NDVI, rate 0"}
-            self._event(text.get(state, f"crop sensors: {fresh} of {n} fresh"))
+            if state in ("ok", "silent"):
+                self._event(text(f"event.crop_{state}"))
+            else:
+                self._event(text("event.crop_fresh", fresh=fresh, n=n))
 
     def _hint_unusable_input(self) -> None:
         """Lines that keep coming and never give what the terminal needs are a setting to fix
@@ -390,21 +395,14 @@ class Terminal:
             lines = sum(v for k, v in nmea.items() if k != "resync")
             if lines >= HINT_LINES:
                 self._hinted.add("gnss")
-                self._event(
-                    f"GNSS: {lines} lines, none with a speed: "
-                    + (
-                        "the receiver must send RMC (or VTG)"
-                        if nmea["ok"]
-                        else "none decodes, check gnss.baud"
-                    )
-                )
+                hint = "event.gnss_no_speed" if nmea["ok"] else "event.gnss_no_decode"
+                self._event(text(hint, lines=lines))
         if "crop" not in self._hinted and crop["ok"] == 0:
             bad = sum(v for k, v in crop.items() if k != "stale")
             if bad >= HINT_LINES:
                 self._hinted.add("crop")
                 self._event(
-                    f"crop sensors: {bad} lines, none usable (last: "
-                    f"{self.ndvi.sensors.last_error}): check crop.baud and [crop.columns]"
+                    text("event.crop_unusable", lines=bad, last=self.ndvi.sensors.last_error)
                 )
 
     def _snapshot(
@@ -499,12 +497,12 @@ class Terminal:
         if self.session is not None:
             self.session.raw("can_tx", self.clock(), (msg.arbitration_id, bytes(msg.data)))
 
-    def _event(self, text: str) -> None:
-        self._last_event = text
+    def _event(self, message: Text) -> None:
+        self._last_event = message
         self.counters["events"] += 1
-        log.info("%s", text)
+        log.info("%s", message)  # English in the program log
         if self._on_event is not None:
-            self._on_event(text)
+            self._on_event(message)
 
 
 def _why(source: LineSource) -> str:

@@ -24,6 +24,7 @@ import can
 
 from topdress import protocol
 from topdress.ecu.helpers import slip_measured_pct
+from topdress.i18n import Text, text
 from topdress.protocol import EcuCalStatus, FrameIds
 
 LAYER_INDEX = {"upper": 0, "lower": 1}
@@ -58,22 +59,34 @@ class CalCommand:
 class CalibrationView:
     kind: str  # catch | wheel | fan
     step: str  # running | weigh | drive | done | aborted
-    text: str
+    text: Text
     progress: float = 0.0  # 0..1
     result: dict[str, float] = field(default_factory=dict)
     key: str = ""  # the configuration key the result would set ("" for the fan check)
 
 
 class CalibrationError(ValueError):
-    """A value the operator entered that cannot give a result."""
+    """A value the operator entered that cannot give a result (its message a Text)."""
+
+    def __init__(self, message: Text) -> None:
+        super().__init__(message)
+        self.text = message
+
+
+def _layer(layer: str) -> Text:
+    return text(f"main.{layer}")
+
+
+def _step(step: str) -> Text:
+    return text(f"cal.step.{step}")
 
 
 def kg_per_rev(weighed_kg: float, revolutions: float) -> float:
     """Fertilizer per metering revolution from a catch test."""
     if not revolutions > 0:
-        raise CalibrationError("the meter did not turn: no revolutions counted")
+        raise CalibrationError(text("cal.error.no_revolutions"))
     if not (math.isfinite(weighed_kg) and weighed_kg > 0):
-        raise CalibrationError(f"weighed mass must be > 0 kg, not {weighed_kg:g}")
+        raise CalibrationError(text("cal.error.weight", kg=weighed_kg))
     return weighed_kg / revolutions
 
 
@@ -92,9 +105,9 @@ def wheel_result(
 ) -> WheelResult:
     """Effective radius and slip (eq. 3, the C core's td_slip) of a measured-distance run."""
     if pulses <= 0:
-        raise CalibrationError("the ground wheel did not turn: no pulses counted")
+        raise CalibrationError(text("cal.error.no_pulses"))
     if not distance_m > 0:
-        raise CalibrationError(f"distance must be > 0 m, not {distance_m:g}")
+        raise CalibrationError(text("cal.error.distance", distance=distance_m))
     n = pulses / ppr
     slip_gnss = None
     if gnss_distance_m is not None and gnss_distance_m > 0:
@@ -119,7 +132,7 @@ class CatchTest:
         self, layer: str, revolutions: float, meter_rpm: float, seq: int, ids: FrameIds
     ) -> None:
         if layer not in LAYER_INDEX:
-            raise CalibrationError(f"layer must be upper or lower, not {layer!r}")
+            raise CalibrationError(text("cal.error.layer", layer=layer))
         self.layer = layer
         self.target_rev = revolutions
         self.meter_rpm = meter_rpm
@@ -131,7 +144,9 @@ class CatchTest:
             1, LAYER_INDEX[layer], revolutions, meter_rpm, self.seq, ids=ids
         )
         self.step = "running"
-        self.text = f"{layer} meter: {revolutions:g} revolutions at {meter_rpm:g} r/min"
+        self.text = text(
+            "cal.text.catch_running", layer=_layer(layer), rev=revolutions, rpm=meter_rpm
+        )
         self.revolutions = 0.0
         self.result: dict[str, float] = {}
         self._sent_t: float | None = None
@@ -146,19 +161,18 @@ class CatchTest:
             if self.step == "running":
                 if st.state == "done":
                     self.step = "weigh"
-                    self.text = (
-                        f"{self.layer} meter: {st.revolutions:.3f} revolutions; "
-                        "weigh what was caught and enter kg"
+                    self.text = text(
+                        "cal.text.catch_weigh", layer=_layer(self.layer), rev=st.revolutions
                     )
                 elif st.state == "aborted":
                     self.step = "aborted"
-                    self.text = f"catch test aborted by the ECU: {st.reason}"
+                    self.text = text("cal.text.catch_aborted", reason=st.reason)
         if self._answered or self.step != "running":
             return []
         if self._sent_t is None or now - self._sent_t >= CAL_ANSWER_S - 1e-9:
             if self._tries >= CAL_TRIES:
                 self.step = "aborted"
-                self.text = "the ECU does not answer the calibration command (firmware too old?)"
+                self.text = text("cal.text.no_answer")
                 return []
             self._tries += 1
             self._sent_t = now
@@ -167,12 +181,16 @@ class CatchTest:
 
     def finish(self, weighed_kg: float) -> None:
         if self.step not in ("weigh", "done"):
-            raise CalibrationError(f"the catch test is {self.step}, not waiting for a weight")
+            raise CalibrationError(text("cal.error.not_weighing", step=_step(self.step)))
         k = kg_per_rev(weighed_kg, self.revolutions)
         self.result = {"kg_per_rev": k, "weighed_kg": weighed_kg, "revolutions": self.revolutions}
         self.step = "done"
-        self.text = (
-            f"{self.layer}: {k:.4f} kg/rev ({weighed_kg:g} kg over {self.revolutions:.3f} rev)"
+        self.text = text(
+            "cal.text.catch_done",
+            layer=_layer(self.layer),
+            kg_per_rev=k,
+            kg=weighed_kg,
+            rev=self.revolutions,
         )
 
     def close(self) -> list[can.Message]:
@@ -198,12 +216,12 @@ class WheelCal:
 
     def __init__(self, distance_m: float, radius_m: float, ppr: int) -> None:
         if not 1.0 <= distance_m <= 1000.0:
-            raise CalibrationError(f"distance must be 1..1000 m, not {distance_m:g}")
+            raise CalibrationError(text("cal.error.distance_range", distance=distance_m))
         self.distance_m = distance_m
         self.radius_m = radius_m
         self.ppr = ppr
         self.step = "drive"
-        self.text = f"drive {distance_m:g} m (measured on the ground), then finish"
+        self.text = text("cal.text.wheel_drive", distance=distance_m)
         self._pulses0: int | None = None
         self.pulses = 0
         self.gnss_m = 0.0
@@ -225,10 +243,10 @@ class WheelCal:
 
     def finish(self, distance_m: float | None = None) -> None:
         if self.step != "drive":
-            raise CalibrationError(f"the wheel calibration is {self.step}")
+            raise CalibrationError(text("cal.error.wheel_step", step=_step(self.step)))
         if distance_m is not None:
             if not 1.0 <= distance_m <= 1000.0:
-                raise CalibrationError(f"distance must be 1..1000 m, not {distance_m:g}")
+                raise CalibrationError(text("cal.error.distance_range", distance=distance_m))
             self.distance_m = distance_m
         r = wheel_result(
             self.pulses,
@@ -247,12 +265,13 @@ class WheelCal:
             self.result["gnss_distance_m"] = r.gnss_distance_m
             self.result["slip_gnss_pct"] = r.slip_gnss_pct
         self.step = "done"
-        gnss = (
-            f", GNSS {r.gnss_distance_m:.1f} m, slip {r.slip_gnss_pct:.1f} %"
-            if r.slip_gnss_pct is not None
-            else ", no GNSS distance (GNSS lost meanwhile)"
-        )
-        self.text = f"radius {r.radius_m * 1000:.1f} mm ({r.revolutions:.2f} rev){gnss}"
+        radius = dict(radius_mm=r.radius_m * 1000.0, rev=r.revolutions)
+        if r.gnss_distance_m is not None and r.slip_gnss_pct is not None:
+            self.text = text(
+                "cal.text.wheel_done", gnss_m=r.gnss_distance_m, slip=r.slip_gnss_pct, **radius
+            )
+        else:
+            self.text = text("cal.text.wheel_done_no_gnss", **radius)
 
     def close(self) -> list[can.Message]:
         return []
@@ -279,7 +298,7 @@ class FanCheck:
         self.fan_min_rpm = fan_min_rpm
         self.command = CalCommand(start=True, fan_rpm=fan_rpm)
         self.step = "running"
-        self.text = f"fans to {fan_rpm:g} rpm for {seconds:g} s, meters off"
+        self.text = text("cal.text.fan_running", rpm=fan_rpm, s=seconds)
         self.t = 0.0
         self._reached: list[float | None] = [None, None]
         self._last: tuple[float, float] = (0.0, 0.0)
@@ -289,11 +308,11 @@ class FanCheck:
         if self.step != "running":
             return []
         if not x.ecu_live:
-            self.step, self.text = "aborted", "fan check aborted: the ECU is not heard"
+            self.step, self.text = "aborted", text("cal.text.fan_no_ecu")
             self.command = CalCommand()
             return []
         if x.v_wheel_kmh > 0.5:
-            self.step, self.text = "aborted", "fan check aborted: the machine moves"
+            self.step, self.text = "aborted", text("cal.text.fan_moves")
             self.command = CalCommand()
             return []
         self.t += x.dt_s
@@ -308,7 +327,7 @@ class FanCheck:
     def _conclude(self) -> None:
         self.command = CalCommand()
         self.step = "done"
-        parts = []
+        parts: list[Text] = []
         for i, layer in enumerate(("upper", "lower")):
             rpm = self._last[i]
             ok = rpm >= self.fan_min_rpm
@@ -317,9 +336,15 @@ class FanCheck:
             reached = self._reached[i]
             if reached is not None:
                 self.result[f"{layer}_to_min_s"] = reached
-            parts.append(f"{layer} {rpm:.0f} rpm {'ok' if ok else 'LOW'}")
-        self.text = f"fans (target {self.fan_rpm:g}, min {self.fan_min_rpm:g} rpm): " + ", ".join(
-            parts
+            parts.append(
+                text(f"cal.text.fan_{'ok' if ok else 'low'}", layer=_layer(layer), rpm=rpm)
+            )
+        self.text = text(
+            "cal.text.fan_done",
+            target=self.fan_rpm,
+            min=self.fan_min_rpm,
+            upper=parts[0],
+            lower=parts[1],
         )
 
     def close(self) -> list[can.Message]:

@@ -34,6 +34,7 @@ from topdress import protocol
 from topdress.config import CanConfig
 from topdress.ecu import Ecu, EcuParams
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
+from topdress.i18n import Text, text
 from topdress.protocol import AckResult, FrameIds
 
 log = logging.getLogger(__name__)
@@ -131,12 +132,6 @@ class _ParamPush:
         return self.index >= len(self.items)
 
 
-UDP_MULTICAST_WARNING = (
-    "warning: CAN over udp_multicast: any host on this network can read and inject frames "
-    "(no authentication); use it only on a private network or this machine"
-)
-
-
 def _impossible_ack(
     ack: protocol.EcuParamAck, param_id: int, value: float, push: _ParamPush
 ) -> str | None:
@@ -170,7 +165,7 @@ class CanLink:
         param_retries: int = 3,
         param_backoff_s: tuple[float, ...] = PARAM_BACKOFF_S,
         on_tx: Callable[[can.Message], None] | None = None,
-        on_event: Callable[[str], None] | None = None,
+        on_event: Callable[[Text], None] | None = None,
     ) -> None:
         self._bus = bus
         self.cfg = cfg
@@ -206,7 +201,7 @@ class CanLink:
             protocol.param(param_id).check(value)
         if self.cfg.interface == "udp_multicast" and not self._warned_open_bus:
             self._warned_open_bus = True
-            self._event(UDP_MULTICAST_WARNING)
+            self._event(text("event.udp_multicast"))
         self._begin_t = now
         self._params = sorted(params.items())
         self._push = _ParamPush(list(self._params))
@@ -337,7 +332,7 @@ class CanLink:
         if self._waited:
             self._waited = False
             since = now - self._begin_t
-            self._event(f"ECU ready: every parameter acknowledged, {since:.1f} s after start")
+            self._event(text("event.ecu_ready", s=since))
 
     def _poll_params(self, now: float) -> None:
         push = self._push
@@ -358,13 +353,13 @@ class CanLink:
             return self._ack_timeout_s
         return self._backoff_s[min(tries - self._retries - 1, len(self._backoff_s) - 1)]
 
-    def _wait_text(self, push: _ParamPush) -> str:
+    def _wait_text(self, push: _ParamPush) -> Text:
         name = protocol.param_name(push.items[push.index][0])
-        head = f"ECU wait: {name} unacknowledged after {push.tries} tries on CAN {self.where}"
+        head = dict(name=name, tries=push.tries, where=self.where)
         if self.ecu.status_t is None:
-            return f"{head}; still trying (is the ECU powered, on this bus?)"
+            return text("event.ecu_wait_silent", **head)
         # It talks but does not answer: other frame identifiers, or a firmware without them.
-        return f"{head}; the ECU sends status but does not answer (check [can.ids]); still trying"
+        return text("event.ecu_wait_deaf", **head)
 
     # ---- running --------------------------------------------------------------------------
     def set_command(
@@ -444,11 +439,11 @@ class CanLink:
             self.counters.tx_errors += 1
             if not self._send_failing:  # once per failure spell, not twice a second
                 self._send_failing = True
-                self._event(f"CAN send failed: {exc}")
+                self._event(text("event.can_tx_failed", error=str(exc)))
             return False
         if self._send_failing:
             self._send_failing = False
-            self._event("CAN send works again")
+            self._event(text("event.can_tx_again"))
         if self._on_tx is not None:
             self._on_tx(msg)
         return True
@@ -489,7 +484,7 @@ class CanLink:
         """The first status frame, or the first after a loss."""
         if back:
             self._lost = False
-            self._event("ECU back")
+            self._event(text("event.ecu_back"))
         push = self._push
         if push is None:
             return
@@ -511,16 +506,16 @@ class CanLink:
         self._lost = True
         self._alive = False
         self.counters.ecu_lost += 1
-        self._event(f"ECU lost: no status for {now - last:.1f} s")
+        self._event(text("event.ecu_lost", s=now - last))
 
     @property
     def ecu_alive(self) -> bool:
         return self._alive
 
-    def _event(self, text: str) -> None:
-        log.info("%s", text)
+    def _event(self, message: Text) -> None:
+        log.info("%s", message)
         if self._on_event is not None:
-            self._on_event(text)
+            self._on_event(message)
 
 
 class SimulatedEcu:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import unicodedata
 from typing import TextIO
 
-from topdress.i18n import tr
+from topdress.i18n import Text, render, tr
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
 from topdress.terminal.operator import ManualView
@@ -144,7 +144,7 @@ def _operator_lines(s: Snapshot) -> list[str]:
     lines = [
         f"{_label('con.operator')}{_pad(tr(f'op.state.{s.operator}'), 16)}"
         f"  {tr('con.rate')} {_manual(s.manual)}",
-        f"{_label('main.source')}{s.speed_why}",
+        f"{_label('main.source')}{render(s.speed_why) or '--'}",
     ]
     if s.alarms:
         lines += _wrap(_head("con.alarms"), [_alarm(a) for a in s.alarms])
@@ -160,7 +160,7 @@ def _operator_lines(s: Snapshot) -> list[str]:
         c = s.calibration
         lines.append(
             f"{_label('con.calib')}{tr(f'cal.{c.kind}')} {tr(f'cal.step.{c.step}')}"
-            f" {c.progress * 100:3.0f} %: {c.text}"
+            f" {c.progress * 100:3.0f} %: {render(c.text)}"
         )
     return lines
 
@@ -216,7 +216,7 @@ def render_lines(s: Snapshot) -> list[str]:
         faults,
     )
     counts = _wrap(_head("con.counts"), [f"{k} {v}" for k, v in s.counters.items()])
-    last = [f"{_label('con.last')}{s.last_event or '-'}"]
+    last = [f"{_label('con.last')}{render(s.last_event) or '-'}"]
     return [_fit(x) for x in head + fans + _operator_lines(s) + counts + last]
 
 
@@ -283,8 +283,10 @@ class Console:
             self._drawn = len(lines)
         self._stream.flush()
 
-    def message(self, text: str) -> None:
-        """A line that stays (an event): printed above the live block."""
+    def message(self, message: Text | str) -> None:
+        """A line that stays (an event): printed above the live block, in the language in
+        force."""
+        text = render(message)
         if self._tty and self._drawn:
             self._stream.write(f"\x1b[{self._drawn}F\x1b[J")
             self._drawn = 0

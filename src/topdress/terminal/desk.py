@@ -24,6 +24,7 @@ from topdress.config import TerminalConfig
 from topdress.ecu import EcuParams, meter_rate_kg_ha
 from topdress.errors import ConfigError, DeviceError, ProtocolError, SensorError
 from topdress.gnss.nmea import NmeaDecoder
+from topdress.i18n import Text, text
 from topdress.protocol import Fault, Source
 from topdress.terminal import operator as op
 from topdress.terminal.alarms import AlarmBook, AlarmInputs, AlarmView
@@ -77,7 +78,7 @@ class DeskView:
     operator: str
     manual: op.ManualView
     rate_model_kg_ha: tuple[float, float]
-    speed_why: str
+    speed_why: Text | None
     alarms: tuple[AlarmView, ...]
     count_field: CounterView
     count_season: CounterView
@@ -103,7 +104,7 @@ class OperatorDesk:
         where = session.path.parent if session is not None else None
         self.counters = WorkCounters(where / cfg.operator.counters_file if where else None)
         if self.counters.error:
-            term._event(self.counters.error)
+            term._event(text("event.counters_error", error=self.counters.error))
         self.wizard: Wizard | LeadCal | None = None
         self._cal_seq = 0
         self._pending: Future[op.CommandResult] | None = None  # settings awaiting the ECU
@@ -133,7 +134,9 @@ class OperatorDesk:
         command, fut = item
         try:
             result = self._dispatch(now, command, fut)
-        except (op.OperatorError, CalibrationError, ProtocolError) as exc:
+        except (op.OperatorError, CalibrationError) as exc:
+            result = op.CommandResult(False, exc.text)
+        except ProtocolError as exc:
             result = op.CommandResult(False, str(exc))
         except ConfigError as exc:
             result = op.CommandResult(False, str(exc), {exc.key: _reason(exc)})
@@ -156,15 +159,15 @@ class OperatorDesk:
             return self._done(self.op.set_manual(c))
         if isinstance(c, op.AckAlarm):
             if c.name is not None and not self.alarms.known(c.name):
-                return op.CommandResult(False, f"no alarm {c.name!r}")
-            return op.CommandResult(True, f"{self.alarms.ack(c.name)} acknowledged")
+                return op.CommandResult(False, text("op.error.no_alarm", name=c.name))
+            return op.CommandResult(True, text("op.done.acked", n=self.alarms.ack(c.name)))
         if isinstance(c, op.ResetCounter):
             try:
                 self.counters.reset(c.which)
             except ValueError as exc:
                 return op.CommandResult(False, str(exc))
             self.counters.save()
-            return self._done(f"{c.which} counter reset")
+            return self._done(text("op.done.reset", which=text(f"count.{c.which}")))
         if isinstance(c, op.Help):
             return op.CommandResult(False, c.text)
         if isinstance(c, op.TestDevice):
@@ -173,8 +176,8 @@ class OperatorDesk:
             return self._apply(now, c, fut)
         return self._calibration(now, c, fut)
 
-    def _done(self, message: str) -> op.CommandResult:
-        self.term._event(f"operator: {message}")
+    def _done(self, message: Text) -> op.CommandResult:
+        self.term._event(text("event.operator", what=message))
         return op.CommandResult(True, message)
 
     def _send_command_now(self) -> None:
@@ -192,22 +195,22 @@ class OperatorDesk:
         w = self.wizard
         if isinstance(c, op.LeadSeen):
             if not isinstance(w, LeadCal):
-                return op.CommandResult(False, "no look-ahead calibration open")
+                return op.CommandResult(False, text("op.error.no_cal", cal=text("cal.lead")))
             w.seen(now)
             return self._done(w.text)
         if isinstance(c, op.FinishCatchTest):
             if not isinstance(w, CatchTest):
-                return op.CommandResult(False, "no catch test open")
+                return op.CommandResult(False, text("op.error.no_cal", cal=text("cal.catch")))
             w.finish(c.weighed_kg)
             return self._done(w.text)
         if isinstance(c, op.FinishWheelCal):
             if not isinstance(w, WheelCal):
-                return op.CommandResult(False, "no wheel calibration open")
+                return op.CommandResult(False, text("op.error.no_cal", cal=text("cal.wheel")))
             w.finish(c.distance_m)
             return self._done(w.text)
         if isinstance(c, op.CloseCalibration):
             if w is None:
-                return op.CommandResult(False, "no calibration open")
+                return op.CommandResult(False, text("cal.none"))
             value = w.value()
             self._end_wizard()
             if c.apply and isinstance(w, LeadCal) and w.values():
@@ -215,15 +218,19 @@ class OperatorDesk:
             if c.apply and value is not None and w.key:
                 section, key = w.key.split(".")
                 return self._apply(now, op.ApplySettings(section, {key: value}), fut)
-            return op.CommandResult(True, "calibration closed, nothing changed")
+            return op.CommandResult(True, text("op.done.cal_closed"))
         return op.CommandResult(False, f"unknown command {type(c).__name__}")
 
     def _start_wizard(self, now: float, c: Any) -> op.CommandResult:
         if self.op.state != op.STOPPED or self.wizard is not None:
-            raise op.OperatorError(f"stop the meters first (now {self.op.state})")
+            raise op.OperatorError(
+                text("op.error.stop_first", state=text(f"op.state.{self.op.state}"))
+            )
         term = self.term
         if not (term.link.ready and term.link.ecu_alive):
-            raise op.OperatorError(f"the ECU is {term.link.state}: calibration needs it")
+            raise op.OperatorError(
+                text("op.error.ecu_for_cal", state=text(f"link.{term.link.state}"))
+            )
         m = term.cfg.machine
         if isinstance(c, op.StartCatchTest):
             self._cal_seq = (self._cal_seq + 1) % 256
@@ -253,7 +260,7 @@ class OperatorDesk:
             fan_min = term.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
             self.wizard = FanCheck(seconds, m.fan_rpm, float(fan_min))
         self.op.state = op.CALIBRATING
-        return self._done(f"calibration: {self.wizard.text}")
+        return self._done(text("event.calibration", what=self.wizard.text))
 
     def _end_wizard(self) -> None:
         w = self.wizard
@@ -287,7 +294,7 @@ class OperatorDesk:
         for msg in w.tick(now, x):
             link.send(msg)
         if w.step != before and w.step in ("weigh", "aborted", "done"):
-            self.term._event(f"calibration: {w.text}")
+            self.term._event(text("event.calibration", what=w.text))
 
     # ---- the command and the tick ------------------------------------------------------------
     def command(self) -> tuple[bool, float, float, float]:
@@ -319,8 +326,8 @@ class OperatorDesk:
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
         )
-        for text in self.alarms.update(snap.t_s, inputs):
-            self.term._event(text)
+        for alarm in self.alarms.update(snap.t_s, inputs):
+            self.term._event(alarm)
         self._close_old_buses(now)
         cfg = self.term.cfg
         fresh = {r.sensor_id: r.ndvi for r in self.term.ndvi.sensors.fresh(now)}
@@ -361,7 +368,7 @@ class OperatorDesk:
     # ---- device test -------------------------------------------------------------------------
     def _device_test(self, device: str) -> op.CommandResult:
         if device not in self._lines:
-            return op.CommandResult(False, f"no device {device!r} (gnss, crop, can)")
+            return op.CommandResult(False, text("op.error.no_device", device=device))
         t0 = self.term._t0 or 0.0
         decode: Callable[[Any], tuple[str, str]] = {
             "gnss": _decode_nmea(NmeaDecoder()),
@@ -374,7 +381,9 @@ class OperatorDesk:
             "crop": self.term.crop.name,
             "can": self.term.link.where,
         }[device]
-        return op.CommandResult(True, f"{device} on {where}: {len(lines)} recent", data=lines)
+        return op.CommandResult(
+            True, text("op.done.test", device=device, where=where, n=len(lines)), data=lines
+        )
 
     # ---- settings ----------------------------------------------------------------------------
     def _apply(
@@ -382,7 +391,7 @@ class OperatorDesk:
     ) -> op.CommandResult | None:
         term = self.term
         if self._pending is not None:
-            raise op.OperatorError("settings are being applied: wait for the ECU's answer")
+            raise op.OperatorError(text("op.error.settings_busy"))
         new = validate_section(term.cfg, c.section, c.values)
         if c.section in ECU_SECTIONS:
             changed = changed_ecu_params(term.cfg, new)
@@ -411,18 +420,20 @@ class OperatorDesk:
     def _commit(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
         term = self.term
-        saved = ""
+        saved: Text
         if self.config_path is not None:
             try:
                 new_file = save_section(self.config_path, c.section, c.values)
             except OSError as exc:
-                raise op.OperatorError(f"cannot save {self.config_path}: {exc}") from exc
+                raise op.OperatorError(
+                    text("op.error.save", path=str(self.config_path), error=str(exc))
+                ) from exc
             # The file may hold other sections than the running ones (edited meanwhile):
             # the running configuration takes only this section from it.
             new = _with_section(term.cfg, new_file, c.section)
-            saved = f", saved to {self.config_path}"
+            saved = text("op.done.saved", path=str(self.config_path))
         else:
-            saved = " (not saved: no configuration file)"
+            saved = text("op.done.not_saved")
         term.cfg = new
         if c.section == "rate":
             term.model = build_rate_model(new.rate)
@@ -431,8 +442,8 @@ class OperatorDesk:
         if c.section == "operator":
             self.alarms.off_rate_pct = new.operator.off_rate_pct
             self.alarms.off_rate_s = new.operator.off_rate_s
-        later = " (in force at the next start)" if c.section in RESTART_SECTIONS else ""
-        return self._done(f"settings [{c.section}] applied{saved}{later}")
+        later = text("op.done.later") if c.section in RESTART_SECTIONS else ""
+        return self._done(text("op.done.settings", section=c.section, saved=saved, later=later))
 
     def _reopen(self, now: float, section: str, new: TerminalConfig) -> None:
         term = self.term
@@ -487,10 +498,14 @@ class OperatorDesk:
         link = term.link
         if self.op.state != op.STOPPED:
             raise op.OperatorError(
-                f"the ECU takes [{c.section}] only with the meters stopped (now {self.op.state})"
+                text(
+                    "op.error.ecu_stopped",
+                    section=c.section,
+                    state=text(f"op.state.{self.op.state}"),
+                )
             )
         if not (link.ready and link.params_done and link.ecu_alive):
-            raise op.OperatorError(f"the ECU is {link.state}: its parameters cannot be changed")
+            raise op.OperatorError(text("op.error.ecu_params", state=text(f"link.{link.state}")))
         old = term.cfg.ecu_params()
         pending: Future[op.CommandResult] = fut if fut is not None else Future()
         self._pending = pending
@@ -504,7 +519,8 @@ class OperatorDesk:
                 try:
                     result = self._commit(c, new)
                 except (op.OperatorError, ConfigError) as exc:
-                    result = op.CommandResult(False, f"applied in the ECU, not saved: {exc}")
+                    why = exc.text if isinstance(exc, op.OperatorError) else str(exc)
+                    result = op.CommandResult(False, text("op.error.not_saved", error=why))
                 pending.set_result(result)
                 return
             # Nothing half-applied: what the ECU took of this change goes back.
@@ -515,11 +531,11 @@ class OperatorDesk:
             key = PARAM_KEYS.get(refused, c.section) if refused is not None else c.section
             self._settings_state = {keys[pid]: "put back" for pid in accepted if pid in keys}
             self._settings_state[key] = f"refused: {error}"
-            term._event(f"settings [{c.section}] refused: {error}")
+            term._event(text("event.settings_refused", section=c.section, error=error))
             pending.set_result(op.CommandResult(False, error, {key: error}))
 
         link.push_params(changed, now, done)
-        return None if fut is not None else op.CommandResult(True, "pushing to the ECU")
+        return None if fut is not None else op.CommandResult(True, text("op.done.pushing"))
 
 
 def _log_rollback(error: str | None, accepted: list[int]) -> None:
@@ -597,29 +613,35 @@ def applied_kg_ha(snap: Snapshot, cfg: TerminalConfig) -> tuple[float, float]:
     )
 
 
-def speed_why(snap: Snapshot, cfg: TerminalConfig) -> str:
-    """Why the ECU meters on the speed it does, in the terms of the paper's rule."""
+def speed_why(snap: Snapshot, cfg: TerminalConfig) -> Text | None:
+    """Why the ECU meters on the speed it does, in the terms of the paper's rule (None while
+    the ECU is not heard)."""
     if not snap.ecu_live:
-        return "--"
+        return None
     s = cfg.speed
-    src = snap.source
+    src = text(f"source.{snap.source}")
     if s.mode != "paper":
-        return f"{src}: speed mode {s.mode}"
+        return text("why.mode", source=src, mode=s.mode)
     faults = Fault(snap.faults)
-    if src == Source.NONE:
-        return "none: no usable speed"
-    if src == Source.GNSS and Fault.WHEEL_ENCODER in faults:
-        return "gnss: wheel encoder fault"
+    if snap.source == Source.NONE:
+        return text("why.none")
+    if snap.source == Source.GNSS and Fault.WHEEL_ENCODER in faults:
+        return text("why.encoder_fault")
     if Fault.GNSS_FROZEN in faults:
-        return "wheel: GNSS frozen while the wheel stands"
+        return text("why.gnss_frozen")
     if snap.v_gnss_kmh is None or Fault.GNSS_LOST in faults:
-        return f"{src}: no valid GNSS speed"
+        return text("why.no_gnss", source=src)
     cmp_v = snap.v_gnss_kmh if s.switch_compare == "gnss" else snap.v_wheel_kmh
-    cv = "CV --" if snap.cv_pct is None else f"CV {snap.cv_pct:.2f} %"
-    thr = f"{s.cv_threshold_pct:g} %"
-    sw = f"{s.switch_speed_kmh:g} km/h"
-    if src == Source.GNSS:
-        return f"gnss: {cv} < {thr}, {s.switch_compare} {cmp_v:.1f} > {sw}"
+    cv = text("why.cv_none") if snap.cv_pct is None else text("why.cv", cv=snap.cv_pct)
+    rule = dict(
+        cv=cv,
+        threshold=s.cv_threshold_pct,
+        compare=text(f"source.{s.switch_compare}"),
+        speed=cmp_v,
+        switch=s.switch_speed_kmh,
+    )
+    if snap.source == Source.GNSS:
+        return text("why.gnss", **rule)
     if not snap.uniform:
-        return f"wheel: {cv} >= {thr} (not uniform)"
-    return f"wheel: {s.switch_compare} {cmp_v:.1f} <= {sw}"
+        return text("why.not_uniform", **rule)
+    return text("why.slow", **rule)

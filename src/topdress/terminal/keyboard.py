@@ -14,6 +14,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from typing import TYPE_CHECKING, TextIO
 
+from topdress.i18n import render, tr
 from topdress.terminal.operator import CommandResult, Help, OperatorError, parse_command
 
 if TYPE_CHECKING:
@@ -24,7 +25,8 @@ log = logging.getLogger(__name__)
 
 def describe(result: CommandResult) -> str:
     """The answer to a typed command, with the data of a device test line by line."""
-    text = result.message if result.ok else f"refused: {result.message}"
+    message = render(result.message)
+    text = message if result.ok else tr("con.refused", message=message)
     if isinstance(result.data, list):
         text += "".join(
             f"\n  {line.t_s:8.2f}  {line.raw[:40]:<40}  {line.decoded}" for line in result.data

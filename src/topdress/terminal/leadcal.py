@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import can
 
 from topdress import protocol
+from topdress.i18n import text
 from topdress.protocol import FrameIds
 from topdress.terminal.calibration import (
     CAL_ANSWER_S,
@@ -73,26 +74,23 @@ def trial(
     (`need_steady` False: check the press only, the meter time is 0)."""
     seen = t_seen - reaction_s
     if t_seen - t_cmd > SEEN_WINDOW_S:
-        raise CalibrationError(f"seen {t_seen - t_cmd:.1f} s after the start: too late")
+        raise CalibrationError(text("lead.error.late", s=t_seen - t_cmd))
     turning = [(t, rev) for t, rev in reports if rev > 0.0]
     if not turning:
-        raise CalibrationError("the meter has not turned yet: press when product comes out")
+        raise CalibrationError(text("lead.error.not_turned"))
     still = [t for t, rev in reports if rev <= 0.0 and t < turning[0][0]]
     t_start = max([t_cmd, *still])
     if seen <= t_start:
-        raise CalibrationError(
-            "seen before the meter turned (less the reaction time): press when product "
-            "comes out of the outlet"
-        )
+        raise CalibrationError(text("lead.error.early"))
     if not need_steady:
         return LeadTrial(meter_s=0.0, airline_s=seen - t_start)
     steady = [(t, rev) for t, rev in turning if t - t_cmd >= STEADY_S]
     if len(steady) < 2:
-        raise CalibrationError("the meter has not run long enough to time it: wait a moment")
+        raise CalibrationError(text("lead.error.short"))
     (t0, rev0), (t1, rev1) = steady[-2], steady[-1]
     rev_per_s = (rev1 - rev0) / (t1 - t0)
     if not rev_per_s > 0.0:
-        raise CalibrationError("the meter does not turn steadily: no meter time")
+        raise CalibrationError(text("lead.error.unsteady"))
     return LeadTrial(meter_s=(t1 - t_cmd) - rev1 / rev_per_s, airline_s=seen - t_start)
 
 
@@ -116,13 +114,13 @@ class LeadCal:
         ids: FrameIds,
     ) -> None:
         if layer not in LAYER_INDEX:
-            raise CalibrationError(f"layer must be upper or lower, not {layer!r}")
+            raise CalibrationError(text("cal.error.layer", layer=layer))
         if not 1 <= trials <= MAX_TRIALS:
-            raise CalibrationError(f"trials must be 1..{MAX_TRIALS}, not {trials}")
+            raise CalibrationError(text("lead.error.trials", max=MAX_TRIALS, trials=trials))
         if not 0.0 <= reaction_ms <= 1000.0:
-            raise CalibrationError(f"reaction time must be 0..1000 ms, not {reaction_ms:g}")
+            raise CalibrationError(text("lead.error.reaction", ms=reaction_ms))
         if not 1.0 <= run_s <= 30.0:
-            raise CalibrationError(f"run time must be 1..30 s, not {run_s:g}")
+            raise CalibrationError(text("lead.error.run", s=run_s))
         self.layer = layer
         self.command = CalCommand(start=True, fan_rpm=fan_rpm)  # fans on, rates 0
         self.fan_min_rpm = fan_min_rpm
@@ -138,7 +136,7 @@ class LeadCal:
         self.done: list[LeadTrial] = []
         self.result: dict[str, float] = {}
         self.step = "running"
-        self.text = ""
+        self.text = text("cal.step.running")
         self._begin(None)
 
     # ---- one trial --------------------------------------------------------------------------
@@ -156,21 +154,24 @@ class LeadCal:
         self._t_seen: float | None = None
         self._pause_until = now
         n = len(self.done) + 1
-        self.text = (
-            f"trial {n} of {self.trials}: {self.layer} meter at {self.meter_rpm:g} r/min; "
-            "press seen when product comes out of the outlet"
+        self.text = text(
+            "lead.text.trial",
+            n=n,
+            trials=self.trials,
+            layer=text(f"main.{self.layer}"),
+            rpm=self.meter_rpm,
         )
 
     def tick(self, now: float, x: CalInputs) -> list[can.Message]:
         if self.step != "running":
             return []
         if not x.ecu_live:
-            self.step, self.text = "aborted", "look-ahead calibration aborted: the ECU is not heard"
+            self.step, self.text = "aborted", text("lead.text.no_ecu")
             self.command = CalCommand()
             return []
         if not self._fans_up:
             if x.fan_rpm[LAYER_INDEX[self.layer]] < self.fan_min_rpm:
-                self.text = f"fans spinning up ({x.fan_rpm[LAYER_INDEX[self.layer]]:.0f} rpm)"
+                self.text = text("lead.text.fans", rpm=x.fan_rpm[LAYER_INDEX[self.layer]])
                 return []
             self._fans_up = True
             self._begin(None)
@@ -186,7 +187,7 @@ class LeadCal:
             if st.state == "aborted":
                 self.step = "aborted"
                 self.command = CalCommand()
-                self.text = f"look-ahead calibration aborted by the ECU: {st.reason}"
+                self.text = text("lead.text.aborted", reason=st.reason)
                 return []
             t_st = x.cal_t if x.cal_t is not None else now
             new = not self._reports or t_st > self._reports[-1][0]
@@ -197,7 +198,7 @@ class LeadCal:
                 if self._tries >= 3:
                     self.step = "aborted"
                     self.command = CalCommand()
-                    self.text = "the ECU does not answer the calibration command"
+                    self.text = text("cal.text.no_answer")
                     return []
                 self._tries += 1
                 self._t_cmd = now  # a retry: the first was lost, the clock starts again
@@ -207,7 +208,7 @@ class LeadCal:
             if stop is not None:
                 return stop
         if self._t_seen is None and self._t_cmd is not None and now - self._t_cmd > SEEN_WINDOW_S:
-            self.text = "no press within 10 s: the trial is repeated"
+            self.text = text("lead.text.no_press", s=SEEN_WINDOW_S)
             out.append(self._msg(0))
             self._begin(now + PAUSE_S)
         return out
@@ -216,12 +217,12 @@ class LeadCal:
         """The operator saw product at the outlet. The trial ends once the meter has run
         steadily long enough to time it (`tick`); a press that cannot be a sighting is refused."""
         if self.step != "running" or self._t_cmd is None or self._pause_until is not None:
-            raise CalibrationError("no trial running: wait for the meter to start")
+            raise CalibrationError(text("lead.error.no_trial"))
         if self._t_seen is not None:
-            raise CalibrationError("already seen: the meter is being timed")
+            raise CalibrationError(text("lead.error.already"))
         trial(self._t_cmd, self._reports, now, self.reaction_s, need_steady=False)
         self._t_seen = now
-        self.text = "seen; timing the meter"
+        self.text = text("lead.text.seen")
 
     def _end_trial(self, now: float) -> list[can.Message] | None:
         assert self._t_cmd is not None and self._t_seen is not None
@@ -249,10 +250,13 @@ class LeadCal:
         self.step = "done"
         self.command = CalCommand()  # fans off again
         r = self.result
-        self.text = (
-            f"meter {r['meter_ms']:.0f} ms (spread {r['meter_spread_ms']:.0f}), "
-            f"air line {r['airline_ms']:.0f} ms (spread {r['airline_spread_ms']:.0f}) "
-            f"over {len(self.done)} trials"
+        self.text = text(
+            "lead.text.done",
+            meter=r["meter_ms"],
+            meter_spread=r["meter_spread_ms"],
+            air=r["airline_ms"],
+            air_spread=r["airline_spread_ms"],
+            trials=len(self.done),
         )
 
     def close(self) -> list[can.Message]:

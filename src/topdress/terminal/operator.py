@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from topdress.errors import TopdressError
+from topdress.i18n import Text, text
 
 #: Run states: the meters stopped (stop in every PcCommand), running, paused (start with zero
 #: rates: the fans keep turning, the meters stand), or a calibration wizard at work.
@@ -24,7 +25,12 @@ PERCENT_RANGE = (-100.0, 200.0)
 
 
 class OperatorError(TopdressError):
-    """A command that cannot be carried out now (the reason is the message)."""
+    """A command that cannot be carried out now (the reason is the message: a Text, or the
+    console's typed-command help, which stays in the words typed)."""
+
+    def __init__(self, message: Text | str) -> None:
+        super().__init__(message)
+        self.text = message
 
 
 # ---- commands ---------------------------------------------------------------------------------
@@ -142,7 +148,7 @@ class Help:
 @dataclass(frozen=True)
 class CommandResult:
     ok: bool
-    message: str = ""
+    message: Text | str = ""  # Text: rendered in the operator's language; str: a library's words
     errors: dict[str, str] = field(default_factory=dict)  # dotted key -> reason
     data: Any = None
 
@@ -155,27 +161,29 @@ class ManualView:
     lower_kg_ha: float = 0.0
     percent: float = 0.0
 
-    def describe(self) -> str:
+    def describe(self) -> Text:
         if self.mode == "fixed":
-            return f"manual {self.upper_kg_ha:.1f}/{self.lower_kg_ha:.1f} kg/ha"
+            return text("manual.fixed_is", upper=self.upper_kg_ha, lower=self.lower_kg_ha)
         if self.mode == "percent":
-            return f"manual {self.percent:+.0f} % on the model"
-        return "model"
+            return text("manual.percent_is", percent=self.percent)
+        return text("manual.model_is")
 
 
 def check_manual(cmd: SetManual) -> ManualView:
     """The manual mode a command asks for; OperatorError naming the value that is wrong."""
     if cmd.mode not in MANUAL_MODES:
-        raise OperatorError(f"manual mode must be one of {', '.join(MANUAL_MODES)}")
+        raise OperatorError(text("op.error.manual_mode", modes=", ".join(MANUAL_MODES)))
     if cmd.mode == "fixed":
         for name, v in (("upper_kg_ha", cmd.upper_kg_ha), ("lower_kg_ha", cmd.lower_kg_ha)):
             if not 0.0 <= v <= MAX_RATE_KG_HA:
-                raise OperatorError(f"{name}: {v:g} is outside 0..{MAX_RATE_KG_HA:g} kg/ha")
+                raise OperatorError(
+                    text("op.error.rate_range", name=name, value=v, max=MAX_RATE_KG_HA)
+                )
         return ManualView("fixed", float(cmd.upper_kg_ha), float(cmd.lower_kg_ha))
     if cmd.mode == "percent":
         lo, hi = PERCENT_RANGE
         if not lo <= cmd.percent <= hi:
-            raise OperatorError(f"percent: {cmd.percent:g} is outside {lo:g}..{hi:g} %")
+            raise OperatorError(text("op.error.percent_range", value=cmd.percent, lo=lo, hi=hi))
         return ManualView("percent", percent=float(cmd.percent))
     return ManualView()
 
@@ -192,25 +200,25 @@ class Operator:
         """What PcCommand's start says: running and paused both keep the ECU started."""
         return self.state in (RUNNING, PAUSED)
 
-    def start(self) -> str:
+    def start(self) -> Text:
         if self.state == CALIBRATING:
-            raise OperatorError("a calibration is running: close it first")
+            raise OperatorError(text("op.error.calibrating"))
         was, self.state = self.state, RUNNING
-        return "resumed" if was == PAUSED else "started"
+        return text("op.done.resumed" if was == PAUSED else "op.done.started")
 
-    def stop(self) -> str:
+    def stop(self) -> Text:
         self.state = STOPPED
-        return "stopped"
+        return text("op.done.stopped")
 
-    def pause(self) -> str:
+    def pause(self) -> Text:
         if self.state != RUNNING:
-            raise OperatorError(f"only running meters can be paused (now {self.state})")
+            raise OperatorError(text("op.error.pause", state=text(f"op.state.{self.state}")))
         self.state = PAUSED
-        return "paused: meters stopped, fans kept"
+        return text("op.done.paused")
 
-    def set_manual(self, cmd: SetManual) -> str:
+    def set_manual(self, cmd: SetManual) -> Text:
         self.manual = check_manual(cmd)
-        return f"rate: {self.manual.describe()}"
+        return text("op.done.rate", rate=self.manual.describe())
 
     def rates(self, model: tuple[float, float]) -> tuple[float, float]:
         """The rates to command per layer from the model's, under pause and manual mode."""
