@@ -228,6 +228,63 @@ def test_counters_file_damaged_is_kept_aside(tmp_path: Path) -> None:
     assert not list(tmp_path.glob(".*.tmp"))
 
 
+def test_periodic_counter_saves_do_not_hold_the_control_loop(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import threading
+
+    from topdress.terminal import counters as mod
+
+    disk = threading.Event()  # the disk's fsync, held until the test lets it finish
+    writing = threading.Event()
+    writers: list[str] = []
+    real_write = mod.atomic_write
+
+    def slow_write(path: Path, text: str) -> None:
+        writers.append(threading.current_thread().name)
+        writing.set()
+        assert disk.wait(5.0)
+        real_write(path, text)
+
+    monkeypatch.setattr(mod, "atomic_write", slow_write)
+    path = tmp_path / "counters.json"
+    c = mod.WorkCounters(path)
+    c.maybe_save(0.0)
+    c.add(0.5, (10.0, 5.0), 60.0, 1000.0)
+    c.maybe_save(mod.SAVE_PERIOD_S)  # returns while the disk still holds the write
+    assert writing.wait(5.0)
+    assert not path.exists() and writers == ["counters"]
+    c.add(0.25, (5.0, 2.5), 30.0, 500.0)
+    c.maybe_save(mod.SAVE_PERIOD_S + 1.0)  # not due yet: nothing more queued
+    disk.set()
+    c.save()  # the end of the run: waits for the background write, then writes the last
+    assert json.loads(path.read_text())["season"]["kg"] == [15.0, 7.5]
+    assert writers == ["counters", "MainThread"] and c.error is None
+
+
+def test_a_counter_save_that_fails_is_said_and_tried_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from topdress.terminal import counters as mod
+
+    path = tmp_path / "counters.json"
+    c = mod.WorkCounters(path)
+    c.add(0.5, (10.0, 5.0), 60.0, 1000.0)
+
+    def full_disk(path: Path, text: str) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(mod, "atomic_write", full_disk)
+    c.maybe_save(0.0)
+    c.maybe_save(mod.SAVE_PERIOD_S)
+    assert c._saver.wait()
+    assert c.error is not None and "No space left on device" in c.error
+    monkeypatch.undo()
+    c.maybe_save(2 * mod.SAVE_PERIOD_S)  # still owed: written at the next period
+    assert c._saver.wait()
+    assert json.loads(path.read_text())["field"]["area_ha"] == 0.5
+
+
 def _config_file(tmp_path: Path) -> Path:
     path = tmp_path / "terminal.toml"
     path.write_text(DEFAULT_TOML, encoding="utf-8")

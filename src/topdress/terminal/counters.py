@@ -5,7 +5,9 @@ only what was applied: while the ECU reports a meter turning, from the speed it 
 (its selected speed), the working width and the measured metering speed times kg/rev. They
 live in a small JSON file beside the session logs, written atomically (a temporary file, then
 rename) every `SAVE_PERIOD_S` and at the end, so a power cut loses at most that much work and
-never leaves a half-written file.
+never leaves a half-written file. The periodic saves are written by a thread of their own: the
+write ends in an fsync, which takes tens of milliseconds on a cab PC's flash (more on an SD
+card), and the control loop must not wait for it.
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ import datetime as dt
 import json
 import logging
 import os
+import threading
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -59,6 +63,43 @@ def _from_json(raw: Any) -> CounterView:
     )
 
 
+class _Saver:
+    """Writes the newest text it is given, in a thread of its own (started at the first)."""
+
+    def __init__(self, write: Callable[[str], None]) -> None:
+        self._write = write
+        self._cond = threading.Condition()
+        self._text: str | None = None
+        self._busy = False
+        self._thread: threading.Thread | None = None
+
+    def submit(self, text: str) -> None:
+        with self._cond:
+            self._text = text  # a newer text replaces one not yet written
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="counters", daemon=True)
+                self._thread.start()
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._text is not None)
+                text, self._text, self._busy = self._text, None, True
+            try:
+                assert text is not None
+                self._write(text)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()
+
+    def wait(self, timeout_s: float = 10.0) -> bool:
+        """Until nothing is left to write; False if the disk took longer than `timeout_s`."""
+        with self._cond:
+            return self._cond.wait_for(lambda: self._text is None and not self._busy, timeout_s)
+
+
 class WorkCounters:
     """The field and season counters, persisted in `path` (None: in memory only)."""
 
@@ -68,6 +109,7 @@ class WorkCounters:
         self.counters = {name: CounterView(since=_now_iso()) for name in COUNTERS}
         self._last_save_t: float | None = None
         self._dirty = False
+        self._saver = _Saver(self._write)
         if path is not None:
             self._load(path)
 
@@ -105,24 +147,34 @@ class WorkCounters:
         return self.counters[which]
 
     def maybe_save(self, now: float) -> None:
-        """Save when something changed and SAVE_PERIOD_S has passed since the last save."""
+        """Save when something changed and SAVE_PERIOD_S has passed since the last save; the
+        file is written in the background (the caller, the control loop, does not wait)."""
         if self._last_save_t is None:
             self._last_save_t = now
         if self._dirty and now - self._last_save_t >= SAVE_PERIOD_S:
             self._last_save_t = now
-            self.save()
+            self.save(wait=False)
 
-    def save(self) -> None:
+    def save(self, wait: bool = True) -> None:
+        """Write the counters as they are now; `wait` False: in the background."""
         if self.path is None:
             return
-        doc = {name: asdict(v) for name, v in self.counters.items()}
+        text = json.dumps({name: asdict(v) for name, v in self.counters.items()}, indent=2)
+        self._dirty = False
+        if wait:
+            self._saver.wait()  # an older text must not land after this one
+            self._write(text + "\n")
+        else:
+            self._saver.submit(text + "\n")
+
+    def _write(self, text: str) -> None:
+        assert self.path is not None
         try:
-            atomic_write(self.path, json.dumps(doc, indent=2) + "\n")
+            atomic_write(self.path, text)
         except OSError as exc:
             self.error = f"cannot save the counters to {self.path}: {exc}"
             log.warning("%s", self.error)
-            return
-        self._dirty = False
+            self._dirty = True  # tried again at the next period
 
 
 def atomic_write(path: Path, text: str) -> None:

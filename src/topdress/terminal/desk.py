@@ -166,7 +166,7 @@ class OperatorDesk:
                 self.counters.reset(c.which)
             except ValueError as exc:
                 return op.CommandResult(False, str(exc))
-            self.counters.save()
+            self.counters.save(wait=False)  # the loop does not wait on the disk
             return self._done(text("op.done.reset", which=text(f"count.{c.which}")))
         if isinstance(c, op.Help):
             return op.CommandResult(False, c.text)
