@@ -53,7 +53,7 @@ _FAN_LOW = (Fault.UPPER_FAN_LOW, Fault.LOWER_FAN_LOW)
 
 
 class AlarmBook:
-    """The alarms of one run. `update` once per tick; returns the texts of new alarms."""
+    """The alarms of one run. `update` once per tick; returns the new alarms (name, text)."""
 
     def __init__(self, off_rate_pct: float, off_rate_s: float) -> None:
         self.off_rate_pct = off_rate_pct
@@ -61,14 +61,14 @@ class AlarmBook:
         self._alarms: dict[str, _Alarm] = {}
         self._off_since: list[float | None] = [None, None]
 
-    def update(self, t_s: float, x: AlarmInputs) -> list[str]:
+    def update(self, t_s: float, x: AlarmInputs) -> list[tuple[str, str]]:
         conditions = dict(self._conditions(t_s, x))
-        new: list[str] = []
+        new: list[tuple[str, str]] = []
         for name, text in conditions.items():
             a = self._alarms.get(name)
             if a is None or not a.active:
                 self._alarms[name] = _Alarm(text, t_s)
-                new.append(f"alarm: {text}")
+                new.append((name, text))
         for name, a in list(self._alarms.items()):
             if a.active and name not in conditions:
                 a.active = False
@@ -112,19 +112,19 @@ class AlarmBook:
             return False
         return t_s - since > self.off_rate_s - 1e-9
 
-    def ack(self, name: str | None) -> int:
-        """Acknowledge one alarm (or all); returns how many were acknowledged."""
+    def ack(self, name: str | None) -> list[str]:
+        """Acknowledge one alarm (or all); returns the names of those acknowledged now."""
         names = list(self._alarms) if name is None else [name] if name in self._alarms else []
-        n = 0
+        acked = []
         for key in names:
             a = self._alarms[key]
             if a.acked:
                 continue
-            n += 1
+            acked.append(key)
             a.acked = True
             if not a.active:
                 del self._alarms[key]
-        return n
+        return acked
 
     def known(self, name: str) -> bool:
         return name in self._alarms

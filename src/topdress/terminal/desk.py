@@ -48,6 +48,7 @@ from topdress.terminal.settings import (
     PARAM_KEYS,
     RESTART_SECTIONS,
     changed_ecu_params,
+    changed_keys,
     save_section,
     validate_section,
 )
@@ -144,21 +145,34 @@ class OperatorDesk:
     def _dispatch(
         self, now: float, c: Any, fut: Future[op.CommandResult]
     ) -> op.CommandResult | None:
+        term = self.term
         if isinstance(c, op.Start):
-            return self._done(self.op.start())
+            was = self.op.state
+            msg = self.op.start()
+            term.log_event(now, "operator.start", was=was)
+            return self._done(msg)
         if isinstance(c, op.Stop):
+            was = self.op.state
             self._end_wizard()
             msg = self.op.stop()
             self._send_command_now()
+            term.log_event(now, "operator.stop", was=was)
             return self._done(msg)
         if isinstance(c, op.Pause):
-            return self._done(self.op.pause())
+            msg = self.op.pause()
+            term.log_event(now, "operator.pause", was=op.RUNNING)
+            return self._done(msg)
         if isinstance(c, op.SetManual):
-            return self._done(self.op.set_manual(c))
+            msg = self.op.set_manual(c)
+            self._manual_event(now)
+            return self._done(msg)
         if isinstance(c, op.AckAlarm):
             if c.name is not None and not self.alarms.known(c.name):
                 return op.CommandResult(False, f"no alarm {c.name!r}")
-            return op.CommandResult(True, f"{self.alarms.ack(c.name)} acknowledged")
+            acked = self.alarms.ack(c.name)
+            for name in acked:
+                term.log_event(now, "alarm.acked", name=name)
+            return op.CommandResult(True, f"{len(acked)} acknowledged")
         if isinstance(c, op.ResetCounter):
             try:
                 self.counters.reset(c.which)
@@ -173,6 +187,17 @@ class OperatorDesk:
         if isinstance(c, op.ApplySettings):
             return self._apply(now, c, fut)
         return self._calibration(now, c, fut)
+
+    def _manual_event(self, now: float) -> None:
+        m = self.op.manual
+        if m.mode == "fixed":
+            self.term.log_event(
+                now, "manual.set", mode=m.mode, upper_kg_ha=m.upper_kg_ha, lower_kg_ha=m.lower_kg_ha
+            )
+        elif m.mode == "percent":
+            self.term.log_event(now, "manual.set", mode=m.mode, percent=m.percent)
+        else:
+            self.term.log_event(now, "manual.off")
 
     def _done(self, message: str) -> op.CommandResult:
         self.term._event(f"operator: {message}")
@@ -194,17 +219,22 @@ class OperatorDesk:
         if isinstance(c, op.LeadSeen):
             if not isinstance(w, LeadCal):
                 return op.CommandResult(False, "no look-ahead calibration open")
+            before = w.step
             w.seen(now)
+            if w.step == "done" and before != "done":
+                self._result_event(now, w)
             return self._done(w.text)
         if isinstance(c, op.FinishCatchTest):
             if not isinstance(w, CatchTest):
                 return op.CommandResult(False, "no catch test open")
             w.finish(c.weighed_kg)
+            self._result_event(now, w)  # weighed again: the new result is logged too
             return self._done(w.text)
         if isinstance(c, op.FinishWheelCal):
             if not isinstance(w, WheelCal):
                 return op.CommandResult(False, "no wheel calibration open")
             w.finish(c.distance_m)
+            self._result_event(now, w)
             return self._done(w.text)
         if isinstance(c, op.CloseCalibration):
             if w is None:
@@ -289,6 +319,15 @@ class OperatorDesk:
             link.send(msg)
         if w.step != before and w.step in ("weigh", "aborted", "done"):
             self.term._event(f"calibration: {w.text}")
+            if w.step == "done":
+                self._result_event(now, w)
+
+    def _result_event(self, now: float, w: Wizard | LeadCal) -> None:
+        """A wizard's result (as proposed; applying it is a setting change of its own)."""
+        detail: dict[str, Any] = dict(w.result)
+        if isinstance(w, CatchTest | LeadCal):
+            detail["layer"] = w.layer
+        self.term.log_event(now, f"calibration.{w.kind}", **detail)
 
     # ---- the command and the tick ------------------------------------------------------------
     def command(self) -> tuple[bool, float, float, float]:
@@ -320,8 +359,9 @@ class OperatorDesk:
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
         )
-        for text in self.alarms.update(snap.t_s, inputs):
-            self.term._event(text)
+        for name, text in self.alarms.update(snap.t_s, inputs):
+            self.term.log_event(now, "alarm.raised", name=name)
+            self.term._event(f"alarm: {text}")
         self._close_old_buses(now)
         cfg = self.term.cfg
         fresh = {r.sensor_id: r.ndvi for r in self.term.ndvi.sensors.fresh(now)}
@@ -391,7 +431,7 @@ class OperatorDesk:
                 return self._push(now, c, new, changed, fut)
         elif c.section in ("gnss", "crop", "can"):
             self._reopen(now, c.section, new)
-        return self._commit(c, new)
+        return self._commit(now, c, new)
 
     def _retune(self, section: str, new: TerminalConfig) -> None:
         """The keys of [gnss] and [crop] that are not the device's: taken at once."""
@@ -405,7 +445,7 @@ class OperatorDesk:
                 # NDVI queued for the old distance would be applied at the wrong spot.
                 term.ndvi.queue = DistanceQueue(new.crop.sensor_to_meter_m)
 
-    def _commit(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
+    def _commit(self, now: float, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
         term = self.term
         saved = ""
@@ -420,6 +460,8 @@ class OperatorDesk:
             saved = f", saved to {self.config_path}"
         else:
             saved = " (not saved: no configuration file)"
+        for key, old_value, new_value in changed_keys(term.cfg, new, c.section):
+            term.log_event(now, "setting.changed", key=key, old=old_value, new=new_value)
         term.cfg = new
         if c.section == "rate":
             term.model = build_rate_model(new.rate)
@@ -499,7 +541,7 @@ class OperatorDesk:
             if error is None:
                 self._settings_state = dict.fromkeys(keys.values(), "ok")
                 try:
-                    result = self._commit(c, new)
+                    result = self._commit(term.clock(), c, new)
                 except (op.OperatorError, ConfigError) as exc:
                     result = op.CommandResult(False, f"applied in the ECU, not saved: {exc}")
                 pending.set_result(result)
