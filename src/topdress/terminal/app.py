@@ -340,9 +340,10 @@ class Terminal:
             zone=site.zone,
             prescription_kg_ha=site.prescription_kg_ha,
         )
-        self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
+        # Before the desk's alarms: a link lost is logged ahead of the alarm it raises.
         self._track_links(now)
         self._track_faults(now)
+        self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
         if self.session is not None:
             self.session.state(self._row(now))
 
