@@ -323,7 +323,7 @@ def test_catch_and_wheel_results_are_logged_and_applying_one_is_a_setting_change
     assert wheel is not None and catch is not None
     events = _events(session.path)
     (w,) = [e for e in events if e.kind == "calibration.wheel"]
-    assert w.t == 50.0 and dict(w.detail) == wheel.result
+    assert w.t == 50.0 and dict(w.detail) == {**wheel.result, "distance_m": odo}
     assert w.detail["radius_m"] == pytest.approx(odo / (2 * math.pi * w.detail["revolutions"]))
     (radius,) = [e for e in events if e.kind == "setting.changed"]
     assert radius.detail == {

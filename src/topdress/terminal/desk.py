@@ -327,6 +327,8 @@ class OperatorDesk:
         detail: dict[str, Any] = dict(w.result)
         if isinstance(w, CatchTest | LeadCal):
             detail["layer"] = w.layer
+        if isinstance(w, WheelCal):
+            detail["distance_m"] = w.distance_m  # as measured on the ground
         self.term.log_event(now, f"calibration.{w.kind}", **detail)
 
     # ---- the command and the tick ------------------------------------------------------------
