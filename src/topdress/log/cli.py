@@ -22,6 +22,13 @@ def register(sub: Any) -> None:
     export.add_argument("--events", type=Path, metavar="OUT.ndjson", help="write the events")
     export.add_argument("--csv", type=Path, metavar="OUT.csv", help="write the decoded state")
     export.add_argument(
+        "--log-events",
+        type=Path,
+        metavar="OUT.ndjson",
+        help="write what happened (operator actions, settings, alarms, links, faults, "
+        "calibrations)",
+    )
+    export.add_argument(
         "--config",
         type=Path,
         metavar="OUT.toml",
@@ -82,14 +89,23 @@ def register(sub: Any) -> None:
 
 def _export(args: argparse.Namespace) -> int:
     from topdress.log.events import write
-    from topdress.log.export import ExportStats, session_events, write_state_csv
+    from topdress.log.export import (
+        ExportStats,
+        session_events,
+        write_log_events,
+        write_state_csv,
+    )
     from topdress.log.session import SessionReader
 
-    outs = [p for p in (args.events, args.csv, args.config, args.out, args.can) if p is not None]
+    outs = [
+        p
+        for p in (args.events, args.csv, args.log_events, args.config, args.out, args.can)
+        if p is not None
+    ]
     if not outs:
         raise LogError(
             "nothing to do: give --out PATH [--format ...], --events OUT.ndjson, --csv OUT.csv, "
-            "--config OUT.toml or --can OUT.log"
+            "--log-events OUT.ndjson, --config OUT.toml or --can OUT.log"
         )
     for out_path in outs:  # a typo must not truncate the session it reads (or its WAL)
         check_output(out_path, [args.session])
@@ -113,6 +129,11 @@ def _export(args: argparse.Namespace) -> int:
             with open_text_output(args.csv, [args.session]) as out:
                 rows = write_state_csv(reader, out)
             print(f"{args.csv}: {rows} state rows", file=report)
+        if args.log_events is not None:
+            with open_text_output(args.log_events, [args.session]) as out:
+                n = write_log_events(reader, out)
+            old = " (a version-1 session file: it records none)" if reader.version < 2 else ""
+            print(f"{args.log_events}: {n} logged events{old}", file=report)
         if args.config is not None:
             with open_text_output(args.config, [args.session]) as out:
                 out.write(reader.config_toml)

@@ -1,8 +1,10 @@
-"""Export a session: raw inputs as events (NDJSON), the decoded state as CSV."""
+"""Export a session: raw inputs as events (NDJSON), the decoded state as CSV, the logged events
+(what happened) as NDJSON."""
 
 from __future__ import annotations
 
 import csv
+import json
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -93,6 +95,17 @@ def write_state_csv(reader: SessionReader, out: TextIO) -> int:
     n = 0
     for row in reader.states():
         writer.writerow("" if v is None else v for v in row.as_tuple())
+        n += 1
+    return n
+
+
+def write_log_events(reader: SessionReader, out: TextIO) -> int:
+    """The session's events (the event table), one JSON object per line in time order:
+    {"t": ..., "kind": ..., "detail": {...}}. A version-1 file has none."""
+    n = 0
+    for ev in reader.events():
+        line = {"t": ev.t, "kind": ev.kind, "detail": dict(ev.detail)}
+        out.write(json.dumps(line, separators=(",", ":")) + "\n")
         n += 1
     return n
 

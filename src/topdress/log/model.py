@@ -1,9 +1,10 @@
-"""Values stored in a session log: the decoded state row and the raw input kinds."""
+"""Values stored in a session log: the decoded state row, the raw input kinds, the events."""
 
 from __future__ import annotations
 
-from dataclasses import astuple, dataclass, fields
-from typing import Final
+from collections.abc import Mapping
+from dataclasses import astuple, dataclass, field, fields
+from typing import Any, Final
 
 # Raw input kinds. "can_rx" = ECU -> terminal, "can_tx" = terminal -> ECU (the terminal's view).
 RAW_KINDS: Final = ("nmea", "crop", "can_rx", "can_tx")
@@ -55,3 +56,53 @@ class StateRow:
 STATE_COLUMNS: Final = tuple(f.name for f in fields(StateRow))
 UTC_SOURCES: Final = ("gnss", "system")
 ZONES: Final = ("field", "headland", "outside")
+
+
+#: What happened, by kind (the `event` table). The kind and its detail are the whole message:
+#: no sentence is stored, so a reader renders them in its own language. See docs/log.md.
+EVENT_KINDS: Final = (
+    "operator.start",
+    "operator.stop",
+    "operator.pause",
+    "manual.set",
+    "manual.off",
+    "setting.changed",
+    "alarm.raised",
+    "alarm.acked",
+    "link.lost",
+    "link.restored",
+    "fault.changed",
+    "calibration.catch",
+    "calibration.wheel",
+    "calibration.fan",
+    "calibration.lead",
+)
+#: Operator actions (listed with their times by `topdress log summary`).
+OPERATOR_KINDS: Final = (
+    "operator.start",
+    "operator.stop",
+    "operator.pause",
+    "manual.set",
+    "manual.off",
+)
+#: Settings whose values never reach the log: the key is kept, each value written as MASK.
+SECRET_KEYS: Final = frozenset({"display.pin"})
+MASK: Final = "***"
+
+
+@dataclass(frozen=True, slots=True)
+class LogEvent:
+    """One thing that happened: `t` on the state rows' clock, `kind` one of EVENT_KINDS,
+    `detail` plain JSON values (numbers, strings, booleans, lists of them) keyed by name."""
+
+    t: float
+    kind: str
+    detail: Mapping[str, Any] = field(default_factory=dict)
+
+
+def masked(event: LogEvent) -> LogEvent:
+    """The event with the values of a secret setting replaced by MASK."""
+    d = event.detail
+    if event.kind != "setting.changed" or d.get("key") not in SECRET_KEYS:
+        return event
+    return LogEvent(event.t, event.kind, {"key": d["key"], "old": MASK, "new": MASK})

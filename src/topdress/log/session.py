@@ -1,17 +1,18 @@
 """The session log: one SQLite file (WAL) per session, written off the control path.
 
-The caller (the terminal's control loop) only ever enqueues: `raw()` and `state()` put a tuple
-on a bounded queue and return at once. A writer thread drains the queue and commits a batch at
-least every `commit_period_s` (0.5 s). WAL with synchronous=FULL makes every commit durable and
-atomic, so a SIGKILL or a power cut loses at most the last uncommitted batch and never corrupts
-the file. Write failures (unwritable path, full disk) are logged and counted in `errors`, the
-rows they carried in `lost`; a full queue counts its rows in `dropped`. Nothing here raises into
-the caller after `create()` has returned, and `create()` itself only reports, never raises.
+The caller (the terminal's control loop) only ever enqueues: `raw()`, `state()` and `event()` put a
+tuple on a bounded queue and return at once. A writer thread drains the queue and commits a batch
+at least every `commit_period_s` (0.5 s). WAL with synchronous=FULL makes every commit durable and
+atomic, so a SIGKILL or a power cut loses at most the last uncommitted batch and never corrupts the
+file. Write failures (unwritable path, full disk) are logged and counted in `errors`, the rows they
+carried in `lost`; a full queue counts its rows in `dropped`. Nothing here raises into the caller
+after `create()` has returned, and `create()` itself only reports, never raises.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import queue
@@ -26,11 +27,21 @@ from typing import Any, Final
 
 from topdress import __version__
 from topdress.errors import LogError
-from topdress.log.model import CAN_KINDS, LINE_KINDS, RAW_KINDS, STATE_COLUMNS, StateRow
+from topdress.log.model import (
+    CAN_KINDS,
+    EVENT_KINDS,
+    LINE_KINDS,
+    RAW_KINDS,
+    STATE_COLUMNS,
+    LogEvent,
+    StateRow,
+    masked,
+)
 
 _log = logging.getLogger(__name__)
 
-SCHEMA_VERSION: Final = 1
+SCHEMA_VERSION: Final = 2  # 2: the event table
+READ_VERSIONS: Final = (1, 2)  # a version-1 file reads as one without events
 SUFFIX: Final = ".sqlite"
 
 _SCHEMA: Final = f"""
@@ -56,6 +67,9 @@ CREATE TABLE state (
     utc REAL, utc_source TEXT, heading_deg REAL, outlet_lat REAL, outlet_lon REAL,
     zone TEXT, prescription_kg_ha REAL
 );
+CREATE TABLE event (
+    id INTEGER PRIMARY KEY, t REAL NOT NULL, kind TEXT NOT NULL, detail TEXT NOT NULL
+);
 PRAGMA user_version = {SCHEMA_VERSION};
 """
 
@@ -64,8 +78,11 @@ _INSERT_STATE: Final = (
     f"INSERT INTO state ({', '.join(STATE_COLUMNS)}) VALUES ({', '.join('?' * len(STATE_COLUMNS))})"
 )
 
+_INSERT_EVENT: Final = "INSERT INTO event (t, kind, detail) VALUES (?, ?, ?)"
+
 _RawRec = tuple[float, str, str | None, int | None, bytes | None]
 _StateRec = tuple[object, ...]
+_EventRec = tuple[float, str, str]
 
 
 class _Sync:
@@ -199,6 +216,16 @@ class SessionLog:
         """Enqueue one decoded state row."""
         self._put(("state", row.as_tuple()))
 
+    def event(self, ev: LogEvent) -> None:
+        """Enqueue one event; it is committed with the batch it falls in (at the latest with
+        the next state rows). A secret setting's values are masked here, whoever built it."""
+        rec = _event_record(masked(ev))
+        if rec is None:
+            self._drop()
+            self._fail(f"event {ev.kind!r} that is not a known kind with plain JSON values")
+            return
+        self._put(("event", rec))
+
     def sync(self, timeout_s: float = 5.0) -> bool:
         """Block until everything enqueued so far is committed (for shutdown and tests)."""
         if self._thread is None or self._closed:
@@ -250,6 +277,7 @@ class SessionLog:
     def _run(self) -> None:
         raws: list[_RawRec] = []
         states: list[_StateRec] = []
+        events: list[_EventRec] = []
         syncs: list[_Sync] = []
         deadline = time.monotonic() + self.commit_period_s
         stop = False
@@ -265,30 +293,36 @@ class SessionLog:
             elif isinstance(item, tuple):
                 if item[0] == "raw":
                     raws.append(item[1])
-                else:
+                elif item[0] == "state":
                     states.append(item[1])
+                else:
+                    events.append(item[1])
             if stop or syncs or time.monotonic() >= deadline:
-                self._commit(raws, states)
-                raws, states = [], []
+                self._commit(raws, states, events)
+                raws, states, events = [], [], []
                 for s in syncs:
                     s.done.set()
                 syncs = []
                 deadline = time.monotonic() + self.commit_period_s
         self._finish()
 
-    def _commit(self, raws: list[_RawRec], states: list[_StateRec]) -> None:
-        if not raws and not states:
+    def _commit(
+        self, raws: list[_RawRec], states: list[_StateRec], events: list[_EventRec]
+    ) -> None:
+        n = len(raws) + len(states) + len(events)
+        if not n:
             return
         assert self._conn is not None
         try:
             self._conn.execute("BEGIN")
             self._conn.executemany(_INSERT_RAW, raws)
             self._conn.executemany(_INSERT_STATE, states)
+            self._conn.executemany(_INSERT_EVENT, events)
             self._conn.execute("COMMIT")
         except sqlite3.Error as exc:
-            self.lost += len(raws) + len(states)
+            self.lost += n
             self._commit_failing = True
-            self._fail(f"commit of {len(raws) + len(states)} rows failed: {exc}")
+            self._fail(f"commit of {n} rows failed: {exc}")
             if self._conn.in_transaction:
                 self._conn.execute("ROLLBACK")
         else:
@@ -327,6 +361,17 @@ def _raw_record(kind: str, t: float, payload: Any) -> _RawRec | None:
         return (float(t), kind, None, int(can_id), bytes(data))
     except (TypeError, ValueError):
         return None
+
+
+def _event_record(ev: LogEvent) -> _EventRec | None:
+    """The row for one event, or None for an unknown kind or a detail JSON cannot hold."""
+    if ev.kind not in EVENT_KINDS:
+        return None
+    try:
+        detail = json.dumps(dict(ev.detail), allow_nan=False, separators=(",", ":"))
+    except (TypeError, ValueError):
+        return None
+    return (float(ev.t), ev.kind, detail)
 
 
 def _init_schema(conn: sqlite3.Connection, config_toml: str) -> None:
@@ -369,10 +414,12 @@ class SessionReader:
             version = int(self._conn.execute("PRAGMA user_version").fetchone()[0])
             if version == 0:  # an empty file, or another program's database
                 raise LogError(f"{self.path}: not a topdress session log (no session schema)")
-            if version != SCHEMA_VERSION:
+            if version not in READ_VERSIONS:
                 raise LogError(
-                    f"{self.path}: session schema {version}, this software reads {SCHEMA_VERSION}"
+                    f"{self.path}: session schema {version}, this software reads "
+                    f"{READ_VERSIONS[0]} to {READ_VERSIONS[-1]}"
                 )
+            self.version = version
             rows = self._conn.execute("SELECT key, value FROM meta").fetchall()
             self.meta: dict[str, str] = {str(k): str(v) for k, v in rows}
         except sqlite3.Error as exc:
@@ -398,6 +445,21 @@ class SessionReader:
         for values in self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"):
             yield StateRow(**dict(zip(cols, values, strict=True)))
 
+    def events(self) -> Iterator[LogEvent]:
+        """The events in time order (none in a version-1 file). A detail that is not a JSON
+        object (written by other software) reads as {"value": what it holds}."""
+        if self.version < 2:
+            return
+        for t, kind, text in self._select("SELECT t, kind, detail FROM event ORDER BY t, id"):
+            yield LogEvent(float(t), str(kind), _detail(text))
+
+    def event_counts(self) -> dict[str, int]:
+        """Number of events of each kind."""
+        if self.version < 2:
+            return {}
+        rows = self._select("SELECT kind, count(*) FROM event GROUP BY kind ORDER BY kind")
+        return {str(kind): int(n) for kind, n in rows}
+
     def state_values(self, columns: tuple[str, ...]) -> dict[str, list[Any]]:
         """The given state columns in logged order, as lists (bulk reading for exports);
         a column this file lacks reads as None."""
@@ -418,8 +480,10 @@ class SessionReader:
         return {str(kind): int(n) for kind, n in rows}
 
     def count(self, table: str) -> int:
-        if table not in ("raw", "state"):
+        if table not in ("raw", "state", "event"):
             raise ValueError(table)
+        if table == "event" and self.version < 2:
+            return 0
         return int(next(self._select(f"SELECT count(*) FROM {table}"))[0])
 
     def _select(self, sql: str) -> Iterator[tuple[Any, ...]]:
@@ -440,3 +504,11 @@ class SessionReader:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _detail(text: Any) -> dict[str, Any]:
+    try:
+        value = json.loads(text)
+    except (TypeError, ValueError):
+        return {"value": text}
+    return value if isinstance(value, dict) else {"value": value}

@@ -8,14 +8,14 @@ integrated and is reported as a gap instead.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any, Final
 
 from topdress import protocol
 from topdress.config import MachineConfig, SpeedConfig, TerminalConfig, loads_config
 from topdress.errors import ConfigError
-from topdress.log.model import RAW_KINDS, SOURCES, StateRow
+from topdress.log.model import OPERATOR_KINDS, RAW_KINDS, SOURCES, LogEvent, StateRow
 from topdress.log.session import SessionReader
 
 _log = logging.getLogger(__name__)
@@ -49,6 +49,16 @@ class StopEvent:
 
 
 @dataclass
+class Action:
+    """One operator action from the event table."""
+
+    t: float  # log time
+    t_s: float  # from the start of the session (its first state row or event)
+    kind: str  # operator.start, operator.stop, operator.pause, manual.set, manual.off
+    detail: dict[str, Any]
+
+
+@dataclass
 class Summary:
     path: str
     duration_s: float = 0.0
@@ -67,6 +77,9 @@ class Summary:
     stops: list[StopEvent] = field(default_factory=list)  # headlands: stops and entries
     stops_zero_pct: float | None = None  # stops after which the metering reached zero
     headland_zero_pct: float | None = None  # headland entries likewise (with a boundary)
+    schema: int = 0  # the file's schema version (1: no events recorded)
+    events: dict[str, int] = field(default_factory=dict)  # logged events by kind
+    actions: list[Action] = field(default_factory=list)  # the operator's, in time order
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -110,6 +123,11 @@ def summarise(reader: SessionReader) -> Summary:
         prev = row
     if first is not None and prev is not None:
         s.duration_s = prev.t - first.t
+    s.schema = reader.version
+    s.events = reader.event_counts()
+    logged = list(reader.events())
+    starts = [x.t for x in (first, logged[0] if logged else None) if x is not None]
+    s.actions = operator_actions(logged, min(starts) if starts else 0.0)
     s.area_ha = s.metering_distance_m * machine.width_m / 10_000.0
     for layer in layers:
         if s.area_ha > 0:
@@ -123,6 +141,15 @@ def summarise(reader: SessionReader) -> Summary:
         if events:
             setattr(s, attr, 100.0 * sum(e.reached_zero for e in events) / len(events))
     return s
+
+
+def operator_actions(events: Iterable[LogEvent], t0: float) -> list[Action]:
+    """The operator's actions, timed from `t0` (the session's first state row or event)."""
+    return [
+        Action(ev.t, ev.t - t0, ev.kind, dict(ev.detail))
+        for ev in events
+        if ev.kind in OPERATOR_KINDS
+    ]
 
 
 def headland_events(
@@ -230,6 +257,15 @@ def format_text(s: Summary) -> str:
             f"{name:<16} {len(events)}, metering reached zero after {pct:.0f} %, "
             f"{kg:.3f} kg and {m:.1f} m metered after them"
         )
+    if s.events:
+        lines.append("events           " + ", ".join(f"{k} {n}" for k, n in s.events.items()))
+    elif s.schema < 2:
+        lines.append("events           none recorded (session schema 1, written before events)")
+    else:
+        lines.append("events           none")
+    for a in s.actions:
+        detail = " ".join(f"{k}={v}" for k, v in a.detail.items())
+        lines.append(f"  {a.t_s:>10.1f} s  {a.kind}" + (f" {detail}" if detail else ""))
     raw = ", ".join(f"{k} {s.raw_inputs.get(k, 0)}" for k in RAW_KINDS)
     lines.append(f"raw inputs       {raw}")
     if s.log_meta:

@@ -54,7 +54,7 @@ _FAN_LOW = (Fault.UPPER_FAN_LOW, Fault.LOWER_FAN_LOW)
 
 
 class AlarmBook:
-    """The alarms of one run. `update` once per tick; returns the events of new alarms."""
+    """The alarms of one run. `update` once per tick; returns the new alarms (name, text)."""
 
     def __init__(self, off_rate_pct: float, off_rate_s: float) -> None:
         self.off_rate_pct = off_rate_pct
@@ -62,14 +62,14 @@ class AlarmBook:
         self._alarms: dict[str, _Alarm] = {}
         self._off_since: list[float | None] = [None, None]
 
-    def update(self, t_s: float, x: AlarmInputs) -> list[Text]:
+    def update(self, t_s: float, x: AlarmInputs) -> list[tuple[str, Text]]:
         conditions = dict(self._conditions(t_s, x))
-        new: list[Text] = []
+        new: list[tuple[str, Text]] = []
         for name, what in conditions.items():
             a = self._alarms.get(name)
             if a is None or not a.active:
                 self._alarms[name] = _Alarm(what, t_s)
-                new.append(text("event.alarm", alarm=what))
+                new.append((name, what))
         for name, a in list(self._alarms.items()):
             if a.active and name not in conditions:
                 a.active = False
@@ -117,19 +117,19 @@ class AlarmBook:
             return False
         return t_s - since > self.off_rate_s - 1e-9
 
-    def ack(self, name: str | None) -> int:
-        """Acknowledge one alarm (or all); returns how many were acknowledged."""
+    def ack(self, name: str | None) -> list[str]:
+        """Acknowledge one alarm (or all); returns the names of those acknowledged now."""
         names = list(self._alarms) if name is None else [name] if name in self._alarms else []
-        n = 0
+        acked = []
         for key in names:
             a = self._alarms[key]
             if a.acked:
                 continue
-            n += 1
+            acked.append(key)
             a.acked = True
             if not a.active:
                 del self._alarms[key]
-        return n
+        return acked
 
     def known(self, name: str) -> bool:
         return name in self._alarms

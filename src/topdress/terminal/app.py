@@ -11,6 +11,9 @@ on a device, only on that queue, with a timeout that keeps its 10 Hz tick:
   by the ECU's selected speed), the rate per layer from the NDVI model, the next command, one
   state row to the session log, and a fresh `Snapshot` for the display.
 
+What happens (operator actions, settings, alarms, links lost and back, the ECU's fault word,
+calibration results) also goes to the session log as events (`log_event`), on the same clock.
+
 GNSS lost (port vanished, no valid fix, stale speed) is forwarded as "not available", so the
 ECU falls back to the wheel.
 """
@@ -36,9 +39,10 @@ from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.gnss.utc import UtcClock
 from topdress.i18n import Text, text
-from topdress.log.model import StateRow
+from topdress.log.model import LogEvent, StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
+from topdress.protocol import Fault
 from topdress.terminal import signals
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.calibration import CalibrationView
@@ -47,7 +51,7 @@ from topdress.terminal.counters import CounterView
 from topdress.terminal.crop import CompensatedNdvi
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
-from topdress.terminal.operator import CommandResult, ManualView
+from topdress.terminal.operator import RUNNING, CommandResult, ManualView
 from topdress.terminal.rate import build_rate_model, build_site_rate, split_layers
 from topdress.terminal.serial_io import LineSource
 
@@ -55,6 +59,8 @@ log = logging.getLogger(__name__)
 
 TICK_S = 0.1  # control tick and state-row period (10 Hz)
 CROP_HOLD_S = 0.5  # a crop sensor state must hold this long to be an event
+#: The states of each link that are a loss (an event when entered, another when left).
+LOST_STATES = {"ecu": ("lost",), "gnss": ("lost", "no fix"), "crop": ("lost", "silent")}
 HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
 _CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
 
@@ -165,6 +171,8 @@ class Terminal:
         self._hinted: set[str] = set()
         self._crop_ok_once = False
         self._last_event: Text | None = None
+        self._lost_since: dict[str, float] = {}  # link -> when it was lost
+        self._faults = 0  # the ECU's fault word as last heard
         self._stop = threading.Event()
         self._can_thread: threading.Thread | None = None
         self.desk = OperatorDesk(self, start, config_path)
@@ -182,6 +190,8 @@ class Terminal:
         self.gnss.start(lambda t, line: self.inbox.put(("nmea", t, line)))
         self.crop.start(lambda t, line: self.inbox.put(("crop", t, line)))
         self.link.begin(self.cfg.ecu_params(), now)
+        if self.desk.op.state == RUNNING:  # headless: the meters start without an operator
+            self.log_event(now, "operator.start", was="stopped", auto=True)
 
     def close(self) -> None:
         """Stop the ECU (a stop command), the readers, and the log; a stop signal arriving
@@ -336,9 +346,41 @@ class Terminal:
             zone=site.zone,
             prescription_kg_ha=site.prescription_kg_ha,
         )
+        # Before the desk's alarms: a link lost is logged ahead of the alarm it raises.
+        self._track_links(now)
+        self._track_faults(now)
         self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
         if self.session is not None:
             self.session.state(self._row(now))
+
+    def _track_links(self, now: float) -> None:
+        states = {"ecu": self.link.state, "gnss": self._gnss_state, "crop": self._crop_reported}
+        for link, state in states.items():
+            lost = state in LOST_STATES[link]
+            since = self._lost_since.get(link)
+            if lost and since is None:
+                self._lost_since[link] = now
+                self.log_event(now, "link.lost", link=link, state=state)
+            elif not lost and since is not None:
+                del self._lost_since[link]
+                lost_s = round(now - since, 3)
+                self.log_event(now, "link.restored", link=link, state=state, lost_s=lost_s)
+
+    def _track_faults(self, now: float) -> None:
+        """The fault word as the ECU sends it; while it is not heard the word is not known."""
+        diag = self.link.ecu.diag
+        if not self.link.ecu_alive or diag is None or int(diag.faults) == self._faults:
+            return
+        was, word = self._faults, int(diag.faults)
+        self._faults = word
+        self.log_event(
+            now,
+            "fault.changed",
+            faults=word,
+            was=was,
+            set=fault_names(word & ~was),
+            cleared=fault_names(was & ~word),
+        )
 
     def _track_gnss_state(self, gnss_kmh: float | None, now: float) -> None:
         if gnss_kmh is not None:
@@ -502,12 +544,24 @@ class Terminal:
         if self.session is not None:
             self.session.raw("can_tx", self.clock(), (msg.arbitration_id, bytes(msg.data)))
 
+    def log_event(self, t: float, kind: str, **detail: Any) -> None:
+        """One event to the session log: `kind` of topdress.log.model.EVENT_KINDS, `detail`
+        plain JSON values (docs/log.md lists each kind's)."""
+        if self.session is not None:
+            self.session.event(LogEvent(t, kind, detail))
+
     def _event(self, message: Text) -> None:
         self._last_event = message
         self.counters["events"] += 1
         log.info("%s", message)  # English in the program log
         if self._on_event is not None:
             self._on_event(message)
+
+
+def fault_names(word: int) -> list[str]:
+    """The names of the bits set in an ECU fault word (`bit<n>` for one this software does
+    not know), lowest first."""
+    return [Fault(1 << n).name or f"bit{n}" for n in range(32) if word >> n & 1]
 
 
 def _why(source: LineSource) -> str:

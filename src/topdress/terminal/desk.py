@@ -51,6 +51,7 @@ from topdress.terminal.settings import (
     RESTART_SECTIONS,
     changed_device_keys,
     changed_ecu_params,
+    changed_keys,
     save_section,
     validate_section,
 )
@@ -146,21 +147,34 @@ class OperatorDesk:
     def _dispatch(
         self, now: float, c: Any, fut: Future[op.CommandResult]
     ) -> op.CommandResult | None:
+        term = self.term
         if isinstance(c, op.Start):
-            return self._done(self.op.start())
+            was = self.op.state
+            msg = self.op.start()
+            term.log_event(now, "operator.start", was=was)
+            return self._done(msg)
         if isinstance(c, op.Stop):
+            was = self.op.state
             self._end_wizard()
             msg = self.op.stop()
             self._send_command_now()
+            term.log_event(now, "operator.stop", was=was)
             return self._done(msg)
         if isinstance(c, op.Pause):
-            return self._done(self.op.pause())
+            msg = self.op.pause()
+            term.log_event(now, "operator.pause", was=op.RUNNING)
+            return self._done(msg)
         if isinstance(c, op.SetManual):
-            return self._done(self.op.set_manual(c))
+            msg = self.op.set_manual(c)
+            self._manual_event(now)
+            return self._done(msg)
         if isinstance(c, op.AckAlarm):
             if c.name is not None and not self.alarms.known(c.name):
                 return op.CommandResult(False, text("op.error.no_alarm", name=c.name))
-            return op.CommandResult(True, text("op.done.acked", n=self.alarms.ack(c.name)))
+            acked = self.alarms.ack(c.name)
+            for name in acked:
+                term.log_event(now, "alarm.acked", name=name)
+            return op.CommandResult(True, text("op.done.acked", n=len(acked)))
         if isinstance(c, op.ResetCounter):
             try:
                 self.counters.reset(c.which)
@@ -175,6 +189,17 @@ class OperatorDesk:
         if isinstance(c, op.ApplySettings):
             return self._apply(now, c, fut)
         return self._calibration(now, c, fut)
+
+    def _manual_event(self, now: float) -> None:
+        m = self.op.manual
+        if m.mode == "fixed":
+            self.term.log_event(
+                now, "manual.set", mode=m.mode, upper_kg_ha=m.upper_kg_ha, lower_kg_ha=m.lower_kg_ha
+            )
+        elif m.mode == "percent":
+            self.term.log_event(now, "manual.set", mode=m.mode, percent=m.percent)
+        else:
+            self.term.log_event(now, "manual.off")
 
     def _done(self, message: Text) -> op.CommandResult:
         self.term._event(text("event.operator", what=message))
@@ -196,17 +221,22 @@ class OperatorDesk:
         if isinstance(c, op.LeadSeen):
             if not isinstance(w, LeadCal):
                 return op.CommandResult(False, text("op.error.no_cal", cal=text("cal.lead")))
+            before = w.step
             w.seen(now)
+            if w.step == "done" and before != "done":
+                self._result_event(now, w)
             return self._done(w.text)
         if isinstance(c, op.FinishCatchTest):
             if not isinstance(w, CatchTest):
                 return op.CommandResult(False, text("op.error.no_cal", cal=text("cal.catch")))
             w.finish(c.weighed_kg)
+            self._result_event(now, w)  # weighed again: the new result is logged too
             return self._done(w.text)
         if isinstance(c, op.FinishWheelCal):
             if not isinstance(w, WheelCal):
                 return op.CommandResult(False, text("op.error.no_cal", cal=text("cal.wheel")))
             w.finish(c.distance_m)
+            self._result_event(now, w)
             return self._done(w.text)
         if isinstance(c, op.CloseCalibration):
             if w is None:
@@ -295,6 +325,17 @@ class OperatorDesk:
             link.send(msg)
         if w.step != before and w.step in ("weigh", "aborted", "done"):
             self.term._event(text("event.calibration", what=w.text))
+            if w.step == "done":
+                self._result_event(now, w)
+
+    def _result_event(self, now: float, w: Wizard | LeadCal) -> None:
+        """A wizard's result (as proposed; applying it is a setting change of its own)."""
+        detail: dict[str, Any] = dict(w.result)
+        if isinstance(w, CatchTest | LeadCal):
+            detail["layer"] = w.layer
+        if isinstance(w, WheelCal):
+            detail["distance_m"] = w.distance_m  # as measured on the ground
+        self.term.log_event(now, f"calibration.{w.kind}", **detail)
 
     # ---- the command and the tick ------------------------------------------------------------
     def command(self) -> tuple[bool, float, float, float]:
@@ -326,8 +367,9 @@ class OperatorDesk:
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
         )
-        for alarm in self.alarms.update(snap.t_s, inputs):
-            self.term._event(alarm)
+        for name, alarm in self.alarms.update(snap.t_s, inputs):
+            self.term.log_event(now, "alarm.raised", name=name)
+            self.term._event(text("event.alarm", alarm=alarm))
         self._close_old_buses(now)
         cfg = self.term.cfg
         fresh = {r.sensor_id: r.ndvi for r in self.term.ndvi.sensors.fresh(now)}
@@ -403,7 +445,7 @@ class OperatorDesk:
             except DeviceError as exc:  # the old device stays; the keys that made it fail said
                 keys = changed_device_keys(term.cfg, new, c.section) or [c.section]
                 return op.CommandResult(False, str(exc), dict.fromkeys(keys, str(exc)))
-        return self._commit(c, new)
+        return self._commit(now, c, new)
 
     def _retune(self, section: str, new: TerminalConfig) -> None:
         """The keys of [gnss] and [crop] that are not the device's: taken at once."""
@@ -417,7 +459,7 @@ class OperatorDesk:
                 # NDVI queued for the old distance would be applied at the wrong spot.
                 term.ndvi.queue = DistanceQueue(new.crop.sensor_to_meter_m)
 
-    def _commit(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
+    def _commit(self, now: float, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
         term = self.term
         saved: Text
@@ -434,6 +476,8 @@ class OperatorDesk:
             saved = text("op.done.saved", path=str(self.config_path))
         else:
             saved = text("op.done.not_saved")
+        for key, old_value, new_value in changed_keys(term.cfg, new, c.section):
+            term.log_event(now, "setting.changed", key=key, old=old_value, new=new_value)
         term.cfg = new
         if c.section == "rate":
             term.model = build_rate_model(new.rate)
@@ -517,7 +561,7 @@ class OperatorDesk:
             if error is None:
                 self._settings_state = dict.fromkeys(keys.values(), "ok")
                 try:
-                    result = self._commit(c, new)
+                    result = self._commit(term.clock(), c, new)
                 except (op.OperatorError, ConfigError) as exc:
                     why = exc.text if isinstance(exc, op.OperatorError) else str(exc)
                     result = op.CommandResult(False, text("op.error.not_saved", error=why))

@@ -119,6 +119,26 @@ def _merge(base: dict[str, Any], changes: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _flat(values: Mapping[str, Any], prefix: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        if isinstance(value, Mapping):
+            out.update(_flat(value, f"{prefix}.{key}"))
+        else:
+            out[f"{prefix}.{key}"] = value
+    return out
+
+
+def changed_keys(
+    old: TerminalConfig, new: TerminalConfig, section: str
+) -> list[tuple[str, Any, Any]]:
+    """(dotted key, old value, new value) for every value of `section` that differs; a key
+    only one side has gives None on the other (an ECU override added or removed)."""
+    a = _flat(section_values(old, section), section)
+    b = _flat(section_values(new, section), section)
+    return [(k, a.get(k), b.get(k)) for k in sorted(a.keys() | b.keys()) if a.get(k) != b.get(k)]
+
+
 def validate_section(
     cfg: TerminalConfig, section: str, values: Mapping[str, Any]
 ) -> TerminalConfig:
