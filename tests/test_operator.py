@@ -16,7 +16,7 @@ from topdress import protocol
 from topdress.config import DEFAULT_TOML, loads_config
 from topdress.ecu import meter_target_rpm
 from topdress.gnss.nmea import make_sentence
-from topdress.log.session import SessionLog
+from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.actuators import MeterParams
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, StepOutput, World
@@ -145,10 +145,13 @@ def test_manual_fixed_and_percent_rates_are_commanded_and_shown() -> None:
     assert "operator: rate: manual +20 % on the model" in texts
 
 
-def test_off_rate_and_blocked_meters_raise_alarms_the_operator_acknowledges() -> None:
+def test_off_rate_and_blocked_meters_raise_alarms_the_operator_acknowledges(
+    tmp_path: Path,
+) -> None:
     # upper: a motor too weak for its target (off rate); lower: jams at 12 s (blocked)
     sim = SimConfig(meter=(MeterParams(max_rpm=15.0), MeterParams(jammed_at_s=12.0)))
-    rig = make_rig(drive(straight(8.0, 400.0)), autostart=True)
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = make_rig(drive(straight(8.0, 400.0)), autostart=True, session=session)
     rig.world = World(sim, seed=3, drive=rig.world.drive)
     try:
         rig.run(20.0)
@@ -179,6 +182,14 @@ def test_off_rate_and_blocked_meters_raise_alarms_the_operator_acknowledges() ->
     finally:
         rig.close()
     assert any(e.startswith("alarm: lower meter blocked") for _, e in rig.events)
+    # the session log has each alarm with its time, an off-rate one with its figures
+    with SessionReader(session.path) as reader:
+        raised = {e.detail["name"]: e for e in reader.events() if e.kind == "alarm.raised"}
+    off_rate = raised["off_rate_upper"]
+    assert off_rate.t - rig.term._t0 == pytest.approx(alarms["off_rate_upper"].since_s, abs=0.01)
+    assert off_rate.detail["rpm"] <= 15.5 and off_rate.detail["target"] > 17.0
+    assert (off_rate.detail["pct"], off_rate.detail["s"]) == (10.0, 5.0)
+    assert dict(raised["blocked_lower"].detail) == {"name": "blocked_lower"}
 
 
 def test_counters_count_what_was_applied_and_persist(tmp_path: Path) -> None:

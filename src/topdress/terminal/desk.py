@@ -368,7 +368,8 @@ class OperatorDesk:
             ecu_link=snap.ecu_link,
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
-            self.term.log_event(now, "alarm.raised", name=name)
+            figures = {k: v for k, v in alarm.values if isinstance(v, int | float)}
+            self.term.log_event(now, "alarm.raised", name=name, **figures)
             self.term._event(text("event.alarm", alarm=alarm))
         self._close_old_buses(now)
         cfg = self.term.cfg
