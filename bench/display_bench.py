@@ -6,7 +6,9 @@ As bench/terminal_bench.py (this process plays the machine: 10 Hz GNSS and crop 
 pseudo-terminals, the ECU's twin on a udp_multicast bus; the terminal runs in a child process,
 send_on_gnss on, session log on, meters started), plus the display served by the child and a
 headless Chromium (Debian's, through Selenium; at nice 10 and off the first CPU, as the kiosk
-set-up of docs/display.md) showing its main screen the whole time.
+set-up of docs/display.md) showing its main screen the whole time. The terminal runs with the
+real-time policy docs/display.md sets it up with (`SCHED_RR` 10, as `chrt -r 10`) where this
+user may set one (`--no-realtime`: the normal policy); the figures' last line says which.
 
 - `display_tick_late_p99_ms`: how late the control loop's 10 Hz tick ran (the child records
   each tick against the loop's own grid);
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import random
 import subprocess
 import sys
@@ -37,6 +40,7 @@ from terminal_bench import WARMUP_S, Machine, terminal_toml
 from topdress.display.browser import answers, chromium, free_port, missing_browser
 
 BROWSER_NICENESS = 10
+TERMINAL_RT_PRIORITY = 10  # `chrt -r 10`, systemd's CPUSchedulingPolicy=rr + Priority=10
 
 #: In the page: every new snapshot drawn -> (now - its publication time) in ms.
 OBSERVER_JS = """
@@ -50,7 +54,18 @@ return clock !== null;
 """
 
 
-def child(config: Path, duration_s: float, port: int) -> None:
+def _scheduling(realtime: bool) -> str:
+    """The terminal's scheduling as docs/display.md sets it up, where permitted."""
+    if not realtime:
+        return "normal policy (--no-realtime)"
+    try:
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(TERMINAL_RT_PRIORITY))
+    except PermissionError:
+        return "normal policy (a real-time one is not permitted to this user)"
+    return f"SCHED_RR {TERMINAL_RT_PRIORITY}"
+
+
+def child(config: Path, duration_s: float, port: int, realtime: bool) -> None:
     """The terminal as `topdress run --start` runs it, with its display and no console."""
     from topdress.config import load_config
     from topdress.display.serve import serve_display
@@ -60,6 +75,7 @@ def child(config: Path, duration_s: float, port: int) -> None:
     from topdress.terminal.canlink import open_bus
     from topdress.terminal.serial_io import open_line_source
 
+    scheduling = _scheduling(realtime)  # before any thread: they inherit it
     cfg = load_config(config)
     session = SessionLog.create(cfg.log.dir, config.read_text())
     bus = open_bus(cfg.can)
@@ -82,7 +98,13 @@ def child(config: Path, duration_s: float, port: int) -> None:
     hwm = (_status_kb("VmHWM") + (_status_kb("VmHWM", display_pid) if display_pid else 0)) / 1024
     shown.stop()
     bus.shutdown()
-    print(json.dumps({"late_s": late, "rss_mb": hwm, "counters": term.snapshot.counters}))
+    result = {
+        "late_s": late,
+        "rss_mb": hwm,
+        "counters": term.snapshot.counters,
+        "sched": scheduling,
+    }
+    print(json.dumps(result))
 
 
 def _status_kb(field: str, pid: int | None = None) -> int:
@@ -101,7 +123,7 @@ def _wait_http(url: str, timeout_s: float) -> None:
         time.sleep(0.2)
 
 
-def parent(duration_s: float) -> int:
+def parent(duration_s: float, realtime: bool) -> int:
     why = missing_browser()
     if why is not None:
         print(f"display bench needs a browser: {why}", file=sys.stderr)
@@ -116,7 +138,7 @@ def parent(duration_s: float) -> int:
             threading.Thread(target=target, daemon=True).start()
         proc = subprocess.Popen(
             [sys.executable, __file__, "--child", str(cfg), "--duration", str(duration_s),
-             "--port", str(port)],
+             "--port", str(port), *([] if realtime else ["--no-realtime"])],
             stdout=subprocess.PIPE,
             text=True,
         )  # fmt: skip
@@ -167,7 +189,7 @@ def parent(duration_s: float) -> int:
         f"# {late_ms.size} ticks (p50 late {np.percentile(late_ms, 50):.2f} ms), "
         f"{lat_ms.size} NMEA latencies (p50 {np.percentile(lat_ms, 50):.2f} ms), "
         f"{upd_ms.size} page updates (p50 {np.percentile(upd_ms, 50):.1f} ms); "
-        f"terminal counters {result['counters']}",
+        f"terminal counters {result['counters']}; terminal scheduling: {result['sched']}",
         file=sys.stderr,
     )
     return 0
@@ -178,11 +200,12 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=60.0, help="seconds")
     ap.add_argument("--child", type=Path, metavar="CONFIG", help=argparse.SUPPRESS)
     ap.add_argument("--port", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--no-realtime", action="store_true", help="the terminal at the normal policy")
     args = ap.parse_args()
     if args.child is not None:
-        child(args.child, args.duration, args.port)
+        child(args.child, args.duration, args.port, not args.no_realtime)
         return 0
-    return parent(args.duration)
+    return parent(args.duration, not args.no_realtime)
 
 
 if __name__ == "__main__":

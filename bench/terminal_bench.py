@@ -83,10 +83,16 @@ class Machine:
         self.lock = threading.Lock()
         self.command_times: list[float] = []
         self.flood_lines = 0
+        self.ecu_idle = threading.Event()  # the twin is not pumping: its bus may be shut
+        self.ecu_idle.set()
 
     def run_ecu(self) -> None:
-        while not self.stop.wait(0.01):
-            self.twin.pump(time.monotonic())
+        self.ecu_idle.clear()
+        try:
+            while not self.stop.wait(0.01):
+                self.twin.pump(time.monotonic())
+        finally:
+            self.ecu_idle.set()
 
     def run_spy(self) -> None:
         ids = protocol.DEFAULT_IDS
@@ -161,6 +167,7 @@ class Machine:
 
     def close(self) -> None:
         self.stop.set()
+        self.ecu_idle.wait(1.0)  # not under the twin's feet
         self.ecu_bus.shutdown()
         self.spy.shutdown()
         self.gnss.close()

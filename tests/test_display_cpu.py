@@ -34,3 +34,27 @@ def test_with_two_or_more_the_first_is_left_to_the_terminal() -> None:
     cpus = sorted(os.sched_getaffinity(0))
     assert _after(set(cpus)) == ",".join(str(c) for c in cpus[1:])
     assert _after({cpus[1]}) == str(cpus[1])  # a single CPU given: nowhere else to go
+
+
+YIELD = """
+import os
+from topdress.display.cpu import yield_to_the_terminal
+try:  # as the terminal under `chrt -r 10` would start it
+    os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(10))
+except PermissionError:
+    pass
+before = os.sched_getscheduler(0)
+nice = os.nice(0)
+yield_to_the_terminal(10)
+print(before, os.sched_getscheduler(0), os.nice(0) - nice, len(os.sched_getaffinity(0)))
+"""
+
+
+def test_the_display_drops_a_real_time_policy_it_inherited_and_its_priority() -> None:
+    out = subprocess.run([sys.executable, "-c", YIELD], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    before, after, niced, cpus = (int(x) for x in out.stdout.split())
+    assert after == os.SCHED_OTHER and niced == 10
+    assert cpus == max(1, len(os.sched_getaffinity(0)) - 1)
+    if before != os.SCHED_RR:
+        pytest.skip("not allowed to set a real-time policy here: only the nice part checked")

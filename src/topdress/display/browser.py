@@ -18,7 +18,7 @@ import urllib.request
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from topdress.display.cpu import leave_first_cpu
+from topdress.display.cpu import yield_to_the_terminal
 
 if TYPE_CHECKING:
     from selenium.webdriver.remote.webdriver import WebDriver
@@ -70,8 +70,7 @@ def chromium(
     opts.add_argument(f"--window-size={width},{height}")
 
     def lower() -> None:
-        os.nice(niceness)
-        leave_first_cpu()
+        yield_to_the_terminal(niceness)
 
     service = Service(CHROMEDRIVER, popen_kw={"preexec_fn": lower if niceness else None})
     return webdriver.Chrome(options=opts, service=service)

@@ -35,7 +35,7 @@ from typing import Any
 
 from topdress import i18n
 from topdress.config import TerminalConfig
-from topdress.display.cpu import leave_first_cpu
+from topdress.display.cpu import yield_to_the_terminal
 from topdress.display.server import DisplayError, DisplayOptions, check_security, port_free
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.operator import CommandResult
@@ -252,7 +252,6 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description="topdress display process (started by the terminal)")
     ap.add_argument("--fd", type=int, required=True, help="the socket to the terminal")
     args = ap.parse_args(argv)
-    os.nice(DISPLAY_NICENESS)
-    leave_first_cpu()
+    yield_to_the_terminal(DISPLAY_NICENESS)
     logging.basicConfig(level=logging.WARNING, format="display %(levelname)s %(name)s: %(message)s")
     return _serve(Connection(args.fd))
