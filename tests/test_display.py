@@ -608,6 +608,10 @@ async def test_device_test_shows_the_last_lines(user: User) -> None:
     hub.publish(working())
     register_pages(hub)
     await user.open("/communication")
+    await shows(user, "state_gnss", "state: ok")
+    i18n.set_language("zh")  # the link's state in the language, as on the main screen
+    await shows(user, "state_crop", "状态: 正常")
+    i18n.set_language("en")
     user.find(marker="test_gnss").click()
     await settle(user, term, 1)
     assert term.sent == [op.TestDevice("gnss")]

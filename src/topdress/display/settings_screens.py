@@ -13,6 +13,7 @@ from typing import Any
 from nicegui import ui
 
 from topdress.config import SPEED_MODE_IDS, SWITCH_COMPARE_IDS
+from topdress.display import fmt
 from topdress.display.actions import Actions
 from topdress.display.forms import SectionForm
 from topdress.display.hub import DisplayHub
@@ -198,7 +199,7 @@ class CommunicationScreen:
 
     def update(self, s: Snapshot) -> None:
         for section, state in (("gnss", s.gnss_link), ("crop", s.crop_link), ("can", s.ecu_link)):
-            self.links[section].set_text(f"{tr('comm.state')}: {state}")
+            self.links[section].set_text(f"{tr('comm.state')}: {fmt.link_text(state)}")
 
 
 class ControlScreen:
