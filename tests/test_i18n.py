@@ -80,7 +80,7 @@ def test_the_terminals_messages_are_keyed_with_their_values() -> None:
 
 
 def test_keys_built_at_run_time_exist() -> None:
-    from topdress.terminal.console import FAULT_NAMES
+    from topdress.protocol import FAULT_NAMES
 
     for name in FAULT_NAMES:
         assert f"fault.{name}" in CATALOGUE

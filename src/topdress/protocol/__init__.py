@@ -26,6 +26,7 @@ from topdress.protocol.frames import (
 )
 from topdress.protocol.model import (
     DEFAULT_IDS,
+    FAULT_NAMES,
     LATCHED_FAULTS,
     AckResult,
     CanFrame,
@@ -34,6 +35,7 @@ from topdress.protocol.model import (
     FrameIds,
     Source,
     SpeedMode,
+    fault_names,
 )
 from topdress.protocol.params import ParamSpec, param, param_name, params
 
@@ -41,6 +43,7 @@ __all__ = [
     "CAL_REASONS",
     "CAL_STATES",
     "DEFAULT_IDS",
+    "FAULT_NAMES",
     "LATCHED_FAULTS",
     "AckResult",
     "CanFrame",
@@ -70,6 +73,7 @@ __all__ = [
     "encode_command",
     "encode_gnss_time",
     "encode_param_set",
+    "fault_names",
     "is_known_id",
     "param",
     "param_name",

@@ -83,6 +83,18 @@ class Fault(IntFlag):
     GNSS_FROZEN = 1 << 8
 
 
+#: The fault word's bits by name, lowest first (ecu/include/td_common.h).
+FAULT_NAMES: tuple[str, ...] = tuple(str(f.name) for f in Fault)
+
+
+def fault_names(word: int) -> list[str]:
+    """Names of the bits set in a fault word (16 bits, EcuDiag.FaultWord), lowest first; a bit
+    this software does not know as BITn."""
+    names = [name for bit, name in enumerate(FAULT_NAMES) if word & (1 << bit)]
+    names += [f"BIT{bit}" for bit in range(len(FAULT_NAMES), 16) if word & (1 << bit)]
+    return names
+
+
 # Cleared only by a stop command (operator acknowledgement).
 LATCHED_FAULTS = Fault.WHEEL_ENCODER | Fault.UPPER_BLOCKED | Fault.LOWER_BLOCKED
 

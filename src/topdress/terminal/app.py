@@ -42,7 +42,7 @@ from topdress.i18n import Text, text
 from topdress.log.model import LogEvent, StateRow
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
-from topdress.protocol import Fault
+from topdress.protocol import fault_names
 from topdress.terminal import signals
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.calibration import CalibrationView
@@ -556,12 +556,6 @@ class Terminal:
         log.info("%s", message)  # English in the program log
         if self._on_event is not None:
             self._on_event(message)
-
-
-def fault_names(word: int) -> list[str]:
-    """The names of the bits set in an ECU fault word (`bit<n>` for one this software does
-    not know), lowest first."""
-    return [Fault(1 << n).name or f"bit{n}" for n in range(32) if word >> n & 1]
 
 
 def _why(source: LineSource) -> str:

@@ -14,29 +14,10 @@ import unicodedata
 from typing import TextIO
 
 from topdress.i18n import Text, render, tr
+from topdress.protocol import fault_names
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
 from topdress.terminal.operator import ManualView
-
-#: Fault word bits of the ECU (ecu/include/td_common.h).
-FAULT_NAMES = (
-    "CMD_TIMEOUT",
-    "GNSS_LOST",
-    "WHEEL_ENCODER",
-    "UPPER_BLOCKED",
-    "LOWER_BLOCKED",
-    "UPPER_FAN_LOW",
-    "LOWER_FAN_LOW",
-    "NO_SPEED",
-    "GNSS_FROZEN",
-)
-
-
-def fault_names(word: int) -> list[str]:
-    """Names of the bits set in an ECU fault word (unknown bits as BITn)."""
-    names = [name for bit, name in enumerate(FAULT_NAMES) if word & (1 << bit)]
-    names += [f"BIT{bit}" for bit in range(len(FAULT_NAMES), 16) if word & (1 << bit)]
-    return names
 
 
 def _num(value: float | None, fmt: str) -> str:
