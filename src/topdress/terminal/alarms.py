@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from topdress.i18n import Text, text
 from topdress.protocol import Fault
+from topdress.terminal.links import link_state
 
 ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
 #: Metering speed targets below this are not judged off-rate (a meter just starting or stopping).
@@ -97,7 +98,7 @@ class AlarmBook:
         if x.gnss_link == "lost":
             yield "gnss_lost", text("alarm.gnss_lost")
         if x.crop_link in ("lost", "silent"):
-            yield "crop_lost", text("alarm.text.crop_lost", state=text(f"link.{x.crop_link}"))
+            yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
         if x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
 

@@ -51,6 +51,7 @@ from topdress.terminal.counters import CounterView
 from topdress.terminal.crop import CompensatedNdvi
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
+from topdress.terminal.links import link_state
 from topdress.terminal.operator import RUNNING, CommandResult, ManualView
 from topdress.terminal.rate import build_rate_model, build_site_rate, split_layers
 from topdress.terminal.serial_io import LineSource
@@ -397,7 +398,7 @@ class Terminal:
         if state != self._gnss_state:
             if self._gnss_state != "wait" or state != "ok":
                 if state != "lost":
-                    self._event(text("event.gnss", state=text(f"link.{state.replace(' ', '_')}")))
+                    self._event(text("event.gnss", state=link_state(state)))
                 elif self.gnss.connected:
                     self._event(text("event.gnss_silent", s=self.tracker.stale_s))
                 else:

@@ -17,6 +17,7 @@ from topdress.i18n import Text, render, tr
 from topdress.protocol import fault_names
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
+from topdress.terminal.links import link_state
 from topdress.terminal.operator import ManualView
 
 
@@ -86,10 +87,8 @@ def _head(key: str) -> str:
 
 
 def link_text(state: str) -> str:
-    """A link state in words: "ok", "wait", "lost", "no fix", "silent", or "3/4" sensors."""
-    if "/" in state:
-        return tr("link.partial", fresh=state)
-    return tr(f"link.{state.replace(' ', '_')}")
+    """A link state in words, in the language in force (topdress.terminal.links)."""
+    return render(link_state(state))
 
 
 def fault_texts(word: int) -> list[str]:

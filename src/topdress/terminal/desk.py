@@ -42,6 +42,7 @@ from topdress.terminal.canlink import CanLink, open_bus
 from topdress.terminal.counters import CounterView, WorkCounters
 from topdress.terminal.crop import DistanceQueue, parse_crop_line
 from topdress.terminal.leadcal import LeadCal
+from topdress.terminal.links import link_state
 from topdress.terminal.rate import build_rate_model
 from topdress.terminal.serial_io import open_line_source
 from topdress.terminal.settings import (
@@ -258,9 +259,7 @@ class OperatorDesk:
             )
         term = self.term
         if not (term.link.ready and term.link.ecu_alive):
-            raise op.OperatorError(
-                text("op.error.ecu_for_cal", state=text(f"link.{term.link.state}"))
-            )
+            raise op.OperatorError(text("op.error.ecu_for_cal", state=link_state(term.link.state)))
         m = term.cfg.machine
         if isinstance(c, op.StartCatchTest):
             self._cal_seq = (self._cal_seq + 1) % 256
@@ -510,8 +509,7 @@ class OperatorDesk:
         src_cfg = new.gnss if section == "gnss" else new.crop
         old_cfg = term.cfg.gnss if section == "gnss" else term.cfg.crop
         self._retune(section, new)
-        device = ("source", "port", "baud", "path", "replay_interval_s")
-        if all(getattr(src_cfg, k) == getattr(old_cfg, k) for k in device):
+        if all(getattr(src_cfg, k) == getattr(old_cfg, k) for k in DEVICE_KEYS[section]):
             return  # the same device: no reopening
         kind = "nmea" if section == "gnss" else "crop"
         source = open_line_source(src_cfg)
@@ -550,7 +548,7 @@ class OperatorDesk:
                 )
             )
         if not (link.ready and link.params_done and link.ecu_alive):
-            raise op.OperatorError(text("op.error.ecu_params", state=text(f"link.{link.state}")))
+            raise op.OperatorError(text("op.error.ecu_params", state=link_state(link.state)))
         old = term.cfg.ecu_params()
         pending: Future[op.CommandResult] = fut if fut is not None else Future()
         self._pending = pending
