@@ -38,6 +38,10 @@
 /** Result of a measurement update. */
 typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED = 2 } td_fused_result_t;
 
+/** Wheel history: TD_FUSED_HIST means of TD_FUSED_BUCKET_S each (2.4 s back). */
+#define TD_FUSED_HIST 24u
+#define TD_FUSED_BUCKET_S 0.1f
+
 typedef struct {
     float v_ms;                /**< ground speed, m/s, >= 0 */
     float a_ms2;               /**< acceleration, m/s^2 */
@@ -54,6 +58,11 @@ typedef struct {
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
+    uint8_t hist_head;         /**< index of the newest complete bucket */
+    uint8_t hist_n;            /**< complete buckets held, 0..TD_FUSED_HIST */
+    float hist_sum;            /**< the bucket being filled: integral of the wheel speed, m */
+    float hist_s;              /**< and its length, s */
+    float hist_ms[TD_FUSED_HIST]; /**< mean wheel speed per bucket, m/s (newest at hist_head) */
 } td_fused_t;
 
 /** Initialise at rest, scale 1, with the tuning (units of td_params.h). TD_E_ARG on a bad argument. */
@@ -68,6 +77,11 @@ void td_fused_predict(td_fused_t *f, float dt_s);
  * persistently rejected wheel stays rejected).
  */
 td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs);
+/** Record the wheel circumference speed z_ms (m/s, 0 at rest) over the last dt_s (every step);
+ *  z_ms < 0 (no wheel: encoder fault) clears the history. */
+void td_fused_record(td_fused_t *f, float z_ms, float dt_s);
+/** The recorded wheel speed delay_s ago (m/s, interpolated between buckets); false beyond the history. */
+bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms);
 /** GNSS update with speed z_ms valid delay_s (0..10 s) ago. */
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn);
 /** The wheel stands (no pulse for the stop time): speed and acceleration are zero. */

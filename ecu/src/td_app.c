@@ -399,6 +399,7 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
     td_fused_predict(f, dt_s > TD_MAX_PREDICT_S ? TD_MAX_PREDICT_S : dt_s);
 
     const bool wheel_ok = (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
+    td_fused_record(f, wheel_ok && e->started ? v_edge : -1.0f, dt_s);
     const bool gnss_ok = st->gnss_valid && (st->faults & TD_FAULT_GNSS_FROZEN) == 0u;
     const bool backs = gnss_ok && app->have_fused && td_age_us(now_us, app->gnss_fused_us) < TD_GNSS_BACKS_US;
     /* the paper's own test of uniform motion (the wheel's CV): the estimate's acceleration alone

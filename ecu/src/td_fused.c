@@ -25,6 +25,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define SCALE_MIN 0.5f
 #define SCALE_MAX 1.5f
 #define SHAPE_MIN 0.5f
+#define SHAPE_MAX_KMH 12.0f /* eq. 5's shape held constant above */
+#define SCALE_MIN_MS 0.5f /* GNSS teaches the scale above this speed */
 /* re-opened learning on loose ground (td_fused.h) */
 #define REOPEN_SIGMA2 4.0f    /* a mean beyond 2 GNSS sigmas */
 #define REOPEN_MIN_MS 0.05f   /* innovations smaller than this have no sign */
@@ -33,6 +35,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (5 %)^2 when re-opened */
 #define Q_SCALE_OPEN 2.0e-5f  /* scale random walk while re-opened, 1/s */
+/* the wheel's history against GNSS: a bucket's bounce, share of its speed */
+#define HIST_REL 0.04f
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK2 0.01f  /* (0.1 m/s^2)^2 */
 #define LEAD_A_MAX 3.0f
@@ -58,6 +62,13 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
+    f->hist_head = 0u;
+    f->hist_n = 0u;
+    f->hist_sum = 0.0f;
+    f->hist_s = 0.0f;
+    for (unsigned i = 0u; i < TD_FUSED_HIST; i++) {
+        f->hist_ms[i] = 0.0f;
+    }
     td_fused_tune(f, jerk_ms3, gnss_std_kmh, wheel_noise_pct);
     return TD_OK;
 }
@@ -135,22 +146,22 @@ static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn
 }
 
 float td_fused_shape(const td_fused_t *f, float v_ms, float *slope) {
+    if (slope != NULL) {
+        *slope = 0.0f;
+    }
     if (!f->slip_shape) {
-        if (slope != NULL) {
-            *slope = 0.0f;
-        }
         return 1.0f;
     }
-    /* eq. 5: slip(%) = A v^2 + B v + C, v in km/h; g = 1 - slip/100, dg/dv per m/s */
+    /* eq. 5: slip(%) = A v^2 + B v + C, v in km/h; g = 1 - slip/100, dg/dv per m/s. Held at
+     * its value at SHAPE_MAX_KMH beyond: the fit's wheel speed g(v) v would fall again above
+     * ~14.7 km/h and give the wheel a second, false solution the estimate could run off to */
     const float vk = v_ms * 3.6f;
-    const float g = 1.0f - td_slip_model_pct(vk) * 0.01f;
+    const bool held = vk > SHAPE_MAX_KMH;
+    const float g = 1.0f - td_slip_model_pct(held ? SHAPE_MAX_KMH : vk) * 0.01f;
     if (g < SHAPE_MIN || g > 1.0f) {
-        if (slope != NULL) {
-            *slope = 0.0f;
-        }
         return g < SHAPE_MIN ? SHAPE_MIN : 1.0f;
     }
-    if (slope != NULL) {
+    if (slope != NULL && !held) {
         *slope = -(td_slip_model_pct(vk + 0.5f) - td_slip_model_pct(vk - 0.5f)) * 0.01f * 3.6f;
     }
     return g;
@@ -190,19 +201,72 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     return TD_FUSED_RESTARTED;
 }
 
+void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
+    if (!(z_ms >= 0.0f)) { /* no wheel: the history says nothing any more */
+        f->hist_n = 0u;
+        f->hist_sum = 0.0f;
+        f->hist_s = 0.0f;
+        return;
+    }
+    if (!(dt_s > 0.0f)) {
+        return;
+    }
+    f->hist_sum += z_ms * dt_s;
+    f->hist_s += dt_s;
+    if (f->hist_s >= TD_FUSED_BUCKET_S * 0.999f) {
+        f->hist_head = (uint8_t)((f->hist_head + 1u) % TD_FUSED_HIST);
+        f->hist_ms[f->hist_head] = f->hist_sum / f->hist_s;
+        if (f->hist_n < TD_FUSED_HIST) {
+            f->hist_n++;
+        }
+        f->hist_sum = 0.0f;
+        f->hist_s = 0.0f;
+    }
+}
+
+bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms) {
+    /* bucket i (0 = newest complete) is centred hist_s + (i + 0.5) buckets back */
+    float x = (delay_s - f->hist_s) / TD_FUSED_BUCKET_S - 0.5f;
+    if (x < 0.0f) {
+        x = 0.0f;
+    }
+    if (f->hist_n == 0u || x > (float)(f->hist_n - 1u)) {
+        return false;
+    }
+    const unsigned i = (unsigned)x;
+    const float frac = x - (float)i;
+    const float w0 = f->hist_ms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+    const float w1 = i + 1u < f->hist_n ? f->hist_ms[(f->hist_head + TD_FUSED_HIST - i - 1u) % TD_FUSED_HIST] : w0;
+    *z_ms = w0 + frac * (w1 - w0);
+    return true;
+}
+
+/* The scale from the wheel's history against GNSS at the same instant: no motion model between
+ * them, so an acceleration cannot take up a scale error. Innovation in wheel m/s. */
+static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g) {
+    const float h[3] = { 0.0f, 0.0f, g * z_ms };
+    const float sg = f->scale * g;
+    const float sd = HIST_REL * w_then;
+    const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss;
+    (void)update(f, h, w_then - sg * z_ms, r, true);
+}
+
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn) {
     const float d = delay_s > 0.0f ? delay_s : 0.0f;
     const float h[3] = { 1.0f, -d, 0.0f };
     const float y = z_ms - (f->v_ms - f->a_ms2 * d);
     f->innov_ms = y;
+    float w_then = 0.0f;
+    const bool have_w = td_fused_wheel_at(f, d, &w_then);
+    const float g = td_fused_shape(f, z_ms, NULL);
+    /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
+    const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
     /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
-     * REOPEN_SIGMA GNSS sigmas (the estimate's own variance is mostly the wheel's bounce and
-     * would hide a slip step of 15 %) */
-    const float r_steady = f->r_gnss + Q_STEADY * f->q_jerk * d * d * d / 3.0f;
-    const int8_t sign = y > REOPEN_MIN_MS ? 1 : (y < -REOPEN_MIN_MS ? -1 : 0);
+     * REOPEN_SIGMA GNSS sigmas */
+    const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
     if (sign != 0 && sign == f->run_sign && fabsf(f->a_ms2) < REOPEN_A_MS2) {
         f->run_s += f->since_gnss_s;
-        f->run_sum += y * f->since_gnss_s;
+        f->run_sum += ys * f->since_gnss_s;
     } else {
         f->reopened = false; /* the run is over */
         f->run_s = 0.0f;
@@ -217,15 +281,16 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
                 f->p[SS] = P_S_REOPEN;
             }
         }
-    } else if (f->reopened && y * y < CLOSE_SIGMA2 * f->r_gnss) {
+    } else if (f->reopened && ys * ys < CLOSE_SIGMA2 * f->r_gnss) {
         f->reopened = false;
     }
     f->since_gnss_s = 0.0f;
-    const bool learning = learn || f->reopened;
-    /* the jerk over the delay; in steady motion (learn: steady for longer than the delay) a
-     * small share of it, or the GNSS speed would teach the scale almost nothing */
-    const float r = learn ? r_steady : f->r_gnss + f->q_jerk * d * d * d / 3.0f;
-    return update(f, h, y, r, learning) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
+    if ((learn || (f->reopened && fabsf(f->a_ms2) < REOPEN_A_MS2)) && have_w && z_ms > SCALE_MIN_MS && fabsf(y) * fabsf(y) < GATE_SIGMA2 * (f->p[VV] + f->r_gnss + f->q_jerk * d * d * d / 3.0f)) {
+        learn_scale(f, z_ms, w_then, g);
+    }
+    /* the jerk over the delay; in steady motion a small share of it */
+    const float r = learn ? f->r_gnss + Q_STEADY * f->q_jerk * d * d * d / 3.0f : f->r_gnss + f->q_jerk * d * d * d / 3.0f;
+    return update(f, h, z_ms - (f->v_ms - f->a_ms2 * d), r, !have_w && (learn || f->reopened)) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
 }
 
 void td_fused_standstill(td_fused_t *f) {
