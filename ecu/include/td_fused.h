@@ -10,24 +10,32 @@
  *   scale is a constant; with the slip shape on, g(v) = 1 - eq. 5 slip(v) / 100 and s learns how
  *   far this soil is from the paper's wheat stubble (the slip then follows the speed at once),
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports).
- * GNSS (delayed by d = age + lag): z_g = v(t - d) = v - a*d + noise,  H = [1, -d, 0],
- *   R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it while learning, as the caller
- *   learns only in motion steady for longer than the delay): the measurement is applied to the
- *   current state through the model instead of rewinding a history (no RAM for one).
- * The scale row of the gain is zeroed (Joseph-form covariance update, so P stays consistent)
- * unless `learn` is set: the caller learns the scale only while GNSS is good and the motion
- * steady, and keeps it through GNSS outages.
+ * GNSS (delayed by d = age + lag) enters twice:
+ *   1. the scale, against the wheel's own history at the fix's time of validity (100 ms means
+ *      kept for 2.4 s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
+ *      R = (4 % of w)^2 + floor^2 + (s g)^2 gnss_std^2. Wheel and GNSS then describe the same
+ *      instant, so no motion model stands between them and an acceleration cannot take up a
+ *      scale error (it did when the scale was learned through v - a d);
+ *   2. the speed through the model: z_g = v(t - d) = v - a*d,  H = [1, -d, 0],
+ *      R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it in steady motion), with
+ *      the scale's row of the gain zeroed. Beyond the history (a delay over ~2.3 s, or no wheel)
+ *      the scale is learned through this update instead.
+ * The scale is learned only while the caller says (`learn`: GNSS good, motion steady) or while
+ * re-opened, and kept through GNSS outages.
  * Scale random walk 2e-5/s; its variance never grows beyond the initial (10 %)^2.
- * Loose ground: GNSS innovations of one sign (beyond 0.05 m/s) for 1 s or longer while
- * |a| < 0.3 m/s^2, with a mean beyond 2 GNSS sigmas, say the wheel's scale has changed (a slip
- * step): learning re-opens (`reopened`). The scale's variance rises to at least (5 %)^2, its
- * random walk to 0.01/s, and the GNSS updates learn it, weighted as in steady motion, until a GNSS innovation changes sign or falls within 1 GNSS sigma; then the
- * slow walk and the caller's learning rule are back. A 15 % slip step is followed within ~1-2 s, and so is
- * the way back after the patch.
+ * Loose ground: GNSS against the scaled wheel history, one sign (beyond 0.05 m/s) for 1 s or
+ * longer while |a| < 0.3 m/s^2, with a mean beyond 2 GNSS sigmas, says the wheel's scale has
+ * changed (a slip step): learning re-opens (`reopened`) while |a| < 0.3 m/s^2, the scale's
+ * variance raised to at least (3 %)^2, until that difference changes sign or falls within
+ * 1 GNSS sigma. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is learned to within 1.5 %
+ * in ~4 s.
+ * eq. 5's shape g(v) is held at its 12 km/h value above 12 km/h: the fit's g(v) v falls again
+ * above ~14.7 km/h, which gave a wheel reading a second, false speed to run off to.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 48 bytes of state. No heap, no globals.
+ * Costs per step: ~120 float operations; 48 bytes of state and ~110 of wheel history. No heap,
+ * no globals.
  */
 #ifndef TD_FUSED_H
 #define TD_FUSED_H

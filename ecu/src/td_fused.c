@@ -33,7 +33,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define CLOSE_SIGMA2 1.0f     /* closed again within 1 GNSS sigma, or on a change of sign */
 #define REOPEN_S 1.0f         /* one sign for this long */
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
-#define P_S_REOPEN 0.0009f    /* the scale's variance at least (5 %)^2 when re-opened */
+#define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 #define Q_SCALE_OPEN 2.0e-5f  /* scale random walk while re-opened, 1/s */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
@@ -285,12 +285,16 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
         f->reopened = false;
     }
     f->since_gnss_s = 0.0f;
-    if ((learn || (f->reopened && fabsf(f->a_ms2) < REOPEN_A_MS2)) && have_w && z_ms > SCALE_MIN_MS && fabsf(y) * fabsf(y) < GATE_SIGMA2 * (f->p[VV] + f->r_gnss + f->q_jerk * d * d * d / 3.0f)) {
+    /* the jerk over the delay; in steady motion a small share of it */
+    const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
+    const bool learning = learn || (f->reopened && fabsf(f->a_ms2) < REOPEN_A_MS2);
+    if (!update(f, h, y, r, learning && !have_w)) {
+        return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
+    }
+    if (learning && have_w && z_ms > SCALE_MIN_MS) {
         learn_scale(f, z_ms, w_then, g);
     }
-    /* the jerk over the delay; in steady motion a small share of it */
-    const float r = learn ? f->r_gnss + Q_STEADY * f->q_jerk * d * d * d / 3.0f : f->r_gnss + f->q_jerk * d * d * d / 3.0f;
-    return update(f, h, z_ms - (f->v_ms - f->a_ms2 * d), r, !have_w && (learn || f->reopened)) ? TD_FUSED_ACCEPTED : TD_FUSED_REJECTED;
+    return TD_FUSED_ACCEPTED;
 }
 
 void td_fused_standstill(td_fused_t *f) {
