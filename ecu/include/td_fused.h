@@ -85,7 +85,7 @@ void td_fused_predict(td_fused_t *f, float dt_s);
  * persistently rejected wheel stays rejected).
  */
 td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs);
-/** Record the wheel circumference speed z_ms (m/s, 0 at rest) over the last dt_s (every step);
+/** Record the wheel circumference speed z_ms (m/s, 0 at rest) over the last dt_s (>= 0 s, every step);
  *  z_ms < 0 (no wheel: encoder fault) clears the history. */
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s);
 /** The recorded wheel speed delay_s ago (m/s, interpolated between buckets); false beyond the history. */

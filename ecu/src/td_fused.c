@@ -208,17 +208,12 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->hist_s = 0.0f;
         return;
     }
-    if (!(dt_s > 0.0f)) {
-        return;
-    }
     f->hist_sum += z_ms * dt_s;
     f->hist_s += dt_s;
     if (f->hist_s >= TD_FUSED_BUCKET_S * 0.999f) {
         f->hist_head = (uint8_t)((f->hist_head + 1u) % TD_FUSED_HIST);
         f->hist_ms[f->hist_head] = f->hist_sum / f->hist_s;
-        if (f->hist_n < TD_FUSED_HIST) {
-            f->hist_n++;
-        }
+        f->hist_n += f->hist_n < TD_FUSED_HIST ? 1u : 0u;
         f->hist_sum = 0.0f;
         f->hist_s = 0.0f;
     }
@@ -227,17 +222,16 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
 bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms) {
     /* bucket i (0 = newest complete) is centred hist_s + (i + 0.5) buckets back */
     float x = (delay_s - f->hist_s) / TD_FUSED_BUCKET_S - 0.5f;
-    if (x < 0.0f) {
-        x = 0.0f;
-    }
-    if (f->hist_n == 0u || x > (float)(f->hist_n - 1u)) {
+    x = x > 0.0f ? x : 0.0f;
+    if (!(x <= (float)f->hist_n - 1.0f)) {
         return false;
     }
     const unsigned i = (unsigned)x;
-    const float frac = x - (float)i;
-    const float w0 = f->hist_ms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
-    const float w1 = i + 1u < f->hist_n ? f->hist_ms[(f->hist_head + TD_FUSED_HIST - i - 1u) % TD_FUSED_HIST] : w0;
-    *z_ms = w0 + frac * (w1 - w0);
+    const unsigned k = f->hist_head + TD_FUSED_HIST - i;
+    const float w0 = f->hist_ms[k % TD_FUSED_HIST];
+    /* the older neighbour: at the oldest bucket x is whole and it weighs 0 (init zeroes the ring) */
+    const float w1 = f->hist_ms[(k - 1u) % TD_FUSED_HIST];
+    *z_ms = w0 + (x - (float)i) * (w1 - w0);
     return true;
 }
 
