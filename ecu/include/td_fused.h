@@ -100,8 +100,8 @@ float td_fused_shape(const td_fused_t *f, float v_ms, float *slope);
 float td_fused_lead_ms(const td_fused_t *f, float lead_s);
 /**
  * The acceleration the look-ahead uses, m/s^2: the estimate's, with its wheel-bounce noise
- * (a few 0.01 m/s^2 in steady motion) shrunk away, a^3 / (a^2 + 0.1^2), and bounded to
- * +-3 m/s^2. Above ~0.3 m/s^2 it is the estimate's within 10 %.
+ * shrunk away, a^3 / (a^2 + k^2) with k = 0.13 /s * v (the bounce is a share of the speed: at
+ * 8 km/h k = 0.29 m/s^2; a launch from rest keeps its acceleration), bounded to +-3 m/s^2.
  */
 float td_fused_lead_accel_ms2(const td_fused_t *f);
 /** 1-sigma uncertainty of the speed, m/s. */

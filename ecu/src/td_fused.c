@@ -38,7 +38,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
 /* look-ahead acceleration: noise shrink and bound */
-#define LEAD_A_SHRINK2 0.01f  /* (0.1 m/s^2)^2 */
+#define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
 
 int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct) {
@@ -313,7 +313,10 @@ float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
 float td_fused_lead_accel_ms2(const td_fused_t *f) {
     const float a = f->a_ms2;
     const float a2 = a * a;
-    const float s = a * a2 / (a2 + LEAD_A_SHRINK2);
+    /* the bounce's share of a grows with the speed (the bounce is relative); a launch from
+     * rest keeps its acceleration */
+    const float k = LEAD_A_SHRINK_PER_MS * f->v_ms;
+    const float s = a2 > 0.0f ? a * a2 / (a2 + k * k) : 0.0f;
     return s > LEAD_A_MAX ? LEAD_A_MAX : (s < -LEAD_A_MAX ? -LEAD_A_MAX : s);
 }
 

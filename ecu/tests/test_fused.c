@@ -317,17 +317,26 @@ static void test_slip_shape_is_monotone(void **state) {
     assert_float_equal(slope, 0.0, 0.0);
 }
 
-/* The look-ahead's acceleration: bounce-sized values shrunk away, braking kept, bounded. */
+/* The look-ahead's acceleration: bounce-sized values shrunk away in proportion to the speed,
+ * a launch from rest kept whole, braking kept, bounded. */
 static void test_lead_acceleration_shrink(void **state) {
     (void)state;
     td_fused_t f;
     assert_int_equal(td_fused_init(&f, 0.3f, 0.4f, 6.0f), TD_OK);
     const float a[5] = { 0.0f, 0.05f, -0.1f, -0.8f, 5.0f };
-    const float want[5] = { 0.0f, 0.01f, -0.05f, -0.8f * 0.64f / 0.65f, 3.0f };
+    /* at 2 m/s k = 0.26 m/s^2: a^3 / (a^2 + 0.0676) */
+    const float want[5] = { 0.0f, 0.05f * 0.0025f / 0.0701f, -0.1f * 0.01f / 0.0776f, -0.8f * 0.64f / 0.7076f, 3.0f };
+    f.v_ms = 2.0f;
     for (int i = 0; i < 5; i++) {
         f.a_ms2 = a[i];
         assert_float_equal(td_fused_lead_accel_ms2(&f), want[i], 1e-5);
     }
+    f.v_ms = 0.0f; /* at rest nothing is bounce */
+    f.a_ms2 = 0.05f;
+    assert_float_equal(td_fused_lead_accel_ms2(&f), 0.05, 1e-6);
+    f.v_ms = 1.0f; /* 1 m/s: k = 0.13 */
+    f.a_ms2 = 0.13f;
+    assert_float_equal(td_fused_lead_accel_ms2(&f), 0.065, 1e-5);
 }
 
 int main(void) {
