@@ -293,6 +293,87 @@ int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint3
 int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *data, size_t len,
             uint32_t now_us);
 int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
+
+/* the simulator's plant (src/topdress/sim/csrc/plant.h) */
+#define TDSIM_GAUSS_BLOCK ...
+#define TDSIM_REFILL_TRACTOR ...
+#define TDSIM_REFILL_WHEEL ...
+#define TDSIM_LANDED_UPPER ...
+#define TDSIM_LANDED_LOWER ...
+#define TDSIM_NEW_BIN ...
+#define TDSIM_TX_SHIFT ...
+typedef struct { uint32_t n; uint32_t next; double v[...]; ...; } tdsim_gauss_t;
+typedef struct {
+    double runup_m, accel_min_ms2, accel_max_ms2, clutch_s, decel_ms2, jerk_ms3, speed_tau_s;
+    double ripple_sd, ripple_tau_s, stall_at_s;
+    double x_m, y_m, heading_rad, v_ms, a_ms2, odometer_m, t_s, ripple, vb_ms, accel_limit_ms2;
+    double target_ms, jerk_now_ms3;
+    tdsim_gauss_t gauss;
+    ...;
+} tdsim_tractor_t;
+typedef struct {
+    double circ_m, slip_a, slip_b, slip_c, bounce_sd, bounce_tau_s, encoder_dead_at_s, lifted_at_s;
+    double ppr;
+    double slip_offset_pct, bounce, revolutions;
+    int64_t count;
+    tdsim_gauss_t gauss;
+    ...;
+} tdsim_wheel_t;
+typedef struct {
+    double max_rpm, breakaway_duty, friction_duty, load_duty, flutes, load_ripple;
+    double counts_per_rev, jammed_at_s, encoder_dead_at_s, decay;
+    double rpm, revolutions;
+    int64_t count;
+    ...;
+} tdsim_meter_t;
+typedef struct {
+    double max_rpm, ppr, failed_at_s, belt_slip, decay;
+    double rpm, revolutions;
+    int64_t count;
+    ...;
+} tdsim_fan_t;
+typedef struct {
+    double line_length_m, air_speed_ms, nominal_fan_rpm, min_fan_rpm, drop_s, release_rev;
+    uint8_t blocked;
+    double rev_in, in_flight_kg, landed_kg;
+    ...;
+} tdsim_airline_t;
+typedef struct {
+    tdsim_tractor_t *tractor;
+    tdsim_wheel_t *wheel;
+    tdsim_meter_t *meter[2];
+    tdsim_fan_t *fan[2];
+    tdsim_airline_t *line[2];
+    double dt_s;
+    double kg_per_rev[2];
+    double bin_m;
+    int64_t bin;
+    uint8_t wheel_edges;
+    const double *patches;
+    uint32_t n_patches;
+    double loose_slip_pct;
+    double loose_x, loose_y, loose_reach2, loose_floor;
+    float duty[4];
+    double rev_prev[2];
+    double wheel_pos;
+    uint32_t edge_us;
+    double landed_kg[2];
+    ...;
+} tdsim_world_t;
+int tdsim_tractor_step(tdsim_tractor_t *s, double dt_s, double v_target_ms, double curvature);
+int64_t tdsim_wheel_step(tdsim_wheel_t *s, double t_s, double dt_s, double v_ms,
+                         double slip_floor_pct);
+int64_t tdsim_meter_step(tdsim_meter_t *s, double t_s, double dt_s, double duty);
+int64_t tdsim_fan_step(tdsim_fan_t *s, double t_s, double dt_s, double duty);
+tdsim_airline_t *tdsim_airline_new(void);
+void tdsim_airline_free(tdsim_airline_t *s);
+double tdsim_airline_step(tdsim_airline_t *s, double t_s, double d_rev, double kg_per_rev,
+                          double fan_rpm);
+uint32_t tdsim_airline_len(const tdsim_airline_t *s);
+double tdsim_world_loose(tdsim_world_t *w, double x_m, double y_m);
+uint32_t tdsim_world_wheel_edge(tdsim_world_t *w, uint32_t now_us, int64_t count);
+int tdsim_world_step(tdsim_world_t *w, td_app_t *app, double t_s, uint32_t now_us,
+                     double v_target_ms, double curvature);
 """
 
 # Small C shims so that one Python call does one whole step, without filling structs field
@@ -306,6 +387,7 @@ SHIMS = r"""
 #include "td_meter.h"
 #include "td_slip.h"
 #include "td_speedsel.h"
+#include "plant.h"
 
 static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
                      uint32_t f0, uint32_t f1, uint32_t wheel_edge_us, uint8_t wheel_edge_valid,
@@ -359,8 +441,8 @@ ffibuilder.cdef(CDEF)
 ffibuilder.set_source(
     "topdress.ecu._core",
     SHIMS,
-    sources=[*sorted(glob("ecu/src/*.c")), "ecu/src/gen/td_can.c"],
-    include_dirs=["ecu/include", "ecu/src/gen"],
+    sources=[*sorted(glob("ecu/src/*.c")), "ecu/src/gen/td_can.c", "src/topdress/sim/csrc/plant.c"],
+    include_dirs=["ecu/include", "ecu/src/gen", "src/topdress/sim/csrc"],
     extra_compile_args=["-std=c99", "-O2"],
 )
 
