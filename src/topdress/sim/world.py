@@ -106,7 +106,7 @@ class World:
         self._step_n = 0
         self.first_landing_m: list[float | None] = [None, None]
         self.first_landing_t: list[float | None] = [None, None]
-        self.applied_by_bin: tuple[dict[int, float], dict[int, float]] = ({}, {})
+        self._applied: tuple[dict[int, float], dict[int, float]] = ({}, {})
         # mean true NDVI across the working width under the outlets, by bin (the spot's truth)
         self.ndvi_by_bin: dict[int, float] = {}
         self._crop_next = min(s.next_t for s in self.sensors)
@@ -124,6 +124,7 @@ class World:
         self._patches = ffi.new("double[]", [v for patch in cfg.loose_patches for v in patch])
         ws.patches, ws.n_patches = self._patches, len(cfg.loose_patches)
         ws.loose_slip_pct, ws.loose_reach2 = cfg.loose_slip_pct, -1.0
+        ws.land_bin, ws.done_bin = (-1, -1), (-1, -1)
         self._app = self.ecu._app
         self._step_fn = lib.tdsim_world_step
 
@@ -176,10 +177,26 @@ class World:
             refill(self.wheel._gauss, self.wheel._s.gauss)
         if rc & lib.TDSIM_NEW_BIN:
             self._record_ndvi(self._ws.bin)
-        if rc & lib.TDSIM_LANDED_UPPER:
-            self._landed(0, t)
-        if rc & lib.TDSIM_LANDED_LOWER:
-            self._landed(1, t)
+        if rc & lib.TDSIM_FIRST_LANDING:
+            for i in (0, 1):
+                if self.first_landing_m[i] is None and self._ws.landed_any[i]:
+                    self.first_landing_m[i] = self.tractor.odometer
+                    self.first_landing_t[i] = t
+        if rc & lib.TDSIM_BIN_DONE:
+            ws = self._ws
+            for i in (0, 1):
+                if ws.done_bin[i] >= 0:
+                    self._applied[i][ws.done_bin[i]] = ws.done_kg[i]
+                    ws.done_bin[i] = -1
+
+    @property
+    def applied_by_bin(self) -> tuple[dict[int, float], dict[int, float]]:
+        """Fertilizer landed (kg) by record bin of the track (odometer // bin_m), per layer."""
+        ws = self._ws
+        for i in (0, 1):
+            if ws.land_bin[i] >= 0:  # the bin the outlets are over, so far
+                self._applied[i][ws.land_bin[i]] = ws.land_kg[i]
+        return self._applied
 
     @property
     def _edge_us(self) -> int:
@@ -214,17 +231,6 @@ class World:
         self.ndvi_by_bin[b] = sum(self.field.ndvi(tr.x + o * c, tr.y - o * s) for o in offs) / len(
             offs
         )
-
-    def _landed(self, i: int, t: float) -> None:
-        """Record what landed from air line i in this step where the outlets are."""
-        landed: float = self._ws.landed_kg[i]
-        odo = self.tractor.odometer
-        if self.first_landing_m[i] is None:
-            self.first_landing_m[i] = odo
-            self.first_landing_t[i] = t
-        b = int(odo / self._bin_m)
-        bins = self.applied_by_bin[i]
-        bins[b] = bins.get(b, 0.0) + landed
 
     def metered_kg(self, layer: int) -> float:
         """Fertilizer the layer's metering wheel has let out so far (true kg/rev): what a

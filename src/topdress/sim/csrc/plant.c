@@ -265,13 +265,35 @@ uint32_t tdsim_world_wheel_edge(tdsim_world_t *w, uint32_t now_us, int64_t count
     return w->edge_us;
 }
 
-/* The meter's revolutions since the last call into its air line, and what lands. */
+/* The meter's revolutions since the last call into its air line; what lands goes to the record
+ * bin under the outlets (summed in landing order, as the bins' dict of World had it). */
 static int transport(tdsim_world_t *w, int i, double t_s) {
     const double rev = w->meter[i]->revolutions;
     const double d_rev = rev - w->rev_prev[i];
+    double landed;
+    int flags = 0;
     w->rev_prev[i] = rev;
-    w->landed_kg[i] = tdsim_airline_step(w->line[i], t_s, d_rev, w->kg_per_rev[i], w->fan[i]->rpm);
-    return w->landed_kg[i] < 0.0 ? -1 : (w->landed_kg[i] > 0.0);
+    landed = tdsim_airline_step(w->line[i], t_s, d_rev, w->kg_per_rev[i], w->fan[i]->rpm);
+    if (landed < 0.0) {
+        return -1;
+    }
+    if (landed > 0.0) {
+        if (!w->landed_any[i]) {
+            w->landed_any[i] = 1;
+            flags |= TDSIM_FIRST_LANDING;
+        }
+        if (w->bin != w->land_bin[i]) {
+            if (w->land_bin[i] >= 0) {
+                w->done_bin[i] = w->land_bin[i];
+                w->done_kg[i] = w->land_kg[i];
+                flags |= TDSIM_BIN_DONE;
+            }
+            w->land_bin[i] = w->bin;
+            w->land_kg[i] = 0.0;
+        }
+        w->land_kg[i] += landed;
+    }
+    return flags;
 }
 
 int tdsim_world_step(tdsim_world_t *w, td_app_t *app, double t_s, uint32_t now_us,
@@ -305,13 +327,12 @@ int tdsim_world_step(tdsim_world_t *w, td_app_t *app, double t_s, uint32_t now_u
     counts[3] = tdsim_fan_step(w->fan[1], t_s, dt, w->duty[3]);
     /* an air line with nothing metered into it and nothing in flight has nothing to do */
     for (i = 0; i < 2; i++) {
-        w->landed_kg[i] = 0.0;
         if (w->meter[i]->revolutions > w->rev_prev[i] || w->line[i]->in_flight_kg > 0.0) {
-            const int landed = transport(w, i, t_s);
-            if (landed < 0) {
+            const int f = transport(w, i, t_s);
+            if (f < 0) {
                 return -1000;
             }
-            flags |= landed ? (i == 0 ? TDSIM_LANDED_UPPER : TDSIM_LANDED_LOWER) : 0;
+            flags |= f;
         } else {
             w->rev_prev[i] = w->meter[i]->revolutions;
         }

@@ -86,8 +86,8 @@ typedef struct {
  * length is in bits 8 and up) */
 #define TDSIM_REFILL_TRACTOR 0x01 /* the tractor's draws are used up: hand over more */
 #define TDSIM_REFILL_WHEEL 0x02
-#define TDSIM_LANDED_UPPER 0x04 /* landed_kg[0] > 0 this step */
-#define TDSIM_LANDED_LOWER 0x08
+#define TDSIM_FIRST_LANDING 0x04 /* fertilizer landed for the first time (either layer) */
+#define TDSIM_BIN_DONE 0x08      /* a layer's landings moved on to a new bin: see done_bin */
 #define TDSIM_NEW_BIN 0x10 /* the tractor entered record bin `bin` */
 #define TDSIM_TX_SHIFT 8
 
@@ -113,7 +113,11 @@ typedef struct {
     double rev_prev[2];
     double wheel_pos;
     uint32_t edge_us;
-    double landed_kg[2]; /* landed in the last step, per layer */
+    /* what landed, per layer: in the record bin the outlets are over (land_bin, kg so far:
+     * land_kg) and, once they have moved on, in the bin before (done_bin, done_kg; < 0 none) */
+    uint8_t landed_any[2];
+    int64_t land_bin[2], done_bin[2];
+    double land_kg[2], done_kg[2];
 } tdsim_world_t;
 
 int tdsim_tractor_step(tdsim_tractor_t *s, double dt_s, double v_target_ms, double curvature);
