@@ -6,7 +6,7 @@ import math
 import random
 from dataclasses import dataclass
 
-from topdress.sim.cplant import ffi, lib, refill
+from topdress.sim.cplant import attach, ffi, lib, refill
 
 KMH = 1.0 / 3.6
 
@@ -187,8 +187,7 @@ class Tractor:
         self.seed = seed
         self._s.target_ms = -1.0
         self._rng = random.Random(seed)
-        self._gauss = self._rng.gauss
-        refill(self._gauss, self._s.gauss)
+        attach(self._rng, self._s.gauss)
 
     @property
     def p(self) -> TractorParams:
@@ -205,8 +204,8 @@ class Tractor:
 
     def step(self, dt: float, v_target: float, curvature: float) -> None:
         lib.tdsim_tractor_step(self._s, dt, v_target, curvature)
-        if self._s.gauss.next >= self._s.gauss.n:
-            refill(self._gauss, self._s.gauss)
+        if self._s.gauss.n - self._s.gauss.next < 2:
+            refill(self._rng, self._s.gauss)
 
     @property
     def x(self) -> float:

@@ -6,7 +6,7 @@ import math
 import random
 from dataclasses import dataclass
 
-from topdress.sim.cplant import ffi, lib, refill
+from topdress.sim.cplant import attach, ffi, lib, refill
 
 
 @dataclass(frozen=True)
@@ -39,10 +39,9 @@ class GroundWheel:
         self._s = ffi.new("tdsim_wheel_t *")
         self.p = p
         self._rng = random.Random(seed)
-        self._gauss = self._rng.gauss
         self._slip_offset = self._rng.gauss(0.0, p.slip_sd_pct)
         self._s.slip_offset_pct = self._slip_offset
-        refill(self._gauss, self._s.gauss)
+        attach(self._rng, self._s.gauss)
 
     @property
     def p(self) -> WheelParams:
@@ -81,6 +80,6 @@ class GroundWheel:
         """Advance by dt at true ground speed v_ms (on ground where the slip is at least
         slip_floor_pct, e.g. a loose patch); return the cumulative pulse count."""
         n: int = lib.tdsim_wheel_step(self._s, t, dt, v_ms, slip_floor_pct)
-        if self._s.gauss.next >= self._s.gauss.n:
-            refill(self._gauss, self._s.gauss)
+        if self._s.gauss.n - self._s.gauss.next < 2:
+            refill(self._rng, self._s.gauss)
         return n

@@ -172,9 +172,9 @@ class World:
         if rc < 0:
             check(rc, "Ecu.step")
         if rc & lib.TDSIM_REFILL_TRACTOR:
-            refill(self.tractor._gauss, self.tractor._s.gauss)
+            refill(self.tractor._rng, self.tractor._s.gauss)
         if rc & lib.TDSIM_REFILL_WHEEL:
-            refill(self.wheel._gauss, self.wheel._s.gauss)
+            refill(self.wheel._rng, self.wheel._s.gauss)
         if rc & lib.TDSIM_NEW_BIN:
             self._record_ndvi(self._ws.bin)
         if rc & lib.TDSIM_FIRST_LANDING:

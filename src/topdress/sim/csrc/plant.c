@@ -13,16 +13,28 @@ static double (*volatile sin_fn)(double) = sin;
 static double (*volatile cos_fn)(double) = cos;
 static double (*volatile pow_fn)(double, double) = pow;
 
-#define TWO_PI (2.0 * 3.141592653589793)
+#define TWO_PI 6.283185307179586 /* math.tau, random.TWOPI; 2 pi exactly as a double */
 
-static double gauss_next(tdsim_gauss_t *g) {
-    /* Python refills before a step whenever the block is used up (TDSIM_REFILL_*); a step
-       draws at most once per stream */
-    if (g->next >= g->n) {
-        return NAN;
+double tdsim_gauss_draw(tdsim_gauss_t *g) {
+    double z, x2pi, g2rad;
+    if (g->has_kept) {
+        g->has_kept = 0;
+        z = g->kept;
+    } else {
+        if (g->n < 2u || g->next > g->n - 2u) {
+            return NAN;
+        }
+        x2pi = g->u[g->next++] * TWO_PI;
+        g2rad = sqrt(-2.0 * log(1.0 - g->u[g->next++]));
+        z = cos_fn(x2pi) * g2rad;
+        g->kept = sin_fn(x2pi) * g2rad;
+        g->has_kept = 1;
     }
-    return g->v[g->next++];
+    return 0.0 + z * 1.0; /* mu + z * sigma */
 }
+
+/* fewer than two uniforms left: the next draw may need more */
+static int gauss_low(const tdsim_gauss_t *g) { return g->n < 2u || g->next > g->n - 2u; }
 
 /* 0.0 <= at_s <= t_s: a fault knob set (>= 0) and its time reached */
 static int knob_on(double at_s, double t_s) { return 0.0 <= at_s && at_s <= t_s; }
@@ -71,7 +83,7 @@ int tdsim_tractor_step(tdsim_tractor_t *s, double dt_s, double v_target_ms, doub
     if (vb > 0.0 && s->ripple_sd > 0.0) {
         const double k = dt_s / s->ripple_tau_s;
         const double c = s->ripple_sd * sqrt(2 * k);
-        s->ripple += -k * s->ripple + c * gauss_next(&s->gauss);
+        s->ripple += -k * s->ripple + c * tdsim_gauss_draw(&s->gauss);
     }
     v = vb * (1.0 + s->ripple);
     v = v > 0.0 ? v : 0.0;
@@ -94,7 +106,7 @@ int64_t tdsim_wheel_step(tdsim_wheel_t *s, double t_s, double dt_s, double v_ms,
     if (s->bounce_sd > 0.0) {
         const double k = dt_s / s->bounce_tau_s;
         const double c = s->bounce_sd * sqrt(2 * k);
-        s->bounce += -k * s->bounce + c * gauss_next(&s->gauss);
+        s->bounce += -k * s->bounce + c * tdsim_gauss_draw(&s->gauss);
     }
     /* eq. 5 plus the run's offset, >= 0, and at least the ground's floor */
     v_kmh = v_ms * 3.6;
@@ -352,10 +364,10 @@ int tdsim_world_step(tdsim_world_t *w, td_app_t *app, double t_s, uint32_t now_u
     w->duty[1] = out.meter_duty[1];
     w->duty[2] = out.fan_duty[0];
     w->duty[3] = out.fan_duty[1];
-    if (tr->gauss.next >= tr->gauss.n) {
+    if (gauss_low(&tr->gauss)) {
         flags |= TDSIM_REFILL_TRACTOR;
     }
-    if (w->wheel->gauss.next >= w->wheel->gauss.n) {
+    if (gauss_low(&w->wheel->gauss)) {
         flags |= TDSIM_REFILL_WHEEL;
     }
     return flags | ((int)app->tx_count << TDSIM_TX_SHIFT);

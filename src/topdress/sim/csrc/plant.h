@@ -7,7 +7,7 @@
  * the Python it replaced (double precision, IEEE rounding, glibc's sin/cos/pow), so that a
  * seed gives the same numbers bit for bit. The Python classes (topdress.sim.*) own the
  * parameters (fault knobs included) and the random streams: they copy a replaced parameter
- * set into the struct and hand over N(0, 1) draws of their own random.Random in blocks
+ * set into the struct and hand over random() draws of their own random.Random in blocks
  * (tdsim_gauss_t), used in the order they were drawn.
  *
  * Units: seconds, metres, m/s, rpm, kg; times of the ECU's clock in microseconds (uint32).
@@ -19,13 +19,17 @@
 
 #include "td_app.h"
 
-#define TDSIM_GAUSS_BLOCK 64
+#define TDSIM_UNIFORM_BLOCK 64
 
-/* Draws of one random stream, handed over by Python: v[next..n-1] are still to be used. */
+/* One N(0, 1) stream of a Python random.Random: its random() draws, handed over in blocks
+ * (u[next..n-1] still to be used), turned into normal draws the way random.gauss does it
+ * (a pair from two uniforms, the second one kept for the next draw). */
 typedef struct {
     uint32_t n;
     uint32_t next;
-    double v[TDSIM_GAUSS_BLOCK];
+    double u[TDSIM_UNIFORM_BLOCK];
+    double kept; /* the second of a pair, when has_kept */
+    uint8_t has_kept;
 } tdsim_gauss_t;
 
 typedef struct {
@@ -84,7 +88,7 @@ typedef struct {
 
 /* World.step's flags (tdsim_world_step's return value when >= 0; the ECU's transmit queue
  * length is in bits 8 and up) */
-#define TDSIM_REFILL_TRACTOR 0x01 /* the tractor's draws are used up: hand over more */
+#define TDSIM_REFILL_TRACTOR 0x01 /* the tractor's stream has < 2 uniforms left: top it up */
 #define TDSIM_REFILL_WHEEL 0x02
 #define TDSIM_FIRST_LANDING 0x04 /* fertilizer landed for the first time (either layer) */
 #define TDSIM_BIN_DONE 0x08      /* a layer's landings moved on to a new bin: see done_bin */
@@ -120,6 +124,8 @@ typedef struct {
     double land_kg[2], done_kg[2];
 } tdsim_world_t;
 
+/* random.gauss(0.0, 1.0) of the stream; NaN when it runs dry (the caller tops up first) */
+double tdsim_gauss_draw(tdsim_gauss_t *g);
 int tdsim_tractor_step(tdsim_tractor_t *s, double dt_s, double v_target_ms, double curvature);
 int64_t tdsim_wheel_step(tdsim_wheel_t *s, double t_s, double dt_s, double v_ms,
                          double slip_floor_pct);
