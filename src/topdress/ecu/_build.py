@@ -286,13 +286,14 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
 int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
 const td_state_t *td_app_state(const td_app_t *app);
 
-/* fast paths of the binding (below): one C call per step, per frame in, per frame out */
+/* fast paths of the binding (below): one C call per step, per frame in, per drain of the
+   transmit queue */
 int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
               uint32_t f0, uint32_t f1, uint32_t wheel_edge_us, uint8_t wheel_edge_valid,
               float out[4]);
 int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *data, size_t len,
             uint32_t now_us);
-int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
+int tdpy_tx_drain(td_app_t *app, uint32_t ids[], uint8_t lens[], char data[]);
 
 /* the simulator's plant (src/topdress/sim/csrc/plant.h) */
 #define TDSIM_UNIFORM_BLOCK ...
@@ -429,15 +430,18 @@ static int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *dat
     return td_app_rx(app, &f, now_us);
 }
 
-/* Returns the frame length, or -1 when the transmit queue is empty. */
-static int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]) {
+/* Pops every frame of the transmit queue (at most TD_TXQ_LEN): ids, lengths, and payloads 8
+   bytes apart in data. Returns how many. */
+static int tdpy_tx_drain(td_app_t *app, uint32_t ids[], uint8_t lens[], char data[]) {
     td_can_frame_t f;
-    if (!td_app_tx_pop(app, &f)) {
-        return -1;
+    int n = 0;
+    while (n < (int)TD_TXQ_LEN && td_app_tx_pop(app, &f)) {
+        ids[n] = f.id;
+        lens[n] = f.dlc;
+        memcpy(data + 8 * n, f.data, 8);
+        n++;
     }
-    *id = f.id;
-    memcpy(data, f.data, 8);
-    return f.dlc;
+    return n;
 }
 """
 

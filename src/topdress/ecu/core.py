@@ -107,11 +107,12 @@ class Ecu:
         p = (params or EcuParams.defaults()).to_c()
         check(lib.td_app_init(self._app, p, now_us & _U32), "Ecu")
         self._out = ffi.new("float[4]")
-        self._tx_id = ffi.new("uint32_t *")
-        self._tx_data = ffi.new("char[8]")
         # bound once: step_raw is the simulator's inner loop
         self._step_fn = lib.tdpy_step
-        self._pop_fn = lib.tdpy_tx_pop
+        self._drain_fn = lib.tdpy_tx_drain
+        self._tx_ids = ffi.new("uint32_t[]", lib.TD_TXQ_LEN)
+        self._tx_lens = ffi.new("uint8_t[]", lib.TD_TXQ_LEN)
+        self._tx_buf = ffi.new("char[]", 8 * lib.TD_TXQ_LEN)
         #: frames in the transmit queue after the last step_raw (skip tx_raw when 0)
         self.tx_pending = 0
 
@@ -175,12 +176,11 @@ class Ecu:
 
     def tx_raw(self) -> list[CanFrame]:
         """Drain the transmit queue as (arbitration_id, data) tuples, oldest first."""
-        frames = []
-        id_p, data = self._tx_id, self._tx_data
-        while (n := self._pop_fn(self._app, id_p, data)) >= 0:
-            frames.append((int(id_p[0]), ffi.buffer(data, n)[:]))
+        ids, lens = self._tx_ids, self._tx_lens
+        n = self._drain_fn(self._app, ids, lens, self._tx_buf)
         self.tx_pending = 0
-        return frames
+        buf = ffi.buffer(self._tx_buf, 8 * n)[:]
+        return [(int(ids[i]), buf[8 * i : 8 * i + lens[i]]) for i in range(n)]
 
     def tx(self) -> list[can.Message]:
         """Drain the transmit queue as python-can messages (29-bit ids), oldest first."""
