@@ -337,6 +337,12 @@ typedef struct {
     ...;
 } tdsim_fan_t;
 typedef struct {
+    double ndvi_mean, wave_amp, k, phase0, phase1, two_r2;
+    const double *patches;
+    uint32_t n_patches;
+    ...;
+} tdsim_field_t;
+typedef struct {
     double line_length_m, air_speed_ms, nominal_fan_rpm, min_fan_rpm, drop_s, release_rev;
     uint8_t blocked;
     double rev_in, in_flight_kg, landed_kg;
@@ -371,6 +377,7 @@ int64_t tdsim_wheel_step(tdsim_wheel_t *s, double t_s, double dt_s, double v_ms,
                          double slip_floor_pct);
 int64_t tdsim_meter_step(tdsim_meter_t *s, double t_s, double dt_s, double duty);
 int64_t tdsim_fan_step(tdsim_fan_t *s, double t_s, double dt_s, double duty);
+double tdsim_field_ndvi(const tdsim_field_t *f, double x_m, double y_m);
 tdsim_airline_t *tdsim_airline_new(void);
 void tdsim_airline_free(tdsim_airline_t *s);
 double tdsim_airline_step(tdsim_airline_t *s, double t_s, double d_rev, double kg_per_rev,

@@ -165,6 +165,19 @@ int64_t tdsim_fan_step(tdsim_fan_t *s, double t_s, double dt_s, double duty) {
     return s->count;
 }
 
+double tdsim_field_ndvi(const tdsim_field_t *f, double x_m, double y_m) {
+    double v = f->ndvi_mean + f->wave_amp * 0.5 * (sin_fn(f->k * x_m + f->phase0) +
+                                                   sin_fn(0.7 * f->k * y_m + f->phase1));
+    uint32_t i;
+    for (i = 0; i < f->n_patches; i++) {
+        const double *pa = f->patches + 3 * i;
+        const double d2 = pow_fn(x_m - pa[0], 2) + pow_fn(y_m - pa[1], 2);
+        v += pa[2] * exp(-d2 / f->two_r2);
+    }
+    v = v > 0.15 ? v : 0.15;
+    return v < 0.92 ? v : 0.92;
+}
+
 tdsim_airline_t *tdsim_airline_new(void) { return calloc(1, sizeof(tdsim_airline_t)); }
 
 void tdsim_airline_free(tdsim_airline_t *s) {

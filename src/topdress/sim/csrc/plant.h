@@ -69,6 +69,13 @@ typedef struct {
     int64_t count;
 } tdsim_fan_t;
 
+/* The field's NDVI pattern (FieldParams with k = 2 pi / wavelength, two_r2 = 2 r^2) */
+typedef struct {
+    double ndvi_mean, wave_amp, k, phase0, phase1, two_r2;
+    const double *patches; /* x, y, amplitude each */
+    uint32_t n_patches;
+} tdsim_field_t;
+
 /* A parcel of fertilizer in flight: it lands at t_s. */
 typedef struct {
     double t_s;
@@ -131,6 +138,7 @@ int64_t tdsim_wheel_step(tdsim_wheel_t *s, double t_s, double dt_s, double v_ms,
                          double slip_floor_pct);
 int64_t tdsim_meter_step(tdsim_meter_t *s, double t_s, double dt_s, double duty);
 int64_t tdsim_fan_step(tdsim_fan_t *s, double t_s, double dt_s, double duty);
+double tdsim_field_ndvi(const tdsim_field_t *f, double x_m, double y_m);
 tdsim_airline_t *tdsim_airline_new(void);
 void tdsim_airline_free(tdsim_airline_t *s);
 /* kg landing in (t - dt, t]; < 0 when the FIFO cannot grow (out of memory) */
