@@ -179,7 +179,7 @@ class Ecu:
         ids, lens = self._tx_ids, self._tx_lens
         n = self._drain_fn(self._app, ids, lens, self._tx_buf)
         self.tx_pending = 0
-        buf = ffi.buffer(self._tx_buf, 8 * n)[:]
+        buf = ffi.unpack(self._tx_buf, 8 * n)
         return [(int(ids[i]), buf[8 * i : 8 * i + lens[i]]) for i in range(n)]
 
     def tx(self) -> list[can.Message]:

@@ -118,15 +118,12 @@ class Drive:
             return "uniform" if self.reached else "accel"
         return "run"
 
-    def _next_speed_ms(self) -> float:
-        nxt = self.index + 1
-        return self.segments[nxt].speed_kmh * KMH if nxt < len(self.segments) else 0.0
-
     def command(self, tr: Tractor, dt: float) -> tuple[float, float]:
         """Advance the plan by one step; return (target speed m/s, curvature 1/m)."""
         if self.finished:
             return 0.0, 0.0
-        seg = self.segments[self.index]
+        segs = self.segments
+        seg = segs[self.index]
         kind = seg.kind
         v = tr.v
         if kind == "stop":
@@ -157,11 +154,13 @@ class Drive:
         progress = self._progress + ds
         self._progress = progress
         remaining = seg.length_m - progress
-        v_next = self._next_speed_ms()
-        decel = tr.p.decel_ms2
+        nxt = self.index + 1  # the speed of the next segment, the end of this one
+        v_next = segs[nxt].speed_kmh * KMH if nxt < len(segs) else 0.0
+        p = tr.p
+        decel = p.decel_ms2
         brake_m = (v * v - v_next * v_next) / (2.0 * decel)
         brake_m = brake_m if brake_m > 0.0 else 0.0  # max(0.0, brake_m)
-        if remaining <= brake_m + v * decel / tr.p.jerk_ms3:
+        if remaining <= brake_m + v * decel / p.jerk_ms3:
             v_t = v_next if v_next < v_t else v_t  # min(v_t, v_next)
         if remaining <= 0.0:
             self._advance()

@@ -20,6 +20,7 @@ from topdress.sim.cplant import ffi, lib, refill
 
 _U32 = 0xFFFFFFFF
 _NO_MEMORY = -1000  # tdsim_world_step: an air line could not grow
+_TX_SHIFT: int = lib.TDSIM_TX_SHIFT
 LAYERS = ("upper", "lower")
 
 
@@ -127,6 +128,7 @@ class World:
         ws.land_bin, ws.done_bin = (-1, -1), (-1, -1)
         self._app = self.ecu._app
         self._step_fn = lib.tdsim_world_step
+        self._tx_raw = self.ecu.tx_raw
 
     @property
     def now_us(self) -> int:
@@ -163,7 +165,7 @@ class World:
                 if line is not None:
                     crop.append(line)
             self._crop_next = min(s.next_t for s in self.sensors)
-        return t, lines, crop, self.ecu.tx_raw() if rc >> lib.TDSIM_TX_SHIFT else []
+        return t, lines, crop, self._tx_raw() if rc >> _TX_SHIFT else []
 
     def _after_step(self, rc: int, t: float) -> None:
         """What tdsim_world_step's flags leave to Python: errors, random draws, records."""
