@@ -8,6 +8,7 @@ from typing import Any
 
 from topdress.sim.cplant import ffi, lib
 
+
 @dataclass(frozen=True)
 class MeterParams:
     """One metering drive seen at the metering shaft.

@@ -25,7 +25,7 @@ def attach(rng: random.Random, block: Any) -> None:
     kept = getattr(rng, "gauss_next", None)
     if kept is not None:
         block.kept, block.has_kept = kept, 1
-        setattr(rng, "gauss_next", None)
+        rng.gauss_next = None
     block.n = block.next = 0
     refill(rng, block)
 

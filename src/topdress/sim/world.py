@@ -11,12 +11,12 @@ from topdress.ecu import Ecu, EcuParams
 from topdress.ecu.params import check
 from topdress.protocol import CanFrame
 from topdress.sim.actuators import Fan, FanParams, MeterMotor, MeterParams
+from topdress.sim.cplant import ffi, lib, refill
 from topdress.sim.field import CropSensor, CropSensorParams, Field, FieldParams
 from topdress.sim.gnss import EARTH_R_M, GnssParams, GnssReceiver
 from topdress.sim.tractor import Drive, Tractor, TractorParams
 from topdress.sim.transport import AirLine, AirLineParams
 from topdress.sim.wheel import GroundWheel, WheelParams
-from topdress.sim.cplant import ffi, lib, refill
 
 _U32 = 0xFFFFFFFF
 _NO_MEMORY = -1000  # tdsim_world_step: an air line could not grow
