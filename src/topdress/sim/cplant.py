@@ -22,10 +22,11 @@ def attach(rng: random.Random, block: Any) -> None:
     """Make tdsim_gauss_t `block` the rest of rng's gauss stream: the second value of a pair
     that rng.gauss keeps for its next call (the pure-Python random.gauss holds it in
     `gauss_next`) moves over, then the block is filled."""
-    kept = getattr(rng, "gauss_next", None)
+    state = vars(rng)
+    kept = state.get("gauss_next")
     if kept is not None:
         block.kept, block.has_kept = kept, 1
-        rng.gauss_next = None
+        state["gauss_next"] = None
     block.n = block.next = 0
     refill(rng, block)
 
