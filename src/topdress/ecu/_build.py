@@ -420,8 +420,7 @@ static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0
     out[1] = o.meter_duty[1];
     out[2] = o.fan_duty[0];
     out[3] = o.fan_duty[1];
-    /* on success, the frames waiting in the transmit queue (the caller drains them only then) */
-    return rc < 0 ? rc : (int)app->tx_count;
+    return rc;
 }
 
 /* A frame longer than 8 bytes (CAN FD) keeps its length in dlc so the core rejects it as

@@ -113,8 +113,6 @@ class Ecu:
         self._tx_ids = ffi.new("uint32_t[]", lib.TD_TXQ_LEN)
         self._tx_lens = ffi.new("uint8_t[]", lib.TD_TXQ_LEN)
         self._tx_buf = ffi.new("char[]", 8 * lib.TD_TXQ_LEN)
-        #: frames in the transmit queue after the last step_raw (skip tx_raw when 0)
-        self.tx_pending = 0
 
     def rx(self, frame: can.Message | CanFrame, now_us: int) -> int:
         """Hand one received frame to the core. Returns TD_OK (0) when acted on, or the negative
@@ -158,7 +156,6 @@ class Ecu:
         )
         if rc < 0:
             check(rc, "Ecu.step")
-        self.tx_pending = rc
         return (out[0], out[1], out[2], out[3])
 
     def step(
@@ -178,7 +175,6 @@ class Ecu:
         """Drain the transmit queue as (arbitration_id, data) tuples, oldest first."""
         ids, lens = self._tx_ids, self._tx_lens
         n = self._drain_fn(self._app, ids, lens, self._tx_buf)
-        self.tx_pending = 0
         buf = ffi.unpack(self._tx_buf, 8 * n)
         return [(int(ids[i]), buf[8 * i : 8 * i + lens[i]]) for i in range(n)]
 

@@ -20,7 +20,8 @@ from topdress.sim.wheel import GroundWheel, WheelParams
 
 _U32 = 0xFFFFFFFF
 _NO_MEMORY = -1000  # tdsim_world_step: an air line could not grow
-_TX_SHIFT: int = lib.TDSIM_TX_SHIFT
+_TX_SHIFT: int = lib.TDSIM_TX_SHIFT  # tdsim_world_step's result: frames to drain << this
+_FLAGS = (1 << _TX_SHIFT) - 1  # and the flags below it
 LAYERS = ("upper", "lower")
 
 
@@ -112,7 +113,6 @@ class World:
         self.ndvi_by_bin: dict[int, float] = {}
         self._crop_next = min(s.next_t for s in self.sensors)
         self._dt_us = round(dt * 1e6)
-        self._bin_m = cfg.bin_m
         # the continuous part of a step runs in C (csrc/plant.c, tdsim_world_step) on the
         # devices' structs; the flags it returns say what is left for Python
         ws = self._ws = ffi.new("tdsim_world_t *")
@@ -153,7 +153,7 @@ class World:
         tr = self.tractor
         v_t, k = self.drive.command(tr, dt)
         rc = self._step_fn(self._ws, self._app, t, (n * self._dt_us) & _U32, v_t, k)
-        if rc & 0xFF or rc < 0:
+        if rc & _FLAGS or rc < 0:
             self._after_step(rc, t)
         gnss = self.gnss
         lines = gnss.step(t, tr.x, tr.y, tr.v, tr.heading) if t + 1e-9 >= gnss.next_due_s else []
