@@ -114,7 +114,9 @@ class World:
         self._crop_next = min(s.next_t for s in self.sensors)
         self._dt_us = round(dt * 1e6)
         # the continuous part of a step runs in C (csrc/plant.c, tdsim_world_step) on the
-        # devices' structs; the flags it returns say what is left for Python
+        # devices' structs; the flags it returns say what is left for Python. The devices are
+        # the World's for good: it holds them so their structs live as long as it does.
+        self._devices = (self.tractor, self.wheel, *self.meters, *self.fans, *self.airlines)
         ws = self._ws = ffi.new("tdsim_world_t *")
         ws.tractor, ws.wheel = self.tractor._s, self.wheel._s
         ws.meter = [m._s for m in self.meters]
