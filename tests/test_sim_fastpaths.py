@@ -114,6 +114,13 @@ def ref_edge(pos: float, prev: float, count: int, now_us: int, last: int) -> int
 # -- the tests --------------------------------------------------------------------------
 
 
+def skip_draw(tr: Tractor, ref_rng: random.Random) -> None:
+    """Keep the reference's stream with the tractor's over a step it did not model: the
+    ripple draws once in a step that ends with speed."""
+    if tr._vb > 0.0 and tr.p.ripple_sd > 0.0:
+        ref_rng.gauss(0.0, 1.0)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_tractor_speed_equals_the_plain_formulation(seed: int) -> None:
     rng = random.Random(seed)
@@ -123,7 +130,7 @@ def test_tractor_speed_equals_the_plain_formulation(seed: int) -> None:
     tr.step(DT, 2.0, 0.0)  # the first step picks the gear: the reference starts after it
     st = {"t": tr.t, "vb": tr._vb, "a": tr.a, "limit": tr._accel_limit, "jerk": tr._jerk}
     st |= {"ripple": tr._ripple, "v": tr.v}
-    ref_rng.setstate(tr._rng.getstate())
+    skip_draw(tr, ref_rng)
     v_t = 2.0
     for i in range(4000):
         if i % 500 == 499:  # the driver changes speed: the gear is picked again in both
@@ -131,7 +138,7 @@ def test_tractor_speed_equals_the_plain_formulation(seed: int) -> None:
             tr.step(DT, v_t, rng.uniform(-0.3, 0.3))
             st = {"t": tr.t, "vb": tr._vb, "a": tr.a, "limit": tr._accel_limit}
             st |= {"jerk": tr._jerk, "ripple": tr._ripple, "v": tr.v}
-            ref_rng.setstate(tr._rng.getstate())
+            skip_draw(tr, ref_rng)
             continue
         h, x, y, odo = tr.heading, tr.x, tr.y, tr.odometer
         k = rng.uniform(-0.3, 0.3) if i % 7 == 0 else 0.0

@@ -286,13 +286,107 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
 int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
 const td_state_t *td_app_state(const td_app_t *app);
 
-/* fast paths of the binding (below): one C call per step, per frame in, per frame out */
+/* fast paths of the binding (below): one C call per step, per frame in, per drain of the
+   transmit queue */
 int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
               uint32_t f0, uint32_t f1, uint32_t wheel_edge_us, uint8_t wheel_edge_valid,
               float out[4]);
 int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *data, size_t len,
             uint32_t now_us);
-int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]);
+int tdpy_tx_drain(td_app_t *app, uint32_t ids[], uint8_t lens[], char data[]);
+
+/* the simulator's plant (src/topdress/sim/csrc/plant.h) */
+#define TDSIM_UNIFORM_BLOCK ...
+#define TDSIM_REFILL_TRACTOR ...
+#define TDSIM_REFILL_WHEEL ...
+#define TDSIM_FIRST_LANDING ...
+#define TDSIM_BIN_DONE ...
+#define TDSIM_NEW_BIN ...
+#define TDSIM_TX_SHIFT ...
+typedef struct {
+    uint32_t n; uint32_t next; double u[...]; double kept; uint8_t has_kept; ...;
+} tdsim_gauss_t;
+double tdsim_gauss_draw(tdsim_gauss_t *g);
+typedef struct {
+    double runup_m, accel_min_ms2, accel_max_ms2, clutch_s, decel_ms2, jerk_ms3, speed_tau_s;
+    double ripple_sd, ripple_tau_s, stall_at_s;
+    double x_m, y_m, heading_rad, v_ms, a_ms2, odometer_m, t_s, ripple, vb_ms, accel_limit_ms2;
+    double target_ms, jerk_now_ms3;
+    tdsim_gauss_t gauss;
+    ...;
+} tdsim_tractor_t;
+typedef struct {
+    double circ_m, slip_a, slip_b, slip_c, bounce_sd, bounce_tau_s, encoder_dead_at_s, lifted_at_s;
+    double ppr;
+    double slip_offset_pct, bounce, revolutions;
+    int64_t count;
+    tdsim_gauss_t gauss;
+    ...;
+} tdsim_wheel_t;
+typedef struct {
+    double max_rpm, breakaway_duty, friction_duty, load_duty, flutes, load_ripple;
+    double counts_per_rev, jammed_at_s, encoder_dead_at_s, decay;
+    double rpm, revolutions;
+    int64_t count;
+    ...;
+} tdsim_meter_t;
+typedef struct {
+    double max_rpm, ppr, failed_at_s, belt_slip, decay;
+    double rpm, revolutions;
+    int64_t count;
+    ...;
+} tdsim_fan_t;
+typedef struct {
+    double ndvi_mean, wave_amp, k, phase0, phase1, two_r2;
+    const double *patches;
+    uint32_t n_patches;
+    ...;
+} tdsim_field_t;
+typedef struct {
+    double line_length_m, air_speed_ms, nominal_fan_rpm, min_fan_rpm, drop_s, release_rev;
+    uint8_t blocked;
+    double rev_in, in_flight_kg, landed_kg;
+    ...;
+} tdsim_airline_t;
+typedef struct {
+    tdsim_tractor_t *tractor;
+    tdsim_wheel_t *wheel;
+    tdsim_meter_t *meter[2];
+    tdsim_fan_t *fan[2];
+    tdsim_airline_t *line[2];
+    double dt_s;
+    double kg_per_rev[2];
+    double bin_m;
+    int64_t bin;
+    uint8_t wheel_edges;
+    const double *patches;
+    uint32_t n_patches;
+    double loose_slip_pct;
+    double loose_x, loose_y, loose_reach2, loose_floor;
+    float duty[4];
+    double rev_prev[2];
+    double wheel_pos;
+    uint32_t edge_us;
+    uint8_t landed_any[2];
+    int64_t land_bin[2], done_bin[2];
+    double land_kg[2], done_kg[2];
+    ...;
+} tdsim_world_t;
+int tdsim_tractor_step(tdsim_tractor_t *s, double dt_s, double v_target_ms, double curvature);
+int64_t tdsim_wheel_step(tdsim_wheel_t *s, double t_s, double dt_s, double v_ms,
+                         double slip_floor_pct);
+int64_t tdsim_meter_step(tdsim_meter_t *s, double t_s, double dt_s, double duty);
+int64_t tdsim_fan_step(tdsim_fan_t *s, double t_s, double dt_s, double duty);
+double tdsim_field_ndvi(const tdsim_field_t *f, double x_m, double y_m);
+tdsim_airline_t *tdsim_airline_new(void);
+void tdsim_airline_free(tdsim_airline_t *s);
+double tdsim_airline_step(tdsim_airline_t *s, double t_s, double d_rev, double kg_per_rev,
+                          double fan_rpm);
+uint32_t tdsim_airline_len(const tdsim_airline_t *s);
+double tdsim_world_loose(tdsim_world_t *w, double x_m, double y_m);
+uint32_t tdsim_world_wheel_edge(tdsim_world_t *w, uint32_t now_us, int64_t count);
+int tdsim_world_step(tdsim_world_t *w, td_app_t *app, double t_s, uint32_t now_us,
+                     double v_target_ms, double curvature);
 """
 
 # Small C shims so that one Python call does one whole step, without filling structs field
@@ -306,6 +400,7 @@ SHIMS = r"""
 #include "td_meter.h"
 #include "td_slip.h"
 #include "td_speedsel.h"
+#include "plant.h"
 
 static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0, uint32_t m1,
                      uint32_t f0, uint32_t f1, uint32_t wheel_edge_us, uint8_t wheel_edge_valid,
@@ -325,8 +420,7 @@ static int tdpy_step(td_app_t *app, uint32_t now_us, uint32_t wheel, uint32_t m0
     out[1] = o.meter_duty[1];
     out[2] = o.fan_duty[0];
     out[3] = o.fan_duty[1];
-    /* on success, the frames waiting in the transmit queue (the caller drains them only then) */
-    return rc < 0 ? rc : (int)app->tx_count;
+    return rc;
 }
 
 /* A frame longer than 8 bytes (CAN FD) keeps its length in dlc so the core rejects it as
@@ -342,15 +436,18 @@ static int tdpy_rx(td_app_t *app, uint32_t id, uint8_t extended, const char *dat
     return td_app_rx(app, &f, now_us);
 }
 
-/* Returns the frame length, or -1 when the transmit queue is empty. */
-static int tdpy_tx_pop(td_app_t *app, uint32_t *id, char data[8]) {
+/* Pops every frame of the transmit queue (at most TD_TXQ_LEN): ids, lengths, and payloads 8
+   bytes apart in data. Returns how many. */
+static int tdpy_tx_drain(td_app_t *app, uint32_t ids[], uint8_t lens[], char data[]) {
     td_can_frame_t f;
-    if (!td_app_tx_pop(app, &f)) {
-        return -1;
+    int n = 0;
+    while (n < (int)TD_TXQ_LEN && td_app_tx_pop(app, &f)) {
+        ids[n] = f.id;
+        lens[n] = f.dlc;
+        memcpy(data + 8 * n, f.data, 8);
+        n++;
     }
-    *id = f.id;
-    memcpy(data, f.data, 8);
-    return f.dlc;
+    return n;
 }
 """
 
@@ -359,8 +456,8 @@ ffibuilder.cdef(CDEF)
 ffibuilder.set_source(
     "topdress.ecu._core",
     SHIMS,
-    sources=[*sorted(glob("ecu/src/*.c")), "ecu/src/gen/td_can.c"],
-    include_dirs=["ecu/include", "ecu/src/gen"],
+    sources=[*sorted(glob("ecu/src/*.c")), "ecu/src/gen/td_can.c", "src/topdress/sim/csrc/plant.c"],
+    include_dirs=["ecu/include", "ecu/src/gen", "src/topdress/sim/csrc"],
     extra_compile_args=["-std=c99", "-O2"],
 )
 

@@ -107,13 +107,12 @@ class Ecu:
         p = (params or EcuParams.defaults()).to_c()
         check(lib.td_app_init(self._app, p, now_us & _U32), "Ecu")
         self._out = ffi.new("float[4]")
-        self._tx_id = ffi.new("uint32_t *")
-        self._tx_data = ffi.new("char[8]")
         # bound once: step_raw is the simulator's inner loop
         self._step_fn = lib.tdpy_step
-        self._pop_fn = lib.tdpy_tx_pop
-        #: frames in the transmit queue after the last step_raw (skip tx_raw when 0)
-        self.tx_pending = 0
+        self._drain_fn = lib.tdpy_tx_drain
+        self._tx_ids = ffi.new("uint32_t[]", lib.TD_TXQ_LEN)
+        self._tx_lens = ffi.new("uint8_t[]", lib.TD_TXQ_LEN)
+        self._tx_buf = ffi.new("char[]", 8 * lib.TD_TXQ_LEN)
 
     def rx(self, frame: can.Message | CanFrame, now_us: int) -> int:
         """Hand one received frame to the core. Returns TD_OK (0) when acted on, or the negative
@@ -157,7 +156,6 @@ class Ecu:
         )
         if rc < 0:
             check(rc, "Ecu.step")
-        self.tx_pending = rc
         return (out[0], out[1], out[2], out[3])
 
     def step(
@@ -175,12 +173,10 @@ class Ecu:
 
     def tx_raw(self) -> list[CanFrame]:
         """Drain the transmit queue as (arbitration_id, data) tuples, oldest first."""
-        frames = []
-        id_p, data = self._tx_id, self._tx_data
-        while (n := self._pop_fn(self._app, id_p, data)) >= 0:
-            frames.append((int(id_p[0]), ffi.buffer(data, n)[:]))
-        self.tx_pending = 0
-        return frames
+        ids, lens = self._tx_ids, self._tx_lens
+        n = self._drain_fn(self._app, ids, lens, self._tx_buf)
+        buf = ffi.unpack(self._tx_buf, 8 * n)
+        return [(int(ids[i]), buf[8 * i : 8 * i + lens[i]]) for i in range(n)]
 
     def tx(self) -> list[can.Message]:
         """Drain the transmit queue as python-can messages (29-bit ids), oldest first."""

@@ -15,7 +15,7 @@ by bisection on the same check, so a decoded frame is accepted or refused exactl
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
@@ -87,6 +87,17 @@ class FrameLayout:
     checks: tuple[SignalCheck, ...]
     checked: tuple[int, ...]  # the signals a raw value can fail (the others need no check)
     ratios: tuple[tuple[int, int], ...] | None  # SignalCheck.ratio of every signal, if all have one
+    _guards: tuple[tuple[int, int, int, frozenset[int] | None], ...] = field(
+        init=False, repr=False, compare=False
+    )
+    _signed: bool = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # what SignalCheck.check accepts, as plain values: (index, raw_lo, raw_hi, choices) of
+        # every checked signal; check itself runs only to raise a refused signal's error
+        guards = tuple((i, c.raw_lo, c.raw_hi, c.choices) for i, c in enumerate(self.checks))
+        object.__setattr__(self, "_guards", tuple(guards[i] for i in self.checked))
+        object.__setattr__(self, "_signed", any(self.sign_bits))
 
     def decode(self, data: bytes) -> tuple[tuple[int, ...], tuple[float, ...]]:
         """Raw and physical values in DBC order; ProtocolError for a wrong length or as
@@ -100,7 +111,7 @@ class FrameLayout:
         """Raw signal values in DBC order; the caller has checked the length."""
         x = int.from_bytes(data, "little")
         raw = tuple([(x >> s) & m for s, m in self.fields])
-        if not any(self.sign_bits):
+        if not self._signed:
             return raw
         return tuple([r - ((r & b) << 1) for r, b in zip(raw, self.sign_bits, strict=True)])
 
@@ -108,8 +119,10 @@ class FrameLayout:
         """Physical values in DBC order; ProtocolError as SignalCheck.check for the first
         signal (in DBC order) outside its range or value table."""
         checks = self.checks
-        for i in self.checked:
-            checks[i].check(raw[i])
+        for i, lo, hi, choices in self._guards:
+            r = raw[i]
+            if not lo <= r <= hi or (choices is not None and r not in choices):
+                checks[i].check(r)
         ratios = self.ratios
         if ratios is None:
             return tuple([c.physical(r) for c, r in zip(checks, raw, strict=True)])

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-_TWO_PI = 2.0 * math.pi
+from topdress.sim.cplant import ffi, lib
 
 
 @dataclass(frozen=True)
@@ -34,43 +35,57 @@ class MeterParams:
 
 
 class _Shaft:
-    """A shaft with first-order speed: its speed, revolutions and cumulative encoder count."""
+    """A shaft with first-order speed: its speed, revolutions and cumulative encoder count,
+    in a C struct (`_s`) that csrc/plant.c steps."""
 
-    def __init__(self, tau_s: float, dt: float) -> None:
-        self._decay = math.exp(-dt / tau_s)  # exact discretisation of the first-order lag
-        self.rpm = 0.0
-        self.revolutions = 0.0
-        self.count = 0
+    _s: Any
+
+    def __init__(self, dt: float) -> None:
+        self._dt = dt
+
+    def _decay(self, tau_s: float) -> float:
+        """The exact discretisation of the first-order lag over one step."""
+        return math.exp(-self._dt / tau_s)
+
+    @property
+    def rpm(self) -> float:
+        r: float = self._s.rpm
+        return r
+
+    @property
+    def revolutions(self) -> float:
+        r: float = self._s.revolutions
+        return r
+
+    @property
+    def count(self) -> int:
+        n: int = self._s.count
+        return n
 
 
 class MeterMotor(_Shaft):
     def __init__(self, p: MeterParams, dt: float) -> None:
-        super().__init__(p.tau_s, dt)
+        super().__init__(dt)
+        self._s = ffi.new("tdsim_meter_t *")
         self.p = p
 
+    @property
+    def p(self) -> MeterParams:
+        return self._p
+
+    @p.setter
+    def p(self, p: MeterParams) -> None:
+        self._p = p
+        s = self._s
+        s.max_rpm, s.breakaway_duty, s.friction_duty = p.max_rpm, p.breakaway_duty, p.friction_duty
+        s.load_duty, s.flutes, s.load_ripple = p.load_duty, p.flutes, p.load_ripple
+        s.counts_per_rev, s.jammed_at_s = p.counts_per_rev, p.jammed_at_s
+        s.encoder_dead_at_s, s.decay = p.encoder_dead_at_s, self._decay(p.tau_s)
+
     def step(self, t: float, dt: float, duty: float) -> int:
-        """Apply duty for dt; return the cumulative encoder count."""
-        p = self.p
-        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)  # PWM saturates
-        if 0.0 <= p.jammed_at_s <= t:
-            self.rpm = 0.0
-            return self.count
-        rpm = self.rpm
-        if rpm <= 0.0 and duty <= p.breakaway_duty + p.load_duty:
-            return self.count
-        load = p.load_duty
-        if p.load_ripple:
-            load *= 1.0 + p.load_ripple * math.sin(_TWO_PI * p.flutes * self.revolutions)
-        w_ss = p.max_rpm * (duty - p.friction_duty - load)
-        w = w_ss + (rpm - w_ss) * self._decay
-        if w <= 0.0:
-            w = 0.0  # friction holds the shaft; it does not turn backwards
-        revolutions = self.revolutions + 0.5 * (rpm + w) * dt / 60.0
-        self.revolutions = revolutions
-        self.rpm = w
-        if not 0.0 <= p.encoder_dead_at_s <= t:
-            self.count = int(revolutions * p.counts_per_rev)
-        return self.count
+        """Apply duty for dt; return the cumulative encoder count (tdsim_meter_step)."""
+        n: int = lib.tdsim_meter_step(self._s, t, dt, duty)
+        return n
 
     def steady_rpm(self, duty: float) -> float:
         """Steady-state shaft speed for a constant duty (0 below breakaway)."""
@@ -93,19 +108,22 @@ class FanParams:
 
 class Fan(_Shaft):
     def __init__(self, p: FanParams, dt: float) -> None:
-        super().__init__(p.tau_s, dt)
+        super().__init__(dt)
+        self._s = ffi.new("tdsim_fan_t *")
         self.p = p
 
+    @property
+    def p(self) -> FanParams:
+        return self._p
+
+    @p.setter
+    def p(self, p: FanParams) -> None:
+        self._p = p
+        s = self._s
+        s.max_rpm, s.ppr, s.failed_at_s = p.max_rpm, p.ppr, p.failed_at_s
+        s.belt_slip, s.decay = p.belt_slip, self._decay(p.tau_s)
+
     def step(self, t: float, dt: float, duty: float) -> int:
-        """Apply duty for dt; return the cumulative tachometer count."""
-        p = self.p
-        duty = 0.0 if duty < 0.0 else (1.0 if duty > 1.0 else duty)  # PWM saturates
-        if 0.0 <= p.failed_at_s <= t:
-            duty = 0.0
-        w_ss = p.max_rpm * duty * (1.0 - p.belt_slip)
-        rpm = w_ss + (self.rpm - w_ss) * self._decay
-        self.rpm = rpm
-        revolutions = self.revolutions + rpm * dt / 60.0
-        self.revolutions = revolutions
-        self.count = int(revolutions * p.ppr)
-        return self.count
+        """Apply duty for dt; return the cumulative tachometer count (tdsim_fan_step)."""
+        n: int = lib.tdsim_fan_step(self._s, t, dt, duty)
+        return n

@@ -6,6 +6,8 @@ import math
 import random
 from dataclasses import dataclass
 
+from topdress.sim.cplant import ffi, lib
+
 
 @dataclass(frozen=True)
 class FieldParams:
@@ -25,8 +27,10 @@ class FieldParams:
 
 
 class Field:
+    """The NDVI pattern of one field (seeded); ndvi() is computed in C (csrc/plant.c,
+    tdsim_field_ndvi), the same arithmetic as the formula of FieldParams."""
+
     def __init__(self, p: FieldParams, seed: int) -> None:
-        self.p = p
         rng = random.Random(seed)
         self._phase = (rng.uniform(0, 2 * math.pi), rng.uniform(0, 2 * math.pi))
         self._patches = [
@@ -37,21 +41,28 @@ class Field:
             )
             for _ in range(p.patches)
         ]
+        self._s = ffi.new("tdsim_field_t *")
+        self._patch_arr = ffi.new("double[]", [v for patch in self._patches for v in patch])
+        self._s.patches, self._s.n_patches = self._patch_arr, len(self._patches)
+        self._s.phase0, self._s.phase1 = self._phase
+        self.p = p
+        self._ndvi = lib.tdsim_field_ndvi
+
+    @property
+    def p(self) -> FieldParams:
+        return self._p
+
+    @p.setter
+    def p(self, p: FieldParams) -> None:
+        self._p = p
+        s = self._s
+        s.ndvi_mean, s.wave_amp = p.ndvi_mean, p.wave_amp
+        s.k = 2 * math.pi / p.wavelength_m
+        s.two_r2 = 2 * (p.patch_radius_m * p.patch_radius_m)
 
     def ndvi(self, x: float, y: float) -> float:
-        p = self.p
-        k = 2 * math.pi / p.wavelength_m
-        v = p.ndvi_mean + p.wave_amp * 0.5 * (
-            math.sin(k * x + self._phase[0]) + math.sin(0.7 * k * y + self._phase[1])
-        )
-        two_r2 = 2 * (p.patch_radius_m * p.patch_radius_m)
-        exp = math.exp
-        for px, py, amp in self._patches:
-            d2 = (x - px) ** 2 + (y - py) ** 2
-            v += amp * exp(-d2 / two_r2)
-        # min(0.92, max(0.15, v)) without the calls, down to the operand returned
-        v = v if v > 0.15 else 0.15
-        return v if v < 0.92 else 0.92
+        v: float = self._ndvi(self._s, x, y)
+        return v
 
 
 @dataclass(frozen=True)

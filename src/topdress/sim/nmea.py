@@ -6,12 +6,16 @@ import math
 from functools import reduce
 from operator import xor
 
+from topdress.gnss.nmea import nmea_checksum
+
 KNOTS_PER_MS = 3600.0 / 1852.0
 TALKERS = ("GP", "BD", "GB", "GN", "GL", "GA")
 
 
 def checksum(body: str) -> str:
     """XOR of the characters between '$' and '*', two upper-case hex digits."""
+    if body.isascii():  # every line the simulator writes: the XOR of its bytes
+        return f"{nmea_checksum(body.encode('ascii')):02X}"
     return f"{reduce(xor, map(ord, body), 0):02X}"
 
 

@@ -258,20 +258,19 @@ class Sil:
             while (msg := self.ecu_bus.recv(0)) is not None:
                 w.deliver_can(msg, now)
             self._pending_to_ecu = 0
-        out = w.step()
-        t = out.t_s
+        t, nmea, crop, frames = w.step_raw()
         pc = self.pc
-        if out.nmea:
-            self.nmea_lines += len(out.nmea)
-            for line in out.nmea:
+        if nmea:
+            self.nmea_lines += len(nmea)
+            for line in nmea:
                 pc.on_nmea(line, t)
-        if out.crop:
-            self.crop_lines += len(out.crop)
+        if crop:
+            self.crop_lines += len(crop)
             if pc.ndvi is not None:
-                for line in out.crop:
+                for line in crop:
                     pc.on_crop(line, t)
-        if out.can:
-            for fid, data in out.can:
+        if frames:
+            for fid, data in frames:
                 self.ecu_bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=True))
             status = False
             while (msg := self.pc_bus.recv(0)) is not None:

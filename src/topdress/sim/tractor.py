@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+
+from topdress.sim.cplant import attach, ffi, lib, refill
 
 KMH = 1.0 / 3.6
 
@@ -116,15 +118,12 @@ class Drive:
             return "uniform" if self.reached else "accel"
         return "run"
 
-    def _next_speed_ms(self) -> float:
-        nxt = self.index + 1
-        return self.segments[nxt].speed_kmh * KMH if nxt < len(self.segments) else 0.0
-
     def command(self, tr: Tractor, dt: float) -> tuple[float, float]:
         """Advance the plan by one step; return (target speed m/s, curvature 1/m)."""
         if self.finished:
             return 0.0, 0.0
-        seg = self.segments[self.index]
+        segs = self.segments
+        seg = segs[self.index]
         kind = seg.kind
         v = tr.v
         if kind == "stop":
@@ -155,11 +154,13 @@ class Drive:
         progress = self._progress + ds
         self._progress = progress
         remaining = seg.length_m - progress
-        v_next = self._next_speed_ms()
-        decel = tr.p.decel_ms2
+        nxt = self.index + 1  # the speed of the next segment, the end of this one
+        v_next = segs[nxt].speed_kmh * KMH if nxt < len(segs) else 0.0
+        p = tr.p
+        decel = p.decel_ms2
         brake_m = (v * v - v_next * v_next) / (2.0 * decel)
         brake_m = brake_m if brake_m > 0.0 else 0.0  # max(0.0, brake_m)
-        if remaining <= brake_m + v * decel / tr.p.jerk_ms3:
+        if remaining <= brake_m + v * decel / p.jerk_ms3:
             v_t = v_next if v_next < v_t else v_t  # min(v_t, v_next)
         if remaining <= 0.0:
             self._advance()
@@ -173,83 +174,97 @@ class Drive:
             self.finished = True
 
 
-@dataclass
 class Tractor:
-    """Point-mass tractor: speed with acceleration, jerk and ripple; planar position and heading."""
+    """Point-mass tractor: speed with acceleration, jerk and ripple; planar position and heading.
 
-    p: TractorParams = field(default_factory=TractorParams)
-    seed: int = 0
-    x: float = 0.0  # east, m
-    y: float = 0.0  # north, m
-    heading: float = 0.0  # radians, 0 = north, clockwise positive
-    v: float = 0.0
-    a: float = 0.0
-    odometer: float = 0.0
-    t: float = 0.0
-    _ripple: float = 0.0
-    _vb: float = 0.0  # speed without ripple
-    _accel_limit: float = 0.0
-    _target: float = -1.0
-    _jerk: float = 0.0
+    The motion is integrated in C (csrc/plant.c, tdsim_tractor_step); this object holds the
+    parameters (replace `p` to turn a fault knob) and the ripple's random stream."""
 
-    def __post_init__(self) -> None:
-        self._rng = random.Random(self.seed)
-        self._gauss = self._rng.gauss
-        self._ripple_for: tuple[float, TractorParams] | None = None  # (dt, p) of the two below
-        self._ripple_k = 0.0
-        self._ripple_c = 0.0
+    def __init__(self, p: TractorParams | None = None, seed: int = 0) -> None:
+        self._s = ffi.new("tdsim_tractor_t *")
+        self.p = p if p is not None else TractorParams()
+        self.seed = seed
+        self._s.target_ms = -1.0
+        self._rng = random.Random(seed)
+        attach(self._rng, self._s.gauss)
 
-    # The inner loop of every simulation: plain locals, no min/max calls. `b if b > a else a`
-    # is max(a, b) and `b if b < a else a` is min(a, b), down to which operand is returned.
+    @property
+    def p(self) -> TractorParams:
+        return self._p
+
+    @p.setter
+    def p(self, p: TractorParams) -> None:
+        self._p = p
+        s = self._s
+        s.runup_m, s.accel_min_ms2, s.accel_max_ms2 = p.runup_m, p.accel_min_ms2, p.accel_max_ms2
+        s.clutch_s, s.decel_ms2, s.jerk_ms3 = p.clutch_s, p.decel_ms2, p.jerk_ms3
+        s.speed_tau_s, s.ripple_sd, s.ripple_tau_s = p.speed_tau_s, p.ripple_sd, p.ripple_tau_s
+        s.stall_at_s = p.stall_at_s
+
     def step(self, dt: float, v_target: float, curvature: float) -> None:
-        p = self.p
-        t = self.t + dt
-        self.t = t
-        if v_target != self._target:
-            # the driver picks gear and throttle for the new target speed
-            self._target = v_target
-            a = v_target * v_target / (2.0 * p.runup_m)
-            self._accel_limit = min(p.accel_max_ms2, max(p.accel_min_ms2, a))
-            if self._vb <= 0.0:
-                self._jerk = self._accel_limit / max(p.clutch_s, 1e-3)
-            else:
-                self._jerk = p.jerk_ms3
-        if 0.0 <= p.stall_at_s <= t:
-            v_target = 0.0
-        vb = self._vb
-        acc = self.a
-        limit = self._accel_limit
-        a_des = (v_target - vb) / p.speed_tau_s
-        lo = -p.decel_ms2
-        a_des = a_des if a_des > lo else lo
-        a_des = a_des if a_des < limit else limit
-        if acc >= limit - 1e-9 or a_des < acc:
-            self._jerk = p.jerk_ms3  # the clutch is in
-        da = self._jerk * dt
-        step_a = a_des - acc
-        step_a = step_a if step_a > -da else -da
-        acc += step_a if step_a < da else da
-        vb += acc * dt
-        if v_target <= 0.0 and vb < 0.02:
-            vb, acc = 0.0, 0.0
-        self.a = acc
-        self._vb = vb
-        if vb > 0.0 and p.ripple_sd > 0.0:
-            if (
-                self._ripple_for is None
-                or dt != self._ripple_for[0]
-                or p is not self._ripple_for[1]
-            ):
-                self._ripple_for = (dt, p)
-                self._ripple_k = dt / p.ripple_tau_s
-                self._ripple_c = p.ripple_sd * math.sqrt(2 * self._ripple_k)
-            self._ripple += -self._ripple_k * self._ripple + self._ripple_c * self._gauss(0.0, 1.0)
-        v = vb * (1.0 + self._ripple)
-        v = v if v > 0.0 else 0.0
-        self.v = v
-        ds = v * dt
-        self.odometer += ds
-        h = self.heading + ds * curvature
-        self.heading = h
-        self.x += ds * math.sin(h)
-        self.y += ds * math.cos(h)
+        lib.tdsim_tractor_step(self._s, dt, v_target, curvature)
+        if self._s.gauss.n - self._s.gauss.next < 2:
+            refill(self._rng, self._s.gauss)
+
+    @property
+    def x(self) -> float:
+        """East, m."""
+        r: float = self._s.x_m
+        return r
+
+    @property
+    def y(self) -> float:
+        """North, m."""
+        r: float = self._s.y_m
+        return r
+
+    @property
+    def heading(self) -> float:
+        """Radians, 0 = north, clockwise positive."""
+        r: float = self._s.heading_rad
+        return r
+
+    @heading.setter
+    def heading(self, h: float) -> None:
+        self._s.heading_rad = h
+
+    @property
+    def v(self) -> float:
+        r: float = self._s.v_ms
+        return r
+
+    @property
+    def a(self) -> float:
+        r: float = self._s.a_ms2
+        return r
+
+    @property
+    def odometer(self) -> float:
+        r: float = self._s.odometer_m
+        return r
+
+    @property
+    def t(self) -> float:
+        r: float = self._s.t_s
+        return r
+
+    @property
+    def _vb(self) -> float:
+        """Speed without ripple."""
+        r: float = self._s.vb_ms
+        return r
+
+    @property
+    def _ripple(self) -> float:
+        r: float = self._s.ripple
+        return r
+
+    @property
+    def _accel_limit(self) -> float:
+        r: float = self._s.accel_limit_ms2
+        return r
+
+    @property
+    def _jerk(self) -> float:
+        r: float = self._s.jerk_now_ms3
+        return r

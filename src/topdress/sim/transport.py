@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import math
-from collections import deque
 from dataclasses import dataclass
+
+from topdress.sim.cplant import ffi, lib
 
 
 @dataclass(frozen=True)
@@ -27,14 +27,43 @@ class AirLineParams:
 
 
 class AirLine:
-    """FIFO of fertilizer parcels in flight; step() returns the mass landing now."""
+    """FIFO of fertilizer parcels in flight; step() returns the mass landing now. The FIFO
+    lives in C (csrc/plant.c, tdsim_airline_step); `p` is copied there when replaced."""
 
     def __init__(self, p: AirLineParams) -> None:
+        s = lib.tdsim_airline_new()
+        if s == ffi.NULL:
+            raise MemoryError("air line")
+        self._s = ffi.gc(s, lib.tdsim_airline_free)
         self.p = p
-        self._q: deque[tuple[float, float]] = deque()
-        self._rev_in = 0.0
-        self.in_flight_kg = 0.0
-        self.landed_kg = 0.0
+
+    @property
+    def p(self) -> AirLineParams:
+        return self._p
+
+    @p.setter
+    def p(self, p: AirLineParams) -> None:
+        self._p = p
+        s = self._s
+        s.line_length_m, s.air_speed_ms, s.drop_s = p.line_length_m, p.air_speed_ms, p.drop_s
+        s.nominal_fan_rpm, s.min_fan_rpm = p.nominal_fan_rpm, p.min_fan_rpm
+        s.release_rev, s.blocked = p.release_rev, p.blocked
+
+    @property
+    def in_flight_kg(self) -> float:
+        m: float = self._s.in_flight_kg
+        return m
+
+    @property
+    def landed_kg(self) -> float:
+        m: float = self._s.landed_kg
+        return m
+
+    @property
+    def parcels(self) -> int:
+        """Parcels in flight."""
+        n: int = lib.tdsim_airline_len(self._s)
+        return n
 
     def delay_s(self, fan_rpm: float) -> float:
         """Transport time for a parcel entering now, inf if the air cannot carry it."""
@@ -45,28 +74,7 @@ class AirLine:
 
     def step(self, t: float, d_rev: float, kg_per_rev: float, fan_rpm: float) -> float:
         """Feed d_rev metering revolutions at time t; return kg landing in (t - dt, t]."""
-        q = self._q
-        p = self.p
-        if d_rev > 0.0:
-            before = self._rev_in
-            rev_in = before + d_rev
-            self._rev_in = rev_in
-            release = p.release_rev
-            released = rev_in - (release if release > before else before)  # max(before, release)
-            if released > 0.0:
-                m = released * kg_per_rev
-                self.in_flight_kg += m
-                # delay_s(fan_rpm), inlined: every metering step comes here
-                if fan_rpm < p.min_fan_rpm:
-                    q.append((t + math.inf, m))
-                else:
-                    air_ms = p.air_speed_ms * fan_rpm / p.nominal_fan_rpm
-                    q.append((t + (p.drop_s + p.line_length_m / air_ms), m))
-        if not q or q[0][0] > t or p.blocked:
-            return 0.0
-        landed = 0.0
-        while q and q[0][0] <= t:
-            landed += q.popleft()[1]
-        self.in_flight_kg -= landed
-        self.landed_kg += landed
+        landed: float = lib.tdsim_airline_step(self._s, t, d_rev, kg_per_rev, fan_rpm)
+        if landed < 0.0:
+            raise MemoryError("air line: no memory for more parcels in flight")
         return landed

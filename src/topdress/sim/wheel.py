@@ -6,6 +6,8 @@ import math
 import random
 from dataclasses import dataclass
 
+from topdress.sim.cplant import attach, ffi, lib, refill
+
 
 @dataclass(frozen=True)
 class WheelParams:
@@ -30,20 +32,44 @@ class WheelParams:
 
 
 class GroundWheel:
-    """Integrates the tractor's travel into cumulative encoder pulses."""
+    """Integrates the tractor's travel into cumulative encoder pulses (in C: csrc/plant.c,
+    tdsim_wheel_step); this object holds the parameters and the bounce's random stream."""
 
     def __init__(self, p: WheelParams, seed: int) -> None:
+        self._s = ffi.new("tdsim_wheel_t *")
         self.p = p
         self._rng = random.Random(seed)
-        self._gauss = self._rng.gauss
-        self._circ = 2.0 * math.pi * p.radius_m
         self._slip_offset = self._rng.gauss(0.0, p.slip_sd_pct)
-        self._bounce = 0.0
-        self._bounce_for: tuple[float, WheelParams] | None = None  # (dt, p) of the two below
-        self._bounce_k = 0.0
-        self._bounce_c = 0.0
-        self.revolutions = 0.0
-        self.count = 0
+        self._s.slip_offset_pct = self._slip_offset
+        attach(self._rng, self._s.gauss)
+
+    @property
+    def p(self) -> WheelParams:
+        return self._p
+
+    @p.setter
+    def p(self, p: WheelParams) -> None:
+        self._p = p
+        s = self._s
+        s.circ_m = 2.0 * math.pi * p.radius_m
+        s.slip_a, s.slip_b, s.slip_c = p.slip_a, p.slip_b, p.slip_c
+        s.bounce_sd, s.bounce_tau_s = p.bounce_sd, p.bounce_tau_s
+        s.encoder_dead_at_s, s.lifted_at_s, s.ppr = p.encoder_dead_at_s, p.lifted_at_s, p.ppr
+
+    @property
+    def revolutions(self) -> float:
+        r: float = self._s.revolutions
+        return r
+
+    @revolutions.setter
+    def revolutions(self, r: float) -> None:
+        self._s.revolutions = r
+
+    @property
+    def count(self) -> int:
+        """Cumulative encoder pulses."""
+        n: int = self._s.count
+        return n
 
     def slip_pct(self, v_kmh: float) -> float:
         """Mean slip at speed v for this run (eq. 5 plus the run's offset), >= 0."""
@@ -53,25 +79,7 @@ class GroundWheel:
     def step(self, t: float, dt: float, v_ms: float, slip_floor_pct: float = 0.0) -> int:
         """Advance by dt at true ground speed v_ms (on ground where the slip is at least
         slip_floor_pct, e.g. a loose patch); return the cumulative pulse count."""
-        p = self.p
-        if v_ms <= 0.0 or (0.0 <= p.lifted_at_s <= t):
-            return self.count
-        if p.bounce_sd > 0.0:
-            if (
-                self._bounce_for is None
-                or dt != self._bounce_for[0]
-                or p is not self._bounce_for[1]
-            ):
-                self._bounce_for = (dt, p)
-                self._bounce_k = dt / p.bounce_tau_s
-                self._bounce_c = p.bounce_sd * math.sqrt(2 * self._bounce_k)
-            self._bounce += -self._bounce_k * self._bounce + self._bounce_c * self._gauss(0.0, 1.0)
-        # slip_pct inlined (the simulator's inner loop): max(0, eq. 5), then max(that, floor)
-        v_kmh = v_ms * 3.6
-        slip = p.slip_a * v_kmh * v_kmh + p.slip_b * v_kmh + p.slip_c + self._slip_offset
-        slip = slip if slip > 0.0 else 0.0
-        slip = (slip_floor_pct if slip_floor_pct > slip else slip) * 0.01
-        self.revolutions += v_ms * dt * (1.0 - slip) * (1.0 + self._bounce) / self._circ
-        if not 0.0 <= p.encoder_dead_at_s <= t:
-            self.count = int(self.revolutions * p.ppr)
-        return self.count
+        n: int = lib.tdsim_wheel_step(self._s, t, dt, v_ms, slip_floor_pct)
+        if self._s.gauss.n - self._s.gauss.next < 2:
+            refill(self._rng, self._s.gauss)
+        return n

@@ -8,7 +8,10 @@ from dataclasses import field as dc_field
 from typing import Any
 
 from topdress.ecu import Ecu, EcuParams
+from topdress.ecu.params import check
+from topdress.protocol import CanFrame
 from topdress.sim.actuators import Fan, FanParams, MeterMotor, MeterParams
+from topdress.sim.cplant import ffi, lib, refill
 from topdress.sim.field import CropSensor, CropSensorParams, Field, FieldParams
 from topdress.sim.gnss import EARTH_R_M, GnssParams, GnssReceiver
 from topdress.sim.tractor import Drive, Tractor, TractorParams
@@ -16,6 +19,9 @@ from topdress.sim.transport import AirLine, AirLineParams
 from topdress.sim.wheel import GroundWheel, WheelParams
 
 _U32 = 0xFFFFFFFF
+_NO_MEMORY = -1000  # tdsim_world_step: an air line could not grow
+_TX_SHIFT: int = lib.TDSIM_TX_SHIFT  # tdsim_world_step's result: frames to drain << this
+_FLAGS = (1 << _TX_SHIFT) - 1  # and the flags below it
 LAYERS = ("upper", "lower")
 
 
@@ -100,23 +106,31 @@ class World:
         self.ecu = Ecu(cfg.ecu, now_us=0)
         self.t_s = 0.0
         self._step_n = 0
-        self._duty = (0.0, 0.0, 0.0, 0.0)
-        self._rev_prev = [0.0, 0.0]
         self.first_landing_m: list[float | None] = [None, None]
         self.first_landing_t: list[float | None] = [None, None]
-        self.applied_by_bin: tuple[dict[int, float], dict[int, float]] = ({}, {})
+        self._applied: tuple[dict[int, float], dict[int, float]] = ({}, {})
         # mean true NDVI across the working width under the outlets, by bin (the spot's truth)
         self.ndvi_by_bin: dict[int, float] = {}
-        self._bin = -1
-        self._wheel_pos = 0.0  # encoder position (pulses, fractional) at the last step
-        self._edge_us = 0
         self._crop_next = min(s.next_t for s in self.sensors)
         self._dt_us = round(dt * 1e6)
-        self._bin_m = cfg.bin_m
-        self._patches = cfg.loose_patches
-        # _loose's last answer: (x, y) where asked, the squared distance from there within
-        # which it stands (< 0: none), the floor
-        self._loose_last = (0.0, 0.0, -1.0, 0.0)
+        # the continuous part of a step runs in C (csrc/plant.c, tdsim_world_step) on the
+        # devices' structs; the flags it returns say what is left for Python. The devices are
+        # the World's for good: it holds them so their structs live as long as it does.
+        self._devices = (self.tractor, self.wheel, *self.meters, *self.fans, *self.airlines)
+        ws = self._ws = ffi.new("tdsim_world_t *")
+        ws.tractor, ws.wheel = self.tractor._s, self.wheel._s
+        ws.meter = [m._s for m in self.meters]
+        ws.fan = [f._s for f in self.fans]
+        ws.line = [a._s for a in self.airlines]
+        ws.dt_s, ws.kg_per_rev, ws.bin_m, ws.bin = dt, cfg.kg_per_rev, cfg.bin_m, -1
+        ws.wheel_edges = cfg.wheel_edges
+        self._patches = ffi.new("double[]", [v for patch in cfg.loose_patches for v in patch])
+        ws.patches, ws.n_patches = self._patches, len(cfg.loose_patches)
+        ws.loose_slip_pct, ws.loose_reach2 = cfg.loose_slip_pct, -1.0
+        ws.land_bin, ws.done_bin = (-1, -1), (-1, -1)
+        self._app = self.ecu._app
+        self._step_fn = lib.tdsim_world_step
+        self._tx_raw = self.ecu.tx_raw
 
     @property
     def now_us(self) -> int:
@@ -129,6 +143,10 @@ class World:
 
     def step(self) -> StepOutput:
         """Advance one control period: plant under the last duties, then one ECU step."""
+        return StepOutput(*self.step_raw())
+
+    def step_raw(self) -> tuple[float, list[str], list[str], list[CanFrame]]:
+        """step() as a plain tuple (t_s, nmea, crop, can): the simulator's inner loop."""
         dt = self.dt
         n = self._step_n + 1
         self._step_n = n
@@ -136,107 +154,87 @@ class World:
         self.t_s = t
         tr = self.tractor
         v_t, k = self.drive.command(tr, dt)
-        tr.step(dt, v_t, k)
-        wheel = self.wheel
-        if tr.v > 0.0:  # a standing wheel does not turn (GroundWheel.step returns at once)
-            floor = self._loose(tr.x, tr.y) if self._patches else 0.0
-            wc = wheel.step(t, dt, tr.v, floor)
-        else:
-            wc = wheel.count
-        if int(tr.odometer / self._bin_m) != self._bin:
-            self._record_ndvi()
-        d = self._duty
-        m0, m1 = self.meters
-        f0, f1 = self.fans
-        c0 = m0.step(t, dt, d[0])
-        c1 = m1.step(t, dt, d[1])
-        g0 = f0.step(t, dt, d[2])
-        g1 = f1.step(t, dt, d[3])
-        # an air line with nothing metered into it and nothing in flight has nothing to do
-        # (_transport is called only for one that has)
-        rev_prev = self._rev_prev
-        if m0.revolutions > rev_prev[0] or self.airlines[0].in_flight_kg > 0.0:
-            self._transport(0, t, m0.revolutions, f0.rpm)
-        else:
-            rev_prev[0] = m0.revolutions
-        if m1.revolutions > rev_prev[1] or self.airlines[1].in_flight_kg > 0.0:
-            self._transport(1, t, m1.revolutions, f1.rpm)
-        else:
-            rev_prev[1] = m1.revolutions
+        rc = self._step_fn(self._ws, self._app, t, (n * self._dt_us) & _U32, v_t, k)
+        if rc & _FLAGS or rc < 0:
+            self._after_step(rc, t)
         gnss = self.gnss
         lines = gnss.step(t, tr.x, tr.y, tr.v, tr.heading) if t + 1e-9 >= gnss.next_due_s else []
         crop: list[str] = []
         if t + 1e-9 >= self._crop_next:
+            x, y, h = tr.x, tr.y, tr.heading
             for s in self.sensors:
-                line = s.step(t, self.field, tr.x, tr.y, tr.heading)
+                line = s.step(t, self.field, x, y, h)
                 if line is not None:
                     crop.append(line)
             self._crop_next = min(s.next_t for s in self.sensors)
-        now = (n * self._dt_us) & _U32
-        edge = self._wheel_edge(now, wc) if self.cfg.wheel_edges else None
-        ecu = self.ecu
-        self._duty = ecu.step_raw(now, wc, c0, c1, g0, g1, edge)
-        return StepOutput(t, lines, crop, ecu.tx_raw() if ecu.tx_pending else [])
+        return t, lines, crop, self._tx_raw() if rc >> _TX_SHIFT else []
+
+    def _after_step(self, rc: int, t: float) -> None:
+        """What tdsim_world_step's flags leave to Python: errors, random draws, records."""
+        if rc == _NO_MEMORY:
+            raise MemoryError("air line: no memory for more parcels in flight")
+        if rc < 0:
+            check(rc, "Ecu.step")
+        if rc & lib.TDSIM_REFILL_TRACTOR:
+            refill(self.tractor._rng, self.tractor._s.gauss)
+        if rc & lib.TDSIM_REFILL_WHEEL:
+            refill(self.wheel._rng, self.wheel._s.gauss)
+        if rc & lib.TDSIM_NEW_BIN:
+            self._record_ndvi(self._ws.bin)
+        if rc & lib.TDSIM_FIRST_LANDING:
+            for i in (0, 1):
+                if self.first_landing_m[i] is None and self._ws.landed_any[i]:
+                    self.first_landing_m[i] = self.tractor.odometer
+                    self.first_landing_t[i] = t
+        if rc & lib.TDSIM_BIN_DONE:
+            ws = self._ws
+            for i in (0, 1):
+                if ws.done_bin[i] >= 0:
+                    self._applied[i][ws.done_bin[i]] = ws.done_kg[i]
+                    ws.done_bin[i] = -1
+
+    @property
+    def applied_by_bin(self) -> tuple[dict[int, float], dict[int, float]]:
+        """Fertilizer landed (kg) by record bin of the track (odometer // bin_m), per layer."""
+        ws = self._ws
+        for i in (0, 1):
+            if ws.land_bin[i] >= 0:  # the bin the outlets are over, so far
+                self._applied[i][ws.land_bin[i]] = ws.land_kg[i]
+        return self._applied
+
+    @property
+    def _edge_us(self) -> int:
+        """The capture timer's last edge (the ECU clock, us)."""
+        e: int = self._ws.edge_us
+        return e
+
+    @property
+    def _wheel_pos(self) -> float:
+        """The encoder position (pulses, fractional) at the last step."""
+        pos: float = self._ws.wheel_pos
+        return pos
 
     def _loose(self, x: float, y: float) -> float:
         """The wheel's slip floor here (%): loose_slip_pct inside a loose patch, else 0.
 
         Which patch the wheel is in can only change after it has moved as far as the nearest
         patch edge: until then the last answer stands (the tractor moves a few cm a step)."""
-        ax, ay, reach2, floor = self._loose_last
-        if (x - ax) ** 2 + (y - ay) ** 2 < reach2:
-            return floor
-        floor = 0.0
-        edge = math.inf  # distance to the nearest patch edge
-        for px, py, r in self._patches:
-            d2 = (x - px) ** 2 + (y - py) ** 2
-            if d2 <= r * r:
-                floor = self.cfg.loose_slip_pct
-            edge = min(edge, abs(math.sqrt(d2) - r))
-        # half of it, less a margin for rounding: near an edge the patches are looked at
-        # again every step
-        reach = edge * 0.5 - 1e-6
-        self._loose_last = (x, y, reach * reach if reach > 0.0 else -1.0, floor)
+        floor: float = lib.tdsim_world_loose(self._ws, x, y)
         return floor
 
     def _wheel_edge(self, now_us: int, count: int) -> int:
         """The capture timer: the time of the last whole pulse crossed in this step, by
         interpolating the wheel's position over the step (the previous edge if none)."""
-        w = self.wheel
-        pos = w.revolutions * w.p.ppr
-        prev = self._wheel_pos
-        self._wheel_pos = pos
-        if pos > prev:
-            whole = math.floor(pos)
-            if whole > math.floor(prev) and count == int(pos):
-                back_us = (pos - whole) / (pos - prev) * self.dt * 1e6
-                self._edge_us = (now_us - int(back_us)) & _U32
-        return self._edge_us
+        e: int = lib.tdsim_world_wheel_edge(self._ws, now_us, count)
+        return e
 
-    def _record_ndvi(self) -> None:
+    def _record_ndvi(self, b: int) -> None:
         tr = self.tractor
-        b = int(tr.odometer / self.cfg.bin_m)
-        if b == self._bin:
-            return
-        self._bin = b
         c, s = math.cos(tr.heading), math.sin(tr.heading)
         offs = self.cfg.crop_offsets_m
         self.ndvi_by_bin[b] = sum(self.field.ndvi(tr.x + o * c, tr.y - o * s) for o in offs) / len(
             offs
         )
-
-    def _transport(self, i: int, t: float, rev: float, fan_rpm: float) -> None:
-        d_rev = rev - self._rev_prev[i]
-        self._rev_prev[i] = rev
-        landed = self.airlines[i].step(t, d_rev, self.cfg.kg_per_rev[i], fan_rpm)
-        if landed > 0.0:
-            odo = self.tractor.odometer
-            if self.first_landing_m[i] is None:
-                self.first_landing_m[i] = odo
-                self.first_landing_t[i] = t
-            b = int(odo / self._bin_m)
-            bins = self.applied_by_bin[i]
-            bins[b] = bins.get(b, 0.0) + landed
 
     def metered_kg(self, layer: int) -> float:
         """Fertilizer the layer's metering wheel has let out so far (true kg/rev): what a
