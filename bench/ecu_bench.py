@@ -33,6 +33,8 @@ CM4 = [
     "-mfloat-abi=hard",
     "-mfpu=fpv4-sp-d16",
     "-Os",
+    # the core never reads errno: sqrtf becomes the FPU's VSQRT instead of newlib's wrapper
+    "-fno-math-errno",
     "-ffunction-sections",
     "-fdata-sections",
 ]

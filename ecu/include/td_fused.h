@@ -24,17 +24,19 @@
  * re-opened, and kept through GNSS outages.
  * Scale random walk 2e-5/s; its variance never grows beyond the initial (10 %)^2.
  * Loose ground: GNSS against the scaled wheel history, one sign (beyond 0.05 m/s) for 1 s or
- * longer while |a| < 0.3 m/s^2, with a mean beyond 2 GNSS sigmas, says the wheel's scale has
- * changed (a slip step): learning re-opens (`reopened`) while |a| < 0.3 m/s^2, the scale's
+ * longer in steady motion, with a mean beyond 2 GNSS sigmas, says the wheel's scale has
+ * changed (a slip step): learning re-opens (`reopened`) while the motion is steady, the scale's
  * variance raised to at least (3 %)^2, until that difference changes sign or falls within
- * 1 GNSS sigma. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is learned to within 1.5 %
+ * 1 GNSS sigma. Steady: the wheel's own change over the delay below 0.3 m/s^2 * d (for a delay
+ * of 0.5 s or more; else |a| < 0.3 m/s^2): the estimate's a can be wrong exactly when the scale
+ * is, as it takes up the difference between the wheel and the delayed GNSS. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is learned to within 1.5 %
  * in ~4 s.
  * eq. 5's shape g(v) is held at its 12 km/h value above 12 km/h: the fit's g(v) v falls again
  * above ~14.7 km/h, which gave a wheel reading a second, false speed to run off to.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 48 bytes of state and ~110 of wheel history. No heap,
+ * Costs per step: ~120 float operations; 176 bytes (68 of state, 108 of wheel history). No heap,
  * no globals.
  */
 #ifndef TD_FUSED_H
@@ -60,8 +62,8 @@ typedef struct {
     float wheel_rel;           /**< wheel noise, share of speed */
     float innov_ms;            /**< last GNSS innovation (z - prediction at its time of validity), m/s */
     float since_gnss_s;        /**< time since the last GNSS update, s */
-    float run_s;               /**< how long GNSS innovations have kept one sign, s */
-    float run_sum;             /**< their integral over that time, m */
+    float run_s;               /**< how long GNSS against the scaled wheel history has kept one sign, s */
+    float run_sum;             /**< its integral over that time, m */
     int8_t run_sign;           /**< their sign (0: none) */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
@@ -85,8 +87,9 @@ void td_fused_predict(td_fused_t *f, float dt_s);
  * persistently rejected wheel stays rejected).
  */
 td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs);
-/** Record the wheel circumference speed z_ms (m/s, 0 at rest) over the last dt_s (>= 0 s, every step);
- *  z_ms < 0 (no wheel: encoder fault) clears the history. */
+/** Record the wheel circumference speed z_ms (m/s, 0 at rest) over the last dt_s (every step; any
+ *  period: a step's overshoot beyond a bucket starts the next). z_ms < 0 (no wheel: encoder
+ *  fault), a step longer than the history, or no number clears the history and ends a re-opening. */
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s);
 /** The recorded wheel speed delay_s ago (m/s, interpolated between buckets); false beyond the history. */
 bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms);

@@ -395,8 +395,9 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
     const float v_edge = td_edge_step(e, now_us, in->wheel_count, in->wheel_edge_us, in->wheel_edge_valid != 0u);
     st->edge_timing = in->wheel_edge_valid != 0u;
     st->v_edge_kmh = v_edge * TD_KMH_PER_MS;
-    float dt_s = (float)dt_us * 1.0e-6f;
-    td_fused_predict(f, dt_s > TD_MAX_PREDICT_S ? TD_MAX_PREDICT_S : dt_s);
+    const float dt_raw_s = (float)dt_us * 1.0e-6f;
+    const float dt_s = dt_raw_s > TD_MAX_PREDICT_S ? TD_MAX_PREDICT_S : dt_raw_s;
+    td_fused_predict(f, dt_s);
 
     const bool wheel_ok = (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
     td_fused_record(f, wheel_ok && e->started ? v_edge : -1.0f, dt_s);

@@ -34,9 +34,12 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define REOPEN_S 1.0f         /* one sign for this long */
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
-#define Q_SCALE_OPEN 2.0e-5f  /* scale random walk while re-opened, 1/s */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
+#define HIST_Z_MAX_MS 100.0f                  /* a wheel speed beyond this is no number */
+#define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
+#define BUCKET_CLOSE_S (TD_FUSED_BUCKET_S - 1.0e-4f) /* sums of 10 ms steps fall just short */
+#define STEADY_MIN_S 0.5f /* the wheel's own change over a delay at least this long says steady */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -91,7 +94,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     p[VA] += dt_s * p[AA] + q * dt2 * 0.5f;
     p[VS] += dt_s * p[AS];
     p[AA] += q * dt_s;
-    p[SS] += (f->reopened ? Q_SCALE_OPEN : Q_SCALE) * dt_s;
+    p[SS] += Q_SCALE * dt_s;
     if (p[SS] > P_S_MAX) {
         p[SS] = P_S_MAX;
     }
@@ -202,20 +205,27 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
 }
 
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
-    if (!(z_ms >= 0.0f)) { /* no wheel: the history says nothing any more */
+    if (!(z_ms >= 0.0f && z_ms < HIST_Z_MAX_MS) || !(dt_s <= HIST_DT_MAX_S)) {
+        /* no wheel (encoder fault), or no number: the history says nothing any more, and a
+         * re-opening that rested on it is over */
         f->hist_n = 0u;
         f->hist_sum = 0.0f;
         f->hist_s = 0.0f;
+        f->reopened = false;
         return;
     }
     f->hist_sum += z_ms * dt_s;
     f->hist_s += dt_s;
-    if (f->hist_s >= TD_FUSED_BUCKET_S * 0.999f) {
+    /* buckets stay TD_FUSED_BUCKET_S long whatever the step: the overshoot starts the next one,
+     * and a long step fills several */
+    while (f->hist_s >= BUCKET_CLOSE_S) {
         f->hist_head = (uint8_t)((f->hist_head + 1u) % TD_FUSED_HIST);
         f->hist_ms[f->hist_head] = f->hist_sum / f->hist_s;
-        f->hist_n += f->hist_n < TD_FUSED_HIST ? 1u : 0u;
-        f->hist_sum = 0.0f;
-        f->hist_s = 0.0f;
+        if (f->hist_n < TD_FUSED_HIST) {
+            f->hist_n++;
+        }
+        f->hist_s -= TD_FUSED_BUCKET_S;
+        f->hist_sum = z_ms * f->hist_s;
     }
 }
 
@@ -229,7 +239,8 @@ bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms) {
     const unsigned i = (unsigned)x;
     const unsigned k = f->hist_head + TD_FUSED_HIST - i;
     const float w0 = f->hist_ms[k % TD_FUSED_HIST];
-    /* the older neighbour: at the oldest bucket x is whole and it weighs 0 (init zeroes the ring) */
+    /* the older neighbour: at the oldest bucket x is whole and it weighs 0 (every entry is a
+     * finite speed: init zeroes the ring, record writes only checked speeds) */
     const float w1 = f->hist_ms[(k - 1u) % TD_FUSED_HIST];
     *z_ms = w0 + (x - (float)i) * (w1 - w0);
     return true;
@@ -255,10 +266,14 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float g = td_fused_shape(f, z_ms, NULL);
     /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
     const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
+    /* steady: the wheel's own change over the delay (the estimate's a can be wrong exactly
+     * when the scale is: it took up the difference), else the estimate's a */
+    const bool steady = have_w && d >= STEADY_MIN_S ? fabsf(f->hist_ms[f->hist_head] - w_then) < REOPEN_A_MS2 * d
+                                                   : fabsf(f->a_ms2) < REOPEN_A_MS2;
     /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
      * REOPEN_SIGMA GNSS sigmas */
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
-    if (sign != 0 && sign == f->run_sign && fabsf(f->a_ms2) < REOPEN_A_MS2) {
+    if (sign != 0 && sign == f->run_sign && steady) {
         f->run_s += f->since_gnss_s;
         f->run_sum += ys * f->since_gnss_s;
     } else {
@@ -281,7 +296,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     f->since_gnss_s = 0.0f;
     /* the jerk over the delay; in steady motion a small share of it */
     const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
-    const bool learning = learn || (f->reopened && fabsf(f->a_ms2) < REOPEN_A_MS2);
+    const bool learning = learn || (f->reopened && steady);
     if (!update(f, h, y, r, learning && !have_w)) {
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
     }
