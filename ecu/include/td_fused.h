@@ -27,10 +27,9 @@
  * longer in steady motion, with a mean beyond 2 GNSS sigmas, says the wheel's scale has
  * changed (a slip step): learning re-opens (`reopened`) while the motion is steady, the scale's
  * variance raised to at least (3 %)^2, until that difference changes sign or falls within
- * 1 GNSS sigma. Steady: the wheel's own change over the delay below 0.3 m/s^2 * d (for a delay
- * of 0.5 s or more; else |a| < 0.3 m/s^2): the estimate's a can be wrong exactly when the scale
- * is, as it takes up the difference between the wheel and the delayed GNSS. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is learned to within 1.5 %
- * in ~4 s.
+ * 1 GNSS sigma. Steady: |a| < 0.3 m/s^2. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is
+ * learned to within 1.5 % in ~4 s. (With a short lag, ~0.6 s at 3-4 m/s, a takes up enough of
+ * the difference to exceed 0.3 m/s^2 and the step is not re-learned: docs/speed.md.)
  * eq. 5's shape g(v) is held at its 12 km/h value above 12 km/h: the fit's g(v) v falls again
  * above ~14.7 km/h, which gave a wheel reading a second, false speed to run off to.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut

@@ -39,7 +39,6 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define HIST_Z_MAX_MS 100.0f                  /* a wheel speed beyond this is no number */
 #define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
 #define BUCKET_CLOSE_S (TD_FUSED_BUCKET_S - 1.0e-4f) /* sums of 10 ms steps fall just short */
-#define STEADY_MIN_S 0.5f /* the wheel's own change over a delay at least this long says steady */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -266,10 +265,9 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float g = td_fused_shape(f, z_ms, NULL);
     /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
     const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
-    /* steady: the wheel's own change over the delay (the estimate's a can be wrong exactly
-     * when the scale is: it took up the difference), else the estimate's a */
-    const bool steady = have_w && d >= STEADY_MIN_S ? fabsf(f->hist_ms[f->hist_head] - w_then) < REOPEN_A_MS2 * d
-                                                   : fabsf(f->a_ms2) < REOPEN_A_MS2;
+    /* steady: the estimate's a (gating on the wheel's own change over the delay instead let
+     * a bouncing wheel re-open on noise: docs/experiments.md) */
+    const bool steady = fabsf(f->a_ms2) < REOPEN_A_MS2;
     /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
      * REOPEN_SIGMA GNSS sigmas */
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
