@@ -16,10 +16,10 @@ import contextlib
 import json
 import logging
 import os
-import queue
 import sqlite3
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -151,7 +151,11 @@ class SessionLog:
         self._count_lock = threading.Lock()
         self.commit_period_s = commit_period_s
         self._conn = conn
-        self._queue: queue.Queue[object] = queue.Queue(maxsize=queue_size)
+        # A deque under a plain lock, not a queue.Queue: a row is put ~200 times a second and
+        # nobody waits on the queue itself (the writer waits on `_wake`).
+        self._queue: deque[object] = deque()
+        self._queue_size = queue_size
+        self._queue_lock = threading.Lock()
         self._wake = threading.Event()  # the writer drains now, not at the end of the period
         self._wake_depth = max(1, queue_size // 2)
         self._closed = False
@@ -234,7 +238,7 @@ class SessionLog:
         if self._thread is None or self._closed:
             return False
         marker = _Sync()
-        self._queue.put(marker, timeout=timeout_s)
+        self._queue.append(marker)  # a marker is not a row: never refused
         self._wake.set()
         return marker.done.wait(timeout_s)
 
@@ -244,7 +248,7 @@ class SessionLog:
             return
         self._closed = True
         if self._thread is not None:
-            self._queue.put(_STOP)
+            self._queue.append(_STOP)
             self._wake.set()
             self._thread.join()
 
@@ -258,12 +262,13 @@ class SessionLog:
         if self._closed or self._thread is None:
             self._drop()
             return
-        try:
-            self._queue.put_nowait(item)
-        except queue.Full:
+        with self._queue_lock:
+            depth = len(self._queue)
+            if depth < self._queue_size:
+                self._queue.append(item)
+        if depth >= self._queue_size:
             self._drop()
-            return
-        if self._queue.qsize() >= self._wake_depth:
+        elif depth + 1 >= self._wake_depth:
             self._wake.set()
 
     def _drop(self) -> None:
@@ -294,8 +299,8 @@ class SessionLog:
             self._wake.clear()
             while not stop:  # everything queued so far, in order, up to a stop
                 try:
-                    item = self._queue.get_nowait()
-                except queue.Empty:
+                    item = self._queue.popleft()
+                except IndexError:
                     break
                 if item is _STOP:
                     stop = True
