@@ -3,11 +3,12 @@
 The caller (the terminal's control loop) only ever enqueues: `raw()`, `state()` and `event()` put a
 tuple on a bounded queue and return at once. A writer thread drains the queue and commits a batch
 at least every `commit_period_s` (0.5 s); it wakes for the batch, not for every row (a sync, a
-close or a half-full queue wake it at once), so logging costs no thread switch per input. WAL with synchronous=FULL makes every commit durable and
-atomic, so a SIGKILL or a power cut loses at most the last uncommitted batch and never corrupts the
-file. Write failures (unwritable path, full disk) are logged and counted in `errors`, the rows they
-carried in `lost`; a full queue counts its rows in `dropped`. Nothing here raises into the caller
-after `create()` has returned, and `create()` itself only reports, never raises.
+close or a half-full queue wake it at once), so logging costs no thread switch per input. WAL
+with synchronous=FULL makes every commit durable and atomic, so a SIGKILL or a power cut loses at
+most the last uncommitted batch and never corrupts the file. Write failures (unwritable path, full
+disk) are logged and counted in `errors`, the rows they carried in `lost`; a full queue counts its
+rows in `dropped`. Nothing here raises into the caller after `create()` has returned, and
+`create()` itself only reports, never raises.
 """
 
 from __future__ import annotations
