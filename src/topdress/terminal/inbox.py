@@ -32,12 +32,11 @@ class Inbox:
 
     def __init__(self, line_limit: int = LINE_LIMIT, control_limit: int = CONTROL_LIMIT) -> None:
         self._lock = threading.Lock()
-        # A bell, not a threading.Condition: a put rings it at most once until the loop answers,
-        # and waiting is one lock acquire in C (a Condition's wait and notify run in Python,
-        # ~100 times a second each). Held = not rung; `_rung` is changed under `_lock` only.
+        # A bell, not a threading.Condition: waiting is one lock acquire in C (a Condition's
+        # wait and notify run in Python, ~100 times a second each). Held = not rung; the puts
+        # ring it (under `_lock`, so one at a time), the loop takes the ring by acquiring it.
         self._bell = threading.Lock()
         self._bell.acquire()
-        self._rung = False
         self._control: deque[Item] = deque()
         self._control_limit = control_limit
         self._lines: dict[str, deque[Item]] = {k: deque(maxlen=line_limit) for k in LINE_KINDS}
@@ -63,8 +62,7 @@ class Inbox:
                 depth = len(self._control)
             if depth > self.high_water[kind]:
                 self.high_water[kind] = depth
-            if not self._rung:
-                self._rung = True
+            if self._bell.locked():
                 self._bell.release()
 
     def get(self, timeout: float | None = None) -> Item | None:
@@ -80,8 +78,6 @@ class Inbox:
                 return None
             rung = self._bell.acquire(timeout=wait)
             with self._lock:
-                if rung:
-                    self._rung = False
                 item = self._take()
             if item is not None or not rung:
                 return item
