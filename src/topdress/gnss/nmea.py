@@ -53,6 +53,7 @@ _LIMITS = {
 }
 _ADDRESS = re.compile(rb"^[A-Z][A-Z0-9]{2,9}$")
 _HEX2 = re.compile(rb"^[0-9A-Fa-f]{2}$")
+_PRINTABLE = re.compile(rb"[\x20-\x7e]*")  # printable ASCII only (one scan, not a step per byte)
 
 
 @dataclass(frozen=True)
@@ -148,7 +149,7 @@ def _bad(reason: str, message: str, talker: str | None = None, kind: str | None 
 
 
 def _printable(raw: bytes) -> bool:
-    return all(0x20 <= b <= 0x7E for b in raw)
+    return _PRINTABLE.fullmatch(raw) is not None
 
 
 def _split_address(address: str) -> tuple[str, str]:

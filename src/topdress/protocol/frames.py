@@ -17,7 +17,7 @@ import cantools
 
 from topdress.errors import ProtocolError
 from topdress.protocol.dbc import message
-from topdress.protocol.layout import FrameLayout, checks, layout
+from topdress.protocol.layout import FrameLayout, checks, encoder, layout
 from topdress.protocol.model import (
     DEFAULT_IDS,
     AckResult,
@@ -489,6 +489,9 @@ def _encode(name: str, signals: dict[str, Any]) -> bytes:
     for key, value in signals.items():
         if isinstance(value, float) and not math.isfinite(value):
             raise ProtocolError(f"{name}.{key}: {value} is not a number")
+    fast = encoder(name)
+    if fast is not None and (payload := fast(signals)) is not None:
+        return payload
     try:
         data: bytes = message(name).encode(signals, strict=True)
     except (cantools.database.EncodeError, OverflowError) as exc:

@@ -10,11 +10,17 @@ signals) has no layout and is decoded by cantools.
 
 The range check of a signal is reduced to the interval of raw values that pass it, found once
 by bisection on the same check, so a decoded frame is accepted or refused exactly as before.
+
+Encoding (`encoder`) takes the same layouts the other way for the frames the terminal sends
+every 100 ms: each signal's own cantools conversion gives its raw value and its DBC range is
+checked as cantools checks it (strict); anything the fast form does not take (a value out of
+range, a missing or extra signal, a non-number) goes to cantools, which encodes it or raises.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
@@ -226,3 +232,49 @@ def layout(name: str) -> FrameLayout | None:
     if name not in table:
         message(name)  # raises the protocol's error for an unknown name
     return table[name]
+
+
+#: A compiled encoder: physical values by signal name -> the payload, or None when the values
+#: need cantools (to encode them or to raise its error).
+Encoder = Callable[[Mapping[str, Any]], bytes | None]
+
+
+@cache
+def encoder(name: str) -> Encoder | None:
+    """The compiled encoder of frame `name`; None for a frame without a layout."""
+    lay = layout(name)
+    if lay is None:
+        return None
+    msg = message(name)
+    plan = tuple(
+        (
+            sig.name,
+            sig.conversion,
+            shift,
+            mask,
+            # cantools' strict range check: the DBC range widened by a millionth of the scale
+            -math.inf if sig.minimum is None else sig.minimum - abs(sig.conversion.scale) * 1e-6,
+            math.inf if sig.maximum is None else sig.maximum + abs(sig.conversion.scale) * 1e-6,
+            sig.conversion.choices or None,
+            check.raw_all,
+        )
+        for sig, (shift, mask), check in zip(msg.signals, lay.fields, lay.checks, strict=True)
+    )
+    length = lay.length
+
+    def encode(values: Mapping[str, Any]) -> bytes | None:
+        if len(values) != len(plan):
+            return None
+        x = 0
+        for sig_name, conv, shift, mask, lo, hi, choices, (raw_lo, raw_hi) in plan:
+            value = values.get(sig_name)
+            if value is None or type(value) not in (int, float):  # bool, str: cantools
+                return None
+            raw = conv.numeric_scaled_to_raw(value)
+            in_table = choices is not None and raw in choices
+            if not (in_table or lo <= value <= hi) or not raw_lo <= raw <= raw_hi:
+                return None
+            x |= (raw & mask) << shift
+        return x.to_bytes(length, "little")
+
+    return encode

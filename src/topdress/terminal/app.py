@@ -338,8 +338,11 @@ class Terminal:
         start, fan, upper, lower = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
         self.link.set_command(start, fan, upper, lower)
         self.link.poll(now)
-        snap = replace(
-            self._snapshot(now, ndvi_sensors, ndvi, (upper, lower)),
+        snap = self._snapshot(
+            now,
+            ndvi_sensors,
+            ndvi,
+            (upper, lower),
             utc=self.utc.now(now),
             heading_deg=outlet.heading_deg if outlet is not None else None,
             outlet_lat=outlet.lat if outlet is not None else None,
@@ -459,7 +462,9 @@ class Terminal:
         ndvi_sensors: float | None,
         ndvi: float | None,
         rates: tuple[float, float],
+        **site: Any,
     ) -> Snapshot:
+        """The loop's state now; `site`: the Snapshot fields of time, outlet and site."""
         live = self.link.ecu_alive
         # The ECU's last frames are history once it is not heard: nothing is shown from them.
         ecu = self.link.ecu if live else EcuView()
@@ -491,6 +496,7 @@ class Terminal:
             distance_m=self.ndvi.odometer.distance_m,
             counters=self._counters(),
             last_event=self._last_event,
+            **site,
         )
 
     def _counters(self) -> dict[str, int]:

@@ -23,6 +23,7 @@ _REFLECTANCES = ("red", "red_edge", "nir")
 # "inf" or "nan": such a field is refused, not read as a number.
 _DECIMAL = re.compile(r"^-?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)$")
 _SENSOR_ID = re.compile(r"^[0-9]{1,3}$")
+_TEXT = re.compile(rb"[\x20-\x7e\t]*")  # printable ASCII and tab only
 _INDICES = ("ndre", "ndvi")
 
 
@@ -81,7 +82,7 @@ def _text(line: bytes | str) -> str:
     raw = raw.strip(b"\r\n\x00 ")
     if not raw:
         raise SensorError("empty: empty line")
-    if not all(0x20 <= b <= 0x7E or b == 0x09 for b in raw):
+    if _TEXT.fullmatch(raw) is None:
         raise SensorError("binary: non-text bytes in the line")
     return raw.decode("ascii")
 

@@ -16,6 +16,7 @@ else waits (up to `timeout`) for the next put.
 from __future__ import annotations
 
 import threading
+import time
 from collections import Counter, deque
 from typing import Any
 
@@ -30,7 +31,12 @@ class Inbox:
     """Thread-safe: any thread puts, the control loop gets."""
 
     def __init__(self, line_limit: int = LINE_LIMIT, control_limit: int = CONTROL_LIMIT) -> None:
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()
+        # A bell, not a threading.Condition: waiting is one lock acquire in C (a Condition's
+        # wait and notify run in Python, ~100 times a second each). Held = not rung; the puts
+        # ring it (under `_lock`, so one at a time), the loop takes the ring by acquiring it.
+        self._bell = threading.Lock()
+        self._bell.acquire()
         self._control: deque[Item] = deque()
         self._control_limit = control_limit
         self._lines: dict[str, deque[Item]] = {k: deque(maxlen=line_limit) for k in LINE_KINDS}
@@ -41,7 +47,7 @@ class Inbox:
     def put(self, item: Item) -> None:
         """Queue one item; lines of a full source push out that source's oldest line."""
         kind = item[0]
-        with self._cond:
+        with self._lock:
             lines = self._lines.get(kind)
             if lines is not None:
                 if len(lines) == lines.maxlen:
@@ -56,23 +62,33 @@ class Inbox:
                 depth = len(self._control)
             if depth > self.high_water[kind]:
                 self.high_water[kind] = depth
-            self._cond.notify()
+            if self._bell.locked():
+                self._bell.release()
 
     def get(self, timeout: float | None = None) -> Item | None:
         """The next item, control first; None when nothing came within `timeout` seconds."""
-        with self._cond:
-            item = self._take()
-            if item is None and (timeout is None or timeout > 0):
-                self._cond.wait(timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            with self._lock:
                 item = self._take()
-            return item
+            if item is not None:
+                return item
+            wait = -1.0 if deadline is None else deadline - time.monotonic()
+            if deadline is not None and wait <= 0:
+                return None
+            rung = self._bell.acquire(timeout=wait)
+            with self._lock:
+                item = self._take()
+            if item is not None or not rung:
+                return item
+            # rung for an item taken meanwhile without waiting: wait on
 
     def empty(self) -> bool:
-        with self._cond:
+        with self._lock:
             return not self._control and not any(self._lines.values())
 
     def depth(self) -> int:
-        with self._cond:
+        with self._lock:
             return len(self._control) + sum(len(q) for q in self._lines.values())
 
     def _take(self) -> Item | None:

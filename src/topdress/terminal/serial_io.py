@@ -8,7 +8,9 @@ partial line left when a port vanishes is delivered, and both are counted in `co
 
 from __future__ import annotations
 
+import contextlib
 import random
+import re
 import sys
 import threading
 import time
@@ -25,6 +27,7 @@ from topdress.errors import DeviceError
 Sink = Callable[[float, bytes], None]
 Clock = Callable[[], float]
 MAX_LINE = 256
+_EOL = re.compile(rb"[\r\n]+")  # CR, LF or CRLF; the empty lines between them are skipped
 
 
 class LineSource(Protocol):
@@ -53,16 +56,23 @@ class LineSplitter:
 
     def feed(self, data: bytes) -> list[bytes]:
         lines: list[bytes] = []
-        for byte in data:
-            if byte in (0x0A, 0x0D):
+        # Runs between terminators, not bytes: a Python step per byte was most of a reader
+        # thread's time. Only the last piece is unterminated.
+        pieces = _EOL.split(data)
+        last = len(pieces) - 1
+        for i, piece in enumerate(pieces):
+            if piece and not self._cutting:
+                room = self.max_line - len(self._buf)
+                if len(piece) < room:
+                    self._buf += piece
+                else:
+                    self._buf += piece[:room]
+                    lines.append(self._take("overlong"))
+                    self._cutting = True
+            if i < last:
                 if self._buf:
                     lines.append(self._take("lines"))
                 self._cutting = False
-            elif not self._cutting:
-                self._buf.append(byte)
-                if len(self._buf) >= self.max_line:
-                    lines.append(self._take("overlong"))
-                    self._cutting = True
         return lines
 
     def flush(self) -> list[bytes]:
@@ -135,12 +145,25 @@ class SerialLineSource(_ThreadedSource):
         self.baud = baud
         self.backoff_s = backoff_s
         self.backoff_max_s = backoff_max_s
+        self._port: serial.Serial | None = None  # while the reader reads it
+        self._port_lock = threading.Lock()
+
+    def stop(self) -> None:
+        self._stop.set()
+        # The reader blocks in read() with no timeout (no wake-ups while the line is quiet):
+        # this wakes it; a cancel that comes before the read makes that read return. Under the
+        # lock, so the port is not closed meanwhile.
+        with self._port_lock:
+            if self._port is not None:
+                with contextlib.suppress(OSError):
+                    self._port.cancel_read()
+        super().stop()
 
     def _run(self) -> None:
         delay = self.backoff_s
         while not self._stop.is_set():
             try:
-                with serial.Serial(self.port, self.baud, timeout=0.05) as port:
+                with serial.Serial(self.port, self.baud, timeout=None) as port:
                     self._connected = True
                     self.counters["opens"] += 1
                     delay = self.backoff_s
@@ -155,10 +178,16 @@ class SerialLineSource(_ThreadedSource):
             delay = min(delay * 2.0, self.backoff_max_s)
 
     def _read(self, port: serial.Serial) -> None:
-        while not self._stop.is_set():
-            data = port.read(max(1, port.in_waiting))
-            if data:
-                self._deliver(self.splitter.feed(data))
+        with self._port_lock:
+            self._port = port
+        try:
+            while not self._stop.is_set():
+                data = port.read(max(1, port.in_waiting))
+                if data:
+                    self._deliver(self.splitter.feed(data))
+        finally:
+            with self._port_lock:
+                self._port = None
 
 
 class StreamLineSource(_ThreadedSource):
