@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from topdress.sim.cplant import ffi, lib
+from topdress.sim.cplant import CField, ffi, lib
 
 
 @dataclass(frozen=True)
@@ -47,20 +47,9 @@ class _Shaft:
         """The exact discretisation of the first-order lag over one step."""
         return math.exp(-self._dt / tau_s)
 
-    @property
-    def rpm(self) -> float:
-        r: float = self._s.rpm
-        return r
-
-    @property
-    def revolutions(self) -> float:
-        r: float = self._s.revolutions
-        return r
-
-    @property
-    def count(self) -> int:
-        n: int = self._s.count
-        return n
+    rpm = CField[float]("rpm")
+    revolutions = CField[float]("revolutions")
+    count = CField[int]("count")
 
 
 class MeterMotor(_Shaft):

@@ -9,11 +9,12 @@ the C code in blocks (`attach`, `refill`) and become the normal draws random.gau
 from __future__ import annotations
 
 import random
-from typing import Any
+from operator import attrgetter
+from typing import Any, Generic, TypeVar, overload
 
 from topdress.ecu._core import ffi, lib
 
-__all__ = ["attach", "ffi", "lib", "refill"]
+__all__ = ["CField", "attach", "ffi", "lib", "refill"]
 
 _BLOCK: int = lib.TDSIM_UNIFORM_BLOCK
 
@@ -38,3 +39,35 @@ def refill(rng: random.Random, block: Any) -> None:
     block.u[0:_BLOCK] = left + [r() for _ in range(_BLOCK - len(left))]
     block.n = _BLOCK
     block.next = 0
+
+
+T = TypeVar("T")
+
+
+class CField(Generic[T]):
+    """A device's attribute that lives in its C struct, `self._s.<field>`: read, and written
+    only if `writable` (the others are the C step's to change)."""
+
+    def __init__(self, field: str, doc: str = "", writable: bool = False) -> None:
+        self._field = field
+        self._read = attrgetter("_s." + field)  # C-level: the simulator reads these every step
+        self._writable = writable
+        self.__doc__ = doc
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._name = name
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> CField[T]: ...
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> T: ...
+    def __get__(self, obj: object | None, owner: type | None = None) -> CField[T] | T:
+        if obj is None:
+            return self
+        value: T = self._read(obj)
+        return value
+
+    def __set__(self, obj: object, value: T) -> None:
+        if not self._writable:
+            raise AttributeError(f"{self._name} is set by the plant's C step")
+        setattr(obj._s, self._field, value)  # type: ignore[attr-defined]

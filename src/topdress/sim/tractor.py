@@ -6,7 +6,7 @@ import math
 import random
 from dataclasses import dataclass
 
-from topdress.sim.cplant import attach, ffi, lib, refill
+from topdress.sim.cplant import CField, attach, ffi, lib, refill
 
 KMH = 1.0 / 3.6
 
@@ -206,65 +206,14 @@ class Tractor:
         if self._s.gauss.n - self._s.gauss.next < 2:
             refill(self._rng, self._s.gauss)
 
-    @property
-    def x(self) -> float:
-        """East, m."""
-        r: float = self._s.x_m
-        return r
-
-    @property
-    def y(self) -> float:
-        """North, m."""
-        r: float = self._s.y_m
-        return r
-
-    @property
-    def heading(self) -> float:
-        """Radians, 0 = north, clockwise positive."""
-        r: float = self._s.heading_rad
-        return r
-
-    @heading.setter
-    def heading(self, h: float) -> None:
-        self._s.heading_rad = h
-
-    @property
-    def v(self) -> float:
-        r: float = self._s.v_ms
-        return r
-
-    @property
-    def a(self) -> float:
-        r: float = self._s.a_ms2
-        return r
-
-    @property
-    def odometer(self) -> float:
-        r: float = self._s.odometer_m
-        return r
-
-    @property
-    def t(self) -> float:
-        r: float = self._s.t_s
-        return r
-
-    @property
-    def _vb(self) -> float:
-        """Speed without ripple."""
-        r: float = self._s.vb_ms
-        return r
-
-    @property
-    def _ripple(self) -> float:
-        r: float = self._s.ripple
-        return r
-
-    @property
-    def _accel_limit(self) -> float:
-        r: float = self._s.accel_limit_ms2
-        return r
-
-    @property
-    def _jerk(self) -> float:
-        r: float = self._s.jerk_now_ms3
-        return r
+    x = CField[float]("x_m", "East, m.")
+    y = CField[float]("y_m", "North, m.")
+    heading = CField[float]("heading_rad", "Radians, 0 = north, clockwise positive.", writable=True)
+    v = CField[float]("v_ms")
+    a = CField[float]("a_ms2")
+    odometer = CField[float]("odometer_m")
+    t = CField[float]("t_s")
+    _vb = CField[float]("vb_ms", "Speed without ripple.")
+    _ripple = CField[float]("ripple")
+    _accel_limit = CField[float]("accel_limit_ms2")
+    _jerk = CField[float]("jerk_now_ms3")

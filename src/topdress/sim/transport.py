@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from topdress.sim.cplant import ffi, lib
+from topdress.sim.cplant import CField, ffi, lib
 
 
 @dataclass(frozen=True)
@@ -49,15 +49,8 @@ class AirLine:
         s.nominal_fan_rpm, s.min_fan_rpm = p.nominal_fan_rpm, p.min_fan_rpm
         s.release_rev, s.blocked = p.release_rev, p.blocked
 
-    @property
-    def in_flight_kg(self) -> float:
-        m: float = self._s.in_flight_kg
-        return m
-
-    @property
-    def landed_kg(self) -> float:
-        m: float = self._s.landed_kg
-        return m
+    in_flight_kg = CField[float]("in_flight_kg")
+    landed_kg = CField[float]("landed_kg")
 
     @property
     def parcels(self) -> int:

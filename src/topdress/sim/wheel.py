@@ -6,7 +6,7 @@ import math
 import random
 from dataclasses import dataclass
 
-from topdress.sim.cplant import attach, ffi, lib, refill
+from topdress.sim.cplant import CField, attach, ffi, lib, refill
 
 
 @dataclass(frozen=True)
@@ -56,20 +56,8 @@ class GroundWheel:
         s.bounce_sd, s.bounce_tau_s = p.bounce_sd, p.bounce_tau_s
         s.encoder_dead_at_s, s.lifted_at_s, s.ppr = p.encoder_dead_at_s, p.lifted_at_s, p.ppr
 
-    @property
-    def revolutions(self) -> float:
-        r: float = self._s.revolutions
-        return r
-
-    @revolutions.setter
-    def revolutions(self, r: float) -> None:
-        self._s.revolutions = r
-
-    @property
-    def count(self) -> int:
-        """Cumulative encoder pulses."""
-        n: int = self._s.count
-        return n
+    revolutions = CField[float]("revolutions", writable=True)
+    count = CField[int]("count", "Cumulative encoder pulses.")
 
     def slip_pct(self, v_kmh: float) -> float:
         """Mean slip at speed v for this run (eq. 5 plus the run's offset), >= 0."""
