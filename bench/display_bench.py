@@ -37,7 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from terminal_bench import WARMUP_S, Machine, terminal_toml
-from topdress.display.browser import answers, chromium, free_port, missing_browser
+
+# The browser driver is test code (tests/browser.py), shared with the end-to-end test.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from browser import answers, chromium, free_port, missing_browser
 
 BROWSER_NICENESS = 10
 TERMINAL_RT_PRIORITY = 10  # `chrt -r 10`, systemd's CPUSchedulingPolicy=rr + Priority=10
@@ -67,13 +70,13 @@ def _scheduling(realtime: bool) -> str:
 
 def child(config: Path, duration_s: float, port: int, realtime: bool) -> None:
     """The terminal as `topdress run --start` runs it, with its display and no console."""
+    from topdress.cli.display import serve_display
     from topdress.config import load_config
-    from topdress.display.serve import serve_display
+    from topdress.devices.lines import open_line_source
     from topdress.display.server import DisplayOptions
     from topdress.log.session import SessionLog
     from topdress.terminal.app import TICK_S, Snapshot, Terminal
     from topdress.terminal.canlink import open_bus
-    from topdress.terminal.serial_io import open_line_source
 
     scheduling = _scheduling(realtime)  # before any thread: they inherit it
     cfg = load_config(config)

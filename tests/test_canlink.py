@@ -12,7 +12,7 @@ import pytest
 import serial
 
 from topdress import protocol
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import CanConfig, default_config, loads_config
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
 from topdress.terminal.canlink import CanLink, SimulatedEcu, open_bus

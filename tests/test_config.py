@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import (
     DEFAULT_TOML,
     MAX_CONFIG_BYTES,

@@ -12,15 +12,15 @@ import time
 import pytest
 
 from topdress.config import CropConfig, default_config, loads_config
-from topdress.errors import ConfigError, SensorError
-from topdress.terminal.crop import (
+from topdress.crop.sensors import (
     CompensatedNdvi,
     CropSensors,
     DistanceQueue,
     Odometer,
     parse_crop_line,
 )
-from topdress.terminal.serial_io import SerialLineSource
+from topdress.devices.lines import SerialLineSource
+from topdress.errors import ConfigError, SensorError
 
 CFG = default_config().crop
 COLUMNS = CFG.columns

@@ -17,14 +17,14 @@ import serial
 from can import Message
 
 from topdress import protocol
-from topdress.cli import main
+from topdress.cli.demo import demo_config_toml, run_demo
+from topdress.cli.main import main
+from topdress.cli.run import EXIT_NO_ECU
 from topdress.config import default_config, loads_config
 from topdress.ecu import meter_target_rpm
 from topdress.log.session import RawRecord, SessionReader
 from topdress.protocol import AckResult
 from topdress.sim.live import PtyPort
-from topdress.terminal.cli import EXIT_NO_ECU
-from topdress.terminal.demo import demo_config_toml, run_demo
 
 
 def test_demo_runs_meters_at_eq4_targets_and_logs(tmp_path: Path) -> None:
@@ -244,7 +244,7 @@ class _PulledAdapter(can.BusABC):  # type: ignore[misc]
 def test_run_with_the_can_adapter_pulled_fails_cleanly(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr("topdress.terminal.demo.open_bus", lambda cfg: _PulledAdapter())
+    monkeypatch.setattr("topdress.cli.demo.open_bus", lambda cfg: _PulledAdapter())
     cfg = tmp_path / "t.toml"
     cfg.write_text(f'[gnss]\nport = "/dev/nonexistent"\n[log]\ndir = "{tmp_path}"\n')
     # no traceback: it waits for the ECU it cannot reach; the send failure named once
@@ -269,7 +269,7 @@ def test_demo_without_pseudo_terminals_fails_naming_them(
     def no_ptys(*args: object) -> None:
         raise OSError(2, "out of pty devices")
 
-    monkeypatch.setattr("topdress.terminal.demo.LiveMachine", no_ptys)
+    monkeypatch.setattr("topdress.cli.demo.LiveMachine", no_ptys)
     assert main(["demo", "--duration", "1", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "cannot make the simulated machine's pseudo-terminals" in err

@@ -23,13 +23,13 @@ from topdress.display.map_view import machine_arrow, rate_colour, swath_quad
 from topdress.display.pages import register_pages
 from topdress.display.server import DisplayError, DisplayOptions, check_security, is_loopback
 from topdress.i18n import text
-from topdress.terminal import operator as op
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
 from topdress.terminal.calibration import CalibrationView
 from topdress.terminal.counters import CounterView
 from topdress.terminal.desk import DeviceLine
-from topdress.terminal.operator import CommandResult, ManualView
+from topdress.view import commands as op
+from topdress.view.commands import CommandResult, ManualView
 
 LAT0, LON0 = 43.8853, 125.3245
 

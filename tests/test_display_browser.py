@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from topdress.display.browser import DemoProcess, chromium, missing_browser
+from browser import DemoProcess, chromium, missing_browser
 
 pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
 

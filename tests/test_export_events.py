@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from topdress import protocol
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.log.events import (
     CanEvent,
     CropEvent,

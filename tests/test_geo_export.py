@@ -21,7 +21,7 @@ import pytest
 from isoxml.util.isoxml_io import isoxml_from_path
 
 from geo_rig import record
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML
 from topdress.ecu import meter_rate_kg_ha
 from topdress.geo.asapplied import rate_kg_ha

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from geo_rig import record
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML
 from topdress.geo.mapview import rate_classes, rpm_classes
 from topdress.sim.tractor import Drive

@@ -16,12 +16,12 @@ from pyproj import CRS, Transformer
 
 from geo_rig import latlon, record
 from topdress.config import DEFAULT_TOML, BoundaryConfig, LinearRateConfig, PrescriptionConfig
+from topdress.crop.rate import LinearRate, SiteRate
 from topdress.errors import MapError
 from topdress.geo.boundary import load_boundary
 from topdress.geo.prescription import Zone, load_prescription
 from topdress.log.session import SessionReader
 from topdress.sim.tractor import Drive, Segment
-from topdress.terminal.rate import LinearRate, SiteRate
 
 
 def box(x0: float, y0: float, x1: float, y1: float) -> shapely.Polygon:
@@ -309,7 +309,7 @@ def test_a_prescription_drives_the_simulated_machine_and_shows_in_the_export(
     assert all(r.rate_kg_ha_upper + r.rate_kg_ha_lower == pytest.approx(300.0) for r in north)
     assert {r.prescription_kg_ha for r in south} == {100.0}
     # the meters follow: late in each zone the measured rate is the zone's
-    from topdress.cli import main
+    from topdress.cli.main import main
 
     out = tmp_path / "a.gpkg"
     assert main(["log", "export", str(session), "--out", str(out)]) == 0
@@ -349,7 +349,7 @@ def test_a_boundary_turns_the_meters_off_in_the_headland(tmp_path: Path) -> None
     assert np.all(rpm[y > 43] == 0.0)
     assert np.median(rpm[(y > 20) & (y < 38)]) > 5.0
     # the boundary and its headland line are drawn on the map
-    from topdress.cli import main
+    from topdress.cli.main import main
 
     html = tmp_path / "m.html"
     assert main(["log", "map", str(session), "--out", str(html)]) == 0
@@ -359,7 +359,7 @@ def test_a_boundary_turns_the_meters_off_in_the_headland(tmp_path: Path) -> None
 
 def test_the_terminal_refuses_to_start_on_a_bad_map_naming_key_and_file(tmp_path: Path) -> None:
     from topdress.config import loads_config
-    from topdress.terminal.rate import build_rate_model, build_site_rate
+    from topdress.crop.rate import build_rate_model, build_site_rate
 
     bad = write_polygons(tmp_path / "rx.geojson", [box(0, 0, 5, 5)], {"dose": [1.0]})
     cfg = loads_config(f'[prescription]\npath = "{bad}"\n')

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from topdress.cli import main
+from topdress.cli.gnss import decode_stream
+from topdress.cli.main import main
 from topdress.gnss.nmea import GnssFix, NmeaDecoder, make_sentence, nmea_checksum
 from topdress.gnss.tracker import GnssSpeedTracker
-from topdress.terminal.gnss_cli import decode_stream
 
 GPSD_LOGS = Path(__file__).resolve().parents[1].parent / "shared" / "nmea" / "gpsd-logs"
 

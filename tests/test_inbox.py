@@ -8,11 +8,11 @@ import time
 from dataclasses import replace
 
 from topdress.config import default_config
+from topdress.devices.lines import FakeLineSource
 from topdress.gnss.nmea import make_sentence
 from topdress.terminal.app import Terminal
 from topdress.terminal.canlink import SimulatedEcu, open_bus
 from topdress.terminal.inbox import Inbox
-from topdress.terminal.serial_io import FakeLineSource
 
 
 def test_a_flooding_source_loses_its_oldest_lines_counted_and_nothing_else() -> None:

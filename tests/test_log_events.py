@@ -19,13 +19,13 @@ from typing import Any
 import pytest
 
 from test_operator import drive, make_rig, post, stand, straight
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML
 from topdress.errors import LogError
 from topdress.log.model import LogEvent, StateRow
 from topdress.log.session import SCHEMA_VERSION, SessionLog, SessionReader
 from topdress.log.summary import summarise
-from topdress.terminal import operator as op
+from topdress.view import commands as op
 
 PIN = "80412957"  # a value no other part of a session holds
 

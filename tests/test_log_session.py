@@ -10,7 +10,7 @@ from pathlib import Path
 import can
 import pytest
 
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.errors import LogError
 from topdress.log.model import StateRow
 from topdress.log.session import SCHEMA_VERSION, SessionLog, SessionReader

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from topdress import protocol
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import default_config
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.log.model import StateRow
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import summarise

@@ -20,9 +20,9 @@ from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.actuators import MeterParams
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, StepOutput, World
-from topdress.terminal import operator as op
 from topdress.terminal.leadcal import LeadCal
-from topdress.terminal.operator import CommandResult
+from topdress.view import commands as op
+from topdress.view.commands import CommandResult
 
 CFG = loads_config(DEFAULT_TOML)
 
@@ -514,7 +514,7 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
 def test_gnss_port_changed_while_running_is_reopened_on_the_new_device() -> None:
     import time as wall
 
-    from topdress.sim import nmea
+    from topdress.gnss import sentences as nmea
     from topdress.sim.live import PtyPort
 
     port = PtyPort()

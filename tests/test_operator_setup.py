@@ -15,7 +15,9 @@ from types import SimpleNamespace
 import pytest
 
 from topdress import __version__, protocol
-from topdress.cli import main
+from topdress import config_edit as settings
+from topdress.cli.config import can_interfaces, init_text
+from topdress.cli.main import main
 from topdress.config import (
     DEFAULT_TOML,
     DisplayConfig,
@@ -25,11 +27,9 @@ from topdress.config import (
     loads_config,
     redacted_text,
 )
-from topdress.config_cli import can_interfaces, init_text
 from topdress.errors import ConfigError, ProtocolError
-from topdress.terminal import operator as op
-from topdress.terminal import settings
 from topdress.terminal.calibration import CalibrationError, kg_per_rev, wheel_result
+from topdress.view import commands as op
 
 
 def test_version(capsys: pytest.CaptureFixture[str]) -> None:
@@ -350,9 +350,9 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
     tmp_path: Path,
 ) -> None:
     """`topdress sim ecu` in its own process; this one is the cab PC reading the ptys it named."""
+    from topdress.devices.lines import open_line_source
     from topdress.terminal.app import Terminal
     from topdress.terminal.canlink import open_bus
-    from topdress.terminal.serial_io import open_line_source
 
     group = f"239.74.{os.getpid() % 250}.{7 + os.getpid() % 200}"
     _udp_or_skip(group)
@@ -460,7 +460,7 @@ def test_can_adapter_options_reach_python_can() -> None:
 
 
 def test_sim_ecu_options_become_the_terminals_can_options() -> None:
-    from topdress.sim.ecu_cli import parse_options, terminal_snippet
+    from topdress.cli.sim import parse_options, terminal_snippet
 
     opts = parse_options(["port=43200", "tty_baudrate=115200", "fd=false", "name=left rack"])
     text = terminal_snippet("/dev/pts/3", "/dev/pts/4", "udp_multicast", "239.0.0.9", opts)

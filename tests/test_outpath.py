@@ -11,7 +11,7 @@ import pytest
 
 from test_export_events import make_session
 from test_log_durability import run_and_kill
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.errors import OutputError
 from topdress.log.export import STATE_COLUMNS
 from topdress.outpath import check_output, open_text_output, write_output

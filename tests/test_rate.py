@@ -13,7 +13,7 @@ from topdress.config import (
     TableRateConfig,
     loads_config,
 )
-from topdress.terminal.rate import (
+from topdress.crop.rate import (
     LinearRate,
     SufficiencyRate,
     TableRate,

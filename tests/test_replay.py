@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from topdress import protocol
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.config import default_config, loads_config
 from topdress.ecu import Ecu
 from topdress.gnss.nmea import NmeaDecoder, make_sentence

@@ -12,9 +12,7 @@ from pathlib import Path
 import pytest
 
 from topdress.config import CropConfig, GnssConfig
-from topdress.errors import DeviceError
-from topdress.gnss.nmea import NmeaDecoder, make_sentence
-from topdress.terminal.serial_io import (
+from topdress.devices.lines import (
     FakeLineSource,
     FileLineSource,
     LineSplitter,
@@ -22,6 +20,8 @@ from topdress.terminal.serial_io import (
     StdinLineSource,
     open_line_source,
 )
+from topdress.errors import DeviceError
+from topdress.gnss.nmea import NmeaDecoder, make_sentence
 
 RMC = make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,87.5,210526,,,A")
 

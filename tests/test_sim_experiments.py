@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from topdress.cli import main
+from topdress.cli.main import main
 from topdress.protocol import SpeedMode
 from topdress.sim import experiments as ex
 from topdress.sim import report

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from topdress.config import CropConfig
+from topdress.crop.sensors import CompensatedNdvi
 from topdress.errors import ConfigError
 from topdress.protocol import SpeedMode
 from topdress.sim import experiments as ex
 from topdress.sim import fieldexp as fx
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.crop import CompensatedNdvi
 
 WIDTH = 3.6
 

@@ -7,7 +7,7 @@ import math
 import pynmeagps
 import pytest
 
-from topdress.sim import nmea
+from topdress.gnss import sentences as nmea
 from topdress.sim.actuators import Fan, FanParams, MeterMotor, MeterParams
 from topdress.sim.field import CropSensor, CropSensorParams, Field, FieldParams
 from topdress.sim.gnss import GnssParams, GnssReceiver

@@ -10,13 +10,13 @@ from pathlib import Path
 
 import pytest
 
+from topdress.display.console import Console, fault_names, render_line, render_lines, width
 from topdress.i18n import set_language, text, tr
 from topdress.protocol import Fault
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
 from topdress.terminal.calibration import CalibrationView
-from topdress.terminal.console import Console, fault_names, render_line, render_lines, width
-from topdress.terminal.operator import ManualView
+from topdress.view.commands import ManualView
 
 WORKING = Snapshot(
     t_s=12.3,
@@ -258,7 +258,7 @@ def test_long_chinese_text_is_cut_by_columns() -> None:
 
 
 def test_the_configured_language_applies_at_start_without_the_display(tmp_path: Path) -> None:
-    from topdress.cli import main
+    from topdress.cli.main import main
     from topdress.i18n import language
 
     cfg = tmp_path / "t.toml"

@@ -9,11 +9,11 @@ from dataclasses import replace
 import pytest
 
 from topdress.config import default_config
-from topdress.sim import nmea
+from topdress.devices.lines import FakeLineSource, SerialLineSource
+from topdress.gnss import sentences as nmea
 from topdress.sim.live import PtyPort
 from topdress.terminal.app import Terminal
 from topdress.terminal.canlink import open_bus
-from topdress.terminal.serial_io import FakeLineSource, SerialLineSource
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float = 5.0) -> bool:

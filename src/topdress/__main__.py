@@ -19,7 +19,7 @@ def _interrupted(signum: int, frame: FrameType | None) -> None:
 
 def run() -> None:
     signal.signal(signal.SIGINT, _interrupted)
-    from topdress.cli import main  # the heavy imports happen here and in main()
+    from topdress.cli.main import main  # the heavy imports happen here and in main()
 
     # Loaded: Ctrl-C is a KeyboardInterrupt again, which main() and the terminal handle.
     signal.signal(signal.SIGINT, signal.default_int_handler)

@@ -16,7 +16,7 @@ from nicegui import ui
 
 from topdress.display.hub import DisplayHub
 from topdress.i18n import render, tr
-from topdress.terminal.operator import CommandResult
+from topdress.view.commands import CommandResult
 
 COMMAND_TIMEOUT_S = 15.0  # settings for the ECU wait for every acknowledgement
 

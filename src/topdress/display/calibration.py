@@ -14,9 +14,9 @@ from topdress.display.actions import Actions
 from topdress.display.hub import DisplayHub
 from topdress.i18n import render, tr
 from topdress.i18n.catalogue import CATALOGUE
-from topdress.terminal import operator as op
 from topdress.terminal.app import Snapshot
 from topdress.terminal.calibration import CalibrationView
+from topdress.view import commands as op
 
 
 class CalibrationScreen:

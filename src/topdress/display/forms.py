@@ -2,7 +2,7 @@
 
 Values are shown as the configuration in force holds them and read back with their types;
 a refused value (ConfigError, or an error the terminal returns for a dotted key) is shown at
-its field. The checks are the configuration's own (`topdress.terminal.settings`), never a copy.
+its field. The checks are the configuration's own (`topdress.config_edit`), never a copy.
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ from topdress.config import TerminalConfig
 from topdress.display.cpu import yield_to_the_terminal
 from topdress.display.server import DisplayError, DisplayOptions, check_security, port_free
 from topdress.terminal.app import Snapshot, Terminal
-from topdress.terminal.operator import CommandResult
+from topdress.view.commands import CommandResult
 
 log = logging.getLogger(__name__)
 

@@ -7,7 +7,7 @@ import random
 from collections import deque
 from dataclasses import dataclass
 
-from topdress.sim import nmea
+from topdress.gnss import sentences as nmea
 
 EARTH_R_M = 6_371_000.0
 

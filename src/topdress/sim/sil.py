@@ -18,12 +18,12 @@ import numpy as np
 
 from topdress import protocol
 from topdress.config import CropConfig, LinearRateConfig
+from topdress.crop.rate import LinearRate
+from topdress.crop.sensors import CompensatedNdvi
 from topdress.errors import EcuParamError, ProtocolError
+from topdress.gnss.sentences import parse_rmc_speed_kmh
 from topdress.sim.inproc import segment
-from topdress.sim.nmea import parse_rmc_speed_kmh
 from topdress.sim.world import World
-from topdress.terminal.crop import CompensatedNdvi
-from topdress.terminal.rate import LinearRate
 
 _channels = itertools.count()
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from topdress.i18n import Text, text
 from topdress.protocol import Fault
-from topdress.terminal.links import link_state
+from topdress.view.links import link_state
 
 ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
 #: Metering speed targets below this are not judged off-rate (a meter just starting or stopping).

@@ -34,6 +34,9 @@ from typing import Any
 import can
 
 from topdress.config import TerminalConfig
+from topdress.crop.rate import build_rate_model, build_site_rate, split_layers
+from topdress.crop.sensors import CompensatedNdvi
+from topdress.devices.lines import LineSource
 from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
@@ -48,13 +51,10 @@ from topdress.terminal.alarms import AlarmView
 from topdress.terminal.calibration import CalibrationView
 from topdress.terminal.canlink import CanLink, EcuView
 from topdress.terminal.counters import CounterView
-from topdress.terminal.crop import CompensatedNdvi
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
-from topdress.terminal.links import link_state
-from topdress.terminal.operator import RUNNING, CommandResult, ManualView
-from topdress.terminal.rate import build_rate_model, build_site_rate, split_layers
-from topdress.terminal.serial_io import LineSource
+from topdress.view.commands import RUNNING, CommandResult, ManualView
+from topdress.view.links import link_state
 
 log = logging.getLogger(__name__)
 
@@ -179,7 +179,7 @@ class Terminal:
         self.desk = OperatorDesk(self, start, config_path)
 
     def post(self, command: Any) -> Future[CommandResult]:
-        """Hand an operator command (topdress.terminal.operator) to the loop; thread-safe."""
+        """Hand an operator command (topdress.view.commands) to the loop; thread-safe."""
         return self.desk.post(command)
 
     # ---- life cycle ---------------------------------------------------------------------------

@@ -21,12 +21,25 @@ import can
 
 from topdress import protocol
 from topdress.config import TerminalConfig
+from topdress.config_edit import (
+    DEVICE_KEYS,
+    ECU_SECTIONS,
+    PARAM_KEYS,
+    RESTART_SECTIONS,
+    changed_device_keys,
+    changed_ecu_params,
+    changed_keys,
+    save_section,
+    validate_section,
+)
+from topdress.crop.rate import build_rate_model
+from topdress.crop.sensors import DistanceQueue, parse_crop_line
+from topdress.devices.lines import open_line_source
 from topdress.ecu import EcuParams, meter_rate_kg_ha
 from topdress.errors import ConfigError, DeviceError, ProtocolError, SensorError
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.i18n import Text, text
 from topdress.protocol import Fault, Source
-from topdress.terminal import operator as op
 from topdress.terminal.alarms import AlarmBook, AlarmInputs, AlarmView
 from topdress.terminal.calibration import (
     CalCommand,
@@ -40,22 +53,9 @@ from topdress.terminal.calibration import (
 )
 from topdress.terminal.canlink import CanLink, open_bus
 from topdress.terminal.counters import CounterView, WorkCounters
-from topdress.terminal.crop import DistanceQueue, parse_crop_line
 from topdress.terminal.leadcal import LeadCal
-from topdress.terminal.links import link_state
-from topdress.terminal.rate import build_rate_model
-from topdress.terminal.serial_io import open_line_source
-from topdress.terminal.settings import (
-    DEVICE_KEYS,
-    ECU_SECTIONS,
-    PARAM_KEYS,
-    RESTART_SECTIONS,
-    changed_device_keys,
-    changed_ecu_params,
-    changed_keys,
-    save_section,
-    validate_section,
-)
+from topdress.view import commands as op
+from topdress.view.links import link_state
 
 if TYPE_CHECKING:
     from topdress.terminal.app import Snapshot, Terminal

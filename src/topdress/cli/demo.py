@@ -20,6 +20,9 @@ import can
 
 from topdress import i18n
 from topdress.config import TerminalConfig, loads_config, redacted_text
+from topdress.devices.lines import open_line_source
+from topdress.display.console import Console
+from topdress.display.keyboard import KeyboardCommands
 from topdress.errors import ConfigError, DeviceError
 from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
@@ -27,10 +30,7 @@ from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.app import Snapshot, Terminal
 from topdress.terminal.canlink import open_bus
-from topdress.terminal.console import Console
-from topdress.terminal.keyboard import KeyboardCommands
-from topdress.terminal.operator import CONSOLE_HELP
-from topdress.terminal.serial_io import open_line_source
+from topdress.view.commands import CONSOLE_HELP
 
 if TYPE_CHECKING:
     from topdress.display.server import DisplayOptions
@@ -128,7 +128,7 @@ def run_terminal(
     )
     shown = None
     if display is not None:  # the web display beside the console (topdress.display)
-        from topdress.display.serve import serve_display
+        from topdress.cli.display import serve_display
 
         shown = serve_display(term, display, console.message)
     if keyboard is not None:

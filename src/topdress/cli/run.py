@@ -118,9 +118,9 @@ def _sigterm_stops() -> Iterator[None]:
 
 
 def _demo(args: argparse.Namespace) -> int:
+    from topdress.cli.demo import run_demo
+    from topdress.cli.display import display_options
     from topdress.config import default_config
-    from topdress.display.serve import display_options
-    from topdress.terminal.demo import run_demo
 
     display = display_options(default_config(), args.display, args.host, args.port)
     with _sigterm_stops():
@@ -136,8 +136,8 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from topdress.display.serve import display_options
-    from topdress.terminal.demo import run_terminal
+    from topdress.cli.demo import run_terminal
+    from topdress.cli.display import display_options
 
     cfg = load_config(args.config)
     display = display_options(cfg, args.display, args.host, args.port)

@@ -15,7 +15,7 @@ from concurrent.futures import Future
 from typing import TYPE_CHECKING, TextIO
 
 from topdress.i18n import render, tr
-from topdress.terminal.operator import CommandResult, Help, OperatorError, parse_command
+from topdress.view.commands import CommandResult, Help, OperatorError, parse_command
 
 if TYPE_CHECKING:
     from topdress.terminal.app import Terminal

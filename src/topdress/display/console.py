@@ -17,8 +17,8 @@ from topdress.i18n import Text, render, tr
 from topdress.protocol import fault_names
 from topdress.terminal.alarms import AlarmView
 from topdress.terminal.app import Snapshot
-from topdress.terminal.links import link_state
-from topdress.terminal.operator import ManualView
+from topdress.view.commands import ManualView
+from topdress.view.links import link_state
 
 
 def _num(value: float | None, fmt: str) -> str:
@@ -87,7 +87,7 @@ def _head(key: str) -> str:
 
 
 def link_text(state: str) -> str:
-    """A link state in words, in the language in force (topdress.terminal.links)."""
+    """A link state in words, in the language in force (topdress.view.links)."""
     return render(link_state(state))
 
 

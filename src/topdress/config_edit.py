@@ -6,7 +6,7 @@
   so the user's comments and layout stay, atomically (temporary file, then rename), the
   previous file kept as `FILE.bak`;
 - applying (reopening a port or the CAN bus, pushing ECU parameters) is the terminal's, on its
-  own loop (`ApplySettings`, see topdress.terminal.operator).
+  own loop (`ApplySettings`, see topdress.view.commands).
 
 Also: the serial ports the machine has (pyserial), and the NDVI -> rate curve for a plot.
 """
@@ -24,9 +24,9 @@ import tomlkit
 from serial.tools import list_ports
 
 from topdress.config import ECU_KEYS, TerminalConfig, config_from_dict, read_config_text
+from topdress.crop.rate import RateModel, build_rate_model
 from topdress.errors import ConfigError
 from topdress.terminal.counters import atomic_write
-from topdress.terminal.rate import RateModel, build_rate_model
 
 SECTIONS = tuple(f.name for f in dataclasses.fields(TerminalConfig))
 #: What applying a changed section takes, beyond the file.

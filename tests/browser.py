@@ -1,8 +1,9 @@
 """The display in a real browser: Debian's headless Chromium driven by Selenium through
 Debian's chromedriver (nothing downloads a browser), and `topdress demo` as a child process.
 
-Used by the end-to-end test (tests/test_display_browser.py) and bench/display_bench.py; needs
-the dev extras (selenium) and scripts/sysdeps.sh's browser packages.
+Test code, no part of the package: used by the end-to-end test (tests/test_display_browser.py)
+and bench/display_bench.py; needs the dev extras (selenium) and scripts/sysdeps.sh's browser
+packages.
 """
 
 from __future__ import annotations

@@ -15,12 +15,12 @@ from topdress.errors import TopdressError
 # Each module defines `register(subparsers)` and sets `func` on its parsers;
 # `func(args) -> int` is the exit code.
 REGISTRARS = (
-    "topdress.config_cli",
-    "topdress.terminal.cli",
-    "topdress.terminal.gnss_cli",
-    "topdress.sim.cli",
-    "topdress.log.cli",
-    "topdress.sim.ecu_cli",
+    "topdress.cli.config",
+    "topdress.cli.run",
+    "topdress.cli.gnss",
+    "topdress.cli.experiment",
+    "topdress.cli.log",
+    "topdress.cli.sim",
 )
 
 
