@@ -72,11 +72,12 @@ def child(config: Path, duration_s: float, port: int, realtime: bool) -> None:
     """The terminal as `topdress run --start` runs it, with its display and no console."""
     from topdress.cli.display import serve_display
     from topdress.config import load_config
+    from topdress.devices.can import open_bus
     from topdress.devices.lines import open_line_source
-    from topdress.display.server import DisplayOptions
+    from topdress.display.options import DisplayOptions
     from topdress.log.session import SessionLog
-    from topdress.terminal.app import TICK_S, Snapshot, Terminal
-    from topdress.terminal.canlink import open_bus
+    from topdress.terminal.app import Terminal
+    from topdress.view.snapshot import TICK_S, Snapshot
 
     scheduling = _scheduling(realtime)  # before any thread: they inherit it
     cfg = load_config(config)

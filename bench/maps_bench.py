@@ -34,9 +34,9 @@ import pyogrio.raw
 import shapely
 
 from topdress.config import PrescriptionConfig
+from topdress.geo.export import export_maps
 from topdress.geo.outlet import offset_position
 from topdress.geo.prescription import load_prescription
-from topdress.log.export import export_maps
 from topdress.log.model import StateRow
 from topdress.log.session import SessionLog, SessionReader
 

@@ -51,10 +51,10 @@ WARMUP_S = 3.0  # parameter push and first commands; latencies counted after it
 def child(config: Path, duration_s: float) -> None:
     """The terminal, as `topdress run` runs it, without the console; prints its CPU use."""
     from topdress.config import load_config
+    from topdress.devices.can import open_bus
     from topdress.devices.lines import open_line_source
     from topdress.log.session import SessionLog
     from topdress.terminal.app import Terminal
-    from topdress.terminal.canlink import open_bus
 
     cfg = load_config(config)
     session = SessionLog.create(cfg.log.dir, config.read_text())

@@ -11,13 +11,13 @@ from pathlib import Path
 import can
 
 from topdress.config import loads_config
+from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
 from topdress.log.session import SessionLog
 from topdress.sim.gnss import GnssParams
 from topdress.sim.tractor import Drive
 from topdress.sim.world import World
 from topdress.terminal.app import Terminal
-from topdress.terminal.canlink import open_bus
 
 _channels = itertools.count()
 LAT0, LON0 = GnssParams().lat0_deg, GnssParams().lon0_deg

@@ -14,8 +14,9 @@ import serial
 from topdress import protocol
 from topdress.cli.main import main
 from topdress.config import CanConfig, default_config, loads_config
+from topdress.devices.can import open_bus
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
-from topdress.terminal.canlink import CanLink, SimulatedEcu, open_bus
+from topdress.terminal.canlink import CanLink, SimulatedEcu
 
 _channels = itertools.count()
 

@@ -20,16 +20,12 @@ from topdress.display import pages
 from topdress.display.charts import meter_options, speed_options
 from topdress.display.hub import DisplayHub, bearing_deg, distance_m
 from topdress.display.map_view import machine_arrow, rate_colour, swath_quad
+from topdress.display.options import DisplayError, DisplayOptions, check_security, is_loopback
 from topdress.display.pages import register_pages
-from topdress.display.server import DisplayError, DisplayOptions, check_security, is_loopback
 from topdress.i18n import text
-from topdress.terminal.alarms import AlarmView
-from topdress.terminal.app import Snapshot
-from topdress.terminal.calibration import CalibrationView
-from topdress.terminal.counters import CounterView
-from topdress.terminal.desk import DeviceLine
 from topdress.view import commands as op
 from topdress.view.commands import CommandResult, ManualView
+from topdress.view.snapshot import AlarmView, CalibrationView, CounterView, DeviceLine, Snapshot
 
 LAT0, LON0 = 43.8853, 125.3245
 
@@ -680,7 +676,7 @@ async def test_can_adapter_options_are_edited_as_name_value_lines(user: User) ->
 def test_a_taken_port_is_said_before_anything_starts() -> None:
     import socket
 
-    from topdress.display.process import DisplayLink
+    from topdress.cli.display import DisplayLink
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -16,12 +16,13 @@ from pyproj import CRS, Transformer
 
 from geo_rig import latlon, record
 from topdress.config import DEFAULT_TOML, BoundaryConfig, LinearRateConfig, PrescriptionConfig
-from topdress.crop.rate import LinearRate, SiteRate
+from topdress.crop.rate import LinearRate
 from topdress.errors import MapError
 from topdress.geo.boundary import load_boundary
 from topdress.geo.prescription import Zone, load_prescription
 from topdress.log.session import SessionReader
 from topdress.sim.tractor import Drive, Segment
+from topdress.terminal.site import SiteRate
 
 
 def box(x0: float, y0: float, x1: float, y1: float) -> shapely.Polygon:
@@ -359,7 +360,8 @@ def test_a_boundary_turns_the_meters_off_in_the_headland(tmp_path: Path) -> None
 
 def test_the_terminal_refuses_to_start_on_a_bad_map_naming_key_and_file(tmp_path: Path) -> None:
     from topdress.config import loads_config
-    from topdress.crop.rate import build_rate_model, build_site_rate
+    from topdress.crop.rate import build_rate_model
+    from topdress.terminal.site import build_site_rate
 
     bad = write_polygons(tmp_path / "rx.geojson", [box(0, 0, 5, 5)], {"dose": [1.0]})
     cfg = loads_config(f'[prescription]\npath = "{bad}"\n')

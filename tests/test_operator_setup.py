@@ -27,6 +27,8 @@ from topdress.config import (
     loads_config,
     redacted_text,
 )
+from topdress.crop.rate import rate_curve
+from topdress.devices import ports
 from topdress.errors import ConfigError, ProtocolError
 from topdress.terminal.calibration import CalibrationError, kg_per_rev, wheel_result
 from topdress.view import commands as op
@@ -226,7 +228,7 @@ def test_can_options_are_given_whole_and_checked_by_name(tmp_path: Path) -> None
 
 
 def test_rate_curve_is_the_model_over_ndvi() -> None:
-    curve = settings.rate_curve(default_config().rate, n=11)
+    curve = rate_curve(default_config().rate, n=11)
     assert len(curve) == 11 and curve[0][0] == 0.0 and curve[-1][0] == 1.0
     got = dict(curve)
     assert got[0.3] == pytest.approx(450.0) and got[0.8] == pytest.approx(150.0)
@@ -239,10 +241,10 @@ def test_serial_ports_listed_by_device(monkeypatch: pytest.MonkeyPatch) -> None:
         SimpleNamespace(device="/dev/ttyUSB1", description="FT232R", hwid="USB VID:PID=0403:6001"),
         SimpleNamespace(device="/dev/ttyS0", description=None, hwid=None),
     ]
-    monkeypatch.setattr(settings.list_ports, "comports", lambda: fake)
-    assert settings.list_serial_ports() == [
-        settings.SerialPortInfo("/dev/ttyS0", "", ""),
-        settings.SerialPortInfo("/dev/ttyUSB1", "FT232R", "USB VID:PID=0403:6001"),
+    monkeypatch.setattr(ports.list_ports, "comports", lambda: fake)
+    assert ports.list_serial_ports() == [
+        ports.SerialPortInfo("/dev/ttyS0", "", ""),
+        ports.SerialPortInfo("/dev/ttyUSB1", "FT232R", "USB VID:PID=0403:6001"),
     ]
 
 
@@ -350,9 +352,9 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
     tmp_path: Path,
 ) -> None:
     """`topdress sim ecu` in its own process; this one is the cab PC reading the ptys it named."""
+    from topdress.devices.can import open_bus
     from topdress.devices.lines import open_line_source
     from topdress.terminal.app import Terminal
-    from topdress.terminal.canlink import open_bus
 
     group = f"239.74.{os.getpid() % 250}.{7 + os.getpid() % 200}"
     _udp_or_skip(group)
@@ -430,7 +432,7 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
 def test_can_adapter_options_reach_python_can() -> None:
     import can
 
-    from topdress.terminal.canlink import open_bus
+    from topdress.devices.can import open_bus
 
     cfg = loads_config(
         '[can]\nchannel = "test-setup-options"\n[can.options]\nreceive_own_messages = true\n'

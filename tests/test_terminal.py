@@ -13,6 +13,7 @@ import pytest
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.crop.rate import build_rate_model, split_layers
+from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
 from topdress.display.console import render_line, render_lines
 from topdress.ecu import meter_target_rpm
@@ -20,8 +21,8 @@ from topdress.gnss.nmea import make_sentence
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import World
-from topdress.terminal.app import Snapshot, Terminal
-from topdress.terminal.canlink import open_bus
+from topdress.terminal.app import Terminal
+from topdress.view.snapshot import Snapshot
 
 _channels = itertools.count()
 

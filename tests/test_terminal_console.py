@@ -13,10 +13,8 @@ import pytest
 from topdress.display.console import Console, fault_names, render_line, render_lines, width
 from topdress.i18n import set_language, text, tr
 from topdress.protocol import Fault
-from topdress.terminal.alarms import AlarmView
-from topdress.terminal.app import Snapshot
-from topdress.terminal.calibration import CalibrationView
 from topdress.view.commands import ManualView
+from topdress.view.snapshot import AlarmView, CalibrationView, Snapshot
 
 WORKING = Snapshot(
     t_s=12.3,

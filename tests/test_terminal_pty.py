@@ -9,11 +9,11 @@ from dataclasses import replace
 import pytest
 
 from topdress.config import default_config
+from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource, SerialLineSource
 from topdress.gnss import sentences as nmea
 from topdress.sim.live import PtyPort
 from topdress.terminal.app import Terminal
-from topdress.terminal.canlink import open_bus
 
 
 def _wait_for(cond: Callable[[], bool], timeout_s: float = 5.0) -> bool:

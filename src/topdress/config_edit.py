@@ -7,8 +7,6 @@
   previous file kept as `FILE.bak`;
 - applying (reopening a port or the CAN bus, pushing ECU parameters) is the terminal's, on its
   own loop (`ApplySettings`, see topdress.view.commands).
-
-Also: the serial ports the machine has (pyserial), and the NDVI -> rate curve for a plot.
 """
 
 from __future__ import annotations
@@ -16,17 +14,14 @@ from __future__ import annotations
 import dataclasses
 import shutil
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import tomlkit
-from serial.tools import list_ports
 
 from topdress.config import ECU_KEYS, TerminalConfig, config_from_dict, read_config_text
-from topdress.crop.rate import RateModel, build_rate_model
 from topdress.errors import ConfigError
-from topdress.terminal.counters import atomic_write
+from topdress.outpath import atomic_write
 
 SECTIONS = tuple(f.name for f in dataclasses.fields(TerminalConfig))
 #: What applying a changed section takes, beyond the file.
@@ -60,21 +55,6 @@ PARAM_KEYS: dict[int, str] = {
     18: "speed.min_work_speed_kmh",
     **{pid: f"ecu.{name}" for name, (pid, *_rest) in ECU_KEYS.items()},
 }
-
-
-@dataclass(frozen=True)
-class SerialPortInfo:
-    device: str
-    description: str
-    hwid: str
-
-
-def list_serial_ports() -> list[SerialPortInfo]:
-    """The serial ports this machine has, by device name (USB adapters included)."""
-    ports = [
-        SerialPortInfo(p.device, p.description or "", p.hwid or "") for p in list_ports.comports()
-    ]
-    return sorted(ports, key=lambda p: p.device)
 
 
 def _plain(value: Any) -> Any:
@@ -199,14 +179,3 @@ def changed_ecu_params(old: TerminalConfig, new: TerminalConfig) -> dict[int, fl
     """The ECU parameters whose value differs between two configurations (id -> new value)."""
     a, b = old.ecu_params(), new.ecu_params()
     return {k: v for k, v in b.items() if a.get(k) != v}
-
-
-def rate_curve(
-    rate_cfg: Any, n: int = 51, model: RateModel | None = None
-) -> list[tuple[float, float]]:
-    """(NDVI, total product kg/ha) at n NDVI values over 0..1, for the live plot.
-
-    `model` the terminal's model (the sufficiency model's virtual reference depends on the NDVI
-    seen); None builds one from `rate_cfg` (a RateConfig)."""
-    m = model if model is not None else build_rate_model(rate_cfg)
-    return [(i / (n - 1), m.rate_kg_ha(i / (n - 1))) for i in range(n)]

@@ -105,3 +105,14 @@ def open_text_output(out: str | Path, inputs: Iterable[str | Path]) -> Iterator[
         return
     with _staged(out, "") as tmp, tmp.open("w", encoding="utf-8", newline="") as f:
         yield f
+
+
+def atomic_write(path: Path, text: str) -> None:
+    """Write `text` to `path` so that a crash leaves the old or the new file, never a mix."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)

@@ -78,7 +78,7 @@ def init_text(ports: list[str], can_ifaces: list[str]) -> str:
 
 
 def _init(args: argparse.Namespace) -> int:
-    from topdress.config_edit import list_serial_ports
+    from topdress.devices.ports import list_serial_ports
 
     path: Path = args.file
     if path.exists() and not args.force:

@@ -20,6 +20,7 @@ import can
 
 from topdress import i18n
 from topdress.config import TerminalConfig, loads_config, redacted_text
+from topdress.devices.can import open_bus
 from topdress.devices.lines import open_line_source
 from topdress.display.console import Console
 from topdress.display.keyboard import KeyboardCommands
@@ -28,12 +29,12 @@ from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.app import Snapshot, Terminal
-from topdress.terminal.canlink import open_bus
+from topdress.terminal.app import Terminal
 from topdress.view.commands import CONSOLE_HELP
+from topdress.view.snapshot import Snapshot
 
 if TYPE_CHECKING:
-    from topdress.display.server import DisplayOptions
+    from topdress.display.options import DisplayOptions
 
 log = logging.getLogger(__name__)
 
@@ -132,7 +133,7 @@ def run_terminal(
 
         shown = serve_display(term, display, console.message)
     if keyboard is not None:
-        KeyboardCommands(term, keyboard, console.message).start()
+        KeyboardCommands(term.post, keyboard, console.message).start()
     if not start:
         console.message(
             "meters stopped until the operator starts them (type start, or the display)"

@@ -139,7 +139,7 @@ def _export(args: argparse.Namespace) -> int:
                 out.write(reader.config_toml)
             print(f"{args.config}: the session's configuration", file=report)
         if args.out is not None:
-            from topdress.log.export import export_maps
+            from topdress.geo.export import export_maps
 
             for line in export_maps(reader, args.out, args.format, args.crs, None):
                 print(line, file=report)

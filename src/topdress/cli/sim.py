@@ -16,12 +16,12 @@ import time
 from typing import Any
 
 from topdress.config import loads_config
+from topdress.devices.can import open_bus
 from topdress.errors import ConfigError, DeviceError
 from topdress.protocol import CAL_REASONS
 from topdress.sim.live import LiveMachine
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.canlink import open_bus
 
 # Polled often enough that the meter has hardly turned when the start of a test is seen.
 _POLL_S = 0.02

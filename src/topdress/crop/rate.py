@@ -3,14 +3,15 @@
 Models share one small interface (RateModel): `rate_kg_ha(ndvi)` gives the total product
 rate for an NDVI, `observe(ndvi)` shows the model every NDVI the sensors see (only the virtual
 reference of the sufficiency model learns from it). `build_rate_model(cfg.rate)` picks the one
-the configuration names. `SiteRate` combines it with a prescription map and a field boundary.
+the configuration names. The terminal combines it with a prescription map and a field boundary
+(topdress.terminal.site).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -19,13 +20,7 @@ from topdress.config import (
     RateConfig,
     SufficiencyRateConfig,
     TableRateConfig,
-    TerminalConfig,
 )
-from topdress.errors import MapError
-
-if TYPE_CHECKING:  # GDAL, shapely and PROJ cost ~60 MB: loaded only when a map is configured
-    from topdress.geo.boundary import FieldBoundary
-    from topdress.geo.prescription import RateMap
 
 # Largest rate one layer's command field carries (PcCommand UpperRate/LowerRate, 0.01 kg/ha).
 MAX_LAYER_KG_HA = 600.0
@@ -169,78 +164,12 @@ def split_layers(total_kg_ha: float, split_upper: float, layers: int = 2) -> Lay
     return LayerRates(min(upper, MAX_LAYER_KG_HA), min(lower, MAX_LAYER_KG_HA), limited)
 
 
-@dataclass(frozen=True)
-class SiteDecision:
-    """The total product rate for where the outlet is, and why."""
+def rate_curve(
+    rate_cfg: Any, n: int = 51, model: RateModel | None = None
+) -> list[tuple[float, float]]:
+    """(NDVI, total product kg/ha) at n NDVI values over 0..1, for the live plot.
 
-    total_kg_ha: float
-    zone: str | None = None  # field boundary zone; None without a boundary (or position)
-    prescription_kg_ha: float | None = None  # the map's rate there; None outside or no map
-    used_ndvi: bool = True  # the NDVI model set (or bounded) the rate
-
-
-class SiteRate:
-    """The NDVI model, a prescription map and a field boundary, combined as configured.
-
-    - No map: the NDVI model's rate (0 without an NDVI).
-    - `prescription.mode = "alone"`: the map's rate at the outlet; outside every zone, and
-      while the outlet's position is not known, `prescription.outside_kg_ha`.
-    - `prescription.mode = "bound"`: the NDVI model's rate, limited to the zone's min and
-      max; the zone's rate while there is no NDVI; outside every zone `outside_kg_ha`.
-    - Boundary: 0 (meters off) in the headland strip, outside the field, and while the
-      position is not known (it cannot be told to be inside).
-    """
-
-    def __init__(
-        self,
-        model: RateModel,
-        prescription: RateMap | None = None,
-        boundary: FieldBoundary | None = None,
-        mode: str = "alone",
-        outside_kg_ha: float = 0.0,
-    ) -> None:
-        self.model = model
-        self.prescription = prescription
-        self.boundary = boundary
-        self.mode = mode
-        self.outside_kg_ha = outside_kg_ha
-
-    def decide(self, ndvi: float | None, outlet: tuple[float, float] | None) -> SiteDecision:
-        zone = None
-        if self.boundary is not None:
-            zone = self.boundary.zone(*outlet) if outlet is not None else None
-            if zone != "field":
-                return SiteDecision(0.0, zone, None, used_ndvi=False)
-        if self.prescription is None:
-            rate = self.model.rate_kg_ha(ndvi) if ndvi is not None else 0.0
-            return SiteDecision(rate, zone)
-        hit = self.prescription.lookup(*outlet) if outlet is not None else None
-        if hit is None:
-            return SiteDecision(self.outside_kg_ha, zone, None, used_ndvi=False)
-        if self.mode == "alone" or ndvi is None:
-            return SiteDecision(hit.rate_kg_ha, zone, hit.rate_kg_ha, used_ndvi=False)
-        rate = self.model.rate_kg_ha(ndvi)
-        rate = min(max(rate, hit.min_kg_ha), hit.max_kg_ha)
-        return SiteDecision(rate, zone, hit.rate_kg_ha)
-
-
-def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
-    """Loads the configured prescription and boundary files (MapError naming the key, the
-    file and the feature)."""
-    presc: RateMap | None = None
-    boundary: FieldBoundary | None = None
-    if cfg.prescription.path:
-        from topdress.geo.prescription import load_prescription
-
-        try:
-            presc = load_prescription(cfg.prescription)
-        except MapError as exc:
-            raise MapError(f"prescription.path: {exc}") from exc
-    if cfg.boundary.path:
-        from topdress.geo.boundary import load_boundary
-
-        try:
-            boundary = load_boundary(cfg.boundary)
-        except MapError as exc:
-            raise MapError(f"boundary.path: {exc}") from exc
-    return SiteRate(model, presc, boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha)
+    `model` the terminal's model (the sufficiency model's virtual reference depends on the NDVI
+    seen); None builds one from `rate_cfg` (a RateConfig)."""
+    m = model if model is not None else build_rate_model(rate_cfg)
+    return [(i / (n - 1), m.rate_kg_ha(i / (n - 1))) for i in range(n)]

@@ -224,6 +224,15 @@ class CompensatedNdvi:
         self.queue = DistanceQueue(cfg.sensor_to_meter_m)
         self.lookahead_s = lookahead_s
 
+    def retune(self, cfg: CropConfig, lookahead_s: float) -> None:
+        """A changed [crop] or [lookahead] section: columns, sensor count, NDVI range and
+        stale_s at the next line, the look-ahead at the next tick. A new sensor distance
+        starts the queue again: NDVI queued for the old one would land at the wrong spot."""
+        self.sensors.cfg = cfg
+        if cfg.sensor_to_meter_m != self.queue.offset_m:
+            self.queue = DistanceQueue(cfg.sensor_to_meter_m)
+        self.lookahead_s = lookahead_s
+
     def update(self, t: float, speed_kmh: float) -> float | None:
         """Call every control tick with the selected speed."""
         position = self.odometer.advance(t, speed_kmh)

@@ -14,9 +14,8 @@ from topdress.display.actions import Actions
 from topdress.display.hub import DisplayHub
 from topdress.i18n import render, tr
 from topdress.i18n.catalogue import CATALOGUE
-from topdress.terminal.app import Snapshot
-from topdress.terminal.calibration import CalibrationView
 from topdress.view import commands as op
+from topdress.view.snapshot import CalibrationView, Snapshot
 
 
 class CalibrationScreen:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from topdress.i18n import tr
-from topdress.terminal.app import Snapshot
+from topdress.view.snapshot import Snapshot
 
 #: Every n-th snapshot of the history is charted (2.5 Hz of the loop's 10): over a minute the
 #: curves look the same, and the page update (and the browser's redraw) is a quarter as large.

@@ -15,10 +15,9 @@ from typing import TextIO
 
 from topdress.i18n import Text, render, tr
 from topdress.protocol import fault_names
-from topdress.terminal.alarms import AlarmView
-from topdress.terminal.app import Snapshot
 from topdress.view.commands import ManualView
-from topdress.view.links import link_state
+from topdress.view.links import fault_texts, link_text
+from topdress.view.snapshot import AlarmView, Snapshot
 
 
 def _num(value: float | None, fmt: str) -> str:
@@ -84,16 +83,6 @@ def _label(key: str) -> str:
 def _head(key: str) -> str:
     """A label before wrapped items (which start two columns after it)."""
     return _pad(tr(key), 6)
-
-
-def link_text(state: str) -> str:
-    """A link state in words, in the language in force (topdress.view.links)."""
-    return render(link_state(state))
-
-
-def fault_texts(word: int) -> list[str]:
-    """The bits of a fault word in the catalogue's words (unknown bits as BITn)."""
-    return [n if n.startswith("BIT") else tr(f"fault.{n}") for n in fault_names(word)]
 
 
 def _ecu_link(s: Snapshot) -> str:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from nicegui import ui
 
-from topdress.display.console import fault_texts, link_text
 from topdress.i18n import tr
-from topdress.terminal.app import Snapshot
+from topdress.view.links import fault_texts, link_text
+from topdress.view.snapshot import Snapshot
 
 __all__ = ["ecu", "faults_text", "link_text", "num", "restyle"]
 

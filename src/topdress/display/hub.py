@@ -18,8 +18,8 @@ from typing import Any
 
 from topdress import i18n
 from topdress.config import TerminalConfig, check_pin
-from topdress.terminal.app import TICK_S, Snapshot
 from topdress.view.commands import CommandResult
+from topdress.view.snapshot import TICK_S, Snapshot
 
 #: Posts an operator command into the terminal's inbox (thread-safe; `Terminal.post`).
 Post = Callable[[Any], "Future[CommandResult]"]

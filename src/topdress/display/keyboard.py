@@ -1,7 +1,8 @@
 """Operator commands typed on the console (`start`, `stop`, `manual fixed 200 150`, ...).
 
-A reader thread turns each line of the input stream into a command (operator.parse_command)
-and posts it to the terminal; the answer is printed as an event when the loop has acted on it.
+A reader thread turns each line of the input stream into a command
+(topdress.view.commands.parse_command) and posts it to the terminal; the answer is printed as an
+event when the loop has acted on it.
 Used by `topdress run` and `topdress demo` when their input is a terminal; the display posts
 the very same commands.
 """
@@ -12,13 +13,10 @@ import logging
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future
-from typing import TYPE_CHECKING, TextIO
+from typing import Any, TextIO
 
 from topdress.i18n import render, tr
 from topdress.view.commands import CommandResult, Help, OperatorError, parse_command
-
-if TYPE_CHECKING:
-    from topdress.terminal.app import Terminal
 
 log = logging.getLogger(__name__)
 
@@ -37,8 +35,14 @@ def describe(result: CommandResult) -> str:
 class KeyboardCommands:
     """Reads commands from `stream` in a daemon thread until it ends."""
 
-    def __init__(self, term: Terminal, stream: TextIO, say: Callable[[str], None]) -> None:
-        self._term = term
+    def __init__(
+        self,
+        post: Callable[[Any], Future[CommandResult]],
+        stream: TextIO,
+        say: Callable[[str], None],
+    ) -> None:
+        """`post`: the terminal's (Terminal.post): a command in, its result as a Future."""
+        self._post = post
         self._stream = stream
         self._say = say  # called on the loop's thread (the Future's callback)
         self._thread = threading.Thread(target=self._run, name="keyboard", daemon=True)
@@ -59,7 +63,7 @@ class KeyboardCommands:
             command = parse_command(line)
         except OperatorError as exc:
             command = Help(str(exc))
-        fut = self._term.post(command)
+        fut = self._post(command)
         fut.add_done_callback(self._answer)
 
     def _answer(self, fut: Future[CommandResult]) -> None:

@@ -10,10 +10,8 @@ from topdress.display.charts import meter_options, speed_options
 from topdress.display.hub import DisplayHub
 from topdress.display.map_view import LiveMap
 from topdress.i18n import render, tr
-from topdress.terminal.alarms import AlarmView
-from topdress.terminal.app import Snapshot
-from topdress.terminal.counters import CounterView
 from topdress.view import commands as op
+from topdress.view.snapshot import AlarmView, CounterView, Snapshot
 
 CHART_PERIOD_S = 1.0  # charts and map redraw at 1 Hz; the numbers at the page's timer rate
 

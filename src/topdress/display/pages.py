@@ -18,10 +18,10 @@ from topdress.display.actions import Actions
 from topdress.display.calibration import CalibrationScreen
 from topdress.display.hub import DisplayHub
 from topdress.display.main_screen import MainScreen
-from topdress.display.server import is_loopback
+from topdress.display.options import is_loopback
 from topdress.display.settings_screens import CommunicationScreen, ControlScreen
 from topdress.i18n import tr
-from topdress.terminal.app import Snapshot
+from topdress.view.snapshot import Snapshot
 
 UPDATE_PERIOD_S = 0.2  # how often a page looks for a new snapshot (5 Hz of the loop's 10)
 

@@ -13,12 +13,9 @@ from typing import Any
 from nicegui import ui
 
 from topdress.config import SPEED_MODE_IDS, SWITCH_COMPARE_IDS
-from topdress.config_edit import (
-    list_serial_ports,
-    rate_curve,
-    section_values,
-    validate_section,
-)
+from topdress.config_edit import section_values, validate_section
+from topdress.crop.rate import rate_curve
+from topdress.devices.ports import list_serial_ports
 from topdress.display import fmt
 from topdress.display.actions import Actions
 from topdress.display.forms import SectionForm
@@ -26,8 +23,8 @@ from topdress.display.hub import DisplayHub
 from topdress.ecu import EcuParams
 from topdress.errors import ConfigError
 from topdress.i18n import render, tr
-from topdress.terminal.app import Snapshot
 from topdress.view import commands as op
+from topdress.view.snapshot import Snapshot
 
 BAUDS = [4800, 9600, 19200, 38400, 57600, 115200]
 CAN_INTERFACES = [

@@ -39,6 +39,11 @@ class GnssSpeedTracker:
         self._latest: GnssSpeed | None = None
         self.position: GnssPosition | None = None
 
+    def retune(self, rmc_timeout_s: float, stale_s: float) -> None:
+        """A changed [gnss] section: the timeouts taken at the next fix."""
+        self.rmc_timeout_s = rmc_timeout_s
+        self.stale_s = stale_s
+
     def update(self, t: float, fix: GnssFix) -> GnssSpeed | None:
         """Returns the new speed sample this fix gives, or None when it gives none."""
         if not fix.ok:

@@ -8,7 +8,6 @@ import json
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Final, TextIO
 
 from topdress import protocol
@@ -108,30 +107,3 @@ def write_log_events(reader: SessionReader, out: TextIO) -> int:
         out.write(json.dumps(line, separators=(",", ":")) + "\n")
         n += 1
     return n
-
-
-def export_maps(
-    reader: SessionReader, out: Path | None, fmt: str, crs: str, can_out: Path | None
-) -> list[str]:
-    """As-applied points and swaths (or ISO 11783-10 task data) to `out`, the CAN traffic to
-    `can_out`; returns one line per file written, and what the session lacked."""
-    from topdress.geo import asapplied, cantrace, isoxml, vector
-
-    lines: list[str] = []
-    if out is not None:
-        data = asapplied.build(reader)
-        asapplied.require_points(data)
-        if fmt == "isoxml":
-            files = isoxml.write_taskdata(data, out, reader.path.stem)
-        else:
-            files = vector.write(data, out, fmt, crs)
-        lines += [str(f) for f in files]
-        lines.append(
-            f"{data.point_geom.size} points, {data.swath_geom.size} swaths, "
-            f"{data.applied_kg:.2f} kg applied (of {data.rows} state rows)"
-        )
-        lines += [f"note: {n}" for n in data.notes]
-    if can_out is not None:
-        n = cantrace.write_trace(reader, can_out)
-        lines.append(f"{can_out}: {n} CAN frames")
-    return lines

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from topdress.i18n import Text, text
 from topdress.protocol import Fault
 from topdress.view.links import link_state
+from topdress.view.snapshot import AlarmView
 
 ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
 #: Metering speed targets below this are not judged off-rate (a meter just starting or stopping).
@@ -31,14 +32,6 @@ class AlarmInputs:
     gnss_link: str
     crop_link: str
     ecu_link: str
-
-
-@dataclass(frozen=True)
-class AlarmView:
-    name: str
-    text: Text  # the alarm with its figures
-    state: str  # active | acked | cleared
-    since_s: float  # terminal time the alarm came
 
 
 @dataclass
@@ -62,6 +55,11 @@ class AlarmBook:
         self.off_rate_s = off_rate_s
         self._alarms: dict[str, _Alarm] = {}
         self._off_since: list[float | None] = [None, None]
+
+    def retune(self, off_rate_pct: float, off_rate_s: float) -> None:
+        """A changed [operator] section: the off-rate limits taken at the next tick."""
+        self.off_rate_pct = off_rate_pct
+        self.off_rate_s = off_rate_s
 
     def update(self, t_s: float, x: AlarmInputs) -> list[tuple[str, Text]]:
         conditions = dict(self._conditions(t_s, x))

@@ -27,16 +27,16 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import can
 
 from topdress.config import TerminalConfig
-from topdress.crop.rate import build_rate_model, build_site_rate, split_layers
+from topdress.crop.rate import RateModel, build_rate_model, split_layers
 from topdress.crop.sensors import CompensatedNdvi
-from topdress.devices.lines import LineSource
+from topdress.devices.lines import LineSource, open_line_source
 from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
@@ -47,78 +47,21 @@ from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
 from topdress.protocol import fault_names
 from topdress.terminal import signals
-from topdress.terminal.alarms import AlarmView
-from topdress.terminal.calibration import CalibrationView
 from topdress.terminal.canlink import CanLink, EcuView
-from topdress.terminal.counters import CounterView
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
-from topdress.view.commands import RUNNING, CommandResult, ManualView
+from topdress.terminal.site import build_site_rate
+from topdress.view.commands import RUNNING, CommandResult
 from topdress.view.links import link_state
+from topdress.view.snapshot import TICK_S, Snapshot
 
 log = logging.getLogger(__name__)
 
-TICK_S = 0.1  # control tick and state-row period (10 Hz)
 CROP_HOLD_S = 0.5  # a crop sensor state must hold this long to be an event
 #: The states of each link that are a loss (an event when entered, another when left).
 LOST_STATES = {"ecu": ("lost",), "gnss": ("lost", "no fix"), "crop": ("lost", "silent")}
 HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
 _CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
-
-
-@dataclass(frozen=True)
-class Snapshot:
-    """What the display shows; built by the control loop every tick."""
-
-    t_s: float = 0.0
-    running: bool = False
-    source: str = "none"
-    v_kmh: float = 0.0
-    v_wheel_kmh: float = 0.0
-    v_gnss_kmh: float | None = None
-    cv_pct: float | None = None
-    uniform: bool = False
-    ndvi_sensors: float | None = None
-    ndvi: float | None = None
-    rate_kg_ha: tuple[float, float] = (0.0, 0.0)
-    target_rpm: tuple[float, float] = (0.0, 0.0)
-    meter_rpm: tuple[float, float] = (0.0, 0.0)
-    fan_rpm: tuple[float, float] = (0.0, 0.0)
-    faults: int = 0
-    # Whether the ECU's values above (running .. faults) are live; while the ECU is not heard
-    # they are unknown (source none, zeros, as in the state row) and shown as such.
-    ecu_live: bool = False
-    ecu_link: str = "wait"  # wait (parameters not all acknowledged yet), ok, lost
-    ecu_where: str = ""  # the CAN interface:channel the terminal listens on
-    gnss_link: str = "wait"  # wait, ok, no fix, lost
-    crop_link: str = "wait"  # wait, ok, "3/4" (fresh of configured), silent, lost
-    lat: float | None = None
-    lon: float | None = None
-    distance_m: float = 0.0
-    counters: dict[str, int] = field(default_factory=dict)
-    last_event: Text | None = None
-    # The operator's side (topdress.terminal.desk): run state, manual mode, alarms, counters.
-    operator: str = "stopped"  # stopped, running, paused, calibrating
-    manual: ManualView = field(default_factory=ManualView)
-    rate_model_kg_ha: tuple[float, float] = (0.0, 0.0)  # the NDVI model's, before manual/pause
-    # why the ECU meters on its source (CV and speed against thresholds); None: ECU not heard
-    speed_why: Text | None = None
-    alarms: tuple[AlarmView, ...] = ()
-    count_field: CounterView = field(default_factory=CounterView)  # this field's counter
-    count_season: CounterView = field(default_factory=CounterView)
-    calibration: CalibrationView | None = None
-    settings_pending: bool = False
-    settings_state: dict[str, str] = field(default_factory=dict)  # key -> pending/ok/refused..
-    ndvi_per_sensor: tuple[float | None, ...] = ()  # sensor 1..n; None where not fresh
-    cv_threshold_pct: float = 4.2  # the speed rule's thresholds in force
-    switch_speed_kmh: float = 6.0
-    applied_kg_ha: tuple[float, float] = (0.0, 0.0)  # from the measured metering speeds
-    utc: tuple[float, str] | None = None  # (POSIX s, "gnss" | "system")
-    heading_deg: float | None = None
-    outlet_lat: float | None = None  # the meters' outlet (antenna + [machine] offsets)
-    outlet_lon: float | None = None
-    zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
-    prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
 
 
 class Terminal:
@@ -141,7 +84,6 @@ class Terminal:
         self.cfg = cfg
         self.gnss = gnss
         self.crop = crop
-        self.bus = bus
         self.session = session
         self.clock = clock
         self._on_event = on_event
@@ -151,14 +93,13 @@ class Terminal:
             cfg.can,
             fan_rpm=cfg.machine.fan_rpm,
             on_tx=self._log_tx,
-            on_event=self._event,
+            on_event=self.event,
         )
         self.nmea = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
-        self.model = build_rate_model(cfg.rate)
         # The prescription map and boundary files are read here: a bad one stops start-up.
-        self.site = build_site_rate(cfg, self.model)
+        self.site = build_site_rate(cfg, build_rate_model(cfg.rate))
         self.utc = UtcClock()
         self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()
@@ -178,9 +119,51 @@ class Terminal:
         self._can_thread: threading.Thread | None = None
         self.desk = OperatorDesk(self, start, config_path)
 
+    @property
+    def bus(self) -> can.BusABC:
+        """The CAN bus in use (a changed [can] section moves the link to another)."""
+        return self.link.bus
+
+    @property
+    def model(self) -> RateModel:
+        """The NDVI -> rate model in force."""
+        return self.site.model
+
+    @property
+    def started_at(self) -> float | None:
+        """The loop's clock when it opened (None before)."""
+        return self._t0
+
     def post(self, command: Any) -> Future[CommandResult]:
         """Hand an operator command (topdress.view.commands) to the loop; thread-safe."""
         return self.desk.post(command)
+
+    # ---- settings changed while running: the desk decides, the parts take them ---------------
+    def reopen(self, section: str, new: TerminalConfig, now: float) -> None:
+        """Open the device of a changed [gnss], [crop] or [can] section in place of the one in
+        use; DeviceError when it cannot be opened (the old one stays)."""
+        if section == "can":
+            self.link.reopen(new.can, new.ecu_params(), now)
+            return
+        kind = "nmea" if section == "gnss" else "crop"
+        source = open_line_source(new.gnss if section == "gnss" else new.crop)
+        if section == "gnss":
+            self.gnss.stop()
+            self.gnss = source
+        else:
+            self.crop.stop()
+            self.crop = source
+        source.start(lambda t, line: self.inbox.put((kind, t, line)))
+
+    def take(self, section: str, new: TerminalConfig) -> None:
+        """The configuration with `section` changed, taken by the parts that read it."""
+        self.cfg = new
+        if section == "gnss":
+            self.tracker.retune(new.gnss.rmc_timeout_s, new.gnss.stale_s)
+        elif section in ("crop", "lookahead"):
+            self.ndvi.retune(new.crop, new.lookahead.total_s)
+        elif section == "rate":
+            self.site.retune(new.rate)
 
     # ---- life cycle ---------------------------------------------------------------------------
     def open(self) -> None:
@@ -215,7 +198,7 @@ class Terminal:
     def _can_reader(self) -> None:
         while not self._stop.is_set():
             try:
-                msg = self.bus.recv(timeout=_CAN_POLL_S)
+                msg = self.link.bus.recv(timeout=_CAN_POLL_S)
             except (can.CanError, OSError) as exc:
                 self.inbox.put(("can_error", self.clock(), str(exc)))
                 self._stop.wait(0.5)
@@ -282,7 +265,7 @@ class Terminal:
             self.counters["can_rx_errors"] += 1
             if not self._can_failing:  # once per failure spell (the reader retries every 0.5 s)
                 self._can_failing = True
-                self._event(text("event.can_rx_error", error=str(payload)))
+                self.event(text("event.can_rx_error", error=str(payload)))
         self.link.poll(t)
 
     def _on_nmea(self, t: float, line: bytes) -> None:
@@ -401,11 +384,11 @@ class Terminal:
         if state != self._gnss_state:
             if self._gnss_state != "wait" or state != "ok":
                 if state != "lost":
-                    self._event(text("event.gnss", state=link_state(state)))
+                    self.event(text("event.gnss", state=link_state(state)))
                 elif self.gnss.connected:
-                    self._event(text("event.gnss_silent", s=self.tracker.stale_s))
+                    self.event(text("event.gnss_silent", s=self.tracker.stale_s))
                 else:
-                    self._event(text("event.gnss_lost", why=_why(self.gnss)))
+                    self.event(text("event.gnss_lost", why=_why(self.gnss)))
             self._gnss_state = state
 
     def _track_crop_state(self, now: float) -> None:
@@ -431,12 +414,12 @@ class Terminal:
         self._crop_ok_once |= state == "ok"
         # Sensors come up one by one at start: report changes once all were there, or a loss.
         if state == "lost":
-            self._event(text("event.crop_lost", why=_why(self.crop)))
+            self.event(text("event.crop_lost", why=_why(self.crop)))
         elif was_ok:
             if state in ("ok", "silent"):
-                self._event(text(f"event.crop_{state}"))
+                self.event(text(f"event.crop_{state}"))
             else:
-                self._event(text("event.crop_fresh", fresh=fresh, n=n))
+                self.event(text("event.crop_fresh", fresh=fresh, n=n))
 
     def _hint_unusable_input(self) -> None:
         """Lines that keep coming and never give what the terminal needs are a setting to fix
@@ -447,12 +430,12 @@ class Terminal:
             if lines >= HINT_LINES:
                 self._hinted.add("gnss")
                 hint = "event.gnss_no_speed" if nmea["ok"] else "event.gnss_no_decode"
-                self._event(text(hint, lines=lines))
+                self.event(text(hint, lines=lines))
         if "crop" not in self._hinted and crop["ok"] == 0:
             bad = sum(v for k, v in crop.items() if k != "stale")
             if bad >= HINT_LINES:
                 self._hinted.add("crop")
-                self._event(
+                self.event(
                     text("event.crop_unusable", lines=bad, last=self.ndvi.sensors.last_error)
                 )
 
@@ -557,7 +540,8 @@ class Terminal:
         if self.session is not None:
             self.session.event(LogEvent(t, kind, detail))
 
-    def _event(self, message: Text) -> None:
+    def event(self, message: Text) -> None:
+        """Something the operator is told (the console, the display's last event)."""
         self._last_event = message
         self.counters["events"] += 1
         log.info("%s", message)  # English in the program log

@@ -18,7 +18,7 @@ what the display shows, `command` what PcCommand carries meanwhile.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import can
 
@@ -26,6 +26,7 @@ from topdress import protocol
 from topdress.ecu.helpers import slip_measured_pct
 from topdress.i18n import Text, text
 from topdress.protocol import EcuCalStatus, FrameIds
+from topdress.view.snapshot import CalibrationView
 
 LAYER_INDEX = {"upper": 0, "lower": 1}
 WHEEL_PULSE_MOD = 1 << 24  # EcuDiag.WheelPulses wraps here
@@ -53,16 +54,6 @@ class CalCommand:
 
     start: bool = False
     fan_rpm: float = 0.0
-
-
-@dataclass(frozen=True)
-class CalibrationView:
-    kind: str  # catch | wheel | fan
-    step: str  # running | weigh | drive | done | aborted
-    text: Text
-    progress: float = 0.0  # 0..1
-    result: dict[str, float] = field(default_factory=dict)
-    key: str = ""  # the configuration key the result would set ("" for the fan check)
 
 
 class CalibrationError(ValueError):

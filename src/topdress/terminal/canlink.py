@@ -26,14 +26,14 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import can
 
 from topdress import protocol
 from topdress.config import CanConfig
+from topdress.devices.can import open_bus
 from topdress.ecu import Ecu, EcuParams
-from topdress.errors import DeviceError, EcuParamError, ProtocolError
+from topdress.errors import EcuParamError, ProtocolError
 from topdress.i18n import Text, text
 from topdress.protocol import AckResult, FrameIds
 
@@ -46,31 +46,9 @@ MAX_FAN_RPM = 6000.0
 #: Waits between parameter tries once the fast retries went unanswered (the ECU is not on the
 #: bus yet): every 1 s for 5 s, then every 2 s; the last repeats.
 PARAM_BACKOFF_S = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
+RETIRE_S = 0.3  # a bus left by reopen is shut down this long after (see CanLink.reopen)
 # Tolerance of time comparisons: a deadline met to the microsecond counts as met.
 _EPS_S = 1e-6
-
-
-def open_bus(cfg: CanConfig, **extra: Any) -> can.BusABC:
-    """Open the python-can bus of the `[can]` section; DeviceError when it cannot be opened."""
-    kwargs: dict[str, Any] = {"interface": cfg.interface, "channel": cfg.channel}
-    if cfg.interface == "udp_multicast":
-        kwargs["fd"] = False  # classic CAN frames, like the real bus
-    elif cfg.interface != "virtual":
-        kwargs["bitrate"] = cfg.bitrate
-    kwargs.update(cfg.options)
-    kwargs.update(extra)
-    try:
-        return can.Bus(**kwargs)
-    except Exception as exc:
-        # anything (kvaser without canlib: NameError); every failure to open is a DeviceError.
-        if isinstance(exc, NameError | ImportError | AttributeError):
-            raise DeviceError(
-                f"cannot open CAN interface {cfg.interface!r}: its driver or the vendor library "
-                f"it needs is not installed ({type(exc).__name__}: {exc})"
-            ) from exc
-        raise DeviceError(
-            f"cannot open CAN interface {cfg.interface!r} channel {cfg.channel!r}: {exc}"
-        ) from exc
 
 
 def frame_ids(cfg: CanConfig) -> FrameIds:
@@ -167,16 +145,21 @@ class CanLink:
         on_tx: Callable[[can.Message], None] | None = None,
         on_event: Callable[[Text], None] | None = None,
     ) -> None:
-        self._bus = bus
-        self.cfg = cfg
-        self.ids = frame_ids(cfg)
         self._ack_timeout_s = param_ack_timeout_s
         self._retries = param_retries
         self._backoff_s = param_backoff_s
         self._on_tx = on_tx
         self._on_event = on_event
+        self._retired: list[tuple[float, can.BusABC]] = []  # buses left by reopen, to close
+        self._start(bus, cfg, Command(fan_rpm=_clamp(fan_rpm, MAX_FAN_RPM)))
+
+    def _start(self, bus: can.BusABC, cfg: CanConfig, command: Command) -> None:
+        """The state of a link fresh on `bus`."""
+        self._bus = bus
+        self.cfg = cfg
+        self.ids = frame_ids(cfg)
         self.counters = LinkCounters()
-        self.command = Command(fan_rpm=_clamp(fan_rpm, MAX_FAN_RPM))
+        self.command = command
         self.ecu = EcuView()
         self._push: _ParamPush | None = None
         self._params: list[tuple[int, float]] = []
@@ -191,6 +174,29 @@ class CanLink:
         self._gnss_seq = 0  # PcGnssTime: one number per new fix
         # start, fan, rates of the last command sent (send_on_rate compares against them)
         self._sent: tuple[bool, float, float, float] | None = None
+
+    @property
+    def bus(self) -> can.BusABC:
+        return self._bus
+
+    def reopen(self, cfg: CanConfig, params: Mapping[int, float], now: float) -> None:
+        """Move to the bus of a changed `[can]` section, as a link fresh on it (counters, the
+        ECU's frames and the parameter push start over; the command carries on).
+
+        DeviceError when the new bus cannot be opened: the old one stays. The old bus is shut
+        down `RETIRE_S` later (a reader thread leaves it within one receive timeout)."""
+        bus = open_bus(cfg)
+        self._retired.append((now, self._bus))
+        self._start(bus, cfg, self.command)
+        self.begin(params, now)
+
+    def _close_retired(self, now: float) -> None:
+        while self._retired and now - self._retired[0][0] >= RETIRE_S:
+            _, bus = self._retired.pop(0)
+            try:
+                bus.shutdown()
+            except (can.CanError, OSError) as exc:
+                log.warning("old CAN interface did not shut down cleanly: %s", exc)
 
     # ---- start-up: parameters -------------------------------------------------------------
     def begin(self, params: Mapping[int, float], now: float) -> None:
@@ -409,6 +415,7 @@ class CanLink:
         """Periodic work: parameter retries, the command period, ECU liveness.
 
         Raises EcuParamError when a parameter is refused."""
+        self._close_retired(now)
         self._poll_params(now)
         if self.params_done and (self._next_cmd_t is None or now >= self._next_cmd_t - _EPS_S):
             # On a fixed grid, so send-on-GNSS frames in between do not shift the period;

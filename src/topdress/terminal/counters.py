@@ -18,32 +18,17 @@ import logging
 import os
 import threading
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
+
+from topdress.outpath import atomic_write
+from topdress.view.snapshot import CounterView
 
 log = logging.getLogger(__name__)
 
 SAVE_PERIOD_S = 10.0
 COUNTERS = ("field", "season")
-
-
-@dataclass(frozen=True)
-class CounterView:
-    area_ha: float = 0.0
-    kg: tuple[float, float] = (0.0, 0.0)  # upper, lower
-    work_s: float = 0.0  # time with a meter turning
-    distance_m: float = 0.0  # distance worked
-    since: str = ""  # ISO date and time of the last reset
-
-    def add(self, area_ha: float, kg: tuple[float, float], dt_s: float, d_m: float) -> CounterView:
-        return replace(
-            self,
-            area_ha=self.area_ha + area_ha,
-            kg=(self.kg[0] + kg[0], self.kg[1] + kg[1]),
-            work_s=self.work_s + dt_s,
-            distance_m=self.distance_m + d_m,
-        )
 
 
 def _now_iso() -> str:
@@ -175,14 +160,3 @@ class WorkCounters:
             self.error = f"cannot save the counters to {self.path}: {exc}"
             log.warning("%s", self.error)
             self._dirty = True  # tried again at the next period
-
-
-def atomic_write(path: Path, text: str) -> None:
-    """Write `text` to `path` so that a crash leaves the old or the new file, never a mix."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)

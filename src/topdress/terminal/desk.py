@@ -15,9 +15,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import can
+from typing import Any, Protocol
 
 from topdress import protocol
 from topdress.config import TerminalConfig
@@ -32,45 +30,35 @@ from topdress.config_edit import (
     save_section,
     validate_section,
 )
-from topdress.crop.rate import build_rate_model
-from topdress.crop.sensors import DistanceQueue, parse_crop_line
-from topdress.devices.lines import open_line_source
+from topdress.crop.sensors import CompensatedNdvi, parse_crop_line
+from topdress.devices.lines import LineSource
 from topdress.ecu import EcuParams, meter_rate_kg_ha
 from topdress.errors import ConfigError, DeviceError, ProtocolError, SensorError
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.i18n import Text, text
+from topdress.log.session import SessionLog
 from topdress.protocol import Fault, Source
-from topdress.terminal.alarms import AlarmBook, AlarmInputs, AlarmView
+from topdress.terminal.alarms import AlarmBook, AlarmInputs
 from topdress.terminal.calibration import (
     CalCommand,
     CalibrationError,
-    CalibrationView,
     CalInputs,
     CatchTest,
     FanCheck,
     WheelCal,
     Wizard,
 )
-from topdress.terminal.canlink import CanLink, open_bus
-from topdress.terminal.counters import CounterView, WorkCounters
+from topdress.terminal.canlink import CanLink
+from topdress.terminal.counters import WorkCounters
+from topdress.terminal.inbox import Inbox
 from topdress.terminal.leadcal import LeadCal
 from topdress.view import commands as op
 from topdress.view.links import link_state
-
-if TYPE_CHECKING:
-    from topdress.terminal.app import Snapshot, Terminal
+from topdress.view.snapshot import AlarmView, CalibrationView, CounterView, DeviceLine, Snapshot
 
 log = logging.getLogger(__name__)
 
 DEVICE_LINES = 20  # lines or frames kept per device for the "test" view
-_BUS_CLOSE_DELAY_S = 0.3  # the CAN reader leaves the old bus within one recv timeout
-
-
-@dataclass(frozen=True)
-class DeviceLine:
-    t_s: float
-    raw: str
-    decoded: str
 
 
 @dataclass(frozen=True)
@@ -93,20 +81,45 @@ class DeskView:
     applied_kg_ha: tuple[float, float]
 
 
+class Loop(Protocol):
+    """What the desk asks of the control loop it sits in (topdress.terminal.app.Terminal):
+    its state to read, its log, and the two ways a changed setting reaches the loop's parts."""
+
+    cfg: TerminalConfig
+    session: SessionLog | None
+    clock: Callable[[], float]
+    inbox: Inbox
+    link: CanLink
+    ndvi: CompensatedNdvi
+    gnss: LineSource
+    crop: LineSource
+
+    @property
+    def started_at(self) -> float | None: ...
+
+    def log_event(self, t: float, kind: str, **detail: Any) -> None: ...
+
+    def event(self, message: Text) -> None: ...
+
+    def reopen(self, section: str, new: TerminalConfig, now: float) -> None: ...
+
+    def take(self, section: str, new: TerminalConfig) -> None: ...
+
+
 class OperatorDesk:
-    def __init__(self, term: Terminal, autostart: bool, config_path: Path | None) -> None:
-        self.term = term
+    def __init__(self, loop: Loop, autostart: bool, config_path: Path | None) -> None:
+        self.loop = loop
         self.config_path = config_path
-        cfg = term.cfg
+        cfg = loop.cfg
         self.op = op.Operator(autostart)
         self.alarms = AlarmBook(cfg.operator.off_rate_pct, cfg.operator.off_rate_s)
         # Beside the session logs; a terminal without a session log (tests, a log that could
         # not be created) keeps them in memory only.
-        session = term.session
+        session = loop.session
         where = session.path.parent if session is not None else None
         self.counters = WorkCounters(where / cfg.operator.counters_file if where else None)
         if self.counters.error:
-            term._event(text("event.counters_error", error=self.counters.error))
+            loop.event(text("event.counters_error", error=self.counters.error))
         self.wizard: Wizard | LeadCal | None = None
         self._cal_seq = 0
         self._pending: Future[op.CommandResult] | None = None  # settings awaiting the ECU
@@ -117,12 +130,11 @@ class OperatorDesk:
         self._lines: dict[str, deque[tuple[float, Any]]] = {
             k: deque(maxlen=DEVICE_LINES) for k in ("gnss", "crop", "can")
         }
-        self._old_buses: list[tuple[float, can.BusABC]] = []
 
     # ---- posting (any thread) ----------------------------------------------------------------
     def post(self, command: Any) -> Future[op.CommandResult]:
         fut: Future[op.CommandResult] = Future()
-        self.term.inbox.put(("op", self.term.clock(), (command, fut)))
+        self.loop.inbox.put(("op", self.loop.clock(), (command, fut)))
         return fut
 
     # ---- the loop ----------------------------------------------------------------------------
@@ -148,22 +160,22 @@ class OperatorDesk:
     def _dispatch(
         self, now: float, c: Any, fut: Future[op.CommandResult]
     ) -> op.CommandResult | None:
-        term = self.term
+        loop = self.loop
         if isinstance(c, op.Start):
             was = self.op.state
             msg = self.op.start()
-            term.log_event(now, "operator.start", was=was)
+            loop.log_event(now, "operator.start", was=was)
             return self._done(msg)
         if isinstance(c, op.Stop):
             was = self.op.state
             self._end_wizard()
             msg = self.op.stop()
             self._send_command_now()
-            term.log_event(now, "operator.stop", was=was)
+            loop.log_event(now, "operator.stop", was=was)
             return self._done(msg)
         if isinstance(c, op.Pause):
             msg = self.op.pause()
-            term.log_event(now, "operator.pause", was=op.RUNNING)
+            loop.log_event(now, "operator.pause", was=op.RUNNING)
             return self._done(msg)
         if isinstance(c, op.SetManual):
             msg = self.op.set_manual(c)
@@ -174,7 +186,7 @@ class OperatorDesk:
                 return op.CommandResult(False, text("op.error.no_alarm", name=c.name))
             acked = self.alarms.ack(c.name)
             for name in acked:
-                term.log_event(now, "alarm.acked", name=name)
+                loop.log_event(now, "alarm.acked", name=name)
             return op.CommandResult(True, text("op.done.acked", n=len(acked)))
         if isinstance(c, op.ResetCounter):
             try:
@@ -194,20 +206,20 @@ class OperatorDesk:
     def _manual_event(self, now: float) -> None:
         m = self.op.manual
         if m.mode == "fixed":
-            self.term.log_event(
+            self.loop.log_event(
                 now, "manual.set", mode=m.mode, upper_kg_ha=m.upper_kg_ha, lower_kg_ha=m.lower_kg_ha
             )
         elif m.mode == "percent":
-            self.term.log_event(now, "manual.set", mode=m.mode, percent=m.percent)
+            self.loop.log_event(now, "manual.set", mode=m.mode, percent=m.percent)
         else:
-            self.term.log_event(now, "manual.off")
+            self.loop.log_event(now, "manual.off")
 
     def _done(self, message: Text) -> op.CommandResult:
-        self.term._event(text("event.operator", what=message))
+        self.loop.event(text("event.operator", what=message))
         return op.CommandResult(True, message)
 
     def _send_command_now(self) -> None:
-        link = self.term.link
+        link = self.loop.link
         cmd = self.command()
         if not link.set_command(cmd[0], cmd[1], cmd[2], cmd[3]):
             link.send_now()
@@ -257,13 +269,13 @@ class OperatorDesk:
             raise op.OperatorError(
                 text("op.error.stop_first", state=text(f"op.state.{self.op.state}"))
             )
-        term = self.term
-        if not (term.link.ready and term.link.ecu_alive):
-            raise op.OperatorError(text("op.error.ecu_for_cal", state=link_state(term.link.state)))
-        m = term.cfg.machine
+        loop = self.loop
+        if not (loop.link.ready and loop.link.ecu_alive):
+            raise op.OperatorError(text("op.error.ecu_for_cal", state=link_state(loop.link.state)))
+        m = loop.cfg.machine
         if isinstance(c, op.StartCatchTest):
             self._cal_seq = (self._cal_seq + 1) % 256
-            ids = term.link.ids
+            ids = loop.link.ids
             self.wizard = CatchTest(c.layer, c.revolutions, c.meter_rpm, self._cal_seq, ids)
         elif isinstance(c, op.StartWheelCal):
             self.wizard = WheelCal(c.distance_m, m.wheel_radius_m, m.wheel_ppr)
@@ -271,8 +283,8 @@ class OperatorDesk:
             self._cal_seq = (self._cal_seq + 1) % 256
             reaction = c.reaction_ms
             if reaction is None:
-                reaction = term.cfg.operator.reaction_ms
-            fan_min = term.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
+                reaction = loop.cfg.operator.reaction_ms
+            fan_min = loop.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
             self.wizard = LeadCal(
                 c.layer,
                 c.meter_rpm,
@@ -282,11 +294,11 @@ class OperatorDesk:
                 m.fan_rpm,
                 float(fan_min),
                 self._cal_seq,
-                term.link.ids,
+                loop.link.ids,
             )
         else:
-            seconds = c.seconds if c.seconds is not None else term.cfg.operator.fan_check_s
-            fan_min = term.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
+            seconds = c.seconds if c.seconds is not None else loop.cfg.operator.fan_check_s
+            fan_min = loop.cfg.ecu.overrides.get("fan_min_rpm", EcuParams.defaults().fan_min_rpm)
             self.wizard = FanCheck(seconds, m.fan_rpm, float(fan_min))
         self.op.state = op.CALIBRATING
         return self._done(text("event.calibration", what=self.wizard.text))
@@ -296,7 +308,7 @@ class OperatorDesk:
         if w is None:
             return
         for msg in w.close():
-            self.term.link.send(msg)
+            self.loop.link.send(msg)
         self.wizard = None
         if self.op.state == op.CALIBRATING:
             self.op.state = op.STOPPED
@@ -305,7 +317,7 @@ class OperatorDesk:
         w = self.wizard
         if w is None:
             return
-        link = self.term.link
+        link = self.loop.link
         ecu = link.ecu if link.ecu_alive else None
         diag = ecu.diag if ecu else None
         status = ecu.status if ecu else None
@@ -323,7 +335,7 @@ class OperatorDesk:
         for msg in w.tick(now, x):
             link.send(msg)
         if w.step != before and w.step in ("weigh", "aborted", "done"):
-            self.term._event(text("event.calibration", what=w.text))
+            self.loop.event(text("event.calibration", what=w.text))
             if w.step == "done":
                 self._result_event(now, w)
 
@@ -334,12 +346,12 @@ class OperatorDesk:
             detail["layer"] = w.layer
         if isinstance(w, WheelCal):
             detail["distance_m"] = w.distance_m  # as measured on the ground
-        self.term.log_event(now, f"calibration.{w.kind}", **detail)
+        self.loop.log_event(now, f"calibration.{w.kind}", **detail)
 
     # ---- the command and the tick ------------------------------------------------------------
     def command(self) -> tuple[bool, float, float, float]:
         """(start, fan rpm, upper kg/ha, lower kg/ha) for PcCommand now."""
-        fan = float(self.term.cfg.machine.fan_rpm)
+        fan = float(self.loop.cfg.machine.fan_rpm)
         if self.wizard is not None:
             c: CalCommand = self.wizard.command
             return (c.start, c.fan_rpm, 0.0, 0.0)
@@ -368,16 +380,15 @@ class OperatorDesk:
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
             figures = {k: v for k, v in alarm.values if isinstance(v, int | float)}
-            self.term.log_event(now, "alarm.raised", name=name, **figures)
-            self.term._event(text("event.alarm", alarm=alarm))
-        self._close_old_buses(now)
-        cfg = self.term.cfg
-        fresh = {r.sensor_id: r.ndvi for r in self.term.ndvi.sensors.fresh(now)}
+            self.loop.log_event(now, "alarm.raised", name=name, **figures)
+            self.loop.event(text("event.alarm", alarm=alarm))
+        cfg = self.loop.cfg
+        fresh = {r.sensor_id: r.ndvi for r in self.loop.ndvi.sensors.fresh(now)}
         return DeskView(
             operator=self.op.state,
             manual=self.op.manual,
             rate_model_kg_ha=self._model_rates,
-            speed_why=speed_why(snap, self.term.cfg),
+            speed_why=speed_why(snap, self.loop.cfg),
             alarms=self.alarms.views(),
             count_field=self.counters.view("field"),
             count_season=self.counters.view("season"),
@@ -393,7 +404,7 @@ class OperatorDesk:
     def _count(self, snap: Snapshot, dt_s: float) -> None:
         if not (snap.ecu_live and snap.running) or dt_s <= 0.0 or dt_s > 1.0:
             return
-        m = self.term.cfg.machine
+        m = self.loop.cfg.machine
         kg = (
             snap.meter_rpm[0] / 60.0 * dt_s * m.kg_per_rev_upper,
             snap.meter_rpm[1] / 60.0 * dt_s * m.kg_per_rev_lower,
@@ -411,17 +422,17 @@ class OperatorDesk:
     def _device_test(self, device: str) -> op.CommandResult:
         if device not in self._lines:
             return op.CommandResult(False, text("op.error.no_device", device=device))
-        t0 = self.term._t0 or 0.0
+        t0 = self.loop.started_at or 0.0
         decode: Callable[[Any], tuple[str, str]] = {
             "gnss": _decode_nmea(NmeaDecoder()),
-            "crop": _decode_crop(self.term.cfg),
-            "can": _decode_can(self.term.link.ids),
+            "crop": _decode_crop(self.loop.cfg),
+            "can": _decode_can(self.loop.link.ids),
         }[device]
         lines = [DeviceLine(t - t0, *decode(p)) for t, p in self._lines[device]]
         where = {
-            "gnss": self.term.gnss.name,
-            "crop": self.term.crop.name,
-            "can": self.term.link.where,
+            "gnss": self.loop.gnss.name,
+            "crop": self.loop.crop.name,
+            "can": self.loop.link.where,
         }[device]
         return op.CommandResult(
             True, text("op.done.test", device=device, where=where, n=len(lines)), data=lines
@@ -431,37 +442,30 @@ class OperatorDesk:
     def _apply(
         self, now: float, c: op.ApplySettings, fut: Future[op.CommandResult] | None
     ) -> op.CommandResult | None:
-        term = self.term
+        loop = self.loop
         if self._pending is not None:
             raise op.OperatorError(text("op.error.settings_busy"))
-        new = validate_section(term.cfg, c.section, c.values)
+        new = validate_section(loop.cfg, c.section, c.values)
         if c.section in ECU_SECTIONS:
-            changed = changed_ecu_params(term.cfg, new)
+            changed = changed_ecu_params(loop.cfg, new)
             if changed:
                 return self._push(now, c, new, changed, fut)
         elif c.section in DEVICE_KEYS:
+            keys = changed_device_keys(loop.cfg, new, c.section)
             try:
-                self._reopen(now, c.section, new)
+                # The CAN link starts over on any change of [can]; a line source is opened
+                # again only when the keys it is opened with changed.
+                if c.section == "can" or keys:
+                    loop.reopen(c.section, new, now)
             except DeviceError as exc:  # the old device stays; the keys that made it fail said
-                keys = changed_device_keys(term.cfg, new, c.section) or [c.section]
-                return op.CommandResult(False, str(exc), dict.fromkeys(keys, str(exc)))
+                return op.CommandResult(
+                    False, str(exc), dict.fromkeys(keys or [c.section], str(exc))
+                )
         return self._commit(now, c, new)
-
-    def _retune(self, section: str, new: TerminalConfig) -> None:
-        """The keys of [gnss] and [crop] that are not the device's: taken at once."""
-        term = self.term
-        if section == "gnss":
-            term.tracker.rmc_timeout_s = new.gnss.rmc_timeout_s
-            term.tracker.stale_s = new.gnss.stale_s
-        elif section == "crop":
-            term.ndvi.sensors.cfg = new.crop  # columns, sensor count, NDVI range, stale_s
-            if new.crop.sensor_to_meter_m != term.cfg.crop.sensor_to_meter_m:
-                # NDVI queued for the old distance would be applied at the wrong spot.
-                term.ndvi.queue = DistanceQueue(new.crop.sensor_to_meter_m)
 
     def _commit(self, now: float, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
-        term = self.term
+        loop = self.loop
         saved: Text
         if self.config_path is not None:
             try:
@@ -472,62 +476,17 @@ class OperatorDesk:
                 ) from exc
             # The file may hold other sections than the running ones (edited meanwhile):
             # the running configuration takes only this section from it.
-            new = _with_section(term.cfg, new_file, c.section)
+            new = _with_section(loop.cfg, new_file, c.section)
             saved = text("op.done.saved", path=str(self.config_path))
         else:
             saved = text("op.done.not_saved")
-        for key, old_value, new_value in changed_keys(term.cfg, new, c.section):
-            term.log_event(now, "setting.changed", key=key, old=old_value, new=new_value)
-        term.cfg = new
-        if c.section == "rate":
-            term.model = build_rate_model(new.rate)
-        if c.section == "lookahead":
-            term.ndvi.lookahead_s = new.lookahead.total_s  # the NDVI looked up this far ahead
+        for key, old_value, new_value in changed_keys(loop.cfg, new, c.section):
+            loop.log_event(now, "setting.changed", key=key, old=old_value, new=new_value)
+        loop.take(c.section, new)
         if c.section == "operator":
-            self.alarms.off_rate_pct = new.operator.off_rate_pct
-            self.alarms.off_rate_s = new.operator.off_rate_s
+            self.alarms.retune(new.operator.off_rate_pct, new.operator.off_rate_s)
         later = text("op.done.later") if c.section in RESTART_SECTIONS else ""
         return self._done(text("op.done.settings", section=c.section, saved=saved, later=later))
-
-    def _reopen(self, now: float, section: str, new: TerminalConfig) -> None:
-        term = self.term
-        if section == "can":
-            bus = open_bus(new.can)  # DeviceError: the old bus stays
-            old_bus, old_link = term.bus, term.link
-            term.bus = bus
-            term.link = CanLink(
-                bus,
-                new.can,
-                fan_rpm=new.machine.fan_rpm,
-                on_tx=term._log_tx,
-                on_event=term._event,
-            )
-            term.link.command = old_link.command
-            term.link.begin(new.ecu_params(), now)
-            self._old_buses.append((now, old_bus))
-            return
-        src_cfg = new.gnss if section == "gnss" else new.crop
-        old_cfg = term.cfg.gnss if section == "gnss" else term.cfg.crop
-        self._retune(section, new)
-        if all(getattr(src_cfg, k) == getattr(old_cfg, k) for k in DEVICE_KEYS[section]):
-            return  # the same device: no reopening
-        kind = "nmea" if section == "gnss" else "crop"
-        source = open_line_source(src_cfg)
-        old = term.gnss if section == "gnss" else term.crop
-        old.stop()
-        if section == "gnss":
-            term.gnss = source
-        else:
-            term.crop = source
-        source.start(lambda t, line: term.inbox.put((kind, t, line)))
-
-    def _close_old_buses(self, now: float) -> None:
-        while self._old_buses and now - self._old_buses[0][0] >= _BUS_CLOSE_DELAY_S:
-            _, bus = self._old_buses.pop(0)
-            try:
-                bus.shutdown()
-            except (can.CanError, OSError) as exc:
-                log.warning("old CAN interface did not shut down cleanly: %s", exc)
 
     def _push(
         self,
@@ -537,8 +496,8 @@ class OperatorDesk:
         changed: dict[int, float],
         fut: Future[op.CommandResult] | None,
     ) -> op.CommandResult | None:
-        term = self.term
-        link = term.link
+        loop = self.loop
+        link = loop.link
         if self.op.state != op.STOPPED:
             raise op.OperatorError(
                 text(
@@ -549,7 +508,7 @@ class OperatorDesk:
             )
         if not (link.ready and link.params_done and link.ecu_alive):
             raise op.OperatorError(text("op.error.ecu_params", state=link_state(link.state)))
-        old = term.cfg.ecu_params()
+        old = loop.cfg.ecu_params()
         pending: Future[op.CommandResult] = fut if fut is not None else Future()
         self._pending = pending
         keys = {pid: PARAM_KEYS.get(pid, c.section) for pid in changed}
@@ -560,7 +519,7 @@ class OperatorDesk:
             if error is None:
                 self._settings_state = dict.fromkeys(keys.values(), "ok")
                 try:
-                    result = self._commit(term.clock(), c, new)
+                    result = self._commit(loop.clock(), c, new)
                 except (op.OperatorError, ConfigError) as exc:
                     why = exc.text if isinstance(exc, op.OperatorError) else str(exc)
                     result = op.CommandResult(False, text("op.error.not_saved", error=why))
@@ -570,11 +529,11 @@ class OperatorDesk:
             back = {pid: old[pid] for pid in accepted if pid in old}
             refused = _refused_id(error, changed)
             if back:
-                term.link.push_params(back, term.clock(), _log_rollback)
+                loop.link.push_params(back, loop.clock(), _log_rollback)
             key = PARAM_KEYS.get(refused, c.section) if refused is not None else c.section
             self._settings_state = {keys[pid]: "put back" for pid in accepted if pid in keys}
             self._settings_state[key] = f"refused: {error}"
-            term._event(text("event.settings_refused", section=c.section, error=error))
+            loop.event(text("event.settings_refused", section=c.section, error=error))
             pending.set_result(op.CommandResult(False, error, {key: error}))
 
         link.push_params(changed, now, done)

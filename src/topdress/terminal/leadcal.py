@@ -45,9 +45,9 @@ from topdress.terminal.calibration import (
     LAYER_INDEX,
     CalCommand,
     CalibrationError,
-    CalibrationView,
     CalInputs,
 )
+from topdress.view.snapshot import CalibrationView
 
 STEADY_S = 0.4  # the meter delay is read from reports at least this long after the command
 PAUSE_S = 3.0  # between trials: the air line empties

@@ -1,0 +1,97 @@
+"""The rate for where the outlet is: the NDVI model, a prescription map and a field boundary,
+combined as configured."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from topdress.config import RateConfig, TerminalConfig
+from topdress.crop.rate import RateModel, build_rate_model
+from topdress.errors import MapError
+
+if TYPE_CHECKING:  # GDAL, shapely and PROJ cost ~60 MB: loaded only when a map is configured
+    from topdress.geo.boundary import FieldBoundary
+    from topdress.geo.prescription import RateMap
+
+
+@dataclass(frozen=True)
+class SiteDecision:
+    """The total product rate for where the outlet is, and why."""
+
+    total_kg_ha: float
+    zone: str | None = None  # field boundary zone; None without a boundary (or position)
+    prescription_kg_ha: float | None = None  # the map's rate there; None outside or no map
+    used_ndvi: bool = True  # the NDVI model set (or bounded) the rate
+
+
+class SiteRate:
+    """The NDVI model, a prescription map and a field boundary, combined as configured.
+
+    - No map: the NDVI model's rate (0 without an NDVI).
+    - `prescription.mode = "alone"`: the map's rate at the outlet; outside every zone, and
+      while the outlet's position is not known, `prescription.outside_kg_ha`.
+    - `prescription.mode = "bound"`: the NDVI model's rate, limited to the zone's min and
+      max; the zone's rate while there is no NDVI; outside every zone `outside_kg_ha`.
+    - Boundary: 0 (meters off) in the headland strip, outside the field, and while the
+      position is not known (it cannot be told to be inside).
+    """
+
+    def __init__(
+        self,
+        model: RateModel,
+        prescription: RateMap | None = None,
+        boundary: FieldBoundary | None = None,
+        mode: str = "alone",
+        outside_kg_ha: float = 0.0,
+    ) -> None:
+        self.model = model
+        self.prescription = prescription
+        self.boundary = boundary
+        self.mode = mode
+        self.outside_kg_ha = outside_kg_ha
+
+    def retune(self, rate: RateConfig) -> None:
+        """A changed [rate] section: the NDVI model is built anew (the prescription and the
+        boundary are read at start only)."""
+        self.model = build_rate_model(rate)
+
+    def decide(self, ndvi: float | None, outlet: tuple[float, float] | None) -> SiteDecision:
+        zone = None
+        if self.boundary is not None:
+            zone = self.boundary.zone(*outlet) if outlet is not None else None
+            if zone != "field":
+                return SiteDecision(0.0, zone, None, used_ndvi=False)
+        if self.prescription is None:
+            rate = self.model.rate_kg_ha(ndvi) if ndvi is not None else 0.0
+            return SiteDecision(rate, zone)
+        hit = self.prescription.lookup(*outlet) if outlet is not None else None
+        if hit is None:
+            return SiteDecision(self.outside_kg_ha, zone, None, used_ndvi=False)
+        if self.mode == "alone" or ndvi is None:
+            return SiteDecision(hit.rate_kg_ha, zone, hit.rate_kg_ha, used_ndvi=False)
+        rate = self.model.rate_kg_ha(ndvi)
+        rate = min(max(rate, hit.min_kg_ha), hit.max_kg_ha)
+        return SiteDecision(rate, zone, hit.rate_kg_ha)
+
+
+def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
+    """Loads the configured prescription and boundary files (MapError naming the key, the
+    file and the feature)."""
+    presc: RateMap | None = None
+    boundary: FieldBoundary | None = None
+    if cfg.prescription.path:
+        from topdress.geo.prescription import load_prescription
+
+        try:
+            presc = load_prescription(cfg.prescription)
+        except MapError as exc:
+            raise MapError(f"prescription.path: {exc}") from exc
+    if cfg.boundary.path:
+        from topdress.geo.boundary import load_boundary
+
+        try:
+            boundary = load_boundary(cfg.boundary)
+        except MapError as exc:
+            raise MapError(f"boundary.path: {exc}") from exc
+    return SiteRate(model, presc, boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha)

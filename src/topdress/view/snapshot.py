@@ -1,0 +1,113 @@
+"""The Snapshot: what the control loop knows at one tick, and the view types inside it.
+
+The one contract between the loop and everything that shows or records it: the console, the
+display (in its own process) and the session log's state row all render from a Snapshot. It
+depends on the protocol and the catalogue only, so a screen needs nothing of the loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+from topdress.i18n import Text
+from topdress.view.commands import ManualView
+
+TICK_S = 0.1  # the control tick, and the period of snapshots and state rows (10 Hz)
+
+
+@dataclass(frozen=True)
+class AlarmView:
+    name: str
+    text: Text  # the alarm with its figures
+    state: str  # active | acked | cleared
+    since_s: float  # terminal time the alarm came
+
+
+@dataclass(frozen=True)
+class CounterView:
+    area_ha: float = 0.0
+    kg: tuple[float, float] = (0.0, 0.0)  # upper, lower
+    work_s: float = 0.0  # time with a meter turning
+    distance_m: float = 0.0  # distance worked
+    since: str = ""  # ISO date and time of the last reset
+
+    def add(self, area_ha: float, kg: tuple[float, float], dt_s: float, d_m: float) -> CounterView:
+        return replace(
+            self,
+            area_ha=self.area_ha + area_ha,
+            kg=(self.kg[0] + kg[0], self.kg[1] + kg[1]),
+            work_s=self.work_s + dt_s,
+            distance_m=self.distance_m + d_m,
+        )
+
+
+@dataclass(frozen=True)
+class CalibrationView:
+    kind: str  # catch | wheel | fan
+    step: str  # running | weigh | drive | done | aborted
+    text: Text
+    progress: float = 0.0  # 0..1
+    result: dict[str, float] = field(default_factory=dict)
+    key: str = ""  # the configuration key the result would set ("" for the fan check)
+
+
+@dataclass(frozen=True)
+class DeviceLine:
+    t_s: float
+    raw: str
+    decoded: str
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the display shows; built by the control loop every tick."""
+
+    t_s: float = 0.0
+    running: bool = False
+    source: str = "none"
+    v_kmh: float = 0.0
+    v_wheel_kmh: float = 0.0
+    v_gnss_kmh: float | None = None
+    cv_pct: float | None = None
+    uniform: bool = False
+    ndvi_sensors: float | None = None
+    ndvi: float | None = None
+    rate_kg_ha: tuple[float, float] = (0.0, 0.0)
+    target_rpm: tuple[float, float] = (0.0, 0.0)
+    meter_rpm: tuple[float, float] = (0.0, 0.0)
+    fan_rpm: tuple[float, float] = (0.0, 0.0)
+    faults: int = 0
+    # Whether the ECU's values above (running .. faults) are live; while the ECU is not heard
+    # they are unknown (source none, zeros, as in the state row) and shown as such.
+    ecu_live: bool = False
+    ecu_link: str = "wait"  # wait (parameters not all acknowledged yet), ok, lost
+    ecu_where: str = ""  # the CAN interface:channel the terminal listens on
+    gnss_link: str = "wait"  # wait, ok, no fix, lost
+    crop_link: str = "wait"  # wait, ok, "3/4" (fresh of configured), silent, lost
+    lat: float | None = None
+    lon: float | None = None
+    distance_m: float = 0.0
+    counters: dict[str, int] = field(default_factory=dict)
+    last_event: Text | None = None
+    # The operator's side (topdress.terminal.desk): run state, manual mode, alarms, counters.
+    operator: str = "stopped"  # stopped, running, paused, calibrating
+    manual: ManualView = field(default_factory=ManualView)
+    rate_model_kg_ha: tuple[float, float] = (0.0, 0.0)  # the NDVI model's, before manual/pause
+    # why the ECU meters on its source (CV and speed against thresholds); None: ECU not heard
+    speed_why: Text | None = None
+    alarms: tuple[AlarmView, ...] = ()
+    count_field: CounterView = field(default_factory=CounterView)  # this field's counter
+    count_season: CounterView = field(default_factory=CounterView)
+    calibration: CalibrationView | None = None
+    settings_pending: bool = False
+    settings_state: dict[str, str] = field(default_factory=dict)  # key -> pending/ok/refused..
+    ndvi_per_sensor: tuple[float | None, ...] = ()  # sensor 1..n; None where not fresh
+    cv_threshold_pct: float = 4.2  # the speed rule's thresholds in force
+    switch_speed_kmh: float = 6.0
+    applied_kg_ha: tuple[float, float] = (0.0, 0.0)  # from the measured metering speeds
+    utc: tuple[float, str] | None = None  # (POSIX s, "gnss" | "system")
+    heading_deg: float | None = None
+    outlet_lat: float | None = None  # the meters' outlet (antenna + [machine] offsets)
+    outlet_lon: float | None = None
+    zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
+    prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
