@@ -137,7 +137,7 @@ def test_eq4_metering_target() -> None:
 
 # mode, compare, cv, v_wheel, v_gnss, gnss_valid, wheel_valid -> source
 # (threshold 4.2 %, switch speed 6.0 km/h)
-D, W, G = SpeedMode.DUAL, SpeedMode.WHEEL_ONLY, SpeedMode.GNSS_ONLY
+D, W, G = SpeedMode.PAPER, SpeedMode.WHEEL_ONLY, SpeedMode.GNSS_ONLY
 TRUTH = [
     (D, Compare.GNSS, 2.0, 7.0, 8.0, True, True, Source.GNSS),  # uniform, fast: GNSS
     (D, Compare.GNSS, 4.19, 6.0, 6.01, True, True, Source.GNSS),  # just inside both limits

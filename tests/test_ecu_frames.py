@@ -206,7 +206,7 @@ def test_defaults_are_the_papers() -> None:
     assert (p.working_width_m, p.wheel_radius_m, p.wheel_ppr) == (3.6, 0.0615, 500)
     assert (p.queue_len, p.cv_threshold_pct, p.switch_speed_kmh) == (5, 4.2, 6.0)
     assert (p.wheel_update_ms, p.wheel_samples, p.status_period_ms) == (500, 4, 100)
-    assert (p.speed_mode, p.switch_compare) == (SpeedMode.DUAL.code, Compare.GNSS.code)
+    assert (p.speed_mode, p.switch_compare) == (SpeedMode.PAPER.code, Compare.GNSS.code)
     assert (p.status_id, p.command_id) == (0x185C6465, 0x0A5C6465)
     assert p.validate() == p
 

@@ -648,3 +648,28 @@ def test_lookahead_trial_refuses_a_press_before_the_meter_turned() -> None:
         trial(1.0, reports[:1], t_seen=1.5, reaction_s=0.2)
     with pytest.raises(CalibrationError, match="long enough"):
         trial(1.0, reports[:4], t_seen=1.5, reaction_s=0.2)
+
+
+@pytest.mark.parametrize(
+    ("values", "pid", "key"),
+    [
+        ({"meter_ms": 300, "airline_ms": 600}, 31, "lookahead.airline_ms"),
+        ({"meter_ms": 300}, 30, "lookahead.meter_ms"),
+        ({"stop_ms": 400}, 38, "lookahead.stop_ms"),
+    ],
+)
+def test_a_refused_look_ahead_parameter_is_shown_at_its_field(
+    tmp_path: Path, values: dict[str, int], pid: int, key: str
+) -> None:
+    rig = make_rig(drive(stand(30.0)))
+    rig.term.desk.config_path = _config_file(tmp_path)
+    try:
+        rig.run(2.0)
+        _refuse_param(rig, pid)
+        res = post(rig, op.ApplySettings("lookahead", values))
+        assert not res.ok
+        assert list(res.errors) == [key]  # the field, not the whole [lookahead] section
+        assert rig.term.snapshot.settings_state[key].startswith("refused: ")
+        assert rig.term.cfg.lookahead.total_s == 0.0  # nothing half-applied
+    finally:
+        rig.close()

@@ -169,8 +169,8 @@ def test_validate_section_names_the_key_and_keeps_the_rest() -> None:
     new = settings.validate_section(cfg, "ecu", {"pid_kp": 0.05})
     assert settings.changed_ecu_params(cfg, new) == {12: 0.05}
     assert (
-        settings.PARAM_KEYS[12] == "ecu.pid_kp"
-        and settings.PARAM_KEYS[9] == "speed.switch_speed_kmh"
+        protocol.param(12).config_key == "ecu.pid_kp"
+        and protocol.param(9).config_key == "speed.switch_speed_kmh"
     )
     with pytest.raises(ConfigError, match="no such section"):
         settings.validate_section(cfg, "radio", {})

@@ -69,7 +69,7 @@ def test_enum_codes_match_the_dbc_value_tables() -> None:
     assert Source.NONE.code == 2 and Source.FUSED.code == 3
     modes = {int(k): str(v) for k, v in diag.get_signal_by_name("SpeedMode").choices.items()}
     assert modes == {
-        SpeedMode.DUAL.code: "Dual",
+        SpeedMode.PAPER.code: "Dual",
         SpeedMode.WHEEL_ONLY.code: "WheelOnly",
         SpeedMode.GNSS_ONLY.code: "GnssOnly",
         SpeedMode.FUSED.code: "Fused",
@@ -170,7 +170,7 @@ def test_decode_diag_speeds_targets() -> None:
     diag = bytes([0x01 | 0x10 | 0x20, 0x41, 0x01, 0x05, 0x00, 0x45, 0x23, 0x01])
     assert decode((DEFAULT_IDS.diag, diag)) == EcuDiag(
         Source.GNSS,
-        SpeedMode.DUAL,
+        SpeedMode.PAPER,
         True,
         True,
         Compare.GNSS,

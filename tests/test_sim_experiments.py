@@ -60,7 +60,7 @@ def test_faster_setting_meters_sooner_and_its_threshold_separates(
     assert fc.separates and 4.0 < fc.max_uniform_pct < fc.threshold_pct == 5.6
     assert fc.cv.chosen_n == fc.queue_len == 5
     # on the faster setting GNSS still carries only uniform motion above 6 km/h
-    run = lab.paper_run(8.0, 0, SpeedMode.DUAL, settings=ex.FASTER)
+    run = lab.paper_run(8.0, 0, SpeedMode.PAPER, settings=ex.FASTER)
     assert ex.rule_violations(run, 5.6, 6.0) == 0
     before, after = ex.gnss_outside_uniform_s(run)
     assert before <= 0.6 and after <= 2.5
@@ -69,7 +69,7 @@ def test_faster_setting_meters_sooner_and_its_threshold_separates(
 def test_gnss_is_used_only_in_uniform_motion_above_6_kmh(lab: ex.Lab) -> None:
     for v in ex.TARGETS_KMH:
         for rep in range(2):
-            run = lab.paper_run(v, rep, SpeedMode.DUAL)
+            run = lab.paper_run(v, rep, SpeedMode.PAPER)
             assert ex.rule_violations(run, 4.2, 6.0) == 0
             gnss = run.trace["source"] == ex.GNSS
             uni = run.trace["phase"] == ex.UNIFORM

@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from topdress.errors import ConfigError
+from topdress.protocol.model import Compare, SpeedMode
+from topdress.protocol.params import ParamSpec, param, params
 
 # Numeric fields carry metadata {"range": (lo, hi)}; str fields may carry {"choices": (...)}.
 _T = TypeVar("_T")
@@ -32,15 +34,21 @@ def _choice(default: str, *choices: str) -> Any:
     return field(default=default, metadata={"choices": choices})
 
 
+def _param(config_key: str, default: _T) -> Any:
+    """A key that is also an ECU parameter: its range is the DBC's (topdress.protocol.params)."""
+    spec = param(config_key)
+    return field(default=default, metadata={"range": (spec.minimum, spec.maximum)})
+
+
 @dataclass(frozen=True)
 class MachineConfig:
-    width_m: float = _num(3.6, 0.5, 30.0)
+    width_m: float = _param("machine.width_m", 3.6)
     rows: int = _num(6, 1, 64)
     layers: int = _num(2, 1, 2)
-    kg_per_rev_upper: float = _num(0.3, 0.001, 5.0)
-    kg_per_rev_lower: float = _num(0.3, 0.001, 5.0)
-    wheel_radius_m: float = _num(0.0615, 0.02, 1.0)
-    wheel_ppr: int = _num(500, 1, 10000)
+    kg_per_rev_upper: float = _param("machine.kg_per_rev_upper", 0.3)
+    kg_per_rev_lower: float = _param("machine.kg_per_rev_lower", 0.3)
+    wheel_radius_m: float = _param("machine.wheel_radius_m", 0.0615)
+    wheel_ppr: int = _param("machine.wheel_ppr", 500)
     fan_rpm: int = _num(3000, 0, 6000)
     # The meters' outlet from the GNSS antenna: forward along the track (behind < 0), and to
     # the right across it, m. The as-applied map, prescription and boundary use the outlet.
@@ -51,40 +59,23 @@ class MachineConfig:
 @dataclass(frozen=True)
 class SpeedConfig:
     # paper = the dual speed mode of the paper; wheel / gnss = one source only.
-    mode: str = _choice("paper", "paper", "wheel", "gnss", "fused")
-    queue_len: int = _num(5, 2, 16)
-    cv_window: int = _num(5, 2, 16)
-    cv_threshold_pct: float = _num(4.2, 0.1, 50.0)
-    switch_speed_kmh: float = _num(6.0, 0.0, 25.0)
-    switch_compare: str = _choice("gnss", "gnss", "wheel")
-    min_work_speed_kmh: float = _num(0.5, 0.0, 10.0)
+    mode: str = _choice(str(SpeedMode.PAPER), *map(str, SpeedMode))
+    queue_len: int = _param("speed.queue_len", 5)
+    cv_window: int = _param("speed.cv_window", 5)
+    cv_threshold_pct: float = _param("speed.cv_threshold_pct", 4.2)
+    switch_speed_kmh: float = _param("speed.switch_speed_kmh", 6.0)
+    switch_compare: str = _choice(str(Compare.GNSS), *map(str, Compare))
+    min_work_speed_kmh: float = _param("speed.min_work_speed_kmh", 0.5)
 
 
-# [ecu] keys: td_params_t field -> (PcParamSet id, lo, hi, integer?). Ranges as td_params.h.
-ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
-    "pid_kp": (12, 0.0, 10.0, False),
-    "pid_ki": (13, 0.0, 10.0, False),
-    "pid_kd": (14, 0.0, 10.0, False),
-    "pid_kff": (15, 0.0, 1.0, False),
-    "cmd_timeout_ms": (16, 100, 10000, True),
-    "gnss_timeout_ms": (17, 100, 10000, True),
-    "wheel_update_ms": (19, 50, 5000, True),
-    "wheel_samples": (20, 1, 16, True),
-    "meter_counts_per_rev": (21, 1, 65535, True),
-    "fan_min_rpm": (22, 0, 6000, True),
-    "fan_ppr": (23, 1, 255, True),
-    "enc_fault_gnss_kmh": (24, 0.5, 25.0, False),
-    "enc_fault_time_ms": (25, 100, 30000, True),
-    "blocked_time_ms": (26, 100, 30000, True),
-    "status_period_ms": (27, 20, 1000, True),
-    "slip_comp": (28, 0, 2, True),
-    "gnss_lag_ms": (29, 0, 3000, True),
-}
+#: [ecu] keys: the ECU parameters of the table (topdress.protocol.params) that the [ecu]
+#: section sets, by their td_params_t name; range and resolution the DBC's.
+ECU_KEYS: dict[str, ParamSpec] = {p.name: p for p in params() if p.section == "ecu"}
 
 # [ecu] keys that the terminal's own periods must agree with (see _check_timing).
 ECU_TIMING = ("cmd_timeout_ms", "gnss_timeout_ms", "status_period_ms")
-SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2, "fused": 3}  # td_speed_mode_t
-SWITCH_COMPARE_IDS = {"gnss": 0, "wheel": 1}  # td_compare_t
+SPEED_MODE_IDS = {str(m): m.code for m in SpeedMode}  # td_speed_mode_t
+SWITCH_COMPARE_IDS = {str(c): c.code for c in Compare}  # td_compare_t
 
 
 @dataclass(frozen=True)
@@ -241,11 +232,11 @@ class LookaheadConfig:
     # will be tau from now (docs/experiments.md measures each part). meter_ms and airline_ms
     # also go to the ECU (LeadMeter, LeadAirLine), whose target speed looks ahead by them.
     command_ms: int = _num(0, 0, 5000)
-    meter_ms: int = _num(0, 0, 3000)
-    airline_ms: int = _num(0, 0, 5000)
+    meter_ms: int = _param("lookahead.meter_ms", 0)
+    airline_ms: int = _param("lookahead.airline_ms", 0)
     # the ECU's speed look-ahead while the speed falls (slowing, the stop: LeadStop); 0 = the
     # same as rising (meter_ms + airline_ms). Not part of the rate's tau.
-    stop_ms: int = _num(0, 0, 5000)
+    stop_ms: int = _param("lookahead.stop_ms", 0)
 
     @property
     def total_s(self) -> float:
@@ -301,34 +292,38 @@ class TerminalConfig:
     lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
 
     def ecu_params(self) -> dict[int, float]:
-        """PcParamSet id -> physical value of every parameter to push at start.
+        """PcParamSet id -> physical value of every parameter to push at start, by the table
+        of topdress.protocol.params.
 
         Machine and speed parameters are always pushed (the terminal's file is the truth
-        for them); of [ecu], only the keys the user set.
+        for them); the look-ahead's once set; of [ecu], only the keys the user set.
         """
-        m, s = self.machine, self.speed
-        params: dict[int, float] = {
-            1: m.width_m,
-            2: m.kg_per_rev_upper,
-            3: m.kg_per_rev_lower,
-            4: m.wheel_radius_m,
-            5: m.wheel_ppr,
-            6: s.queue_len,
-            7: s.cv_window,
-            8: s.cv_threshold_pct,
-            9: s.switch_speed_kmh,
-            10: SPEED_MODE_IDS[s.mode],
-            11: SWITCH_COMPARE_IDS[s.switch_compare],
-            18: s.min_work_speed_kmh,
-        }
-        if self.lookahead.meter_ms or self.lookahead.airline_ms:
-            params[30] = self.lookahead.meter_ms
-            params[31] = self.lookahead.airline_ms
-        if self.lookahead.stop_ms:
-            params[38] = self.lookahead.stop_ms
-        for name, value in self.ecu.overrides.items():
-            params[ECU_KEYS[name][0]] = value
-        return dict(sorted(params.items()))
+        out: dict[int, float] = {}
+        for spec in params():
+            value = self._param_value(spec)
+            if value is not None:
+                out[spec.id] = value
+        return out
+
+    def _param_value(self, spec: ParamSpec) -> float | None:
+        """The value of one ECU parameter to push, None when the ECU keeps its own."""
+        section, key = spec.section, spec.name
+        if section == "ecu":
+            return self.ecu.overrides.get(key)
+        if section == "lookahead":
+            la = self.lookahead
+            # LeadMeter and LeadAirLine go together once either is set; LeadStop when set
+            # (0 = the same as rising, the ECU's default).
+            pushed = la.stop_ms if key == "stop_ms" else la.meter_ms or la.airline_ms
+            ms: int = getattr(la, key)
+            return ms if pushed else None
+        value = getattr(getattr(self, section), key)
+        if key == "mode":
+            return SPEED_MODE_IDS[value]
+        if key == "switch_compare":
+            return SWITCH_COMPARE_IDS[value]
+        number: float = value
+        return number
 
 
 _PIN_LINE = re.compile(r'(?m)^(\s*pin\s*=\s*)("(?:[^"\\]|\\.)*"|\'[^\']*\'|[^#\s]+)')
@@ -543,8 +538,8 @@ def _ecu(table: dict[str, Any]) -> EcuConfig:
     _reject_unknown(table, ECU_KEYS, "ecu.")
     overrides: dict[str, float] = {}
     for name, raw in table.items():
-        _, lo, hi, integer = ECU_KEYS[name]
-        overrides[name] = _number(raw, f"ecu.{name}", lo, hi, integer)
+        spec = ECU_KEYS[name]
+        overrides[name] = _number(raw, f"ecu.{name}", spec.minimum, spec.maximum, spec.integer)
     return EcuConfig(overrides=overrides)
 
 
@@ -635,10 +630,7 @@ def _check_display(d: DisplayConfig) -> None:
 def _check_timing(cfg: TerminalConfig) -> None:
     """The terminal's periods against the ECU's timeouts ([ecu] or the ECU's defaults): a
     mismatch would stop the meters or drop the ECU between two frames, every time."""
-    from topdress.ecu import EcuParams  # the binding, only for the ECU's defaults
-
-    ecu = EcuParams.defaults()
-    ms = {k: cfg.ecu.overrides.get(k, getattr(ecu, k)) for k in ECU_TIMING}
+    ms = {k: cfg.ecu.overrides.get(k, ECU_KEYS[k].default) for k in ECU_TIMING}
     can = cfg.can
     if can.command_period_s * 1000 >= ms["cmd_timeout_ms"]:
         raise ConfigError(
@@ -690,6 +682,8 @@ min_work_speed_kmh = 0.5   # below this the meters stop
 # keeps its defaults for the others. Keys: pid_kp pid_ki pid_kd pid_kff cmd_timeout_ms
 # gnss_timeout_ms wheel_update_ms wheel_samples meter_counts_per_rev fan_min_rpm fan_ppr
 # enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms slip_comp gnss_lag_ms
+# fused_jerk_ms3 fused_gnss_std_kmh fused_wheel_noise_pct wheel_stop_ms drive_adapt
+# meter_tau_ms
 # pid_kp = 0.02
 
 [gnss]

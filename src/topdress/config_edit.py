@@ -19,7 +19,7 @@ from typing import Any
 
 import tomlkit
 
-from topdress.config import ECU_KEYS, TerminalConfig, config_from_dict, read_config_text
+from topdress.config import TerminalConfig, config_from_dict, read_config_text
 from topdress.errors import ConfigError
 from topdress.outpath import atomic_write
 
@@ -38,23 +38,6 @@ WHOLE_TABLES = ("ids", "options")
 ECU_SECTIONS = ("machine", "speed", "ecu", "lookahead")
 LIVE_SECTIONS = ("rate", "operator")  # taken at once by the loop
 RESTART_SECTIONS = ("log", "display")  # saved; in force at the next start
-
-#: PcParamSet id -> the configuration key it comes from (a refusal is shown at that field).
-PARAM_KEYS: dict[int, str] = {
-    1: "machine.width_m",
-    2: "machine.kg_per_rev_upper",
-    3: "machine.kg_per_rev_lower",
-    4: "machine.wheel_radius_m",
-    5: "machine.wheel_ppr",
-    6: "speed.queue_len",
-    7: "speed.cv_window",
-    8: "speed.cv_threshold_pct",
-    9: "speed.switch_speed_kmh",
-    10: "speed.mode",
-    11: "speed.switch_compare",
-    18: "speed.min_work_speed_kmh",
-    **{pid: f"ecu.{name}" for name, (pid, *_rest) in ECU_KEYS.items()},
-}
 
 
 def _plain(value: Any) -> Any:

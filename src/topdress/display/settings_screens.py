@@ -12,7 +12,7 @@ from typing import Any
 
 from nicegui import ui
 
-from topdress.config import SPEED_MODE_IDS, SWITCH_COMPARE_IDS
+from topdress.config import ECU_KEYS, SPEED_MODE_IDS, SWITCH_COMPARE_IDS
 from topdress.config_edit import section_values, validate_section
 from topdress.crop.rate import rate_curve
 from topdress.devices.ports import list_serial_ports
@@ -20,7 +20,6 @@ from topdress.display import fmt
 from topdress.display.actions import Actions
 from topdress.display.forms import SectionForm
 from topdress.display.hub import DisplayHub
-from topdress.ecu import EcuParams
 from topdress.errors import ConfigError
 from topdress.i18n import render, tr
 from topdress.view import commands as op
@@ -235,9 +234,8 @@ class ControlScreen:
             with ui.card().classes("w-80 gap-2"):
                 _title("control.ecu")
                 ui.label(tr("control.ecu_note")).classes("text-xs text-gray-600")
-                defaults = EcuParams.defaults()
                 overrides = cfg.ecu.overrides
-                values = {k: overrides.get(k, _round(defaults.get(k))) for k in ECU_TUNING}
+                values = {k: overrides.get(k, _round(ECU_KEYS[k].default)) for k in ECU_TUNING}
                 ecu = SectionForm("ecu", values)
                 self.ecu_card = SectionCard(hub, actions, "ecu", ecu, only_changed=True)
                 self.pending = ui.label("").classes("text-sm text-amber-800").mark("pending")

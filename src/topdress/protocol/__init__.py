@@ -1,29 +1,15 @@
-"""The CAN protocol of topdress (protocol/topdress.dbc) with cantools: typed encode/decode."""
+"""The CAN protocol of topdress (protocol/topdress.dbc) with cantools: typed encode/decode.
 
-from topdress.protocol.dbc import database, dbc_text
-from topdress.protocol.frames import (
-    CAL_REASONS,
-    CAL_STATES,
-    EcuCalStatus,
-    EcuDiag,
-    EcuFused,
-    EcuFusedAux,
-    EcuParamAck,
-    EcuSpeeds,
-    EcuStatus,
-    EcuTargets,
-    Frame,
-    PcCalCommand,
-    PcCommand,
-    PcGnssTime,
-    PcParamSet,
-    decode,
-    encode_cal_command,
-    encode_command,
-    encode_gnss_time,
-    encode_param_set,
-    is_known_id,
-)
+The codes, fault bits and frame ids (topdress.protocol.model) and the table of ECU parameters
+(topdress.protocol.params) load without cantools; the frames (encode, decode) and the database
+load it, with python-can, on first use. A screen that only shows a Snapshot needs neither.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from topdress.protocol.model import (
     DEFAULT_IDS,
     FAULT_NAMES,
@@ -38,6 +24,69 @@ from topdress.protocol.model import (
     fault_names,
 )
 from topdress.protocol.params import ParamSpec, param, param_name, params
+
+if TYPE_CHECKING:
+    from topdress.protocol.dbc import database, dbc_text
+    from topdress.protocol.frames import (
+        CAL_REASONS,
+        CAL_STATES,
+        EcuCalStatus,
+        EcuDiag,
+        EcuFused,
+        EcuFusedAux,
+        EcuParamAck,
+        EcuSpeeds,
+        EcuStatus,
+        EcuTargets,
+        Frame,
+        PcCalCommand,
+        PcCommand,
+        PcGnssTime,
+        PcParamSet,
+        decode,
+        encode_cal_command,
+        encode_command,
+        encode_gnss_time,
+        encode_param_set,
+        is_known_id,
+    )
+
+_FRAMES = (
+    "CAL_REASONS",
+    "CAL_STATES",
+    "EcuCalStatus",
+    "EcuDiag",
+    "EcuFused",
+    "EcuFusedAux",
+    "EcuParamAck",
+    "EcuSpeeds",
+    "EcuStatus",
+    "EcuTargets",
+    "Frame",
+    "PcCalCommand",
+    "PcCommand",
+    "PcGnssTime",
+    "PcParamSet",
+    "decode",
+    "encode_cal_command",
+    "encode_command",
+    "encode_gnss_time",
+    "encode_param_set",
+    "is_known_id",
+)
+_LAZY = {"database": "topdress.protocol.dbc", "dbc_text": "topdress.protocol.dbc"}
+_LAZY.update(dict.fromkeys(_FRAMES, "topdress.protocol.frames"))
+
+
+def __getattr__(name: str) -> Any:
+    """The names of the frames and the database, imported on first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "CAL_REASONS",

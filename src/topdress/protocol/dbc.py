@@ -11,8 +11,6 @@ from functools import cache
 from importlib import resources
 from typing import Any
 
-import cantools
-
 from topdress.errors import ProtocolError
 
 
@@ -23,7 +21,10 @@ def dbc_text() -> str:
 
 @cache
 def database() -> Any:
-    """The cantools database of the protocol (loaded once)."""
+    """The cantools database of the protocol (loaded once; cantools, and python-can with it,
+    only when a frame is encoded or decoded)."""
+    import cantools
+
     return cantools.database.load_string(dbc_text(), database_format="dbc")
 
 

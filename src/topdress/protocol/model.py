@@ -32,10 +32,11 @@ class Source(StrEnum):
 
 
 class SpeedMode(StrEnum):
-    """Speed mode (td_speed_mode_t; parameter SpeedMode). DUAL is the paper's rule, FUSED the
-    Kalman estimate over both sensors (docs/speed.md)."""
+    """Speed mode (td_speed_mode_t; parameter SpeedMode). PAPER is the paper's dual rule
+    (TD_MODE_DUAL, the DBC's "Dual"), FUSED the Kalman estimate over both sensors
+    (docs/speed.md). The values are the names the configuration and the command line take."""
 
-    DUAL = "dual"
+    PAPER = "paper"
     WHEEL_ONLY = "wheel"
     GNSS_ONLY = "gnss"
     FUSED = "fused"
@@ -65,7 +66,7 @@ class Compare(StrEnum):
 
 
 _SOURCE_CODES = (Source.WHEEL, Source.GNSS, Source.NONE, Source.FUSED)
-_MODE_CODES = (SpeedMode.DUAL, SpeedMode.WHEEL_ONLY, SpeedMode.GNSS_ONLY, SpeedMode.FUSED)
+_MODE_CODES = (SpeedMode.PAPER, SpeedMode.WHEEL_ONLY, SpeedMode.GNSS_ONLY, SpeedMode.FUSED)
 _COMPARE_CODES = (Compare.GNSS, Compare.WHEEL)
 
 

@@ -1,59 +1,75 @@
-"""ECU parameters on CAN: id <-> DBC signal <-> td_params_t / EcuParams field.
+"""ECU parameters on CAN: id <-> DBC signal <-> td_params_t / EcuParams field <-> the
+terminal's configuration key, in one table.
 
-Resolution, unit and range come from the DBC (PcParamSet, multiplexed by ParamId); only the
-field each signal sets is written here.
+Resolution, unit and range come from the DBC (PcParamSet, multiplexed by ParamId); the field
+each signal sets, the configuration key it comes from and the ECU's default are written here.
+The configuration's keys and ranges, the ECU parameters it pushes, the display's fields and the
+field a refused parameter is shown at all come from this table.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from functools import cache
 
 from topdress.errors import ProtocolError
-from topdress.protocol.dbc import message
+from topdress.protocol.dbc import dbc_text
 
-# DBC signal -> (EcuParams field, index into an array field or None).
-_FIELDS: dict[str, tuple[str, int | None]] = {
-    "WorkingWidth": ("working_width_m", None),
-    "UpperKgPerRev": ("kg_per_rev", 0),
-    "LowerKgPerRev": ("kg_per_rev", 1),
-    "WheelRadius": ("wheel_radius_m", None),
-    "WheelPulsesPerRev": ("wheel_ppr", None),
-    "QueueLength": ("queue_len", None),
-    "CvWindow": ("cv_window", None),
-    "CvThreshold": ("cv_threshold_pct", None),
-    "SwitchSpeed": ("switch_speed_kmh", None),
-    "SpeedMode": ("speed_mode", None),
-    "SwitchCompare": ("switch_compare", None),
-    "PidKp": ("pid_kp", None),
-    "PidKi": ("pid_ki", None),
-    "PidKd": ("pid_kd", None),
-    "PidKff": ("pid_kff", None),
-    "CmdTimeout": ("cmd_timeout_ms", None),
-    "GnssTimeout": ("gnss_timeout_ms", None),
-    "MinWorkSpeed": ("min_work_speed_kmh", None),
-    "WheelUpdatePeriod": ("wheel_update_ms", None),
-    "WheelSamples": ("wheel_samples", None),
-    "MeterCountsPerRev": ("meter_counts_per_rev", None),
-    "FanMinSpeed": ("fan_min_rpm", None),
-    "FanPulsesPerRev": ("fan_ppr", None),
-    "EncFaultGnssSpeed": ("enc_fault_gnss_kmh", None),
-    "EncFaultTime": ("enc_fault_time_ms", None),
-    "BlockedTime": ("blocked_time_ms", None),
-    "StatusPeriod": ("status_period_ms", None),
-    "SlipComp": ("slip_comp", None),
-    "GnssLag": ("gnss_lag_ms", None),
-    "LeadMeter": ("lead_meter_ms", None),
-    "LeadAirLine": ("lead_air_ms", None),
-    "FusedJerk": ("fused_jerk_ms3", None),
-    "FusedGnssStd": ("fused_gnss_std_kmh", None),
-    "FusedWheelNoise": ("fused_wheel_noise_pct", None),
-    "WheelStopTime": ("wheel_stop_ms", None),
-    "DriveAdapt": ("drive_adapt", None),
-    "MeterTau": ("meter_tau_ms", None),
-    "LeadStop": ("lead_stop_ms", None),
+# The one table of ECU parameters. Id, resolution, unit and range come from the DBC
+# (PcParamSet, multiplexed by ParamId); only what the DBC cannot say is written here:
+# DBC signal -> (EcuParams field, index into an array field or None, the terminal's
+# configuration key, the ECU's default (td_params_defaults; a test holds it to the C core)).
+# The configuration key is also the display's field and where a refusal is shown.
+_TABLE: dict[str, tuple[str, int | None, str, float]] = {
+    "WorkingWidth": ("working_width_m", None, "machine.width_m", 3.6),
+    "UpperKgPerRev": ("kg_per_rev", 0, "machine.kg_per_rev_upper", 0.3),
+    "LowerKgPerRev": ("kg_per_rev", 1, "machine.kg_per_rev_lower", 0.3),
+    "WheelRadius": ("wheel_radius_m", None, "machine.wheel_radius_m", 0.0615),
+    "WheelPulsesPerRev": ("wheel_ppr", None, "machine.wheel_ppr", 500),
+    "QueueLength": ("queue_len", None, "speed.queue_len", 5),
+    "CvWindow": ("cv_window", None, "speed.cv_window", 5),
+    "CvThreshold": ("cv_threshold_pct", None, "speed.cv_threshold_pct", 4.2),
+    "SwitchSpeed": ("switch_speed_kmh", None, "speed.switch_speed_kmh", 6.0),
+    "SpeedMode": ("speed_mode", None, "speed.mode", 0),
+    "SwitchCompare": ("switch_compare", None, "speed.switch_compare", 0),
+    "PidKp": ("pid_kp", None, "ecu.pid_kp", 0.015),
+    "PidKi": ("pid_ki", None, "ecu.pid_ki", 0.01),
+    "PidKd": ("pid_kd", None, "ecu.pid_kd", 0.0),
+    "PidKff": ("pid_kff", None, "ecu.pid_kff", 0.01666667),
+    "CmdTimeout": ("cmd_timeout_ms", None, "ecu.cmd_timeout_ms", 1500),
+    "GnssTimeout": ("gnss_timeout_ms", None, "ecu.gnss_timeout_ms", 1200),
+    "MinWorkSpeed": ("min_work_speed_kmh", None, "speed.min_work_speed_kmh", 0.5),
+    "WheelUpdatePeriod": ("wheel_update_ms", None, "ecu.wheel_update_ms", 500),
+    "WheelSamples": ("wheel_samples", None, "ecu.wheel_samples", 4),
+    "MeterCountsPerRev": ("meter_counts_per_rev", None, "ecu.meter_counts_per_rev", 6400),
+    "FanMinSpeed": ("fan_min_rpm", None, "ecu.fan_min_rpm", 2000),
+    "FanPulsesPerRev": ("fan_ppr", None, "ecu.fan_ppr", 30),
+    "EncFaultGnssSpeed": ("enc_fault_gnss_kmh", None, "ecu.enc_fault_gnss_kmh", 2.0),
+    "EncFaultTime": ("enc_fault_time_ms", None, "ecu.enc_fault_time_ms", 2000),
+    "BlockedTime": ("blocked_time_ms", None, "ecu.blocked_time_ms", 1000),
+    "StatusPeriod": ("status_period_ms", None, "ecu.status_period_ms", 100),
+    "SlipComp": ("slip_comp", None, "ecu.slip_comp", 0),
+    "GnssLag": ("gnss_lag_ms", None, "ecu.gnss_lag_ms", 0),
+    "LeadMeter": ("lead_meter_ms", None, "lookahead.meter_ms", 0),
+    "LeadAirLine": ("lead_air_ms", None, "lookahead.airline_ms", 0),
+    "FusedJerk": ("fused_jerk_ms3", None, "ecu.fused_jerk_ms3", 0.3),
+    "FusedGnssStd": ("fused_gnss_std_kmh", None, "ecu.fused_gnss_std_kmh", 0.2),
+    "FusedWheelNoise": ("fused_wheel_noise_pct", None, "ecu.fused_wheel_noise_pct", 15.0),
+    "WheelStopTime": ("wheel_stop_ms", None, "ecu.wheel_stop_ms", 300),
+    "DriveAdapt": ("drive_adapt", None, "ecu.drive_adapt", 1),
+    "MeterTau": ("meter_tau_ms", None, "ecu.meter_tau_ms", 200),
+    "LeadStop": ("lead_stop_ms", None, "lookahead.stop_ms", 0),
 }
+
+# A multiplexed signal of PcParamSet: ` SG_ Name m12 : 32|32@1+ (0.01,0) [0|25] "km/h" ECU`.
+# Read from the DBC's text, not through cantools, so that a screen can have the table without
+# loading cantools and python-can (a test holds this reading to cantools').
+_SIGNAL = re.compile(
+    r"^ SG_ (?P<name>\w+) m(?P<id>\d+) : \d+\|\d+@[01][+-] "
+    r"\((?P<scale>[^,]+),[^)]+\) \[(?P<lo>[^|]+)\|(?P<hi>[^\]]+)\] \"(?P<unit>[^\"]*)\""
+)
 
 
 def decimals(scale: float) -> int:
@@ -73,6 +89,18 @@ class ParamSpec:
     scale: float
     minimum: float
     maximum: float
+    config_key: str  # `section.key` of the terminal's configuration (and the display's field)
+    default: float  # what the ECU runs with until the parameter is set
+
+    @property
+    def section(self) -> str:
+        """The configuration section of the parameter (`machine`, `speed`, `ecu`, ...)."""
+        return self.config_key.split(".", 1)[0]
+
+    @property
+    def name(self) -> str:
+        """The parameter's key within its configuration section."""
+        return self.config_key.split(".", 1)[1]
 
     @property
     def key(self) -> str:
@@ -105,25 +133,41 @@ class ParamSpec:
 
 @cache
 def params() -> tuple[ParamSpec, ...]:
-    """Every parameter, by id (1..37)."""
+    """Every parameter, by id (1..38)."""
     specs = []
-    for sig in message("PcParamSet").signals:
-        if sig.is_multiplexer:
-            continue
-        field, index = _FIELDS[sig.name]
+    for line in _param_set_lines():
+        m = _SIGNAL.match(line)
+        if m is None:
+            raise ProtocolError(f"PcParamSet: cannot read the DBC line {line.strip()!r}")
+        field, index, config_key, default = _TABLE[m["name"]]
         specs.append(
             ParamSpec(
-                id=sig.multiplexer_ids[0],
-                signal=sig.name,
+                id=int(m["id"]),
+                signal=m["name"],
                 field=field,
                 index=index,
-                unit=sig.unit or "",
-                scale=float(sig.scale),
-                minimum=float(sig.minimum),
-                maximum=float(sig.maximum),
+                unit=m["unit"],
+                scale=float(m["scale"]),
+                minimum=float(m["lo"]),
+                maximum=float(m["hi"]),
+                config_key=config_key,
+                default=default,
             )
         )
     return tuple(sorted(specs, key=lambda s: s.id))
+
+
+def _param_set_lines() -> list[str]:
+    """The multiplexed signal lines of PcParamSet in the DBC (its multiplexer left out)."""
+    lines = dbc_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if re.match(r"^BO_ \d+ PcParamSet:", line))
+    out = []
+    for line in lines[start + 1 :]:
+        if not line.startswith(" SG_ "):
+            break
+        if " M : " not in line:
+            out.append(line)
+    return out
 
 
 @cache
@@ -133,11 +177,13 @@ def _index() -> dict[str | int, ParamSpec]:
         out[spec.id] = spec
         out[spec.signal] = spec
         out[spec.key] = spec
+        out[spec.config_key] = spec
     return out
 
 
 def param(key: int | str) -> ParamSpec:
-    """Look a parameter up by id, DBC signal name or EcuParams name (`kg_per_rev[1]`)."""
+    """Look a parameter up by id, DBC signal name, EcuParams name (`kg_per_rev[1]`) or
+    configuration key (`machine.kg_per_rev_lower`)."""
     try:
         return _index()[key]
     except KeyError:

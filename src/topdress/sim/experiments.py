@@ -139,7 +139,7 @@ class Lab:
         wait_s = 3.0 + (seed * 0.6180339887 % 1.0)
         world = World(self.cfg, seed=seed, drive=Drive.paper_run(target_kmh, hold_m, wait_s))
         params = (*self.pc.ecu_params, *settings)
-        if mode is not SpeedMode.DUAL:
+        if mode is not SpeedMode.PAPER:
             params = (*params, ("SpeedMode", float(mode.code)))
         with Sil(world, dataclasses.replace(self.pc, ecu_params=params)) as sil:
             sil.run_until_done(max_s=hold_m / (target_kmh / 3.6) + 60.0)
@@ -234,14 +234,14 @@ def table2(
     items = [(v, r) for v in targets for r in range(reps)]
     per: dict[float, list[tuple[float, ...]]] = {}
     for v, r in lab._iter(items, "table2"):
-        dual = lab.paper_run(v, r, SpeedMode.DUAL)
+        dual = lab.paper_run(v, r, SpeedMode.PAPER)
         gnss = lab.paper_run(v, r, SpeedMode.GNSS_ONLY)
         d_on, d_off = response_times(dual)
         g_on, g_off = response_times(gnss)
         vals = [g_on - d_on, g_off - d_off, _landing(dual), _landing(gnss)]
         vals += [dual.stop_m, gnss.stop_m]
         if tuned is not None:
-            fast = lab.paper_run(v, r, SpeedMode.DUAL, settings=tuned)
+            fast = lab.paper_run(v, r, SpeedMode.PAPER, settings=tuned)
             f_on, f_off = response_times(fast)
             vals += [g_on - f_on, g_off - f_off, _landing(fast)]
         else:
@@ -358,7 +358,7 @@ def cv_experiment(
     series = []
     items = [(v, r) for v in targets for r in range(reps)]
     for v, r in lab._iter(items, "cv"):
-        series.append(cv_series(lab.paper_run(v, r, SpeedMode.DUAL, settings=settings)))
+        series.append(cv_series(lab.paper_run(v, r, SpeedMode.PAPER, settings=settings)))
     by_target: dict[int, dict[float, float]] = {}
     max_uni: dict[int, float] = {}
     sd_uni: dict[int, float] = {}
@@ -424,7 +424,7 @@ class SlipResult:
 
 def slip_run(lab: Lab, v_kmh: float, rep: int) -> tuple[float, float]:
     """Eq. 3 over the 40 m at constant speed: wheel pulses from EcuDiag, tape-measured L."""
-    run = lab.paper_run(v_kmh, rep, SpeedMode.DUAL)
+    run = lab.paper_run(v_kmh, rep, SpeedMode.PAPER)
     tr = run.trace
     uni = np.nonzero(tr["phase"] == UNIFORM)[0]
     i0, i1 = uni[0], uni[-1]
@@ -496,7 +496,7 @@ def table34(
     out: dict[tuple[str, float], list[SwitchEvent]] = {}
     items = [(v, r) for v in targets for r in range(reps)]
     for v, r in lab._iter(items, "table34"):
-        ev = switch_events(lab.paper_run(v, r, SpeedMode.DUAL))
+        ev = switch_events(lab.paper_run(v, r, SpeedMode.PAPER))
         out.setdefault(("accel", v), [])
         out.setdefault(("decel", v), [])
         for ph in ("accel", "decel"):

@@ -439,7 +439,7 @@ def write_fig10(out: Path, lab: ex.Lab, targets: Iterable[float], rep: int = 0) 
         "only, same tractor motion (same seed); time from the moment the tractor started.\n\n"
     )
     for v in targets:
-        dual = lab.paper_run(v, rep, SpeedMode.DUAL)
+        dual = lab.paper_run(v, rep, SpeedMode.PAPER)
         gnss = lab.paper_run(v, rep, SpeedMode.GNSS_ONLY)
         fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
         for run, label in ((dual, "dual"), (gnss, "GNSS only")):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,7 +22,6 @@ from topdress.config import TerminalConfig
 from topdress.config_edit import (
     DEVICE_KEYS,
     ECU_SECTIONS,
-    PARAM_KEYS,
     RESTART_SECTIONS,
     changed_device_keys,
     changed_ecu_params,
@@ -511,7 +510,7 @@ class OperatorDesk:
         old = loop.cfg.ecu_params()
         pending: Future[op.CommandResult] = fut if fut is not None else Future()
         self._pending = pending
-        keys = {pid: PARAM_KEYS.get(pid, c.section) for pid in changed}
+        keys = {pid: protocol.param(pid).config_key for pid in changed}
         self._settings_state = dict.fromkeys(keys.values(), "pending")
 
         def done(error: str | None, accepted: list[int]) -> None:
@@ -527,10 +526,9 @@ class OperatorDesk:
                 return
             # Nothing half-applied: what the ECU took of this change goes back.
             back = {pid: old[pid] for pid in accepted if pid in old}
-            refused = _refused_id(error, changed)
             if back:
                 loop.link.push_params(back, loop.clock(), _log_rollback)
-            key = PARAM_KEYS.get(refused, c.section) if refused is not None else c.section
+            key = refused_key(error, changed, c.section)
             self._settings_state = {keys[pid]: "put back" for pid in accepted if pid in keys}
             self._settings_state[key] = f"refused: {error}"
             loop.event(text("event.settings_refused", section=c.section, error=error))
@@ -545,12 +543,15 @@ def _log_rollback(error: str | None, accepted: list[int]) -> None:
         log.warning("putting back the previous ECU parameters failed: %s", error)
 
 
-def _refused_id(error: str, changed: dict[int, float]) -> int | None:
+def refused_key(error: str, changed: Iterable[int], section: str) -> str:
+    """The configuration key (the display's field) an ECU's refusal is shown at: the key of the
+    parameter the refusal names (`SwitchSpeed = 7: ...`), else the whole section."""
     name = error.split(" = ", 1)[0]
     for pid in changed:
-        if protocol.param_name(pid) == name:
-            return pid
-    return None
+        spec = protocol.param(pid)
+        if spec.signal == name:
+            return spec.config_key
+    return section
 
 
 def _with_section(running: TerminalConfig, from_file: TerminalConfig, section: str) -> Any:
