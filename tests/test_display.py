@@ -39,6 +39,7 @@ def working(t_s: float = 12.0, **kw: object) -> Snapshot:
         v_kmh=8.0,
         v_wheel_kmh=7.61,
         v_gnss_kmh=8.0,
+        gnss_kmh=8.0,
         cv_pct=2.51,
         uniform=True,
         ndvi_sensors=0.612,

@@ -277,10 +277,11 @@ def test_no_position_at_all_is_a_clear_error(
 ) -> None:
     from topdress.log.rows import state_row
     from topdress.log.session import SessionLog
+    from topdress.view.snapshot import Snapshot
 
     with SessionLog.create(tmp_path, "") as log:
         for i in range(5):
-            log.state(state_row(i * 0.1, status=None, diag=None, speeds=None, targets=None))
+            log.state(state_row(i * 0.1, Snapshot()))
     assert main(["log", "export", str(log.path), "--out", str(tmp_path / "x.gpkg")]) == 2
     assert "no state row has a position" in capsys.readouterr().err
 

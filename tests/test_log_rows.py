@@ -1,4 +1,5 @@
-"""The state row the terminal logs, built from the ECU's own frames."""
+"""The state row the terminal logs: the Snapshot of the tick, whose ECU values come from the
+ECU's own frames."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pytest
 from topdress import protocol
 from topdress.ecu import Ecu
 from topdress.log.rows import state_row
+from topdress.view.snapshot import Snapshot, ecu_values
 
 
 def test_row_from_the_frames_of_a_running_ecu_matches_its_state() -> None:
@@ -26,16 +28,14 @@ def test_row_from_the_frames_of_a_running_ecu_matches_its_state() -> None:
         for frame in ecu.tx_raw():
             decoded = protocol.decode(frame)
             frames[type(decoded)] = decoded
-    row = state_row(
-        3.0,
-        status=frames[protocol.EcuStatus],  # type: ignore[arg-type]
-        diag=frames[protocol.EcuDiag],  # type: ignore[arg-type]
-        speeds=frames[protocol.EcuSpeeds],  # type: ignore[arg-type]
-        targets=frames[protocol.EcuTargets],  # type: ignore[arg-type]
-        position=(45.75, 126.63),
-        ndvi=0.62,
-        rates_kg_ha=(150.0, 120.0),
+    values = ecu_values(
+        frames[protocol.EcuStatus],  # type: ignore[arg-type]
+        frames[protocol.EcuDiag],  # type: ignore[arg-type]
+        frames[protocol.EcuSpeeds],  # type: ignore[arg-type]
+        frames[protocol.EcuTargets],  # type: ignore[arg-type]
     )
+    snap = Snapshot(**values, lat=45.75, lon=126.63, ndvi=0.62, rate_kg_ha=(150.0, 120.0))
+    row = state_row(3.0, snap)
     s = ecu.state
     assert row.v_wheel_kmh == pytest.approx(s.v_wheel_kmh, abs=0.005)
     assert row.v_wheel_kmh == pytest.approx(5.0, abs=0.02)
@@ -55,6 +55,6 @@ def test_row_from_the_frames_of_a_running_ecu_matches_its_state() -> None:
 
 
 def test_row_before_any_frame() -> None:
-    row = state_row(1.0, status=None, diag=None, speeds=None, targets=None)
+    row = state_row(1.0, Snapshot(**ecu_values(None, None, None, None)))
     assert row.source == "none" and row.v_kmh == 0.0 and row.v_gnss_kmh is None
     assert row.lat is None and row.cv_pct is None and row.faults == 0

@@ -19,6 +19,7 @@ from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, Truth, World
+from topdress.view.snapshot import Snapshot, ecu_values
 
 RATE = (180.0, 150.0)
 
@@ -52,12 +53,17 @@ def record(directory: Path) -> tuple[Path, Truth]:
                 log.state(
                     state_row(
                         t,
-                        status=latest.get(protocol.EcuStatus),  # type: ignore[arg-type]
-                        diag=latest.get(protocol.EcuDiag),  # type: ignore[arg-type]
-                        speeds=latest.get(protocol.EcuSpeeds),  # type: ignore[arg-type]
-                        targets=latest.get(protocol.EcuTargets),  # type: ignore[arg-type]
-                        position=None if pos is None else (pos.lat, pos.lon),
-                        rates_kg_ha=RATE,
+                        Snapshot(
+                            **ecu_values(
+                                latest.get(protocol.EcuStatus),  # type: ignore[arg-type]
+                                latest.get(protocol.EcuDiag),  # type: ignore[arg-type]
+                                latest.get(protocol.EcuSpeeds),  # type: ignore[arg-type]
+                                latest.get(protocol.EcuTargets),  # type: ignore[arg-type]
+                            ),
+                            lat=None if pos is None else pos.lat,
+                            lon=None if pos is None else pos.lon,
+                            rate_kg_ha=RATE,
+                        ),
                     )
                 )
     assert log.errors == 0 and log.dropped == 0

@@ -185,8 +185,9 @@ def test_ecu_silent_is_shown_lost_and_the_stop_reaches_the_ecu_on_close() -> Non
     assert "target=--/-- meter=--/--r/min fan=--/--rpm faults=-- ecu=lost" in line
     # what the terminal knows by itself stays: the GNSS speed it reads, the rate it computes
     assert (
-        lost.v_gnss_kmh is not None
-        and f"GNSS {lost.v_gnss_kmh:5.2f} km/h" in (render_lines(lost)[1])
+        lost.gnss_kmh is not None
+        and lost.v_gnss_kmh is None  # the ECU's: not known while it is not heard
+        and f"GNSS {lost.gnss_kmh:5.2f} km/h" in (render_lines(lost)[1])
     )
     rig.ecu_silent = False
     rig.run(8.0)
@@ -482,3 +483,36 @@ def test_input_that_never_gives_what_is_needed_is_explained_once(
     finally:
         term.close()
         bus.shutdown()
+
+
+def test_the_logged_row_and_the_snapshot_mean_the_same_speeds(tmp_path: Path) -> None:
+    """The state row is derived from the Snapshot: each speed is the ECU's in both (the GNSS
+    speed it compares, at its resolution), while the terminal's own reading of the receiver
+    is shown apart."""
+    session = SessionLog.create(tmp_path, "")
+    rig = VirtualRig(loads_config(""), _drive(8.0, 80.0), session)
+    try:
+        rig.run(20.0)
+    finally:
+        rig.close()
+    with SessionReader(session.path) as reader:
+        rows = list(reader.states())
+    assert len(rows) == len(rig.snapshots)
+    for (t, snap), row in zip(rig.snapshots, rows, strict=True):
+        assert row.t == t
+        assert (row.v_gnss_kmh, row.v_wheel_kmh, row.v_kmh) == (
+            snap.v_gnss_kmh,
+            snap.v_wheel_kmh,
+            snap.v_kmh,
+        )
+        assert (row.source, row.cv_pct, row.faults) == (snap.source, snap.cv_pct, snap.faults)
+    moving = [s for _, s in rig.snapshots if s.ecu_live and s.v_kmh > 7.0]
+    assert len(moving) > 50
+    # two readings of one receiver: the ECU's (as PcCommand and PcGnssTime carried it, when
+    # the ECU last took it) and the terminal's own; in uniform motion they agree closely
+    assert any(s.v_gnss_kmh != s.gnss_kmh for s in moving)
+    uniform = [s for s in moving if s.uniform and s.v_gnss_kmh is not None]
+    assert uniform and all(
+        s.gnss_kmh is not None and abs(s.v_gnss_kmh - s.gnss_kmh) < 0.3  # type: ignore[operator]
+        for s in uniform
+    )

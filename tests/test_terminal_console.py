@@ -23,6 +23,7 @@ WORKING = Snapshot(
     v_kmh=8.02,
     v_wheel_kmh=7.61,
     v_gnss_kmh=8.0,
+    gnss_kmh=8.0,
     cv_pct=2.51,
     uniform=True,
     ndvi_sensors=0.612,

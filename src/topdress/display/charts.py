@@ -64,7 +64,7 @@ def speed_options(history: list[Snapshot], window_s: float = 60.0) -> dict[str, 
     for s in history:
         t = round(s.t_s, 2)
         wheel.append([t, round(s.v_wheel_kmh, 2) if s.ecu_live else None])
-        gnss.append([t, None if s.v_gnss_kmh is None else round(s.v_gnss_kmh, 2)])
+        gnss.append([t, None if s.gnss_kmh is None else round(s.gnss_kmh, 2)])
         selected.append([t, round(s.v_kmh, 2) if s.ecu_live else None])
         marks.append(s.source if s.ecu_live else "none")
     opts = _axes(tr("unit.kmh"), history[0].t_s if history else 0.0, t_end, window_s)

@@ -168,7 +168,7 @@ def render_lines(s: Snapshot) -> list[str]:
         _status(s, running),
         f"{_label('con.speed')}{col(s.v_kmh, '5.2f')} km/h {tr('con.from')} {_pad(source, 5)}"
         f" {tr('main.wheel')} {col(s.v_wheel_kmh, '5.2f')}"
-        f"  GNSS {_col(s.v_gnss_kmh, '5.2f')} km/h  CV {_col(s.cv_pct if live else None, '.2f')} %"
+        f"  GNSS {_col(s.gnss_kmh, '5.2f')} km/h  CV {_col(s.cv_pct if live else None, '.2f')} %"
         f" ({uniform})",
         f"NDVI    {tr('con.sensors')} {_col(s.ndvi_sensors, '.3f')}"
         f"  {tr('con.at_meters')} {_col(s.ndvi, '.3f')}"

@@ -174,7 +174,7 @@ class MainScreen:
         live = s.ecu_live
         self.v_sel.set_text(fmt.ecu(s, s.v_kmh, ".1f"))
         self.v_wheel.set_text(fmt.ecu(s, s.v_wheel_kmh, ".1f"))
-        self.v_gnss.set_text(fmt.num(s.v_gnss_kmh, ".1f"))
+        self.v_gnss.set_text(fmt.num(s.gnss_kmh, ".1f"))
         source = s.source if live else "none"
         self.source.set_text(tr(f"source.{source}") if source != "none" else "--")
         colour = "primary" if source == "gnss" else "orange"

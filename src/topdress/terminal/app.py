@@ -42,7 +42,7 @@ from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.gnss.utc import UtcClock
 from topdress.i18n import Text, text
-from topdress.log.model import LogEvent, StateRow
+from topdress.log.model import LogEvent
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
 from topdress.protocol import fault_names
@@ -53,7 +53,7 @@ from topdress.terminal.inbox import Inbox
 from topdress.terminal.site import build_site_rate
 from topdress.view.commands import RUNNING, CommandResult
 from topdress.view.links import link_state
-from topdress.view.snapshot import TICK_S, Snapshot
+from topdress.view.snapshot import TICK_S, Snapshot, ecu_values
 
 log = logging.getLogger(__name__)
 
@@ -338,7 +338,7 @@ class Terminal:
         self._track_faults(now)
         self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
         if self.session is not None:
-            self.session.state(self._row(now))
+            self.session.state(state_row(now, self.snapshot))
 
     def _track_links(self, now: float) -> None:
         states = {"ecu": self.link.state, "gnss": self._gnss_state, "crop": self._crop_reported}
@@ -451,24 +451,14 @@ class Terminal:
         live = self.link.ecu_alive
         # The ECU's last frames are history once it is not heard: nothing is shown from them.
         ecu = self.link.ecu if live else EcuView()
-        st, diag, sp, tg = ecu.status, ecu.diag, ecu.speeds, ecu.targets
         pos = self.tracker.position
         return Snapshot(
             t_s=now - (self._t0 if self._t0 is not None else now),
-            running=st.running if st is not None else False,
-            source=str(diag.source) if diag is not None else "none",
-            v_kmh=sp.selected_kmh if sp is not None else 0.0,
-            v_wheel_kmh=sp.wheel_kmh if sp is not None else 0.0,
-            v_gnss_kmh=self.link.command.gnss_kmh,
-            cv_pct=diag.cv_pct if diag is not None else None,
-            uniform=diag.uniform if diag is not None else False,
+            **ecu_values(ecu.status, ecu.diag, ecu.speeds, ecu.targets),
+            gnss_kmh=self.link.command.gnss_kmh,
             ndvi_sensors=ndvi_sensors,
             ndvi=ndvi,
             rate_kg_ha=rates,
-            target_rpm=(tg.target_rpm_upper, tg.target_rpm_lower) if tg else (0.0, 0.0),
-            meter_rpm=(st.meter_rpm_upper, st.meter_rpm_lower) if st else (0.0, 0.0),
-            fan_rpm=(st.fan_rpm_upper, st.fan_rpm_lower) if st else (0.0, 0.0),
-            faults=int(diag.faults) if diag is not None else 0,
             ecu_live=live,
             ecu_link=self.link.state,
             ecu_where=self.link.where,
@@ -503,31 +493,6 @@ class Terminal:
         # Lines a flooding source lost (the oldest of its bounded queue), per source.
         out.update((f"{k}_dropped", v) for k, v in self.inbox.dropped.items() if v)
         return out
-
-    def _row(self, now: float) -> StateRow:
-        # While the ECU is lost its last frames are history: the row says "unknown" (source
-        # none, zeros), so the summary does not integrate stale meter speeds.
-        ecu = self.link.ecu if self.link.ecu_alive else EcuView()
-        s = self.snapshot
-        return state_row(
-            now,
-            status=ecu.status,
-            diag=ecu.diag,
-            speeds=ecu.speeds,
-            targets=ecu.targets,
-            position=(s.lat, s.lon) if s.lat is not None and s.lon is not None else None,
-            ndvi=s.ndvi,
-            rates_kg_ha=s.rate_kg_ha,
-            utc=s.utc,
-            heading_deg=s.heading_deg,
-            outlet=(
-                (s.outlet_lat, s.outlet_lon)
-                if s.outlet_lat is not None and s.outlet_lon is not None
-                else None
-            ),
-            zone=s.zone,
-            prescription_kg_ha=s.prescription_kg_ha,
-        )
 
     # ---- events and the transmit tap ----------------------------------------------------------
     def _log_tx(self, msg: can.Message) -> None:

@@ -632,9 +632,9 @@ def speed_why(snap: Snapshot, cfg: TerminalConfig) -> Text | None:
         return text("why.encoder_fault")
     if Fault.GNSS_FROZEN in faults:
         return text("why.gnss_frozen")
-    if snap.v_gnss_kmh is None or Fault.GNSS_LOST in faults:
+    if snap.gnss_kmh is None or Fault.GNSS_LOST in faults:
         return text("why.no_gnss", source=src)
-    cmp_v = snap.v_gnss_kmh if s.switch_compare == "gnss" else snap.v_wheel_kmh
+    cmp_v = snap.gnss_kmh if s.switch_compare == "gnss" else snap.v_wheel_kmh
     cv = text("why.cv_none") if snap.cv_pct is None else text("why.cv", cv=snap.cv_pct)
     rule = dict(
         cv=cv,

@@ -8,7 +8,9 @@ depends on the protocol and the catalogue only, so a screen needs nothing of the
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
+from topdress import protocol
 from topdress.i18n import Text
 from topdress.view.commands import ManualView
 
@@ -60,11 +62,14 @@ class DeviceLine:
 
 @dataclass(frozen=True)
 class Snapshot:
-    """What the display shows; built by the control loop every tick."""
+    """The loop's state at one tick: what the console and the display show and the session log's
+    state row records (topdress.log.rows.state_row)."""
 
     t_s: float = 0.0
     running: bool = False
     source: str = "none"
+    # The ECU's speeds (EcuSpeeds, else EcuStatus): the one it meters with, the wheel's, and
+    # the GNSS speed it compares (None: it has none). The state row logs these same values.
     v_kmh: float = 0.0
     v_wheel_kmh: float = 0.0
     v_gnss_kmh: float | None = None
@@ -80,6 +85,9 @@ class Snapshot:
     # Whether the ECU's values above (running .. faults) are live; while the ECU is not heard
     # they are unknown (source none, zeros, as in the state row) and shown as such.
     ecu_live: bool = False
+    # The receiver's speed as the terminal sends it to the ECU (None: no fix, stale, lost):
+    # known, and shown, while the ECU is not heard.
+    gnss_kmh: float | None = None
     ecu_link: str = "wait"  # wait (parameters not all acknowledged yet), ok, lost
     ecu_where: str = ""  # the CAN interface:channel the terminal listens on
     gnss_link: str = "wait"  # wait, ok, no fix, lost
@@ -111,3 +119,32 @@ class Snapshot:
     outlet_lon: float | None = None
     zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
     prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
+
+
+def ecu_values(
+    status: protocol.EcuStatus | None,
+    diag: protocol.EcuDiag | None,
+    speeds: protocol.EcuSpeeds | None,
+    targets: protocol.EcuTargets | None,
+) -> dict[str, Any]:
+    """The Snapshot fields the ECU's frames give. A frame not received yet gives zeros (and
+    source "none"); speeds come at 0.01 km/h from EcuSpeeds, else at 0.1 km/h from EcuStatus."""
+    if speeds is not None:
+        v_wheel, v_gnss, v = speeds.wheel_kmh, speeds.gnss_kmh, speeds.selected_kmh
+    else:
+        v_wheel = status.wheel_kmh if status is not None else 0.0
+        v_gnss, v = None, v_wheel
+    st, tg = status, targets
+    return dict(
+        running=st.running if st is not None else False,
+        source=str(diag.source) if diag is not None else "none",
+        v_kmh=v,
+        v_wheel_kmh=v_wheel,
+        v_gnss_kmh=v_gnss,
+        cv_pct=diag.cv_pct if diag is not None else None,
+        uniform=diag.uniform if diag is not None else False,
+        target_rpm=(tg.target_rpm_upper, tg.target_rpm_lower) if tg else (0.0, 0.0),
+        meter_rpm=(st.meter_rpm_upper, st.meter_rpm_lower) if st else (0.0, 0.0),
+        fan_rpm=(st.fan_rpm_upper, st.fan_rpm_lower) if st else (0.0, 0.0),
+        faults=int(diag.faults) if diag is not None else 0,
+    )
