@@ -14,6 +14,7 @@ import pytest
 from test_terminal import VirtualRig
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, loads_config
+from topdress.crop.rate import build_rate_model
 from topdress.ecu import meter_target_rpm
 from topdress.gnss.nmea import make_sentence
 from topdress.log.session import SessionLog, SessionReader
@@ -671,5 +672,26 @@ def test_a_refused_look_ahead_parameter_is_shown_at_its_field(
         assert list(res.errors) == [key]  # the field, not the whole [lookahead] section
         assert rig.term.snapshot.settings_state[key].startswith("refused: ")
         assert rig.term.cfg.lookahead.total_s == 0.0  # nothing half-applied
+    finally:
+        rig.close()
+
+
+def test_a_rate_model_changed_while_running_sets_the_rate_at_once() -> None:
+    """[rate] is taken live: the rate commanded follows the new curve from the next tick."""
+    rig = make_rig(drive(stand(2.0), straight(8.0, 200.0)), autostart=True)
+    try:
+        rig.run(10.0)
+        before = rig.term.snapshot
+        assert before.ndvi is not None and before.rate_model_kg_ha[0] > 0
+        res = post(rig, op.ApplySettings("rate", {"linear": {"rate_0_kg_ha": 500.0}}))
+        assert res.ok, res.message
+        rig.run(rig.world.t_s + 0.3)
+        s = rig.term.snapshot
+        assert s.ndvi is not None
+        want = build_rate_model(rig.term.cfg.rate).rate_kg_ha(s.ndvi) / 2
+        assert rig.term.cfg.rate.linear.rate_0_kg_ha == 500.0
+        assert s.rate_model_kg_ha == pytest.approx((want, want), abs=0.01)
+        old = build_rate_model(CFG.rate).rate_kg_ha(s.ndvi) / 2
+        assert abs(want - old) > 5.0  # the new curve, not the old one
     finally:
         rig.close()
