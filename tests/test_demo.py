@@ -4,6 +4,7 @@ with pyserial) and a virtual CAN bus, the terminal in front of it, the session l
 from __future__ import annotations
 
 import io
+import math
 import os
 import signal
 import subprocess
@@ -291,3 +292,71 @@ def test_demo_log_directory_with_a_non_utf8_byte_is_a_clear_error(
     assert main(["demo", "--duration", "1", "--out", bad]) == 2
     err = capsys.readouterr().err
     assert "not UTF-8" in err and "Traceback" not in err and "RuntimeError" not in err
+
+
+def test_demo_with_a_users_file_runs_its_settings_on_its_machines_geometry(
+    tmp_path: Path,
+) -> None:
+    """`topdress demo --config FILE`: the terminal runs with the user's file (its devices
+    replaced by the simulation's), and the simulated machine has the file's geometry: two crop
+    sensors 3.0 m ahead, a 3 m width, the antenna 2 m ahead of the outlets."""
+    user = tmp_path / "mine.toml"
+    user.write_text(
+        "# my machine\n[machine]\nwidth_m = 3.0\noutlet_along_m = -2.0\n"
+        '[crop]\nsensors = 2\nsensor_to_meter_m = 3.0\nport = "/dev/ttyUSB7"\n'
+        '[can]\ninterface = "socketcan"\nchannel = "can9"\n[can.options]\nfd = false\n'
+        "[rate.linear]\nrate_0_kg_ha = 500.0\n",
+        encoding="utf-8",
+    )
+    out = tmp_path / "out"
+    args = ["demo", "--config", str(user), "--duration", "6", "--out", str(out), "--start"]
+    assert main([*args, "--no-display"]) == 0
+    demo_file = out / "topdress-demo.toml"
+    cfg = loads_config(demo_file.read_text(encoding="utf-8"))
+    assert "# my machine" in demo_file.read_text(encoding="utf-8")  # the user's file, kept
+    assert (cfg.machine.width_m, cfg.machine.outlet_along_m) == (3.0, -2.0)
+    assert (cfg.crop.sensors, cfg.crop.sensor_to_meter_m) == (2, 3.0)
+    assert cfg.rate.linear.rate_0_kg_ha == 500.0
+    assert cfg.crop.port.startswith("/dev/pts/")  # the simulation's, not /dev/ttyUSB7
+    assert (cfg.can.interface, cfg.can.options, cfg.log.dir) == ("virtual", {}, str(out))
+    assert user.read_text(encoding="utf-8").startswith("# my machine\n[machine]")  # untouched
+    (session,) = out.glob("*.sqlite")
+    with SessionReader(session) as reader:
+        crop = [r.line or "" for r in reader.raw() if r.kind == "crop"]
+        assert reader.count("state") > 30
+    # the simulated machine has two sensors: ids 1 and 2, no line the terminal refuses
+    ids = {line.split(",")[0] for line in crop}
+    assert crop and ids == {"1", "2"}, ids
+
+
+def test_the_simulated_machine_takes_the_configurations_geometry() -> None:
+    from topdress.sim.gnss import EARTH_R_M
+    from topdress.sim.world import SimConfig, World
+
+    cfg = loads_config(
+        "[machine]\nwidth_m = 6.0\noutlet_along_m = -2.5\noutlet_across_m = 0.5\n"
+        "[crop]\nsensors = 3\nsensor_to_meter_m = 4.0\n"
+    )
+    sim = SimConfig.of_machine(cfg)
+    assert sim.crop_offsets_m == (-2.0, 0.0, 2.0)
+    assert sim.crop_ahead_m == 4.0  # the terminal's crop.sensor_to_meter_m
+    assert (sim.gnss.antenna_along_m, sim.gnss.antenna_across_m) == (2.5, -0.5)
+    # the defaults are the simulator's own machine, bit for bit
+    assert SimConfig.of_machine(default_config()) == SimConfig()
+
+    # the receiver reports the antenna, 2.5 m ahead of the outlets and 0.5 m to their left:
+    # the same drive (same seed, same noise) with the antenna over the outlets, beside it
+    def fix(sim: SimConfig) -> tuple[float, float, float]:
+        world = World(sim, seed=1)
+        world.run(10.0)
+        f = world.gnss.last_fix
+        assert f is not None and f.valid and f.speed_ms > 1.0
+        return f.lat_deg, f.lon_deg, world.tractor.heading
+
+    lat0, lon0, heading = fix(SimConfig())
+    lat1, lon1, _ = fix(sim)
+    north_m = math.radians(lat1 - lat0) * EARTH_R_M
+    east_m = math.radians(lon1 - lon0) * EARTH_R_M * math.cos(math.radians(lat0))
+    along = north_m * math.cos(heading) + east_m * math.sin(heading)
+    right = east_m * math.cos(heading) - north_m * math.sin(heading)
+    assert (along, right) == pytest.approx((2.5, -0.5), abs=0.01)

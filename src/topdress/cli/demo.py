@@ -14,12 +14,13 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 import can
+import tomlkit
 
 from topdress import i18n
-from topdress.config import TerminalConfig, loads_config, redacted_text
+from topdress.config import TerminalConfig, default_config, loads_config, redacted_text
 from topdress.devices.can import open_bus
 from topdress.devices.lines import open_line_source
 from topdress.display.console import Console
@@ -45,8 +46,13 @@ DEMO_PASS_M = 40.0
 DEMO_SPEED_KMH = 8.0
 
 
-def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path) -> str:
-    """The demo's configuration: the defaults, with ports and bus pointing at the simulation."""
+def demo_config_toml(
+    gnss_port: str, crop_port: str, channel: str, log_dir: Path, user_text: str = ""
+) -> str:
+    """The demo's configuration: the user's file (`topdress demo --config`), or the defaults,
+    with ports and bus pointing at the simulation and the session logs in `log_dir`."""
+    if user_text:
+        return _user_config_toml(user_text, gnss_port, crop_port, channel, log_dir)
     q = _toml_str
     return (
         "# topdress demo: the terminal's defaults, wired to the simulated machine\n"
@@ -55,6 +61,32 @@ def demo_config_toml(gnss_port: str, crop_port: str, channel: str, log_dir: Path
         f'[can]\ninterface = "virtual"\nchannel = {q(channel)}\n'
         f"[log]\ndir = {q(str(log_dir))}\n"
     )
+
+
+def _user_config_toml(
+    text: str, gnss_port: str, crop_port: str, channel: str, log_dir: Path
+) -> str:
+    """The user's file, comments kept, with its devices replaced by the simulation's: the line
+    sources on the simulated machine's pseudo-terminals, CAN on its bus (the simulated ECU
+    answers on the DBC's identifiers, with no adapter options), the logs in `log_dir`."""
+    doc = tomlkit.parse(text)
+    for section, port in (("gnss", gnss_port), ("crop", crop_port)):
+        table = _table(doc, section)
+        table["source"], table["port"], table["baud"] = "serial", port, 115200
+    can_table = _table(doc, "can")
+    can_table["interface"], can_table["channel"] = "virtual", channel
+    for whole in ("ids", "options"):
+        can_table.pop(whole, None)
+    _table(doc, "log")["dir"] = str(log_dir)
+    return "# topdress demo: your configuration, wired to the simulated machine\n" + tomlkit.dumps(
+        doc
+    )
+
+
+def _table(doc: Any, name: str) -> Any:
+    if name not in doc:
+        doc[name] = tomlkit.table()
+    return doc[name]
 
 
 def _toml_str(text: str) -> str:
@@ -202,14 +234,18 @@ def run_demo(
     keyboard: TextIO | None = None,
     display: DisplayOptions | None = None,
     passes: int = DEMO_PASSES,
+    user_text: str = "",
 ) -> int:
     """The simulated machine in a thread, the terminal in front of it; returns the exit code.
 
-    The demo's configuration is written to `out_dir/topdress-demo.toml`, where settings changed
-    while it runs are saved."""
+    `user_text`: the user's configuration (`--config FILE`; "" the defaults): the terminal runs
+    with it, and the simulated machine has its geometry (crop sensors, working width, outlet
+    offsets). The demo's configuration is written to `out_dir/topdress-demo.toml`, where
+    settings changed while it runs are saved (never into the user's file)."""
     _check_out_dir(out_dir)
+    machine_cfg = loads_config(user_text, "--config") if user_text else default_config()
     drive = Drive.field_passes(passes, DEMO_PASS_M, DEMO_SPEED_KMH)
-    world = World(SimConfig(), seed=seed, drive=drive)
+    world = World(SimConfig.of_machine(machine_cfg), seed=seed, drive=drive)
     channel = f"topdress-demo-{os.getpid()}"
     sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
     try:
@@ -218,7 +254,9 @@ def run_demo(
         sim_bus.shutdown()
         raise DeviceError(f"cannot make the simulated machine's pseudo-terminals: {exc}") from exc
     try:
-        text = demo_config_toml(machine.gnss_port.path, machine.crop_port.path, channel, out_dir)
+        text = demo_config_toml(
+            machine.gnss_port.path, machine.crop_port.path, channel, out_dir, user_text
+        )
         cfg = loads_config(text)
         config_path = out_dir / "topdress-demo.toml"
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -32,6 +32,13 @@ def register(sub: Any) -> None:
         metavar="DIR",
         help="where the session log goes (default: ./topdress-sessions)",
     )
+    demo.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="run with this configuration (its devices replaced by the simulation's; the "
+        "simulated machine takes its geometry); default: the defaults",
+    )
     demo.add_argument("--seed", type=int, default=1, help="seed of the simulated machine")
     demo.add_argument(
         "--passes",
@@ -122,7 +129,12 @@ def _demo(args: argparse.Namespace) -> int:
     from topdress.cli.display import display_options
     from topdress.config import default_config
 
-    display = display_options(default_config(), args.display, args.host, args.port)
+    user_text = ""
+    cfg = default_config()
+    if args.config is not None:
+        cfg = load_config(args.config)  # a bad file stops here, naming the file
+        user_text = read_config_text(args.config)
+    display = display_options(cfg, args.display, args.host, args.port)
     with _sigterm_stops():
         return run_demo(
             args.duration,
@@ -132,6 +144,7 @@ def _demo(args: argparse.Namespace) -> int:
             keyboard=_keyboard(),
             display=display,
             passes=args.passes,
+            user_text=user_text,
         )
 
 

@@ -13,9 +13,10 @@ import argparse
 import json
 import re
 import time
+from pathlib import Path
 from typing import Any
 
-from topdress.config import loads_config
+from topdress.config import default_config, load_config, loads_config
 from topdress.devices.can import open_bus
 from topdress.errors import ConfigError, DeviceError
 from topdress.protocol import CAL_REASONS
@@ -56,6 +57,13 @@ def register(sub: Any) -> None:
         default="field",
         help="field: passes of 40 m at 8 km/h with headland turns; stand: the machine stands "
         "(calibration)",
+    )
+    ecu.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="the terminal's configuration: the simulated machine takes its geometry (crop "
+        "sensors, working width, outlet offsets); default: the defaults'",
     )
     ecu.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     ecu.add_argument("--seed", type=int, default=1)
@@ -108,7 +116,8 @@ def _run(args: argparse.Namespace) -> int:
         drive = Drive([Segment("stop", duration_s=1e9)])
     else:
         drive = Drive.field_passes(30, 40.0, 8.0)
-    world = World(SimConfig(), seed=args.seed, drive=drive)
+    machine_cfg = load_config(args.config) if args.config is not None else default_config()
+    world = World(SimConfig.of_machine(machine_cfg), seed=args.seed, drive=drive)
     bus = open_bus(can_cfg)
     try:
         try:
@@ -118,7 +127,8 @@ def _run(args: argparse.Namespace) -> int:
         g, c = machine.gnss_port.path, machine.crop_port.path
         print(f"topdress sim ecu: the simulated machine on CAN {interface}:{channel}")
         print(f"  GNSS NMEA (RMC, VTG, GGA at 5 Hz):  {g}")
-        print(f"  crop sensors (4, at 2 Hz):          {c}")
+        n = machine_cfg.crop.sensors
+        print(f"  crop sensors ({n}, at 2 Hz):".ljust(38) + c)
         snippet = terminal_snippet(g, c, interface, channel, options)
         print("a terminal reaches it with:\n" + snippet)
         print("Ctrl-C stops it.", flush=True)

@@ -37,6 +37,9 @@ class GnssParams:
     alt_m: float = 215.0
     utc_start_s: float = 2 * 3600.0  # 02:00 UTC = 10:00 local
     date_ddmmyy: str = "150626"
+    # the antenna from the outlets (the tractor's reference point): forward and to the right, m
+    antenna_along_m: float = 0.0
+    antenna_across_m: float = 0.0
     outages: tuple[tuple[float, float], ...] = ()  # fault knob: (from_s, to_s) with no fix
     speed_bias_ms: float = 0.0  # fault knob: constant speed error
 
@@ -95,6 +98,10 @@ class GnssReceiver:
 
     def _epoch(self, te: float, x: float, y: float, v: float, heading: float) -> None:
         p = self.p
+        if p.antenna_along_m or p.antenna_across_m:  # the antenna, not the outlets, is fixed
+            sin_h, cos_h = math.sin(heading), math.cos(heading)
+            x += p.antenna_along_m * sin_h + p.antenna_across_m * cos_h
+            y += p.antenna_along_m * cos_h - p.antenna_across_m * sin_h
         g = self._rng.gauss
         vx = v * math.sin(heading) + g(0.0, p.speed_sd_ms)
         vy = v * math.cos(heading) + g(0.0, p.speed_sd_ms)

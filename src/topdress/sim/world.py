@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from dataclasses import field as dc_field
 from typing import Any
 
+from topdress.config import TerminalConfig
 from topdress.ecu import Ecu, EcuParams
 from topdress.ecu.params import check
 from topdress.protocol import CanFrame
@@ -38,7 +39,8 @@ class SimConfig:
     airline: tuple[AirLineParams, AirLineParams] = (AirLineParams(), AirLineParams())
     field: FieldParams = dc_field(default_factory=FieldParams)
     crop: CropSensorParams = dc_field(default_factory=CropSensorParams)
-    crop_offsets_m: tuple[float, float, float, float] = (-1.35, -0.45, 0.45, 1.35)
+    # the crop sensors across the track from the outlets' centre, m (right > 0)
+    crop_offsets_m: tuple[float, ...] = (-1.35, -0.45, 0.45, 1.35)
     kg_per_rev: tuple[float, float] = (0.3, 0.3)  # true fertilizer per metering revolution
     ecu: EcuParams | None = None  # None: the ECU's defaults
     bin_m: float = 0.5  # resolution of the applied-fertilizer record along the track
@@ -50,6 +52,28 @@ class SimConfig:
     # loose patches (x, y, radius m) where the ground wheel slips loose_slip_pct (at least)
     loose_patches: tuple[tuple[float, float, float], ...] = ()
     loose_slip_pct: float = 15.0
+
+    @classmethod
+    def of_machine(cls, machine: TerminalConfig, **kw: Any) -> SimConfig:
+        """The simulated machine with the geometry of a terminal's configuration, so the two
+        agree by construction: `crop.sensors` sensors spread evenly across `machine.width_m`,
+        `crop.sensor_to_meter_m` ahead of the outlets, the GNSS antenna where
+        `machine.outlet_along_m` / `outlet_across_m` put it, the metering wheels' kg/rev as
+        calibrated. `kw`: any other SimConfig field."""
+        m, crop = machine.machine, machine.crop
+        pitch = m.width_m / crop.sensors
+        # to the micrometre: the defaults' offsets are then SimConfig's own, bit for bit
+        offsets = tuple(round((i + 0.5) * pitch - m.width_m / 2, 6) for i in range(crop.sensors))
+        gnss = kw.pop("gnss", GnssParams())
+        return cls(
+            crop_offsets_m=offsets,
+            crop_ahead_m=crop.sensor_to_meter_m,
+            gnss=replace(
+                gnss, antenna_along_m=-m.outlet_along_m, antenna_across_m=-m.outlet_across_m
+            ),
+            kg_per_rev=(m.kg_per_rev_upper, m.kg_per_rev_lower),
+            **kw,
+        )
 
 
 @dataclass(frozen=True)
