@@ -40,7 +40,10 @@ import numpy as np
 from topdress import protocol
 from topdress.gnss import sentences as nmea
 from topdress.sim.live import PtyPort
-from topdress.terminal.canlink import SimulatedEcu
+
+# The ECU's twin is test code (tests/ecu_twin.py), shared with the tests.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from ecu_twin import SimulatedEcu
 
 GNSS_HZ = 10.0
 CROP_HZ = 10.0

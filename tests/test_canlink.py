@@ -11,12 +11,13 @@ import can
 import pytest
 import serial
 
+from ecu_twin import SimulatedEcu
 from topdress import protocol
 from topdress.cli.main import main
 from topdress.config import CanConfig, default_config, loads_config
 from topdress.devices.can import open_bus
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
-from topdress.terminal.canlink import CanLink, SimulatedEcu
+from topdress.terminal.canlink import CanLink
 
 _channels = itertools.count()
 

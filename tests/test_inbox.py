@@ -7,12 +7,12 @@ import threading
 import time
 from dataclasses import replace
 
+from ecu_twin import SimulatedEcu
 from topdress.config import default_config
 from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
 from topdress.gnss.nmea import make_sentence
 from topdress.terminal.app import Terminal
-from topdress.terminal.canlink import SimulatedEcu
 from topdress.terminal.inbox import Inbox
 
 

@@ -257,3 +257,26 @@ def test_crop_sensor_lines_match_the_field() -> None:
         assert len(got[i]) == 10
         truth = f.ndvi(10.0 + s.offset_m, 20.0)
         assert sum(got[i]) / 10 == pytest.approx(truth, abs=0.02)
+
+
+def test_the_cab_pcs_quick_rmc_read_is_the_terminals_decoder() -> None:
+    """The simulated receiver's lines through the cab PC's quick speed read and the terminal's
+    NmeaDecoder: the same speed (None where the decoder has no valid fix), to the bit."""
+    from topdress.gnss.nmea import NmeaDecoder
+
+    decoder = NmeaDecoder()
+    outage = GnssParams(outages=((30.0, 40.0),), talker="GP")
+    rmc = 0
+    for params in (GnssParams(), outage):
+        rx = GnssReceiver(params, seed=8)
+        for i in range(1, 6000):
+            t = i * DT
+            v = min(3.0, 0.3 * t)
+            for line in rx.step(t, 0.0, v * t, v, 0.3):
+                fix = decoder.decode(line)
+                if fix.type != "RMC":
+                    continue
+                rmc += 1
+                want = fix.speed_kmh if fix.fix_valid else None
+                assert nmea.parse_rmc_speed_kmh(line) == want
+    assert rmc > 500

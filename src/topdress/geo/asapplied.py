@@ -27,10 +27,10 @@ import numpy.typing as npt
 import shapely
 from pyproj import CRS, Transformer
 
-from topdress.config import MachineConfig, SpeedConfig, TerminalConfig, loads_config
-from topdress.errors import ConfigError, MapError
+from topdress.config import MachineConfig, SpeedConfig
+from topdress.errors import MapError
 from topdress.log.model import STATE_COLUMNS
-from topdress.log.session import SessionReader
+from topdress.log.session import SessionReader, session_config
 
 _log = logging.getLogger(__name__)
 
@@ -40,14 +40,6 @@ WGS84: Final = CRS.from_epsg(4326)
 
 FloatArray = npt.NDArray[np.float64]
 ObjArray = npt.NDArray[np.object_]
-
-
-def session_config(config_toml: str) -> TerminalConfig:
-    try:
-        return loads_config(config_toml)
-    except ConfigError as exc:
-        _log.warning("session configuration unreadable (%s): defaults used", exc)
-        return TerminalConfig()
 
 
 def rate_kg_ha(

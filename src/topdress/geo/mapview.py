@@ -21,9 +21,9 @@ import numpy.typing as npt
 import shapely
 
 from topdress.errors import MapError
-from topdress.geo.asapplied import AsApplied, build, require_points, session_config
+from topdress.geo.asapplied import AsApplied, build, require_points
 from topdress.geo.boundary import load_boundary
-from topdress.log.session import SessionReader
+from topdress.log.session import SessionReader, session_config
 
 # Colour ramp for the classes (low to high), readable in print and for most colour vision.
 RAMP: Final = ("#ffffcc", "#c2e699", "#78c679", "#31a354", "#006837", "#004529")

@@ -1,4 +1,9 @@
-"""NMEA 0183 sentence writers for the simulated receiver (RMC, VTG, GGA, CRLF, checksums)."""
+"""NMEA 0183 sentences written: RMC, VTG, GGA with CRLF and checksums (the simulated receiver's),
+and the quick RMC speed read of the simulated cab PC.
+
+The terminal reads NMEA with topdress.gnss.nmea.NmeaDecoder; the cab PC of the experiments
+reads only the speed of its own receiver's RMC, 25 times faster, and a test holds the two
+readings equal on every line the simulator writes."""
 
 from __future__ import annotations
 
@@ -105,8 +110,8 @@ def course_deg(vx_east: float, vy_north: float) -> float:
 def parse_rmc_speed_kmh(line: str) -> float | None:
     """Speed of a valid RMC line in km/h, None for any other or an invalid line.
 
-    A tiny checksum-verified reader for the simulated cab PC of the experiments;
-    the terminal has its own full NMEA reader.
+    A tiny checksum-verified reader for the simulated cab PC of the experiments; the
+    terminal's full reader (NmeaDecoder) gives the same speed for every line written here.
     """
     s = line.strip()
     if len(s) < 10 or s[0] != "$" or s[-3] != "*" or s[3:6] != "RMC":

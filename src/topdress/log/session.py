@@ -28,7 +28,8 @@ from pathlib import Path
 from typing import Any, Final
 
 from topdress import __version__
-from topdress.errors import LogError
+from topdress.config import TerminalConfig, loads_config
+from topdress.errors import ConfigError, LogError
 from topdress.log.model import (
     CAN_KINDS,
     EVENT_KINDS,
@@ -529,3 +530,13 @@ def _detail(text: Any) -> dict[str, Any]:
     except (TypeError, ValueError):
         return {"value": text}
     return value if isinstance(value, dict) else {"value": value}
+
+
+def session_config(config_toml: str) -> TerminalConfig:
+    """The configuration a session was recorded with (`SessionReader.config_toml`); the
+    defaults where it cannot be read, said in the program log (a file from another version)."""
+    try:
+        return loads_config(config_toml)
+    except ConfigError as exc:
+        _log.warning("session configuration unreadable (%s): defaults used", exc)
+        return TerminalConfig()

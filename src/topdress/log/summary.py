@@ -13,10 +13,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Final
 
 from topdress import protocol
-from topdress.config import MachineConfig, SpeedConfig, TerminalConfig, loads_config
-from topdress.errors import ConfigError
+from topdress.config import MachineConfig, SpeedConfig
 from topdress.log.model import OPERATOR_KINDS, RAW_KINDS, SOURCES, LogEvent, StateRow
-from topdress.log.session import SessionReader
+from topdress.log.session import SessionReader, session_config
 
 _log = logging.getLogger(__name__)
 
@@ -85,20 +84,12 @@ class Summary:
         return asdict(self)
 
 
-def _config(config_toml: str) -> TerminalConfig:
-    try:
-        return loads_config(config_toml)
-    except ConfigError as exc:
-        _log.warning("session configuration unreadable (%s): default machine used", exc)
-        return TerminalConfig()
-
-
 def _machine(config_toml: str) -> MachineConfig:
-    return _config(config_toml).machine
+    return session_config(config_toml).machine
 
 
 def summarise(reader: SessionReader) -> Summary:
-    cfg = _config(reader.config_toml)
+    cfg = session_config(reader.config_toml)
     machine = cfg.machine
     kg_per_rev = (machine.kg_per_rev_upper, machine.kg_per_rev_lower)
     s = Summary(str(reader.path), width_m=machine.width_m)
