@@ -1,7 +1,8 @@
-"""The operator display: the paper's three screens (main, communication, control) and the
-calibration wizards as a web page served by the terminal (NiceGUI).
+"""The operator's screens: the web display (the paper's three screens, main, communication,
+control, and the calibration wizards, with NiceGUI) and the text console with its typed
+commands.
 
-UI only: it renders the terminal's `Snapshot` and posts the operator's commands into the
-terminal's inbox; no domain class imports it. It is served from its own process
+UI only: they render the `Snapshot` (topdress.view) and post the operator's commands; nothing
+here imports the terminal. The web display is served from its own process
 (`topdress.display.process`), so the control loop never waits on it. See docs/display.md.
 """

@@ -1,1 +1,2 @@
-"""GNSS input shared by the terminal, the log tools and replay: NMEA decoding, speed tracking."""
+"""GNSS, in one place: NMEA decoding (the terminal, the log tools, replay), sentences written
+(the simulated receiver), speed tracking, UTC from the fixes."""

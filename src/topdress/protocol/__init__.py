@@ -51,38 +51,14 @@ if TYPE_CHECKING:
         is_known_id,
     )
 
-_FRAMES = (
-    "CAL_REASONS",
-    "CAL_STATES",
-    "EcuCalStatus",
-    "EcuDiag",
-    "EcuFused",
-    "EcuFusedAux",
-    "EcuParamAck",
-    "EcuSpeeds",
-    "EcuStatus",
-    "EcuTargets",
-    "Frame",
-    "PcCalCommand",
-    "PcCommand",
-    "PcGnssTime",
-    "PcParamSet",
-    "decode",
-    "encode_cal_command",
-    "encode_command",
-    "encode_gnss_time",
-    "encode_param_set",
-    "is_known_id",
-)
-_LAZY = {"database": "topdress.protocol.dbc", "dbc_text": "topdress.protocol.dbc"}
-_LAZY.update(dict.fromkeys(_FRAMES, "topdress.protocol.frames"))
+_FROM_DBC = ("database", "dbc_text")  # the rest of __all__ not imported above: the frames'
 
 
 def __getattr__(name: str) -> Any:
     """The names of the frames and the database, imported on first use."""
-    module = _LAZY.get(name)
-    if module is None:
+    if name not in __all__:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module = "topdress.protocol." + ("dbc" if name in _FROM_DBC else "frames")
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value
