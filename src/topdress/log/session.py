@@ -20,7 +20,7 @@ import os
 import sqlite3
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -29,6 +29,7 @@ from typing import Any, Final
 
 from topdress import __version__
 from topdress.errors import LogError
+from topdress.log.check import check_wal, event_detail, meta_ok, raw_ok, state_ok
 from topdress.log.model import (
     CAN_KINDS,
     EVENT_KINDS,
@@ -74,6 +75,8 @@ CREATE TABLE event (
 );
 PRAGMA user_version = {SCHEMA_VERSION};
 """
+
+SCHEMA_SQL: Final = _SCHEMA  # the tables and the version, as a script (for a salvaged copy)
 
 _INSERT_RAW: Final = "INSERT INTO raw (t, kind, line, can_id, data) VALUES (?, ?, ?, ?, ?)"
 _INSERT_STATE: Final = (
@@ -418,7 +421,12 @@ class RawRecord:
 
 
 class SessionReader:
-    """Read access to a session file (also one left behind by a killed writer)."""
+    """Read access to a session file (also one left behind by a killed writer).
+
+    It never changes the file: it opens it read-only (a `-wal` beside it is read, not merged
+    and removed, so a damaged one stays for `topdress log salvage`), or as immutable when
+    there is no `-wal`. Every row is checked (`topdress.log.check`) before it is handed on; a
+    damaged row is skipped and counted in `damaged`, and `warnings()` says what was skipped."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -426,9 +434,29 @@ class SessionReader:
             raise LogError(f"{self.path}: no such session file")
         if not self.path.is_file():
             raise LogError(f"{self.path}: not a file (give the .sqlite file of a session)")
+        self.notes: list[str] = []  # what is wrong with the file as a whole
+        self._bad: dict[str, set[int]] = {t: set() for t in ("meta", "raw", "state", "event")}
+        wal = self.path.with_name(self.path.name + "-wal")
+        has_wal = wal.exists()
+        if has_wal:
+            walcheck = check_wal(wal)
+            message = walcheck.message(wal) if walcheck is not None else None
+            if message is not None:
+                self.notes.append(message)
+        wal_mode = _wal_mode(self.path)
+        uri = self.path.resolve().as_uri() + ("?mode=ro" if has_wal else "?immutable=1")
         try:
-            self._conn = sqlite3.connect(self.path)
+            self._conn = sqlite3.connect(uri, uri=True)
+        except sqlite3.Error as exc:
+            raise LogError(f"{self.path}: cannot open: {exc}") from exc
+        try:
             version = int(self._conn.execute("PRAGMA user_version").fetchone()[0])
+            if version == 0 and wal_mode and not has_wal:
+                raise LogError(
+                    f"{self.path}: a live session copied without its -wal file (its rows are "
+                    f"in {wal.name}, which is not beside it): copy {wal.name} too, or close "
+                    "the session before copying"
+                )
             if version == 0:  # an empty file, or another program's database
                 raise LogError(f"{self.path}: not a topdress session log (no session schema)")
             if version not in READ_VERSIONS:
@@ -437,53 +465,103 @@ class SessionReader:
                     f"{READ_VERSIONS[0]} to {READ_VERSIONS[-1]}"
                 )
             self.version = version
-            rows = self._conn.execute("SELECT key, value FROM meta").fetchall()
-            self.meta: dict[str, str] = {str(k): str(v) for k, v in rows}
+            self.meta: dict[str, str] = {}
+            for rowid, key, value in self._conn.execute("SELECT rowid, key, value FROM meta"):
+                if meta_ok(key, value):
+                    self.meta[key] = value
+                else:
+                    self._bad["meta"].add(int(rowid))
+        except LogError as exc:
+            self._conn.close()
+            if self.notes:  # a damaged -wal may be why the file reads as no session
+                raise LogError("; ".join([str(exc), *self.notes])) from exc
+            raise
         except sqlite3.Error as exc:
-            raise LogError(f"{self.path}: not a readable session log: {exc}") from exc
+            self._conn.close()
+            raise LogError(
+                f"{self.path}: not a readable session log: {exc}"
+                + (f"; {_SALVAGE.format(path=self.path)}" if "malformed" in str(exc) else "")
+            ) from exc
+        #: Not closed, and no -wal beside it: the tail may be in a -wal left behind elsewhere.
+        self.wal_missing = wal_mode and not has_wal and "closed_utc" not in self.meta
 
     @property
     def config_toml(self) -> str:
         return self.meta.get("config_toml", "")
 
+    @property
+    def damaged(self) -> dict[str, int]:
+        """Damaged rows skipped so far, by table (each row counted once)."""
+        return {table: len(ids) for table, ids in self._bad.items() if ids}
+
+    def warnings(self) -> list[str]:
+        """What the commands tell the user: damage to the file as a whole, rows skipped."""
+        out = list(self.notes)
+        damaged = self.damaged
+        if damaged:
+            n = sum(damaged.values())
+            where = ", ".join(f"{table} {k}" for table, k in damaged.items())
+            out.append(
+                f"{self.path}: {n} damaged row{'s' if n != 1 else ''} skipped ({where}): "
+                "values of the wrong type or out of range"
+            )
+        return out
+
     def raw(self) -> Iterator[RawRecord]:
         """Raw inputs in time order. Inputs logged from several threads may reach the log a
         little out of order; equal times keep their logged order."""
-        for t, kind, line, can_id, data in self._select(
-            "SELECT t, kind, line, can_id, data FROM raw ORDER BY t, id"
+        bad = self._bad["raw"]
+        for rid, t, kind, line, can_id, data in self._select(
+            "SELECT id, t, kind, line, can_id, data FROM raw ORDER BY t, id"
         ):
-            yield RawRecord(t, kind, line, can_id, data)
+            if raw_ok(t, kind, line, can_id, data):
+                yield RawRecord(float(t), kind, line, can_id, data)
+            else:
+                bad.add(rid)
 
     def states(self) -> Iterator[StateRow]:
         """State rows in the order they were logged. Columns added since a file was written
         (utc, outlet position, ...) read as None."""
         present = self.state_columns()
-        cols = [c for c in STATE_COLUMNS if c in present]
-        for values in self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"):
+        cols = tuple(c for c in STATE_COLUMNS if c in present)
+        for values in self._state_rows(cols):
             yield StateRow(**dict(zip(cols, values, strict=True)))
 
+    def _state_rows(self, cols: tuple[str, ...]) -> Iterator[tuple[Any, ...]]:
+        bad = self._bad["state"]
+        for row in self._select(f"SELECT id, {', '.join(cols)} FROM state ORDER BY id"):
+            values = row[1:]
+            if state_ok(cols, values):
+                yield values
+            else:
+                bad.add(row[0])
+
     def events(self) -> Iterator[LogEvent]:
-        """The events in time order (none in a version-1 file). A detail that is not a JSON
-        object (written by other software) reads as {"value": what it holds}."""
+        """The events in time order (none in a version-1 file)."""
         if self.version < 2:
             return
-        for t, kind, text in self._select("SELECT t, kind, detail FROM event ORDER BY t, id"):
-            yield LogEvent(float(t), str(kind), _detail(text))
+        bad = self._bad["event"]
+        for rid, t, kind, text in self._select(
+            "SELECT id, t, kind, detail FROM event ORDER BY t, id"
+        ):
+            detail = event_detail(t, kind, text)
+            if detail is None:
+                bad.add(rid)
+            else:
+                yield LogEvent(float(t), kind, detail)
 
     def event_counts(self) -> dict[str, int]:
         """Number of events of each kind."""
-        if self.version < 2:
-            return {}
-        rows = self._select("SELECT kind, count(*) FROM event GROUP BY kind ORDER BY kind")
-        return {str(kind): int(n) for kind, n in rows}
+        counts = Counter(ev.kind for ev in self.events())
+        return dict(sorted(counts.items()))
 
     def state_values(self, columns: tuple[str, ...]) -> dict[str, list[Any]]:
         """The given state columns in logged order, as lists (bulk reading for exports);
         a column this file lacks reads as None."""
         present = self.state_columns()
-        cols = [c for c in columns if c in present]
-        rows = list(self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"))
-        n = len(rows)
+        cols = tuple(c for c in columns if c in present)
+        rows = list(self._state_rows(cols)) if cols else []
+        n = len(rows) if cols else self.count("state")
         got = dict(zip(cols, (list(c) for c in zip(*rows, strict=True)), strict=True)) if n else {}
         return {c: got.get(c, [None] * n) if c in present else [None] * n for c in columns}
 
@@ -492,9 +570,14 @@ class SessionReader:
         return frozenset(str(r[1]) for r in self._select("PRAGMA table_info(state)"))
 
     def raw_counts(self) -> dict[str, int]:
-        """Number of raw inputs of each kind."""
+        """Number of raw inputs of each kind (rows of no known kind are counted as damaged)."""
         rows = self._select("SELECT kind, count(*) FROM raw GROUP BY kind")
-        return {str(kind): int(n) for kind, n in rows}
+        counts = {kind: int(n) for kind, n in rows if kind in RAW_KINDS}
+        if sum(counts.values()) < self.count("raw"):
+            known = ", ".join(f"'{k}'" for k in RAW_KINDS)
+            ids = self._select(f"SELECT id FROM raw WHERE kind IS NULL OR kind NOT IN ({known})")
+            self._bad["raw"].update(int(r[0]) for r in ids)
+        return counts
 
     def count(self, table: str) -> int:
         if table not in ("raw", "state", "event"):
@@ -509,8 +592,7 @@ class SessionReader:
             yield from self._conn.execute(sql)
         except sqlite3.Error as exc:
             raise LogError(
-                f"{self.path}: damaged session log ({exc}); "
-                f"`sqlite3 {self.path} .recover` may save what is left"
+                f"{self.path}: damaged session log ({exc}); {_SALVAGE.format(path=self.path)}"
             ) from exc
 
     def close(self) -> None:
@@ -523,9 +605,14 @@ class SessionReader:
         self.close()
 
 
-def _detail(text: Any) -> dict[str, Any]:
+_SALVAGE: Final = "`topdress log salvage {path} --out NEW.sqlite` saves what is left"
+
+
+def _wal_mode(path: Path) -> bool:
+    """The file's header says WAL (bytes 18 and 19 are 2): its last writes may be in a -wal."""
     try:
-        value = json.loads(text)
-    except (TypeError, ValueError):
-        return {"value": text}
-    return value if isinstance(value, dict) else {"value": value}
+        with path.open("rb") as f:
+            head = f.read(20)
+    except OSError:
+        return False
+    return len(head) == 20 and head[18] == 2 and head[19] == 2
