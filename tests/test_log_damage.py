@@ -185,3 +185,15 @@ def test_salvage_of_no_session_is_a_clear_error(
     assert not (tmp_path / "n.sqlite").exists()
     with pytest.raises(LogError):
         SessionReader(junk)
+
+
+def test_a_line_that_is_not_utf8_is_one_damaged_row(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # One flipped bit in an NMEA line made sqlite3 stop the whole export (exit 2).
+    path = closed_session(tmp_path)
+    poke(path, "UPDATE raw SET line = CAST(x'2447505203ff4d43' AS TEXT) WHERE id = 1")
+    ev = tmp_path / "ev.ndjson"
+    assert main(["log", "export", str(path), "--events", str(ev)]) == 0
+    assert "1 damaged row skipped (raw 1)" in capsys.readouterr().err
+    assert len(ev.read_text().splitlines()) == 200 * 3 + 40 + 200 - 1  # + wheel counts

@@ -160,6 +160,25 @@ def event_detail(t: Any, kind: Any, detail: Any) -> dict[str, Any] | None:
     return value
 
 
+class Undecodable:
+    """A text value that is not UTF-8 (a flipped bit in a line): not a str, so it fails the
+    checks and its row is skipped, where sqlite3 would stop the whole query."""
+
+    def __repr__(self) -> str:
+        return "<not UTF-8>"
+
+
+UNDECODABLE: Final = Undecodable()
+
+
+def text_factory(raw: bytes) -> str | Undecodable:
+    """The reading connections' text factory (sqlite3 `Connection.text_factory`)."""
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return UNDECODABLE
+
+
 def meta_ok(key: Any, value: Any) -> bool:
     return type(key) is str and type(value) is str
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from topdress.errors import LogError
-from topdress.log.check import event_detail, meta_ok, raw_ok, state_ok
+from topdress.log.check import event_detail, meta_ok, raw_ok, state_ok, text_factory
 from topdress.log.model import STATE_COLUMNS
 from topdress.log.session import SCHEMA_SQL
 
@@ -75,6 +75,7 @@ def salvage(source: Path, out: Path) -> SalvageReport:
         src = sqlite3.connect(uri, uri=True)
     except sqlite3.Error as exc:
         raise LogError(f"{source}: cannot open: {exc}") from exc
+    src.text_factory = text_factory
     try:
         # As the sqlite3 shell's .dump: a file shorter than its header says is read as far
         # as it goes instead of refused (a connection setting; nothing is written).

@@ -29,7 +29,14 @@ from typing import Any, Final
 
 from topdress import __version__
 from topdress.errors import LogError
-from topdress.log.check import check_wal, event_detail, meta_ok, raw_ok, state_ok
+from topdress.log.check import (
+    check_wal,
+    event_detail,
+    meta_ok,
+    raw_ok,
+    state_ok,
+    text_factory,
+)
 from topdress.log.model import (
     CAN_KINDS,
     EVENT_KINDS,
@@ -449,6 +456,7 @@ class SessionReader:
             self._conn = sqlite3.connect(uri, uri=True)
         except sqlite3.Error as exc:
             raise LogError(f"{self.path}: cannot open: {exc}") from exc
+        self._conn.text_factory = text_factory
         try:
             version = int(self._conn.execute("PRAGMA user_version").fetchone()[0])
             if version == 0 and wal_mode and not has_wal:
