@@ -4,6 +4,7 @@ no output larger than a bound set by the session's size. Seeded: the same mutant
 
 from __future__ import annotations
 
+import contextlib
 import random
 import shutil
 import sqlite3
@@ -11,8 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from session_rig import closed_session, live_copy
 
+from session_rig import closed_session, live_copy
 from topdress.cli import main
 
 SEED = 22
@@ -33,10 +34,9 @@ def _values(path: Path, rng: random.Random) -> None:
             col = rng.choice(cols)
             n = conn.execute(f"SELECT max(rowid) FROM {table}").fetchone()[0]
             rowid = rng.randint(1, n)
-            try:
-                conn.execute(f"UPDATE {table} SET {col} = ? WHERE rowid = ?", (rng.choice(bad), rowid))
-            except sqlite3.IntegrityError:  # NOT NULL or CHECK: SQLite refused this one
-                pass
+            sql = f"UPDATE {table} SET {col} = ? WHERE rowid = ?"
+            with contextlib.suppress(sqlite3.IntegrityError):  # NOT NULL or CHECK refused it
+                conn.execute(sql, (rng.choice(bad), rowid))
     conn.close()
 
 
