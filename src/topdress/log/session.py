@@ -158,6 +158,8 @@ class SessionLog:
         self.lost = 0  # rows in batches that failed to commit
         self.errors = 0  # write failures (open, commit)
         self.last_error: str | None = None
+        self._first_utc: float | None = None
+        self._last_utc: float | None = None
         self._commit_failing = False
         self._count_lock = threading.Lock()
         self.commit_period_s = commit_period_s
@@ -232,6 +234,11 @@ class SessionLog:
 
     def state(self, row: StateRow) -> None:
         """Enqueue one decoded state row."""
+        if row.utc is not None and row.utc_source == "gnss":
+            # The session's start and end in the receiver's UTC, for the meta at close.
+            if self._first_utc is None:
+                self._first_utc = row.utc
+            self._last_utc = row.utc
         self._put(("state", row.as_tuple()))
 
     def event(self, ev: LogEvent) -> None:
@@ -361,7 +368,9 @@ class SessionLog:
     def _finish(self) -> None:
         assert self._conn is not None
         counters = {
-            "closed_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            # From the state rows' GNSS time, never the PC's clock (empty: no fix all session)
+            "start_utc": _iso(self._first_utc),
+            "closed_utc": _iso(self._last_utc),
             "dropped": str(self.dropped),
             "lost": str(self.lost),
             "errors": str(self.errors),
@@ -373,6 +382,12 @@ class SessionLog:
             self._fail(f"closing failed: {exc}")
         finally:
             self._conn.close()
+
+
+def _iso(utc: float | None) -> str:
+    if utc is None:
+        return ""
+    return datetime.fromtimestamp(utc, UTC).isoformat(timespec="milliseconds")
 
 
 def _raw_record(kind: str, t: float, payload: Any) -> _RawRec | None:

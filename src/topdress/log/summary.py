@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
 from typing import Any, Final
 
 from topdress import protocol
@@ -77,6 +78,8 @@ class Summary:
     stops: list[StopEvent] = field(default_factory=list)  # headlands: stops and entries
     stops_zero_pct: float | None = None  # stops after which the metering reached zero
     headland_zero_pct: float | None = None  # headland entries likewise (with a boundary)
+    start_utc: float | None = None  # the first and last state rows' GNSS time (POSIX s)
+    end_utc: float | None = None
     schema: int = 0  # the file's schema version (1: no events recorded)
     events: dict[str, int] = field(default_factory=dict)  # logged events by kind
     actions: list[Action] = field(default_factory=list)  # the operator's, in time order
@@ -107,7 +110,7 @@ def summarise(reader: SessionReader) -> Summary:
     s.log_meta = {
         k: v
         for k, v in reader.meta.items()
-        if k in ("created_utc", "closed_utc", "dropped", "lost", "errors")
+        if k in ("created_utc", "start_utc", "closed_utc", "dropped", "lost", "errors")
     }
     layers = [LayerSummary(), LayerSummary()]
     first: StateRow | None = None
@@ -121,6 +124,10 @@ def summarise(reader: SessionReader) -> Summary:
         else:
             _integrate(s, layers, kg_per_rev, prev, row.t - prev.t)
         prev = row
+        if row.utc is not None and row.utc_source == "gnss":
+            s.end_utc = row.utc
+            if s.start_utc is None:
+                s.start_utc = row.utc
     if first is not None and prev is not None:
         s.duration_s = prev.t - first.t
     s.schema = reader.version
@@ -240,6 +247,10 @@ def format_text(s: Summary) -> str:
             f"{name + ' layer':<16} applied {layer.applied_kg:.2f} kg ({rate}), "
             f"target {layer.target_kg:.2f} kg, rate error {err}"
         )
+    if s.start_utc is not None and s.end_utc is not None:
+        lines.append(f"time (GNSS)      {_utc_text(s.start_utc)} to {_utc_text(s.end_utc)} UTC")
+    else:
+        lines.append("time (GNSS)      none (no fix with a date in the session)")
     sources = ", ".join(f"{k} {v:.1f} s" for k, v in s.source_s.items())
     lines.append(f"speed source     {sources}")
     faults = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(s.faults_s.items())) or "none"
@@ -275,3 +286,7 @@ def format_text(s: Summary) -> str:
             "log              not closed cleanly (power cut or kill): the tail may be missing"
         )
     return "\n".join(lines)
+
+
+def _utc_text(utc: float) -> str:
+    return datetime.fromtimestamp(utc, UTC).strftime("%Y-%m-%d %H:%M:%S")
