@@ -14,6 +14,7 @@ rows in `dropped`. Nothing here raises into the caller after `create()` has retu
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import logging
 import os
@@ -24,6 +25,7 @@ from collections import Counter, deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Final
 
@@ -106,6 +108,22 @@ class _Sync:
 
 _STOP: Final = object()
 
+#: Free space kept for closing (the last commit, the counters, the checkpoint): a file beside
+#: the session, allocated at start and given back when the disk is full (half, to record the
+#: failure in the file) and at close (the rest).
+RESERVE_BYTES: Final = 256 * 1024
+#: Below this much free space on the log's disk the log reports LOW_SPACE (it keeps writing).
+MIN_FREE_BYTES: Final = 50 * 1024 * 1024
+
+
+class LogHealth(StrEnum):
+    """The session log's state, for the control loop to show (an alarm unless OK)."""
+
+    OK = "ok"
+    LOW_SPACE = "low_space"  # writing, but the disk's free space is below the margin
+    DISK_FULL = "disk_full"  # the last commit failed: no space (or the max_bytes cap)
+    WRITE_FAILING = "write_failing"  # the last commit (or the creation) failed otherwise
+
 
 def _connect(path: Path) -> sqlite3.Connection:
     # isolation_level=None: transactions are explicit (BEGIN/COMMIT in the writer).
@@ -134,6 +152,47 @@ def _claim_path(directory: Path, name: str | None) -> Path:
         return path
 
 
+def _reserve_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.reserve")
+
+
+def _make_reserve(path: Path, size: int) -> int | None:
+    """The reserve file, allocated (not sparse) and locked while the session is open; None
+    when the disk has no room for it (the log works without)."""
+    if size <= 0:
+        return None
+    try:
+        fd = os.open(path, os.O_CREAT | os.O_RDWR | os.O_CLOEXEC, 0o644)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        os.posix_fallocate(fd, 0, size)
+    except OSError:
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    return fd
+
+
+def _remove_stale_reserves(directory: Path) -> None:
+    """Reserve files of sessions that ended without closing (a kill, a power cut): nobody
+    holds their lock. A running session's (another terminal's) stays."""
+    for path in directory.glob(f".*{SUFFIX}.reserve"):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CLOEXEC)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            path.unlink()
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+
 def _remove_unfinished(path: Path) -> None:
     """A file whose schema could not be written (disk full at start) holds nothing: remove it
     with its WAL and shared-memory files, rather than leave a 0-byte session behind."""
@@ -152,6 +211,10 @@ class SessionLog:
         queue_size: int,
         commit_period_s: float,
         open_error: str | None,
+        *,
+        reserve: int | None = None,
+        max_pages: int | None = None,
+        min_free_bytes: int = MIN_FREE_BYTES,
     ) -> None:
         self.path = path
         self.dropped = 0  # rows refused because the queue was full or the log closed/failed
@@ -161,6 +224,12 @@ class SessionLog:
         self._first_utc: float | None = None
         self._last_utc: float | None = None
         self._commit_failing = False
+        self._health = LogHealth.OK if open_error is None else LogHealth.WRITE_FAILING
+        self.free_bytes: int | None = None  # on the log's disk, measured at each commit
+        self.min_free_bytes = min_free_bytes
+        self._reserve = reserve  # the reserve file's descriptor (locked), None: none
+        self._max_pages = max_pages  # the max_bytes cap in pages
+        self._failure_recorded = False
         self._count_lock = threading.Lock()
         self.commit_period_s = commit_period_s
         self._conn = conn
@@ -175,6 +244,8 @@ class SessionLog:
         self._thread: threading.Thread | None = None
         if open_error is not None:
             self._fail(open_error)
+        else:
+            self._check_space()
         if conn is not None:
             self._thread = threading.Thread(target=self._run, name="session-log", daemon=True)
             self._thread.start()
@@ -189,12 +260,16 @@ class SessionLog:
         queue_size: int = 20000,
         commit_period_s: float = 0.5,
         max_bytes: int | None = None,
+        min_free_bytes: int = MIN_FREE_BYTES,
+        reserve_bytes: int = RESERVE_BYTES,
     ) -> SessionLog:
         """Create a new session file in `directory` (made if missing) holding `config_toml`.
 
         Never raises on I/O: if the file cannot be made, the returned log has `ok` False,
         `errors` 1 and `last_error` set, and counts every row given to it as dropped.
-        `max_bytes` caps the file size (SQLite reports "disk full" beyond it).
+        `max_bytes` caps the file size (SQLite reports "disk full" beyond it);
+        `min_free_bytes`: the free-space margin below which `health` is LOW_SPACE;
+        `reserve_bytes`: the space set aside for closing (see RESERVE_BYTES).
         """
         directory = Path(directory)
         path = directory / f"{name or 'session'}{SUFFIX}"
@@ -205,9 +280,11 @@ class SessionLog:
             path = _claim_path(directory, name)
             claimed = True
             conn = _connect(path)
+            max_pages = None
             if max_bytes is not None:
                 page_size = int(conn.execute("PRAGMA page_size").fetchone()[0])
-                conn.execute(f"PRAGMA max_page_count = {max(1, max_bytes // page_size)}")
+                max_pages = max(1, max_bytes // page_size)
+                conn.execute(f"PRAGMA max_page_count = {max_pages}")
             _init_schema(conn, config_toml)
         except (OSError, sqlite3.Error) as exc:
             if conn is not None:
@@ -215,7 +292,23 @@ class SessionLog:
             if claimed:
                 _remove_unfinished(path)
             return cls(path, None, queue_size, commit_period_s, f"cannot create the file: {exc}")
-        return cls(path, conn, queue_size, commit_period_s, None)
+        _remove_stale_reserves(directory)
+        reserve = _make_reserve(_reserve_path(path), reserve_bytes)
+        return cls(
+            path,
+            conn,
+            queue_size,
+            commit_period_s,
+            None,
+            reserve=reserve,
+            max_pages=max_pages,
+            min_free_bytes=min_free_bytes,
+        )
+
+    @property
+    def health(self) -> LogHealth:
+        """OK, LOW_SPACE, DISK_FULL or WRITE_FAILING (read from any thread: one attribute)."""
+        return self._health
 
     @property
     def ok(self) -> bool:
@@ -356,14 +449,75 @@ class SessionLog:
         except sqlite3.Error as exc:
             self.lost += n
             self._commit_failing = True
+            full = getattr(exc, "sqlite_errorcode", None) == sqlite3.SQLITE_FULL
+            self._health = LogHealth.DISK_FULL if full else LogHealth.WRITE_FAILING
             self._fail(f"commit of {n} rows failed: {exc}")
             if self._conn.in_transaction:
                 self._conn.execute("ROLLBACK")
+            self._record_failure(str(exc), full)
         else:
             if self._commit_failing:
                 _log.warning("session log %s: writing again", self.path)
             self._commit_failing = False
             self.last_error = None
+            self._check_space()
+
+    def _check_space(self) -> None:
+        """Measure the free space (a statvfs, microseconds) and set the health from it."""
+        try:
+            st = os.statvfs(self.path.parent)
+        except OSError:
+            return
+        self.free_bytes = st.f_bavail * st.f_frsize
+        low = self.free_bytes < self.min_free_bytes
+        self._health = LogHealth.LOW_SPACE if low else LogHealth.OK
+
+    def _record_failure(self, error: str, full: bool) -> None:
+        """The first failure of a session goes into the file itself, so that `log summary`
+        tells a full disk from a power cut: half the reserve is given back to make room."""
+        if self._failure_recorded or self._conn is None:
+            return
+        self._failure_recorded = True
+        self._release_reserve(half=True)
+        record = {
+            "kind": "disk_full" if full else "write_failed",
+            "error": error,
+            "utc": _iso(self._last_utc),
+            "rows_lost_so_far": self.lost,
+        }
+        try:
+            self._with_room(
+                lambda conn: conn.execute(
+                    "INSERT OR REPLACE INTO meta VALUES ('write_failed', ?)",
+                    (json.dumps(record, separators=(",", ":")),),
+                )
+            )
+        except sqlite3.Error as exc:
+            _log.error("session log %s: the failure could not be recorded: %s", self.path, exc)
+
+    def _with_room(self, write: Any) -> None:
+        """Run `write(conn)` (autocommit) with the max_bytes cap lifted a little."""
+        assert self._conn is not None
+        if self._max_pages is not None:
+            self._conn.execute(f"PRAGMA max_page_count = {self._max_pages + 64}")
+        try:
+            write(self._conn)
+        finally:
+            if self._max_pages is not None:
+                self._conn.execute(f"PRAGMA max_page_count = {self._max_pages}")
+
+    def _release_reserve(self, half: bool = False) -> None:
+        fd = self._reserve
+        if fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if half:
+                os.ftruncate(fd, os.fstat(fd).st_size // 2)
+                return
+            _reserve_path(self.path).unlink()
+        with contextlib.suppress(OSError):
+            os.close(fd)
+        self._reserve = None
 
     def _finish(self) -> None:
         assert self._conn is not None
@@ -375,11 +529,20 @@ class SessionLog:
             "lost": str(self.lost),
             "errors": str(self.errors),
         }
+        # The reserve is given back first: closing must not need the space the disk lacks.
+        self._release_reserve()
         try:
-            self._conn.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)", counters.items())
-            self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            self._with_room(
+                lambda conn: conn.executemany(
+                    "INSERT OR REPLACE INTO meta VALUES (?, ?)", counters.items()
+                )
+            )
         except sqlite3.Error as exc:
             self._fail(f"closing failed: {exc}")
+        try:
+            self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except sqlite3.Error as exc:  # the -wal stays, with the counters in it: still closed
+            _log.warning("session log %s: checkpoint at close failed: %s", self.path, exc)
         finally:
             self._conn.close()
 

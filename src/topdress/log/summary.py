@@ -7,6 +7,7 @@ integrated and is reported as a gap instead.
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
@@ -78,6 +79,8 @@ class Summary:
     stops: list[StopEvent] = field(default_factory=list)  # headlands: stops and entries
     stops_zero_pct: float | None = None  # stops after which the metering reached zero
     headland_zero_pct: float | None = None  # headland entries likewise (with a boundary)
+    write_failure: dict[str, Any] | None = None  # the log's first write failure, as recorded
+    wal_missing: bool = False  # not closed, and no -wal beside the file
     start_utc: float | None = None  # the first and last state rows' GNSS time (POSIX s)
     end_utc: float | None = None
     schema: int = 0  # the file's schema version (1: no events recorded)
@@ -112,6 +115,8 @@ def summarise(reader: SessionReader) -> Summary:
         for k, v in reader.meta.items()
         if k in ("created_utc", "start_utc", "closed_utc", "dropped", "lost", "errors")
     }
+    s.write_failure = _write_failure(reader.meta.get("write_failed"))
+    s.wal_missing = reader.wal_missing
     layers = [LayerSummary(), LayerSummary()]
     first: StateRow | None = None
     prev: StateRow | None = None
@@ -281,12 +286,38 @@ def format_text(s: Summary) -> str:
     lines.append(f"raw inputs       {raw}")
     if s.log_meta:
         lines.append("log              " + ", ".join(f"{k} {v}" for k, v in s.log_meta.items()))
+    failure = s.write_failure
+    if failure is not None:
+        what = "disk full" if failure.get("kind") == "disk_full" else "write failed"
+        when = f" at {failure['utc']} UTC" if failure.get("utc") else ""
+        lines.append(f"log              {what}{when}: {failure.get('error', '')}")
     if "closed_utc" not in s.log_meta:
-        lines.append(
-            "log              not closed cleanly (power cut or kill): the tail may be missing"
-        )
+        if failure is not None:
+            lines.append(
+                "log              not closed cleanly after the log writes failed (see above); "
+                "rows from then on are missing"
+            )
+        else:
+            lines.append(
+                "log              not closed cleanly (power cut or kill): the tail may be missing"
+            )
+        if s.wal_missing:
+            lines.append(
+                "log              and no -wal file beside it: if this is a copy, the -wal "
+                "of the original holds the tail"
+            )
     return "\n".join(lines)
 
 
 def _utc_text(utc: float) -> str:
     return datetime.fromtimestamp(utc, UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _write_failure(text: str | None) -> dict[str, Any] | None:
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return {"kind": "write_failed", "error": text}
+    return value if isinstance(value, dict) else {"kind": "write_failed", "error": text}
