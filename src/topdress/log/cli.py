@@ -216,10 +216,10 @@ def _salvage(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from topdress.config import default_config, load_config
     from topdress.log.events import read_file
-    from topdress.log.replay import MAX_IDLE_S, ReplayStats, replay, write_csv
+    from topdress.log.replay import MAX_IDLE_S, ReplayStats, needed, replay, write_csv
 
     cfg = load_config(args.config) if args.config is not None else default_config()
-    read = read_file(args.events)
+    read = read_file(args.events, needed)
     for number, reason in read.bad:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
     stats = ReplayStats()
@@ -227,7 +227,7 @@ def _replay(args: argparse.Namespace) -> int:
     with open_text_output(args.out, [args.events]) as out:
         write_csv(rows, out)
     print(
-        f"{args.out}: {len(rows)} speed updates from {len(read.events)} events"
+        f"{args.out}: {len(rows)} speed updates from {read.parsed} events"
         + (f" ({len(read.bad)} malformed lines skipped)" if read.bad else "")
         + (f", {stats.gaps_cut} pauses over {MAX_IDLE_S:g} s cut" if stats.gaps_cut else ""),
         file=sys.stderr if is_stdout(args.out) else sys.stdout,
