@@ -53,6 +53,7 @@ bench: $(STAMP) browser
 	$(BIN)/python bench/terminal_bench.py
 	$(BIN)/python bench/maps_bench.py
 	$(BIN)/python bench/display_bench.py
+	$(BIN)/python bench/longday_bench.py
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c

@@ -201,3 +201,20 @@ def test_a_byte_order_mark_does_not_cost_the_first_event(tmp_path: Path) -> None
     )
     result = read_file(path)
     assert result.bad == [] and result.events == [WheelEvent(1.0, 7), WheelEvent(2.0, 9)]
+
+
+@pytest.mark.parametrize(
+    "event",
+    [
+        NmeaEvent(5123.207, '$GNRMC,08"15\\03\r\n'),
+        CropEvent(1e-7, "2,0.04\x00,é,\u2028"),
+        WheelEvent(3.0, 2**40),
+        CanEvent(0.1, 0x1FFFFFFF, b"\x00\xff", "rx"),
+        CanEvent(12.5, 0, b"", None),
+        NmeaEvent(float("nan"), "x"),
+    ],
+)
+def test_the_fast_json_is_what_json_dumps_gives(event: Event) -> None:
+    from topdress.log.events import _to_json_slow
+
+    assert to_json(event) == _to_json_slow(event)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -51,17 +52,23 @@ def test_outlet_carried_forward_by_the_odometer_and_heading_held_when_slow() -> 
     assert tr.heading_deg == 90.0
 
 
-def test_utc_from_the_fix_else_the_system_clock() -> None:
-    clock = UtcClock(system=lambda: 1_000.0)
-    assert clock.now(5.0) == (1_000.0, "system")
+def test_utc_from_the_fix_carried_forward_never_the_system_clock(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = UtcClock()
+    assert clock.now(5.0) is None  # no fix yet: no UTC, not the PC's clock
     clock.on_fix(5.0, "2026-11-22T08:15:03.200Z")
     base = parse_fix_utc("2026-11-22T08:15:03.200Z")
     assert base is not None
-    utc, src = clock.now(5.5)
+    utc, src = clock.now(5.5) or (0.0, "")
     assert src == "gnss" and utc == pytest.approx(base + 0.5)
     clock.on_fix(6.0, "08:15:04.000")  # GGA: time of day without a date is not enough
-    assert clock.now(6.0)[0] == pytest.approx(base + 1.0)
-    assert clock.now(30.0) == (1_000.0, "system")  # a fix too old to carry forward
+    assert (clock.now(6.0) or (0.0,))[0] == pytest.approx(base + 1.0)
+    # 25 s, then 10 min without a fix, the PC's clock set back a day meanwhile: the times
+    # go on from the receiver's (they switched to the system clock after 10 s, and ran back)
+    monkeypatch.setattr(time, "time", lambda: base - 86_400.0)
+    assert clock.now(30.0) == (pytest.approx(base + 25.0), "gnss")
+    assert clock.now(605.0) == (pytest.approx(base + 600.0), "gnss")
 
 
 def test_eq4_inverted_in_c_is_linear_in_the_meter_speed() -> None:

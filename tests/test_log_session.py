@@ -207,7 +207,7 @@ def test_damaged_page_is_a_clear_error_when_read(
     with SessionReader(log.path) as reader, pytest.raises(LogError, match="damaged session log"):
         list(reader.states())
     assert main(["log", "summary", str(log.path)]) == 2
-    assert f"sqlite3 {log.path} .recover" in capsys.readouterr().err
+    assert f"topdress log salvage {log.path} --out" in capsys.readouterr().err
 
 
 def test_sessions_created_at_once_in_one_directory_each_get_their_own_file(

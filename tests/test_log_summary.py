@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from topdress.cli.main import main
 from topdress.log.model import StateRow
 from topdress.log.session import SessionLog, SessionReader
-from topdress.log.summary import summarise
+from topdress.log.summary import format_text, summarise
 
 CONFIG = "[machine]\nwidth_m = 3.6\nkg_per_rev_upper = 0.3\nkg_per_rev_lower = 0.2\n"
 
@@ -85,3 +86,36 @@ def test_summary_command_text_and_json(tmp_path: Path, capsys: pytest.CaptureFix
     data = json.loads(capsys.readouterr().out)
     assert data["layers"]["lower"]["applied_kg"] == pytest.approx(6.84)
     assert data["log_meta"]["dropped"] == "0"
+
+
+def test_start_and_end_are_the_receivers_utc_not_the_pcs_clock(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # An 85 s run logged while the PC's clock was set back a day: its log said it ended 23 h
+    # after it started (created and closed from the PC's clock).
+    import topdress.log.session as session
+
+    class Jumping(session.datetime):  # type: ignore[name-defined,misc]
+        calls = 0
+
+        @classmethod
+        def now(cls, tz: object = None) -> session.datetime:  # type: ignore[name-defined]
+            cls.calls += 1
+            return (
+                session.datetime(2020, 1, 1, tzinfo=session.UTC)
+                if cls.calls > 1
+                else (session.datetime(2026, 5, 28, 12, 0, tzinfo=session.UTC))
+            )
+
+    monkeypatch.setattr(session, "datetime", Jumping)
+    utc0 = 1_780_000_000.0
+    with SessionLog.create(tmp_path, CONFIG) as log:
+        for i in range(851):
+            r = row(50.0 + i * 0.1, 7.2, "gnss", 21.6, 21.6)
+            log.state(replace(r, utc=utc0 + i * 0.1, utc_source="gnss"))
+    with SessionReader(log.path) as reader:
+        assert reader.meta["start_utc"] == "2026-05-28T20:26:40.000+00:00"
+        assert reader.meta["closed_utc"] == "2026-05-28T20:28:05.000+00:00"
+        s = summarise(reader)
+    assert s.start_utc == utc0 and s.end_utc == pytest.approx(utc0 + 85.0)
+    assert "2026-05-28 20:26:40 to 2026-05-28 20:28:05 UTC" in format_text(s)

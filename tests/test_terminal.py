@@ -516,3 +516,27 @@ def test_the_logged_row_and_the_snapshot_mean_the_same_speeds(tmp_path: Path) ->
         s.gnss_kmh is not None and abs(s.v_gnss_kmh - s.gnss_kmh) < 0.3  # type: ignore[operator]
         for s in uniform
     )
+
+
+def test_a_full_log_disk_is_an_alarm_and_an_event(tmp_path: Path) -> None:
+    # A full disk was an ERROR line on the console and a log_err counter, nothing more.
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path, DEFAULT_TOML, max_bytes=200 * 1024)
+    rig = VirtualRig(cfg, _drive(8.0, 60.0), session)
+    try:
+        rig.run(5.0)
+        assert "log_disk_full" not in {a.name for a in rig.snapshots[-1][1].alarms}
+        for k in range(60):  # the writer commits in real time, the rig runs in virtual time
+            rig.run(5.0 + (k + 1) * 0.5)
+            session.sync()
+            if session.lost:
+                break
+        rig.run(rig.world.t_s + 0.2)  # the next ticks see the health
+    finally:
+        rig.close()
+    alarms = {a.name: a for a in rig.snapshots[-1][1].alarms}
+    assert "log_disk_full" in alarms and alarms["log_disk_full"].state == "active"
+    assert any("log disk full" in e for _, e in rig.events)
+    with SessionReader(session.path) as reader:
+        assert '"kind":"disk_full"' in reader.meta["write_failed"]
+        assert "closed_utc" in reader.meta

@@ -111,8 +111,14 @@ def atomic_write(path: Path, text: str) -> None:
     """Write `text` to `path` so that a crash leaves the old or the new file, never a mix."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError:
+        # A full disk: no 0-byte temporary file left beside the sessions.
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise

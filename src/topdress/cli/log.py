@@ -68,6 +68,13 @@ def register(sub: Any) -> None:
     )
     amap.set_defaults(func=_map)
 
+    salvage = log_sub.add_parser(
+        "salvage", help="copy what can still be read of a damaged session into a new file"
+    )
+    salvage.add_argument("session", type=Path, help="session file (.sqlite)")
+    salvage.add_argument("--out", type=Path, required=True, metavar="NEW.sqlite")
+    salvage.set_defaults(func=_salvage)
+
     summary = log_sub.add_parser("summary", help="duration, distance, area, fertilizer, faults")
     summary.add_argument("session", type=Path, help="session file (.sqlite)")
     summary.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -151,6 +158,7 @@ def _export(args: argparse.Namespace) -> int:
                 args.can, [args.session], lambda tmp: write_trace(reader, tmp), args.can.suffix
             )
             print(f"{args.can}: {n} CAN frames", file=report)
+    _warn(reader)
     return 0
 
 
@@ -167,6 +175,7 @@ def _map(args: argparse.Namespace) -> int:
             suffix,
         )
     print(line, file=sys.stderr if is_stdout(args.out) else sys.stdout)
+    _warn(reader)
     return 0
 
 
@@ -180,16 +189,37 @@ def _summary(args: argparse.Namespace) -> int:
         print(json.dumps(summary.as_dict(), indent=2))
     else:
         print(format_text(summary))
+    _warn(reader)
+    return 0
+
+
+def _warn(reader: Any) -> None:
+    """What the reader skipped or found damaged: the command still did its work (exit 0)."""
+    for line in reader.warnings():
+        print(f"topdress: warning: {line}", file=sys.stderr)
+
+
+def _salvage(args: argparse.Namespace) -> int:
+    from topdress.log.salvage import salvage
+
+    if is_stdout(args.out):
+        raise OutputError("--out -: a salvaged session is a file; give a path")
+    if args.out.exists():
+        raise OutputError(f"{args.out}: exists; give a new file for the salvaged session")
+    if not args.session.is_file():
+        raise LogError(f"{args.session}: no such session file")
+    report = write_output(args.out, [args.session], lambda tmp: salvage(args.session, tmp))
+    print(report.text().replace(report.out, str(args.out)))
     return 0
 
 
 def _replay(args: argparse.Namespace) -> int:
     from topdress.config import default_config, load_config
     from topdress.log.events import read_file
-    from topdress.log.replay import MAX_IDLE_S, ReplayStats, replay, write_csv
+    from topdress.log.replay import MAX_IDLE_S, ReplayStats, needed, replay, write_csv
 
     cfg = load_config(args.config) if args.config is not None else default_config()
-    read = read_file(args.events)
+    read = read_file(args.events, needed)
     for number, reason in read.bad:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
     stats = ReplayStats()
@@ -197,7 +227,7 @@ def _replay(args: argparse.Namespace) -> int:
     with open_text_output(args.out, [args.events]) as out:
         write_csv(rows, out)
     print(
-        f"{args.out}: {len(rows)} speed updates from {len(read.events)} events"
+        f"{args.out}: {len(rows)} speed updates from {read.parsed} events"
         + (f" ({len(read.bad)} malformed lines skipped)" if read.bad else "")
         + (f", {stats.gaps_cut} pauses over {MAX_IDLE_S:g} s cut" if stats.gaps_cut else ""),
         file=sys.stderr if is_stdout(args.out) else sys.stdout,

@@ -285,6 +285,21 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "alarm.gnss_lost": ("GNSS lost: metering on the ground wheel", "GNSS 丢失：按地轮速度排肥"),
     "alarm.crop_lost": ("crop sensors lost: no NDVI", "作物传感器丢失：无 NDVI"),
     "alarm.ecu_lost": ("ECU lost: no status frames", "控制器丢失：无状态帧"),
+    "alarm.log_low_space": ("log disk almost full", "记录磁盘将满"),
+    "alarm.log_disk_full": ("log disk full", "记录磁盘已满"),
+    "alarm.log_write_failing": ("session log not written", "作业记录无法写入"),
+    "alarm.text.log_low_space": (
+        "log disk almost full: {free_mb:.0f} MB free (margin {min_mb:.0f} MB)",
+        "记录磁盘将满：剩余 {free_mb:.0f} MB（下限 {min_mb:.0f} MB）",
+    ),
+    "alarm.text.log_disk_full": (
+        "log disk full: this session is not being recorded (metering goes on)",
+        "记录磁盘已满：本次作业未被记录（排肥继续）",
+    ),
+    "alarm.text.log_write_failing": (
+        "session log cannot be written: {error} (metering goes on)",
+        "作业记录无法写入：{error}（排肥继续）",
+    ),
     "alarm.text.off_rate_upper": (
         "upper meter off rate: {rpm:.1f} r/min for {target:.1f} (more than {pct:g} % for {s:g} s)",
         "上层排肥转速偏离：{rpm:.1f} r/min，目标 {target:.1f}（偏差超过 {pct:g} % 达 {s:g} 秒）",

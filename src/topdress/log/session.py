@@ -14,22 +14,32 @@ rows in `dropped`. Nothing here raises into the caller after `create()` has retu
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import logging
 import os
 import sqlite3
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Final
 
 from topdress import __version__
 from topdress.config import TerminalConfig, loads_config
 from topdress.errors import ConfigError, LogError
+from topdress.log.check import (
+    check_wal,
+    event_detail,
+    meta_ok,
+    raw_ok,
+    state_ok,
+    text_factory,
+)
 from topdress.log.model import (
     CAN_KINDS,
     EVENT_KINDS,
@@ -76,6 +86,8 @@ CREATE TABLE event (
 PRAGMA user_version = {SCHEMA_VERSION};
 """
 
+SCHEMA_SQL: Final = _SCHEMA  # the tables and the version, as a script (for a salvaged copy)
+
 _INSERT_RAW: Final = "INSERT INTO raw (t, kind, line, can_id, data) VALUES (?, ?, ?, ?, ?)"
 _INSERT_STATE: Final = (
     f"INSERT INTO state ({', '.join(STATE_COLUMNS)}) VALUES ({', '.join('?' * len(STATE_COLUMNS))})"
@@ -96,6 +108,22 @@ class _Sync:
 
 
 _STOP: Final = object()
+
+#: Free space kept for closing (the last commit, the counters, the checkpoint): a file beside
+#: the session, allocated at start and given back when the disk is full (half, to record the
+#: failure in the file) and at close (the rest).
+RESERVE_BYTES: Final = 256 * 1024
+#: Below this much free space on the log's disk the log reports LOW_SPACE (it keeps writing).
+MIN_FREE_BYTES: Final = 50 * 1024 * 1024
+
+
+class LogHealth(StrEnum):
+    """The session log's state, for the control loop to show (an alarm unless OK)."""
+
+    OK = "ok"
+    LOW_SPACE = "low_space"  # writing, but the disk's free space is below the margin
+    DISK_FULL = "disk_full"  # the last commit failed: no space (or the max_bytes cap)
+    WRITE_FAILING = "write_failing"  # the last commit (or the creation) failed otherwise
 
 
 def _connect(path: Path) -> sqlite3.Connection:
@@ -125,6 +153,47 @@ def _claim_path(directory: Path, name: str | None) -> Path:
         return path
 
 
+def _reserve_path(path: Path) -> Path:
+    return path.with_name(f".{path.name}.reserve")
+
+
+def _make_reserve(path: Path, size: int) -> int | None:
+    """The reserve file, allocated (not sparse) and locked while the session is open; None
+    when the disk has no room for it (the log works without)."""
+    if size <= 0:
+        return None
+    try:
+        fd = os.open(path, os.O_CREAT | os.O_RDWR | os.O_CLOEXEC, 0o644)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        os.posix_fallocate(fd, 0, size)
+    except OSError:
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    return fd
+
+
+def _remove_stale_reserves(directory: Path) -> None:
+    """Reserve files of sessions that ended without closing (a kill, a power cut): nobody
+    holds their lock. A running session's (another terminal's) stays."""
+    for path in directory.glob(f".*{SUFFIX}.reserve"):
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CLOEXEC)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            path.unlink()
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+
 def _remove_unfinished(path: Path) -> None:
     """A file whose schema could not be written (disk full at start) holds nothing: remove it
     with its WAL and shared-memory files, rather than leave a 0-byte session behind."""
@@ -143,13 +212,25 @@ class SessionLog:
         queue_size: int,
         commit_period_s: float,
         open_error: str | None,
+        *,
+        reserve: int | None = None,
+        max_pages: int | None = None,
+        min_free_bytes: int = MIN_FREE_BYTES,
     ) -> None:
         self.path = path
         self.dropped = 0  # rows refused because the queue was full or the log closed/failed
         self.lost = 0  # rows in batches that failed to commit
         self.errors = 0  # write failures (open, commit)
         self.last_error: str | None = None
+        self._first_utc: float | None = None
+        self._last_utc: float | None = None
         self._commit_failing = False
+        self._health = LogHealth.OK if open_error is None else LogHealth.WRITE_FAILING
+        self.free_bytes: int | None = None  # on the log's disk, measured at each commit
+        self.min_free_bytes = min_free_bytes
+        self._reserve = reserve  # the reserve file's descriptor (locked), None: none
+        self._max_pages = max_pages  # the max_bytes cap in pages
+        self._failure_recorded = False
         self._count_lock = threading.Lock()
         self.commit_period_s = commit_period_s
         self._conn = conn
@@ -164,6 +245,8 @@ class SessionLog:
         self._thread: threading.Thread | None = None
         if open_error is not None:
             self._fail(open_error)
+        else:
+            self._check_space()
         if conn is not None:
             self._thread = threading.Thread(target=self._run, name="session-log", daemon=True)
             self._thread.start()
@@ -178,12 +261,16 @@ class SessionLog:
         queue_size: int = 20000,
         commit_period_s: float = 0.5,
         max_bytes: int | None = None,
+        min_free_bytes: int = MIN_FREE_BYTES,
+        reserve_bytes: int = RESERVE_BYTES,
     ) -> SessionLog:
         """Create a new session file in `directory` (made if missing) holding `config_toml`.
 
         Never raises on I/O: if the file cannot be made, the returned log has `ok` False,
         `errors` 1 and `last_error` set, and counts every row given to it as dropped.
-        `max_bytes` caps the file size (SQLite reports "disk full" beyond it).
+        `max_bytes` caps the file size (SQLite reports "disk full" beyond it);
+        `min_free_bytes`: the free-space margin below which `health` is LOW_SPACE;
+        `reserve_bytes`: the space set aside for closing (see RESERVE_BYTES).
         """
         directory = Path(directory)
         path = directory / f"{name or 'session'}{SUFFIX}"
@@ -194,9 +281,11 @@ class SessionLog:
             path = _claim_path(directory, name)
             claimed = True
             conn = _connect(path)
+            max_pages = None
             if max_bytes is not None:
                 page_size = int(conn.execute("PRAGMA page_size").fetchone()[0])
-                conn.execute(f"PRAGMA max_page_count = {max(1, max_bytes // page_size)}")
+                max_pages = max(1, max_bytes // page_size)
+                conn.execute(f"PRAGMA max_page_count = {max_pages}")
             _init_schema(conn, config_toml)
         except (OSError, sqlite3.Error) as exc:
             if conn is not None:
@@ -204,7 +293,23 @@ class SessionLog:
             if claimed:
                 _remove_unfinished(path)
             return cls(path, None, queue_size, commit_period_s, f"cannot create the file: {exc}")
-        return cls(path, conn, queue_size, commit_period_s, None)
+        _remove_stale_reserves(directory)
+        reserve = _make_reserve(_reserve_path(path), reserve_bytes)
+        return cls(
+            path,
+            conn,
+            queue_size,
+            commit_period_s,
+            None,
+            reserve=reserve,
+            max_pages=max_pages,
+            min_free_bytes=min_free_bytes,
+        )
+
+    @property
+    def health(self) -> LogHealth:
+        """OK, LOW_SPACE, DISK_FULL or WRITE_FAILING (read from any thread: one attribute)."""
+        return self._health
 
     @property
     def ok(self) -> bool:
@@ -223,6 +328,11 @@ class SessionLog:
 
     def state(self, row: StateRow) -> None:
         """Enqueue one decoded state row."""
+        if row.utc is not None and row.utc_source == "gnss":
+            # The session's start and end in the receiver's UTC, for the meta at close.
+            if self._first_utc is None:
+                self._first_utc = row.utc
+            self._last_utc = row.utc
         self._put(("state", row.as_tuple()))
 
     def event(self, ev: LogEvent) -> None:
@@ -340,30 +450,108 @@ class SessionLog:
         except sqlite3.Error as exc:
             self.lost += n
             self._commit_failing = True
+            full = getattr(exc, "sqlite_errorcode", None) == sqlite3.SQLITE_FULL
+            self._health = LogHealth.DISK_FULL if full else LogHealth.WRITE_FAILING
             self._fail(f"commit of {n} rows failed: {exc}")
             if self._conn.in_transaction:
                 self._conn.execute("ROLLBACK")
+            self._record_failure(str(exc), full)
         else:
             if self._commit_failing:
                 _log.warning("session log %s: writing again", self.path)
             self._commit_failing = False
             self.last_error = None
+            self._check_space()
+
+    def _check_space(self) -> None:
+        """Measure the free space (a statvfs, microseconds) and set the health from it."""
+        try:
+            st = os.statvfs(self.path.parent)
+        except OSError:
+            return
+        self.free_bytes = st.f_bavail * st.f_frsize
+        low = self.free_bytes < self.min_free_bytes
+        self._health = LogHealth.LOW_SPACE if low else LogHealth.OK
+
+    def _record_failure(self, error: str, full: bool) -> None:
+        """The first failure of a session goes into the file itself, so that `log summary`
+        tells a full disk from a power cut: half the reserve is given back to make room."""
+        if self._failure_recorded or self._conn is None:
+            return
+        self._failure_recorded = True
+        self._release_reserve(half=True)
+        record = {
+            "kind": "disk_full" if full else "write_failed",
+            "error": error,
+            "utc": _iso(self._last_utc),
+            "rows_lost_so_far": self.lost,
+        }
+        try:
+            self._with_room(
+                lambda conn: conn.execute(
+                    "INSERT OR REPLACE INTO meta VALUES ('write_failed', ?)",
+                    (json.dumps(record, separators=(",", ":")),),
+                )
+            )
+        except sqlite3.Error as exc:
+            _log.error("session log %s: the failure could not be recorded: %s", self.path, exc)
+
+    def _with_room(self, write: Any) -> None:
+        """Run `write(conn)` (autocommit) with the max_bytes cap lifted a little."""
+        assert self._conn is not None
+        if self._max_pages is not None:
+            self._conn.execute(f"PRAGMA max_page_count = {self._max_pages + 64}")
+        try:
+            write(self._conn)
+        finally:
+            if self._max_pages is not None:
+                self._conn.execute(f"PRAGMA max_page_count = {self._max_pages}")
+
+    def _release_reserve(self, half: bool = False) -> None:
+        fd = self._reserve
+        if fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if half:
+                os.ftruncate(fd, os.fstat(fd).st_size // 2)
+                return
+            _reserve_path(self.path).unlink()
+        with contextlib.suppress(OSError):
+            os.close(fd)
+        self._reserve = None
 
     def _finish(self) -> None:
         assert self._conn is not None
         counters = {
-            "closed_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            # From the state rows' GNSS time, never the PC's clock (empty: no fix all session)
+            "start_utc": _iso(self._first_utc),
+            "closed_utc": _iso(self._last_utc),
             "dropped": str(self.dropped),
             "lost": str(self.lost),
             "errors": str(self.errors),
         }
+        # The reserve is given back first: closing must not need the space the disk lacks.
+        self._release_reserve()
         try:
-            self._conn.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)", counters.items())
-            self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            self._with_room(
+                lambda conn: conn.executemany(
+                    "INSERT OR REPLACE INTO meta VALUES (?, ?)", counters.items()
+                )
+            )
         except sqlite3.Error as exc:
             self._fail(f"closing failed: {exc}")
+        try:
+            self._conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except sqlite3.Error as exc:  # the -wal stays, with the counters in it: still closed
+            _log.warning("session log %s: checkpoint at close failed: %s", self.path, exc)
         finally:
             self._conn.close()
+
+
+def _iso(utc: float | None) -> str:
+    if utc is None:
+        return ""
+    return datetime.fromtimestamp(utc, UTC).isoformat(timespec="milliseconds")
 
 
 def _raw_record(kind: str, t: float, payload: Any) -> _RawRec | None:
@@ -419,7 +607,12 @@ class RawRecord:
 
 
 class SessionReader:
-    """Read access to a session file (also one left behind by a killed writer)."""
+    """Read access to a session file (also one left behind by a killed writer).
+
+    It never changes the file: it opens it read-only (a `-wal` beside it is read, not merged
+    and removed, so a damaged one stays for `topdress log salvage`), or as immutable when
+    there is no `-wal`. Every row is checked (`topdress.log.check`) before it is handed on; a
+    damaged row is skipped and counted in `damaged`, and `warnings()` says what was skipped."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
@@ -427,9 +620,30 @@ class SessionReader:
             raise LogError(f"{self.path}: no such session file")
         if not self.path.is_file():
             raise LogError(f"{self.path}: not a file (give the .sqlite file of a session)")
+        self.notes: list[str] = []  # what is wrong with the file as a whole
+        self._bad: dict[str, set[int]] = {t: set() for t in ("meta", "raw", "state", "event")}
+        wal = self.path.with_name(self.path.name + "-wal")
+        has_wal = wal.exists()
+        if has_wal:
+            walcheck = check_wal(wal)
+            message = walcheck.message(wal) if walcheck is not None else None
+            if message is not None:
+                self.notes.append(message)
+        wal_mode = _wal_mode(self.path)
+        uri = self.path.resolve().as_uri() + ("?mode=ro" if has_wal else "?immutable=1")
         try:
-            self._conn = sqlite3.connect(self.path)
+            self._conn = sqlite3.connect(uri, uri=True)
+        except sqlite3.Error as exc:
+            raise LogError(f"{self.path}: cannot open: {exc}") from exc
+        self._conn.text_factory = text_factory
+        try:
             version = int(self._conn.execute("PRAGMA user_version").fetchone()[0])
+            if version == 0 and wal_mode and not has_wal:
+                raise LogError(
+                    f"{self.path}: a live session copied without its -wal file (its rows are "
+                    f"in {wal.name}, which is not beside it): copy {wal.name} too, or close "
+                    "the session before copying"
+                )
             if version == 0:  # an empty file, or another program's database
                 raise LogError(f"{self.path}: not a topdress session log (no session schema)")
             if version not in READ_VERSIONS:
@@ -438,53 +652,103 @@ class SessionReader:
                     f"{READ_VERSIONS[0]} to {READ_VERSIONS[-1]}"
                 )
             self.version = version
-            rows = self._conn.execute("SELECT key, value FROM meta").fetchall()
-            self.meta: dict[str, str] = {str(k): str(v) for k, v in rows}
+            self.meta: dict[str, str] = {}
+            for rowid, key, value in self._conn.execute("SELECT rowid, key, value FROM meta"):
+                if meta_ok(key, value):
+                    self.meta[key] = value
+                else:
+                    self._bad["meta"].add(int(rowid))
+        except LogError as exc:
+            self._conn.close()
+            if self.notes:  # a damaged -wal may be why the file reads as no session
+                raise LogError("; ".join([str(exc), *self.notes])) from exc
+            raise
         except sqlite3.Error as exc:
-            raise LogError(f"{self.path}: not a readable session log: {exc}") from exc
+            self._conn.close()
+            raise LogError(
+                f"{self.path}: not a readable session log: {exc}"
+                + (f"; {_SALVAGE.format(path=self.path)}" if "malformed" in str(exc) else "")
+            ) from exc
+        #: Not closed, and no -wal beside it: the tail may be in a -wal left behind elsewhere.
+        self.wal_missing = wal_mode and not has_wal and "closed_utc" not in self.meta
 
     @property
     def config_toml(self) -> str:
         return self.meta.get("config_toml", "")
 
+    @property
+    def damaged(self) -> dict[str, int]:
+        """Damaged rows skipped so far, by table (each row counted once)."""
+        return {table: len(ids) for table, ids in self._bad.items() if ids}
+
+    def warnings(self) -> list[str]:
+        """What the commands tell the user: damage to the file as a whole, rows skipped."""
+        out = list(self.notes)
+        damaged = self.damaged
+        if damaged:
+            n = sum(damaged.values())
+            where = ", ".join(f"{table} {k}" for table, k in damaged.items())
+            out.append(
+                f"{self.path}: {n} damaged row{'s' if n != 1 else ''} skipped ({where}): "
+                "values of the wrong type or out of range"
+            )
+        return out
+
     def raw(self) -> Iterator[RawRecord]:
         """Raw inputs in time order. Inputs logged from several threads may reach the log a
         little out of order; equal times keep their logged order."""
-        for t, kind, line, can_id, data in self._select(
-            "SELECT t, kind, line, can_id, data FROM raw ORDER BY t, id"
+        bad = self._bad["raw"]
+        for rid, t, kind, line, can_id, data in self._select(
+            "SELECT id, t, kind, line, can_id, data FROM raw ORDER BY t, id"
         ):
-            yield RawRecord(t, kind, line, can_id, data)
+            if raw_ok(t, kind, line, can_id, data):
+                yield RawRecord(float(t), kind, line, can_id, data)
+            else:
+                bad.add(rid)
 
     def states(self) -> Iterator[StateRow]:
         """State rows in the order they were logged. Columns added since a file was written
         (utc, outlet position, ...) read as None."""
         present = self.state_columns()
-        cols = [c for c in STATE_COLUMNS if c in present]
-        for values in self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"):
+        cols = tuple(c for c in STATE_COLUMNS if c in present)
+        for values in self._state_rows(cols):
             yield StateRow(**dict(zip(cols, values, strict=True)))
 
+    def _state_rows(self, cols: tuple[str, ...]) -> Iterator[tuple[Any, ...]]:
+        bad = self._bad["state"]
+        for row in self._select(f"SELECT id, {', '.join(cols)} FROM state ORDER BY id"):
+            values = row[1:]
+            if state_ok(cols, values):
+                yield values
+            else:
+                bad.add(row[0])
+
     def events(self) -> Iterator[LogEvent]:
-        """The events in time order (none in a version-1 file). A detail that is not a JSON
-        object (written by other software) reads as {"value": what it holds}."""
+        """The events in time order (none in a version-1 file)."""
         if self.version < 2:
             return
-        for t, kind, text in self._select("SELECT t, kind, detail FROM event ORDER BY t, id"):
-            yield LogEvent(float(t), str(kind), _detail(text))
+        bad = self._bad["event"]
+        for rid, t, kind, text in self._select(
+            "SELECT id, t, kind, detail FROM event ORDER BY t, id"
+        ):
+            detail = event_detail(t, kind, text)
+            if detail is None:
+                bad.add(rid)
+            else:
+                yield LogEvent(float(t), kind, detail)
 
     def event_counts(self) -> dict[str, int]:
         """Number of events of each kind."""
-        if self.version < 2:
-            return {}
-        rows = self._select("SELECT kind, count(*) FROM event GROUP BY kind ORDER BY kind")
-        return {str(kind): int(n) for kind, n in rows}
+        counts = Counter(ev.kind for ev in self.events())
+        return dict(sorted(counts.items()))
 
     def state_values(self, columns: tuple[str, ...]) -> dict[str, list[Any]]:
         """The given state columns in logged order, as lists (bulk reading for exports);
         a column this file lacks reads as None."""
         present = self.state_columns()
-        cols = [c for c in columns if c in present]
-        rows = list(self._select(f"SELECT {', '.join(cols)} FROM state ORDER BY id"))
-        n = len(rows)
+        cols = tuple(c for c in columns if c in present)
+        rows = list(self._state_rows(cols)) if cols else []
+        n = len(rows) if cols else self.count("state")
         got = dict(zip(cols, (list(c) for c in zip(*rows, strict=True)), strict=True)) if n else {}
         return {c: got.get(c, [None] * n) if c in present else [None] * n for c in columns}
 
@@ -493,9 +757,14 @@ class SessionReader:
         return frozenset(str(r[1]) for r in self._select("PRAGMA table_info(state)"))
 
     def raw_counts(self) -> dict[str, int]:
-        """Number of raw inputs of each kind."""
+        """Number of raw inputs of each kind (rows of no known kind are counted as damaged)."""
         rows = self._select("SELECT kind, count(*) FROM raw GROUP BY kind")
-        return {str(kind): int(n) for kind, n in rows}
+        counts = {kind: int(n) for kind, n in rows if kind in RAW_KINDS}
+        if sum(counts.values()) < self.count("raw"):
+            known = ", ".join(f"'{k}'" for k in RAW_KINDS)
+            ids = self._select(f"SELECT id FROM raw WHERE kind IS NULL OR kind NOT IN ({known})")
+            self._bad["raw"].update(int(r[0]) for r in ids)
+        return counts
 
     def count(self, table: str) -> int:
         if table not in ("raw", "state", "event"):
@@ -510,8 +779,7 @@ class SessionReader:
             yield from self._conn.execute(sql)
         except sqlite3.Error as exc:
             raise LogError(
-                f"{self.path}: damaged session log ({exc}); "
-                f"`sqlite3 {self.path} .recover` may save what is left"
+                f"{self.path}: damaged session log ({exc}); {_SALVAGE.format(path=self.path)}"
             ) from exc
 
     def close(self) -> None:
@@ -524,12 +792,17 @@ class SessionReader:
         self.close()
 
 
-def _detail(text: Any) -> dict[str, Any]:
+_SALVAGE: Final = "`topdress log salvage {path} --out NEW.sqlite` saves what is left"
+
+
+def _wal_mode(path: Path) -> bool:
+    """The file's header says WAL (bytes 18 and 19 are 2): its last writes may be in a -wal."""
     try:
-        value = json.loads(text)
-    except (TypeError, ValueError):
-        return {"value": text}
-    return value if isinstance(value, dict) else {"value": value}
+        with path.open("rb") as f:
+            head = f.read(20)
+    except OSError:
+        return False
+    return len(head) == 20 and head[18] == 2 and head[19] == 2
 
 
 def session_config(config_toml: str) -> TerminalConfig:

@@ -7,9 +7,11 @@ integrated and is reported as a gap instead.
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
 from typing import Any, Final
 
 from topdress import protocol
@@ -76,6 +78,10 @@ class Summary:
     stops: list[StopEvent] = field(default_factory=list)  # headlands: stops and entries
     stops_zero_pct: float | None = None  # stops after which the metering reached zero
     headland_zero_pct: float | None = None  # headland entries likewise (with a boundary)
+    write_failure: dict[str, Any] | None = None  # the log's first write failure, as recorded
+    wal_missing: bool = False  # not closed, and no -wal beside the file
+    start_utc: float | None = None  # the first and last state rows' GNSS time (POSIX s)
+    end_utc: float | None = None
     schema: int = 0  # the file's schema version (1: no events recorded)
     events: dict[str, int] = field(default_factory=dict)  # logged events by kind
     actions: list[Action] = field(default_factory=list)  # the operator's, in time order
@@ -98,8 +104,10 @@ def summarise(reader: SessionReader) -> Summary:
     s.log_meta = {
         k: v
         for k, v in reader.meta.items()
-        if k in ("created_utc", "closed_utc", "dropped", "lost", "errors")
+        if k in ("created_utc", "start_utc", "closed_utc", "dropped", "lost", "errors")
     }
+    s.write_failure = _write_failure(reader.meta.get("write_failed"))
+    s.wal_missing = reader.wal_missing
     layers = [LayerSummary(), LayerSummary()]
     first: StateRow | None = None
     prev: StateRow | None = None
@@ -112,6 +120,10 @@ def summarise(reader: SessionReader) -> Summary:
         else:
             _integrate(s, layers, kg_per_rev, prev, row.t - prev.t)
         prev = row
+        if row.utc is not None and row.utc_source == "gnss":
+            s.end_utc = row.utc
+            if s.start_utc is None:
+                s.start_utc = row.utc
     if first is not None and prev is not None:
         s.duration_s = prev.t - first.t
     s.schema = reader.version
@@ -231,6 +243,10 @@ def format_text(s: Summary) -> str:
             f"{name + ' layer':<16} applied {layer.applied_kg:.2f} kg ({rate}), "
             f"target {layer.target_kg:.2f} kg, rate error {err}"
         )
+    if s.start_utc is not None and s.end_utc is not None:
+        lines.append(f"time (GNSS)      {_utc_text(s.start_utc)} to {_utc_text(s.end_utc)} UTC")
+    else:
+        lines.append("time (GNSS)      none (no fix with a date in the session)")
     sources = ", ".join(f"{k} {v:.1f} s" for k, v in s.source_s.items())
     lines.append(f"speed source     {sources}")
     faults = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(s.faults_s.items())) or "none"
@@ -261,8 +277,38 @@ def format_text(s: Summary) -> str:
     lines.append(f"raw inputs       {raw}")
     if s.log_meta:
         lines.append("log              " + ", ".join(f"{k} {v}" for k, v in s.log_meta.items()))
+    failure = s.write_failure
+    if failure is not None:
+        what = "disk full" if failure.get("kind") == "disk_full" else "write failed"
+        when = f" at {failure['utc']} UTC" if failure.get("utc") else ""
+        lines.append(f"log              {what}{when}: {failure.get('error', '')}")
     if "closed_utc" not in s.log_meta:
-        lines.append(
-            "log              not closed cleanly (power cut or kill): the tail may be missing"
-        )
+        if failure is not None:
+            lines.append(
+                "log              not closed cleanly after the log writes failed (see above); "
+                "rows from then on are missing"
+            )
+        else:
+            lines.append(
+                "log              not closed cleanly (power cut or kill): the tail may be missing"
+            )
+        if s.wal_missing:
+            lines.append(
+                "log              and no -wal file beside it: if this is a copy, the -wal "
+                "of the original holds the tail"
+            )
     return "\n".join(lines)
+
+
+def _utc_text(utc: float) -> str:
+    return datetime.fromtimestamp(utc, UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _write_failure(text: str | None) -> dict[str, Any] | None:
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except ValueError:
+        return {"kind": "write_failed", "error": text}
+    return value if isinstance(value, dict) else {"kind": "write_failed", "error": text}

@@ -32,6 +32,12 @@ class AlarmInputs:
     gnss_link: str
     crop_link: str
     ecu_link: str
+    # The session log's health (topdress.log.session.LogHealth): a log that cannot be
+    # written is an alarm, not only a line on the console
+    log_health: str = "ok"
+    log_free_mb: float = 0.0
+    log_min_free_mb: float = 0.0
+    log_error: str = ""
 
 
 @dataclass
@@ -99,6 +105,13 @@ class AlarmBook:
             yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
         if x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
+        if x.log_health == "low_space":
+            free, margin = x.log_free_mb, x.log_min_free_mb
+            yield "log_low_space", text("alarm.text.log_low_space", free_mb=free, min_mb=margin)
+        elif x.log_health == "disk_full":
+            yield "log_disk_full", text("alarm.text.log_disk_full")
+        elif x.log_health == "write_failing":
+            yield "log_write_failing", text("alarm.text.log_write_failing", error=x.log_error)
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]

@@ -361,6 +361,17 @@ class OperatorDesk:
         self._model_rates = model
         return self.command()
 
+    def _log_health(self) -> dict[str, Any]:
+        log = self.loop.session
+        if log is None:
+            return {}
+        return {
+            "log_health": str(log.health),
+            "log_free_mb": (log.free_bytes or 0) / 1e6,
+            "log_min_free_mb": log.min_free_bytes / 1e6,
+            "log_error": log.last_error or "",
+        }
+
     def after_tick(self, now: float, snap: Snapshot) -> DeskView:
         dt_s = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
         self._last_t = now
@@ -376,6 +387,7 @@ class OperatorDesk:
             gnss_link=snap.gnss_link,
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
+            **self._log_health(),
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
             figures = {k: v for k, v in alarm.values if isinstance(v, int | float)}
