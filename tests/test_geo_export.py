@@ -71,18 +71,14 @@ def test_every_vector_format_reads_back_in_gdal(session: Path, tmp_path: Path, f
             continue
         assert info["crs"] == "EPSG:4326"
         assert info["geometry_type"] == ("Point" if kind == "points" else "Polygon")
-        assert info["features"] > 100
+        assert info["features"] > (100 if kind == "points" else 60)  # swaths: ~1 m each
         if fmt == "shp":
             assert all(len(n) <= 10 for n in names)
             assert "AppliedRt" in names and "SWATHWIDTH" in names
         else:
             assert "AppliedRate" in names
-        # the kg of the export are the summary's (points: every interval; swaths: moving ones)
-        kg = float(np.sum(cols["AppliedKg"]))
-        if kind == "points":
-            assert kg == pytest.approx(want_kg, rel=0.005)
-        else:
-            assert 0.9 * want_kg < kg <= want_kg * 1.0001
+        # the kg of both layers are the summary's (swaths: also what was metered standing)
+        assert float(np.sum(cols["AppliedKg"])) == pytest.approx(want_kg, rel=0.005)
         assert set(np.unique(cols["SWATHWIDTH"])) == {3.6}
     if fmt in ("shp", "geojson"):  # the rate classes' style, on the field QGIS reads
         style = (tmp_path / "field_swaths.qml").read_text()
