@@ -368,3 +368,65 @@ def test_the_terminal_refuses_to_start_on_a_bad_map_naming_key_and_file(tmp_path
     cfg = loads_config(f'[boundary]\npath = "{tmp_path / "none.shp"}"\n')
     with pytest.raises(MapError, match=r"^boundary\.path: .*none\.shp: no such file"):
         build_site_rate(cfg, build_rate_model(cfg.rate))
+
+
+def _latin1_in_utf8(tmp: Path, name: str, rate_as_text: bool = False) -> Path:
+    """Two zones whose `name` attribute has a byte that is not UTF-8 (a Latin-1 'ü' in a file
+    that declares UTF-8: its .cpg, or GeoJSON's own); with `rate_as_text` the rate is text
+    with such a byte."""
+    path = tmp / name
+    rates: list[object] = ["1SUED0", "300"] if rate_as_text else [100.0, 300.0]
+    write_polygons(
+        path, [box(-20, -10, 20, 20), box(-20, 20, 20, 40)], {"rate": rates, "name": ["SUED", "N"]}
+    )
+    for f in tmp.glob(path.stem + ".*"):
+        if f.suffix in (".dbf", ".geojson"):  # same length: the dBASE record stays whole
+            f.write_bytes(f.read_bytes().replace(b"SUED", b"S\xfcED"))
+    return path
+
+
+@pytest.mark.parametrize("name", ["rx.shp", "rx.geojson"])
+def test_text_not_in_the_files_encoding_refuses_only_a_rate(tmp_path: Path, name: str) -> None:
+    path = _latin1_in_utf8(tmp_path, name)
+    rx = load_prescription(PrescriptionConfig(path=str(path)))  # the name is not read at all
+    assert rx.lookup(*latlon(0, 0)).rate_kg_ha == 100.0  # type: ignore[union-attr]
+    assert rx.lookup(*latlon(0, 30)).rate_kg_ha == 300.0  # type: ignore[union-attr]
+    (tmp_path / "t").mkdir()
+    bad = _latin1_in_utf8(tmp_path / "t", name, rate_as_text=True)
+    with pytest.raises(MapError, match=r"feature 0 \(fid \d\): rate = '1S.*' is not a number"):
+        load_prescription(PrescriptionConfig(path=str(bad)))
+
+
+def test_a_loaded_map_says_what_it_holds(tmp_path: Path) -> None:
+    path = write_polygons(
+        tmp_path / "lb.shp",
+        [box(-20, -10, 20, 20), box(-20, 20, 20, 40)],
+        {"rate": [100.0, 250.0]},
+    )
+    info = load_prescription(PrescriptionConfig(path=str(path), units="lb/ac")).describe()
+    text = info.text()
+    assert text.startswith("2 zones, 100..250 lb/ac (112.1..280.2 kg/ha), extent 43.8852")
+    assert "(40 x 50 m), read in EPSG:4326" in text
+    assert info.distance_m(*latlon(0, 0)) == 0.0
+    assert info.distance_m(*latlon(0, 140)) == pytest.approx(100.0, rel=0.01)
+    codes = np.array([[1, 1, 1, 1], [1, 1, 2, 2], [2, 2, 2, 2], [0, 0, 0, 0], [1, 2, 0, 1]])
+    grid = _iso_grid(tmp_path, 1, codes.astype(np.uint8).tobytes(), ZONES)
+    text = load_prescription(PrescriptionConfig(path=str(grid))).describe().text()
+    assert text.startswith("20 grid cells (5 x 4), 15 with a rate, 2 rates, 100..300 kg/ha")
+
+
+def test_a_large_map_says_how_far_loading_is(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import topdress.geo.polygons
+    import topdress.geo.prescription
+
+    for mod in (topdress.geo.polygons, topdress.geo.prescription):
+        monkeypatch.setattr(mod, "PROGRESS_FEATURES", 2)
+    lines: list[str] = []
+    load_prescription(PrescriptionConfig(path=str(two_zones(tmp_path / "a.gpkg"))), lines.append)
+    assert lines == [
+        "a.gpkg: reading 2 features",
+        "a.gpkg: checking 2 polygons",
+        "a.gpkg: indexing 2 zones",
+    ]
