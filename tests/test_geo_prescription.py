@@ -21,6 +21,7 @@ from topdress.geo.boundary import load_boundary
 from topdress.geo.prescription import Zone, load_prescription
 from topdress.log.session import SessionReader
 from topdress.sim.tractor import Drive, Segment
+from topdress.sim.world import World
 from topdress.terminal.rate import LinearRate, SiteRate
 
 
@@ -430,3 +431,48 @@ def test_a_large_map_says_how_far_loading_is(
         "a.gpkg: checking 2 polygons",
         "a.gpkg: indexing 2 zones",
     ]
+
+
+# the simulated machine's (docs/experiments.md), the command path at its longest: the next
+# 500 ms command frame after a 100 ms tick
+LOOKAHEAD = "[lookahead]\ncommand_ms = 600\nmeter_ms = 200\nairline_ms = 400\n"
+
+
+def _landed_edge_m(tmp_path: Path, lookahead: bool) -> tuple[float, float]:
+    """Drive north at 8 km/h from the 100 kg/ha zone into the 300 kg/ha one (edge at 20 m);
+    where, past the edge, the product landing on the ground (the simulator's truth: kg landed
+    per metre of travel over the width) first reaches 95 % of 300 kg/ha, m (negative: before);
+    and where it first rose above the old rate, m."""
+    tmp_path.mkdir()
+    rx = two_zones(tmp_path / "rx.gpkg")
+    toml = re.sub(r'(\[prescription\][^\n]*\n)path = ""', rf'\1path = "{rx}"', DEFAULT_TOML)
+    if lookahead:
+        toml = re.sub(r"\[lookahead\]\n(?:[^\[]*)", LOOKAHEAD, toml)
+    ys: list[float] = []
+    kg: list[float] = []
+
+    def on_step(world: World) -> None:
+        tr = world.truth
+        ys.append(tr.y_m)
+        kg.append(tr.applied_kg[0] + tr.applied_kg[1])
+
+    record(tmp_path, toml, _north(40.0), 22.0, on_step)
+    y, m = np.array(ys), np.array(kg)
+    bins = np.arange(15.0, 26.0, 0.1)  # 10 cm of travel
+    landed = np.interp(bins, y, m, left=np.nan, right=np.nan)
+    rate = np.diff(landed) / (0.1 * 3.6) * 10_000.0  # kg/ha over each 10 cm
+    at = np.nonzero(rate >= 0.95 * 300.0)[0]
+    rising = np.nonzero(rate > 1.15 * 100.0)[0]  # above the meter's ripple of the old rate
+    return float(bins[at[0]] + 0.05 - 20.0), float(bins[rising[0]] - 20.0)
+
+
+def test_the_prescription_looks_ahead_like_the_ndvi(tmp_path: Path) -> None:
+    # the outlet at the antenna; the simulated meter and air line take ~0.6 s, the command
+    # path up to 0.5 s: looked up where the outlet is, the new rate lands well past the edge
+    late, _ = _landed_edge_m(tmp_path / "now", lookahead=False)
+    ahead, rises = _landed_edge_m(tmp_path / "ahead", lookahead=True)
+    print(f"lands {late:+.2f} m from the edge at the outlet, {ahead:+.2f} m looked ahead")
+    assert late > 1.0
+    assert abs(ahead) <= 0.3
+    # the meter's ramp (about half a second) starts before the edge, not metres before it
+    assert -1.0 <= rises < 0.0

@@ -326,9 +326,17 @@ class Terminal:
         ndvi_meters = self.ndvi.update(now, v_sel)
         # Before the meters reach the first spot sensed, the nearest information is the sensors'.
         ndvi = ndvi_meters if ndvi_meters is not None else ndvi_sensors
-        outlet = self.outlet.position(self.ndvi.odometer.distance_m)
-        # The prescription and the boundary at the outlet, the NDVI model as configured.
-        site = self.site.decide(ndvi, (outlet.lat, outlet.lon) if outlet is not None else None)
+        odometer = self.ndvi.odometer.distance_m
+        outlet = self.outlet.position(odometer)
+        # The boundary at the outlet; the prescription where the outlet will be when the
+        # product commanded now lands (speed x the look-ahead, as the NDVI); the NDVI model.
+        ahead_m = max(v_sel, 0.0) / 3.6 * self.ndvi.lookahead_s
+        target = self.outlet.position(odometer + ahead_m) if ahead_m > 0.0 else outlet
+        site = self.site.decide(
+            ndvi,
+            (outlet.lat, outlet.lon) if outlet is not None else None,
+            (target.lat, target.lon) if target is not None else None,
+        )
         if ndvi is None and site.used_ndvi:
             self.counters["no_ndvi_ticks"] += 1
         rates = split_layers(site.total_kg_ha, self.cfg.rate.split_upper, self.cfg.machine.layers)

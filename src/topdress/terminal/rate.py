@@ -205,7 +205,15 @@ class SiteRate:
         self.mode = mode
         self.outside_kg_ha = outside_kg_ha
 
-    def decide(self, ndvi: float | None, outlet: tuple[float, float] | None) -> SiteDecision:
+    def decide(
+        self,
+        ndvi: float | None,
+        outlet: tuple[float, float] | None,
+        ahead: tuple[float, float] | None = None,
+    ) -> SiteDecision:
+        """`outlet`: where the outlets are (the boundary's zone); `ahead`: where they will be
+        when the product commanded now lands (the look-ahead; the prescription is looked up
+        there, as the NDVI is), None = at the outlet."""
         zone = None
         if self.boundary is not None:
             zone = self.boundary.zone(*outlet) if outlet is not None else None
@@ -214,7 +222,8 @@ class SiteRate:
         if self.prescription is None:
             rate = self.model.rate_kg_ha(ndvi) if ndvi is not None else 0.0
             return SiteDecision(rate, zone)
-        hit = self.prescription.lookup(*outlet) if outlet is not None else None
+        where = ahead if ahead is not None and outlet is not None else outlet
+        hit = self.prescription.lookup(*where) if where is not None else None
         if hit is None:
             return SiteDecision(self.outside_kg_ha, zone, None, used_ndvi=False)
         if self.mode == "alone" or ndvi is None:
