@@ -476,3 +476,53 @@ def test_the_prescription_looks_ahead_like_the_ndvi(tmp_path: Path) -> None:
     assert abs(ahead) <= 0.3
     # the meter's ramp (about half a second) starts before the edge, not metres before it
     assert -1.0 <= rises < 0.0
+
+
+def _config_with(tmp_path: Path, section: str, path: Path) -> Path:
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(
+        f'[{section}]\npath = "{path}"\n[log]\ndir = "{tmp_path / "logs"}"\n'
+        '[gnss]\nsource = "stdin"\n[crop]\nsource = "file"\npath = "/dev/null"\n'
+        "[display]\nenabled = false\n"
+    )
+    return cfg
+
+
+def test_config_check_and_run_read_the_maps_first_with_the_same_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from topdress.cli import main
+
+    broken = _iso_grid(
+        tmp_path, 1, np.ones((5, 4), np.uint8).tobytes(), ZONES.replace("0006", "ZZZZ", 1)
+    )
+    cfg = _config_with(tmp_path, "prescription", broken)
+    assert main(["config", "check", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    want = (
+        "topdress: error: prescription.path: "
+        + str(broken)
+        + ": TZN 1 PDV: A = 'ZZZZ' is not a DDI"
+    )
+    assert err.startswith(want) and "Traceback" not in err
+    assert main(["run", "--config", str(cfg), "--duration", "1"]) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith(want) and "Traceback" not in err
+    assert "not properly shut down" not in out + err  # no device was opened
+    assert not (tmp_path / "logs").exists() or not list((tmp_path / "logs").iterdir())
+
+
+def test_config_check_says_what_the_maps_hold(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from topdress.cli import main
+
+    rx = two_zones(tmp_path / "rx.gpkg")
+    cfg = _config_with(tmp_path, "prescription", rx)
+    field = write_polygons(tmp_path / "b.geojson", [box(-50, -50, 50, 50)], {"n": [1]})
+    cfg.write_text(cfg.read_text() + f'[boundary]\npath = "{field}"\nheadland_m = 10.0\n')
+    assert main(["config", "check", str(cfg)]) == 0
+    out = capsys.readouterr().out
+    assert f"  prescription: {rx}: 2 zones, 100..300 kg/ha, extent 43.8852" in out
+    assert "(40 x 50 m), read in EPSG:4326" in out
+    assert "  boundary: " in out and "1 polygon, 1.00 ha, headland 10 m leaves 0.64 ha" in out

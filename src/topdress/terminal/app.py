@@ -53,7 +53,7 @@ from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.links import link_state
 from topdress.terminal.operator import RUNNING, CommandResult, ManualView
-from topdress.terminal.rate import build_rate_model, build_site_rate, split_layers
+from topdress.terminal.rate import Maps, build_rate_model, build_site_rate, split_layers
 from topdress.terminal.serial_io import LineSource
 
 log = logging.getLogger(__name__)
@@ -135,9 +135,11 @@ class Terminal:
         start: bool = True,
         on_event: Callable[[Text], None] | None = None,
         config_path: Path | None = None,
+        maps: Maps | None = None,
     ) -> None:
         """`start`: the meters start at once (headless); else at the operator's Start.
-        `config_path`: where settings changed while running are saved (None: not saved)."""
+        `config_path`: where settings changed while running are saved (None: not saved).
+        `maps`: the prescription and boundary loaded already (None: loaded here)."""
         self.cfg = cfg
         self.gnss = gnss
         self.crop = crop
@@ -157,8 +159,8 @@ class Terminal:
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
         self.model = build_rate_model(cfg.rate)
-        # The prescription map and boundary files are read here: a bad one stops start-up.
-        self.site = build_site_rate(cfg, self.model)
+        # The prescription map and boundary files (`run` reads them before any device opens).
+        self.site = build_site_rate(cfg, self.model, maps)
         self.utc = UtcClock()
         self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()

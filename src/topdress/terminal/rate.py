@@ -9,6 +9,7 @@ the configuration names. `SiteRate` combines it with a prescription map and a fi
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
@@ -233,16 +234,34 @@ class SiteRate:
         return SiteDecision(rate, zone, hit.rate_kg_ha)
 
 
-def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
+@dataclass(frozen=True)
+class Maps:
+    """The prescription and the boundary the configuration names (None: none named)."""
+
+    prescription: RateMap | None = None
+    boundary: FieldBoundary | None = None
+
+    def describe(self) -> list[str]:
+        """One line per map: what was loaded (for `config check` and the start of `run`)."""
+        out = []
+        if self.prescription is not None:
+            info = self.prescription.describe()
+            out.append(f"prescription: {self.prescription.source}: {info.text()}")
+        if self.boundary is not None:
+            out.append(f"boundary: {self.boundary.source}: {self.boundary.describe()}")
+        return out
+
+
+def load_maps(cfg: TerminalConfig, progress: Callable[[str], None] | None = None) -> Maps:
     """Loads the configured prescription and boundary files (MapError naming the key, the
-    file and the feature)."""
+    file and the feature). `run` and `config check` call it before anything is opened."""
     presc: RateMap | None = None
     boundary: FieldBoundary | None = None
     if cfg.prescription.path:
         from topdress.geo.prescription import load_prescription
 
         try:
-            presc = load_prescription(cfg.prescription)
+            presc = load_prescription(cfg.prescription, progress)
         except MapError as exc:
             raise MapError(f"prescription.path: {exc}") from exc
     if cfg.boundary.path:
@@ -252,4 +271,12 @@ def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
             boundary = load_boundary(cfg.boundary)
         except MapError as exc:
             raise MapError(f"boundary.path: {exc}") from exc
-    return SiteRate(model, presc, boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha)
+    return Maps(presc, boundary)
+
+
+def build_site_rate(cfg: TerminalConfig, model: RateModel, maps: Maps | None = None) -> SiteRate:
+    """The site rate over `maps`, or over the configured files loaded now."""
+    m = maps if maps is not None else load_maps(cfg)
+    return SiteRate(
+        model, m.prescription, m.boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha
+    )
