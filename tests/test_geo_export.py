@@ -133,7 +133,9 @@ def test_isoxml_task_data_reads_back(session: Path, tmp_path: Path) -> None:
     assert [t.filename for t in task.time_logs] == ["TLG00001"]
     ddis = {int.from_bytes(d.ddi, "big") for d in task_data.devices[0].process_data}
     assert {6, 7, 67, 81, 141, 397, 400} <= ddis
-    totals = {v.device_element_id_ref: v.process_data_value for v in task.times[0].data_log_values}
+    tim = task.times[0]
+    assert (tim.start.offset, tim.stop.offset) == (0, 0)  # UTC, not a local time
+    totals = {v.device_element_id_ref: v.process_data_value for v in tim.data_log_values}
     assert totals["DET2"] + totals["DET3"] == pytest.approx(_summary_kg(session), abs=1.0)
     records = _read_tlg(out / "TLG00001.XML", bins["TLG00001"])
     _, pts = _read(_gpkg(session, tmp_path), "as_applied_points")

@@ -128,7 +128,8 @@ def _dlvs() -> list[_Dlv]:
 
 
 def _iso_time(utc: float) -> str:
-    return datetime.fromtimestamp(utc, UTC).isoformat(timespec="seconds").replace("+00:00", "")
+    """xs:dateTime in UTC, marked so (without the Z a reader takes it as local time)."""
+    return datetime.fromtimestamp(utc, UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
 def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Path]:
