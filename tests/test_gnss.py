@@ -523,3 +523,24 @@ def test_gpsd_captures_rmc_with_a_broken_date_keep_gpsds_position_and_speed() ->
             assert cut.utc == whole.utc.split("T")[1].rstrip("Z")
             n += 1
     assert n > 600 and d.counters["bad_field"] == n
+
+
+def test_the_terminal_counts_a_dropped_field_apart_from_bad_lines() -> None:
+    from topdress.config import loads_config
+    from topdress.terminal.app import Terminal
+    from topdress.terminal.canlink import open_bus
+    from topdress.terminal.serial_io import FakeLineSource
+
+    cfg = loads_config('[can]\nchannel = "test-gnss-bad-field"\n')
+    bus = open_bus(cfg.can)
+    try:
+        term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, clock=lambda: 1.0)
+        body = "GNRMC,083150.00,A,4352.9170,N,12519.4720,E,4.15,212.28,2208-1,,,A"
+        term.handle("nmea", 1.0, make_sentence(body))
+        term.handle("nmea", 1.1, b"$GPRMC,cut")
+        term.tick(1.2)
+        counters = term.snapshot.counters
+        assert (counters["nmea"], counters["nmea_bad"], counters["nmea_bad_field"]) == (1, 1, 1)
+        assert term.snapshot.lat == pytest.approx(43 + 52.917 / 60)  # the position was kept
+    finally:
+        bus.shutdown()

@@ -511,7 +511,9 @@ class Terminal:
 
     def _counters(self) -> dict[str, int]:
         lc = self.link.counters
-        bad_nmea = sum(v for k, v in self.nmea.counters.items() if k not in ("ok", "resync"))
+        # a sentence decoded without a malformed optional field (bad_field) is also "ok"
+        nmea_other = ("ok", "resync", "bad_field")
+        bad_nmea = sum(v for k, v in self.nmea.counters.items() if k not in nmea_other)
         crop = self.ndvi.sensors.counters
         out = {
             "nmea": self.nmea.counters["ok"],
@@ -525,6 +527,8 @@ class Terminal:
         }
         if self.session is not None:
             out["log_err"] = self.session.errors
+        if self.nmea.counters["bad_field"]:
+            out["nmea_bad_field"] = self.nmea.counters["bad_field"]
         # The loop's own anomalies (no NDVI, CAN receive errors) only when they happen.
         out.update((k, v) for k, v in self.counters.items() if k != "events" and v)
         # Lines a flooding source lost (the oldest of its bounded queue), per source.
