@@ -101,10 +101,7 @@ def read_polygons(
         if fid_name in table.column_names
         else None
     )
-    values = {
-        attr: _numbers(_column(table, attr), attr, where, fid_arr)
-        for attr in attributes
-    }
+    values = {attr: _numbers(_column(table, attr), attr, where, fid_arr) for attr in attributes}
     if progress is not None and len(wkb) >= PROGRESS_FEATURES:
         progress(f"{path.name}: checking {len(wkb):,} polygons")
     geoms = _polygons(wkb, where, fid_arr)
