@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -31,8 +32,15 @@ def latlon(x_east_m: float, y_north_m: float) -> tuple[float, float]:
     return lat, lon
 
 
-def record(directory: Path, config_toml: str, drive: Drive, until_s: float) -> Path:
-    """Run the terminal with `config_toml` over `drive` until `until_s`; the session file."""
+def record(
+    directory: Path,
+    config_toml: str,
+    drive: Drive,
+    until_s: float,
+    on_step: Callable[[World], None] | None = None,
+) -> Path:
+    """Run the terminal with `config_toml` over `drive` until `until_s`; the session file.
+    `on_step` sees the simulated world after each of its steps (its ground truth)."""
     cfg = loads_config(config_toml)
     cfg = replace(cfg, can=replace(cfg.can, channel=f"test-geo-{next(_channels)}"))
     world = World(seed=5, drive=drive)
@@ -46,6 +54,8 @@ def record(directory: Path, config_toml: str, drive: Drive, until_s: float) -> P
             while (msg := ecu_bus.recv(timeout=0)) is not None:
                 world.deliver_can(msg)
             out = world.step()
+            if on_step is not None:
+                on_step(world)
             t = out.t_s
             for line in out.nmea:
                 gnss.emit(t, line.encode())

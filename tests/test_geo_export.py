@@ -71,18 +71,14 @@ def test_every_vector_format_reads_back_in_gdal(session: Path, tmp_path: Path, f
             continue
         assert info["crs"] == "EPSG:4326"
         assert info["geometry_type"] == ("Point" if kind == "points" else "Polygon")
-        assert info["features"] > 100
+        assert info["features"] > (100 if kind == "points" else 60)  # swaths: ~1 m each
         if fmt == "shp":
             assert all(len(n) <= 10 for n in names)
             assert "AppliedRt" in names and "SWATHWIDTH" in names
         else:
             assert "AppliedRate" in names
-        # the kg of the export are the summary's (points: every interval; swaths: moving ones)
-        kg = float(np.sum(cols["AppliedKg"]))
-        if kind == "points":
-            assert kg == pytest.approx(want_kg, rel=0.005)
-        else:
-            assert 0.9 * want_kg < kg <= want_kg * 1.0001
+        # the kg of both layers are the summary's (swaths: also what was metered standing)
+        assert float(np.sum(cols["AppliedKg"])) == pytest.approx(want_kg, rel=0.005)
         assert set(np.unique(cols["SWATHWIDTH"])) == {3.6}
     if fmt in ("shp", "geojson"):  # the rate classes' style, on the field QGIS reads
         style = (tmp_path / "field_swaths.qml").read_text()
@@ -137,7 +133,9 @@ def test_isoxml_task_data_reads_back(session: Path, tmp_path: Path) -> None:
     assert [t.filename for t in task.time_logs] == ["TLG00001"]
     ddis = {int.from_bytes(d.ddi, "big") for d in task_data.devices[0].process_data}
     assert {6, 7, 67, 81, 141, 397, 400} <= ddis
-    totals = {v.device_element_id_ref: v.process_data_value for v in task.times[0].data_log_values}
+    tim = task.times[0]
+    assert (tim.start.offset, tim.stop.offset) == (0, 0)  # UTC, not a local time
+    totals = {v.device_element_id_ref: v.process_data_value for v in tim.data_log_values}
     assert totals["DET2"] + totals["DET3"] == pytest.approx(_summary_kg(session), abs=1.0)
     records = _read_tlg(out / "TLG00001.XML", bins["TLG00001"])
     _, pts = _read(_gpkg(session, tmp_path), "as_applied_points")

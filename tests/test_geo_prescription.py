@@ -22,6 +22,7 @@ from topdress.geo.boundary import load_boundary
 from topdress.geo.prescription import Zone, load_prescription
 from topdress.log.session import SessionReader
 from topdress.sim.tractor import Drive, Segment
+from topdress.sim.world import World
 from topdress.terminal.site import SiteRate
 
 
@@ -370,3 +371,160 @@ def test_the_terminal_refuses_to_start_on_a_bad_map_naming_key_and_file(tmp_path
     cfg = loads_config(f'[boundary]\npath = "{tmp_path / "none.shp"}"\n')
     with pytest.raises(MapError, match=r"^boundary\.path: .*none\.shp: no such file"):
         build_site_rate(cfg, build_rate_model(cfg.rate))
+
+
+def _latin1_in_utf8(tmp: Path, name: str, rate_as_text: bool = False) -> Path:
+    """Two zones whose `name` attribute has a byte that is not UTF-8 (a Latin-1 'ü' in a file
+    that declares UTF-8: its .cpg, or GeoJSON's own); with `rate_as_text` the rate is text
+    with such a byte."""
+    path = tmp / name
+    rates: list[object] = ["1SUED0", "300"] if rate_as_text else [100.0, 300.0]
+    write_polygons(
+        path, [box(-20, -10, 20, 20), box(-20, 20, 20, 40)], {"rate": rates, "name": ["SUED", "N"]}
+    )
+    for f in tmp.glob(path.stem + ".*"):
+        if f.suffix in (".dbf", ".geojson"):  # same length: the dBASE record stays whole
+            f.write_bytes(f.read_bytes().replace(b"SUED", b"S\xfcED"))
+    return path
+
+
+@pytest.mark.parametrize("name", ["rx.shp", "rx.geojson"])
+def test_text_not_in_the_files_encoding_refuses_only_a_rate(tmp_path: Path, name: str) -> None:
+    path = _latin1_in_utf8(tmp_path, name)
+    rx = load_prescription(PrescriptionConfig(path=str(path)))  # the name is not read at all
+    assert rx.lookup(*latlon(0, 0)).rate_kg_ha == 100.0  # type: ignore[union-attr]
+    assert rx.lookup(*latlon(0, 30)).rate_kg_ha == 300.0  # type: ignore[union-attr]
+    (tmp_path / "t").mkdir()
+    bad = _latin1_in_utf8(tmp_path / "t", name, rate_as_text=True)
+    with pytest.raises(MapError, match=r"feature 0 \(fid \d\): rate = '1S.*' is not a number"):
+        load_prescription(PrescriptionConfig(path=str(bad)))
+
+
+def test_a_loaded_map_says_what_it_holds(tmp_path: Path) -> None:
+    path = write_polygons(
+        tmp_path / "lb.shp",
+        [box(-20, -10, 20, 20), box(-20, 20, 20, 40)],
+        {"rate": [100.0, 250.0]},
+    )
+    info = load_prescription(PrescriptionConfig(path=str(path), units="lb/ac")).describe()
+    text = info.text()
+    assert text.startswith("2 zones, 100..250 lb/ac (112.1..280.2 kg/ha), extent 43.8852")
+    assert "(40 x 50 m), read in EPSG:4326" in text
+    assert info.distance_m(*latlon(0, 0)) == 0.0
+    assert info.distance_m(*latlon(0, 140)) == pytest.approx(100.0, rel=0.01)
+    codes = np.array([[1, 1, 1, 1], [1, 1, 2, 2], [2, 2, 2, 2], [0, 0, 0, 0], [1, 2, 0, 1]])
+    grid = _iso_grid(tmp_path, 1, codes.astype(np.uint8).tobytes(), ZONES)
+    text = load_prescription(PrescriptionConfig(path=str(grid))).describe().text()
+    assert text.startswith("20 grid cells (5 x 4), 15 with a rate, 2 rates, 100..300 kg/ha")
+
+
+def test_a_large_map_says_how_far_loading_is(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import topdress.geo.polygons
+    import topdress.geo.prescription
+
+    for mod in (topdress.geo.polygons, topdress.geo.prescription):
+        monkeypatch.setattr(mod, "PROGRESS_FEATURES", 2)
+    lines: list[str] = []
+    load_prescription(PrescriptionConfig(path=str(two_zones(tmp_path / "a.gpkg"))), lines.append)
+    assert lines == [
+        "a.gpkg: reading 2 features",
+        "a.gpkg: checking 2 polygons",
+        "a.gpkg: indexing 2 zones",
+    ]
+
+
+# the simulated machine's (docs/experiments.md), the command path at its longest: the next
+# 500 ms command frame after a 100 ms tick
+LOOKAHEAD = "[lookahead]\ncommand_ms = 600\nmeter_ms = 200\nairline_ms = 400\n"
+
+
+def _landed_edge_m(tmp_path: Path, lookahead: bool) -> tuple[float, float]:
+    """Drive north at 8 km/h from the 100 kg/ha zone into the 300 kg/ha one (edge at 20 m);
+    where, past the edge, the product landing on the ground (the simulator's truth: kg landed
+    per metre of travel over the width) first reaches 95 % of 300 kg/ha, m (negative: before);
+    and where it first rose above the old rate, m."""
+    tmp_path.mkdir()
+    rx = two_zones(tmp_path / "rx.gpkg")
+    toml = re.sub(r'(\[prescription\][^\n]*\n)path = ""', rf'\1path = "{rx}"', DEFAULT_TOML)
+    if lookahead:
+        toml = re.sub(r"\[lookahead\]\n(?:[^\[]*)", LOOKAHEAD, toml)
+    ys: list[float] = []
+    kg: list[float] = []
+
+    def on_step(world: World) -> None:
+        tr = world.truth
+        ys.append(tr.y_m)
+        kg.append(tr.applied_kg[0] + tr.applied_kg[1])
+
+    record(tmp_path, toml, _north(40.0), 22.0, on_step)
+    y, m = np.array(ys), np.array(kg)
+    bins = np.arange(15.0, 26.0, 0.1)  # 10 cm of travel
+    landed = np.interp(bins, y, m, left=np.nan, right=np.nan)
+    rate = np.diff(landed) / (0.1 * 3.6) * 10_000.0  # kg/ha over each 10 cm
+    at = np.nonzero(rate >= 0.95 * 300.0)[0]
+    rising = np.nonzero(rate > 1.15 * 100.0)[0]  # above the meter's ripple of the old rate
+    return float(bins[at[0]] + 0.05 - 20.0), float(bins[rising[0]] - 20.0)
+
+
+def test_the_prescription_looks_ahead_like_the_ndvi(tmp_path: Path) -> None:
+    # the outlet at the antenna; the simulated meter and air line take ~0.6 s, the command
+    # path up to 0.5 s: looked up where the outlet is, the new rate lands well past the edge
+    late, _ = _landed_edge_m(tmp_path / "now", lookahead=False)
+    ahead, rises = _landed_edge_m(tmp_path / "ahead", lookahead=True)
+    print(f"lands {late:+.2f} m from the edge at the outlet, {ahead:+.2f} m looked ahead")
+    assert late > 1.0
+    assert abs(ahead) <= 0.3
+    # the meter's ramp (about half a second) starts before the edge, not metres before it
+    assert -1.0 <= rises < 0.0
+
+
+def _config_with(tmp_path: Path, section: str, path: Path) -> Path:
+    cfg = tmp_path / "t.toml"
+    cfg.write_text(
+        f'[{section}]\npath = "{path}"\n[log]\ndir = "{tmp_path / "logs"}"\n'
+        '[gnss]\nsource = "stdin"\n[crop]\nsource = "file"\npath = "/dev/null"\n'
+        "[display]\nenabled = false\n"
+    )
+    return cfg
+
+
+def test_config_check_and_run_read_the_maps_first_with_the_same_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from topdress.cli.main import main
+
+    broken = _iso_grid(
+        tmp_path, 1, np.ones((5, 4), np.uint8).tobytes(), ZONES.replace("0006", "ZZZZ", 1)
+    )
+    cfg = _config_with(tmp_path, "prescription", broken)
+    assert main(["config", "check", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    want = (
+        "topdress: error: prescription.path: "
+        + str(broken)
+        + ": TZN 1 PDV: A = 'ZZZZ' is not a DDI"
+    )
+    assert err.startswith(want) and "Traceback" not in err
+    assert main(["run", "--config", str(cfg), "--duration", "1"]) == 2
+    out, err = capsys.readouterr()
+    assert err.startswith(want) and "Traceback" not in err
+    assert "not properly shut down" not in out + err  # no device was opened
+    assert not (tmp_path / "logs").exists() or not list((tmp_path / "logs").iterdir())
+
+
+def test_config_check_says_what_the_maps_hold(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from topdress.cli.main import main
+
+    rx = two_zones(tmp_path / "rx.gpkg")
+    cfg = _config_with(tmp_path, "prescription", rx)
+    field = write_polygons(tmp_path / "b.geojson", [box(-50, -50, 50, 50)], {"n": [1]})
+    cfg.write_text(cfg.read_text() + f'[boundary]\npath = "{field}"\nheadland_m = 10.0\n')
+    assert main(["config", "check", str(cfg)]) == 0
+    out = capsys.readouterr().out
+    assert f"  prescription: {rx}: 2 zones, 100..300 kg/ha, extent 43.8852" in out
+    assert "(40 x 50 m), read in EPSG:4326" in out
+    assert "  boundary: " in out and "1 polygon, 1.00 ha, headland 10 m leaves 0.64 ha" in out

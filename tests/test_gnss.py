@@ -130,7 +130,7 @@ def test_other_sentences_are_accepted_without_a_fix() -> None:
             make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,-3.2,87.5,210526,,,A"),
             "malformed",
         ),
-        # numbers a checksum cannot vouch for: latitude 99, longitude 185, course 400
+        # numbers a checksum cannot vouch for: latitude 99, longitude 185
         (
             make_sentence("GPRMC,081836.00,A,9904.5678,N,12534.1234,E,3.24,87.5,210526,,,A"),
             "out_of_range",
@@ -139,12 +139,7 @@ def test_other_sentences_are_accepted_without_a_fix() -> None:
             make_sentence("GPRMC,081836.00,A,4304.5678,N,18534.1234,E,3.24,87.5,210526,,,A"),
             "out_of_range",
         ),
-        (
-            make_sentence("GPRMC,081836.00,A,4304.5678,N,12534.1234,E,3.24,400.0,210526,,,A"),
-            "out_of_range",
-        ),
         (make_sentence("GPVTG,054.7,T,034.4,M,005.5,N,-10.2,K,A"), "malformed"),
-        (make_sentence("GPVTG,nan,T,034.4,M,005.5,N,10.2,K,A"), "malformed"),
         (
             make_sentence("GPGGA,081836.00,9104.5678,S,12534.1234,E,1,08,1.0,100,M,0,M,,"),
             "out_of_range",
@@ -289,6 +284,7 @@ def test_gnss_decode_command(tmp_path: Path, capsys: pytest.CaptureFixture[str])
         "lat",
         "lon",
         "utc",
+        "dropped",
     ]
     assert rows[0]["ok"] and rows[0]["speed_kmh"] == pytest.approx(6.022704)
     assert rows[1]["ok"] is False and rows[1]["error"].startswith("no_checksum")
@@ -452,5 +448,99 @@ def test_mutated_sentences_never_raise_and_never_give_a_non_finite_number() -> N
         for value in (fix.speed_kmh, fix.course_deg, fix.lat, fix.lon):
             assert value is None or math.isfinite(value), fix
         assert fix.ok or fix.error is not None
-    assert sum(d.counters.values()) - d.counters["resync"] == 8_000
+    assert sum(d.counters.values()) - d.counters["resync"] - d.counters["bad_field"] == 8_000
     assert d.counters["ok"] > 400 and d.counters["malformed"] > 400
+
+
+@pytest.mark.parametrize(
+    ("body", "dropped"),
+    [
+        # a real receiver's RMC: a date of "2208-1" (GPSD keeps the position and the speed)
+        ("GNRMC,083150.00,A,4352.9170,N,12519.4720,E,0.15,212.28,2208-1,,,A", ("date",)),
+        ("GNRMC,083150.00,A,4352.9170,N,12519.4720,E,0.15,212.28,310226,,,A", ("date",)),
+        ("GNRMC,083150.00,A,4352.9170,N,12519.4720,E,0.15,400.0,150626,,,A", ("course",)),
+        ("GNRMC,083150.00,A,4352.9170,N,12519.4720,E,0.15,21x.2,150626,,,A", ("course",)),
+        (
+            "GNRMC,083150.00,A,4352.9170,N,12519.4720,E,0.15,212.28,150626,7.x,Q,A",
+            ("magvar", "magvar_ew"),
+        ),
+    ],
+)
+def test_rmc_with_one_malformed_optional_field_keeps_position_and_speed(
+    body: str, dropped: tuple[str, ...]
+) -> None:
+    d = NmeaDecoder()
+    fix = d.decode(make_sentence(body))
+    assert fix.ok and fix.fix_valid and fix.dropped == dropped
+    assert (fix.lat, fix.lon) == pytest.approx((43 + 52.917 / 60, 125 + 19.472 / 60))
+    assert fix.speed_kmh == pytest.approx(0.15 * 1.852)
+    if "date" in dropped:  # the time of day stays; UTC needs the date, so no UTC from it
+        assert fix.utc == "08:31:50.000" and fix.course_deg == pytest.approx(212.28)
+    else:
+        assert fix.utc == "2026-06-15T08:31:50.000Z"
+    if "course" in dropped:
+        assert fix.course_deg is None
+    assert d.counters == {"ok": 1, "bad_field": 1}
+
+
+def test_vtg_and_gga_keep_their_speed_and_position_without_a_bad_optional_field() -> None:
+    d = NmeaDecoder()
+    vtg = d.decode(make_sentence("GPVTG,nan,T,034.4,M,005.5,N,10.2,K,A"))
+    assert vtg.ok and vtg.speed_kmh == pytest.approx(10.2) and vtg.course_deg is None
+    assert vtg.dropped == ("course",)
+    gga = d.decode(make_sentence("GNGGA,081836.00,4304.5678,N,12534.1234,E,1,08,1.x,-31.4,M,,M,,"))
+    assert gga.ok and gga.fix_valid and gga.dropped == ("hdop",)
+    assert gga.lat == pytest.approx(43 + 4.5678 / 60)
+    # a negative altitude is a number, not a malformed field
+    gga = d.decode(
+        make_sentence("GNGGA,081836.00,4304.5678,N,12534.1234,E,1,08,0.9,-31.4,M,-2,M,,")
+    )
+    assert gga.ok and gga.dropped == ()
+    # the essential fields still refuse the sentence: a bad speed or position is not guessed
+    bad = d.decode(make_sentence("GNRMC,083150.00,A,4352.9170,N,12519.4720,E,0.1x,,2208-1,,,A"))
+    assert not bad.ok and bad.error is not None and bad.error.startswith("malformed:")
+    assert d.counters == {"ok": 3, "bad_field": 2, "malformed": 1}
+
+
+def test_gpsd_captures_rmc_with_a_broken_date_keep_gpsds_position_and_speed() -> None:
+    # Every RMC of the GPSD captures with a valid fix, its date cut as the real receiver's
+    # ("2208-1") and the checksum made again: the same position and speed as the whole line.
+    logs = Path("/work/shared/nmea/gpsd-logs")
+    if not logs.is_dir():
+        pytest.skip(f"{logs} not present")
+    d = NmeaDecoder()
+    n = 0
+    for path in sorted(logs.glob("*.log")):
+        for raw in path.read_bytes().splitlines():
+            whole = d.decode(raw) if raw[3:6] == b"RMC" else None
+            if whole is None or not whole.fix_valid or whole.utc is None or "T" not in whole.utc:
+                continue
+            fields = raw[1 : raw.rindex(b"*")].decode().split(",")
+            fields[9] = fields[9][:4] + "-1"
+            cut = d.decode(make_sentence(",".join(fields)))
+            assert cut.ok and cut.fix_valid and cut.dropped == ("date",), raw
+            assert (cut.lat, cut.lon, cut.speed_kmh) == (whole.lat, whole.lon, whole.speed_kmh)
+            assert cut.utc == whole.utc.split("T")[1].rstrip("Z")
+            n += 1
+    assert n > 600 and d.counters["bad_field"] == n
+
+
+def test_the_terminal_counts_a_dropped_field_apart_from_bad_lines() -> None:
+    from topdress.config import loads_config
+    from topdress.devices.can import open_bus
+    from topdress.devices.lines import FakeLineSource
+    from topdress.terminal.app import Terminal
+
+    cfg = loads_config('[can]\nchannel = "test-gnss-bad-field"\n')
+    bus = open_bus(cfg.can)
+    try:
+        term = Terminal(cfg, FakeLineSource(), FakeLineSource(), bus, clock=lambda: 1.0)
+        body = "GNRMC,083150.00,A,4352.9170,N,12519.4720,E,4.15,212.28,2208-1,,,A"
+        term.handle("nmea", 1.0, make_sentence(body))
+        term.handle("nmea", 1.1, b"$GPRMC,cut")
+        term.tick(1.2)
+        counters = term.snapshot.counters
+        assert (counters["nmea"], counters["nmea_bad"], counters["nmea_bad_field"]) == (1, 1, 1)
+        assert term.snapshot.lat == pytest.approx(43 + 52.917 / 60)  # the position was kept
+    finally:
+        bus.shutdown()

@@ -96,9 +96,15 @@ def _init(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
+    from topdress.terminal.site import load_maps
+
     cfg = load_config(args.file)
+    # the maps as `run` reads them, with the same errors (relative paths: from here, as run)
+    maps = load_maps(cfg, print)
     print(f"{args.file}: ok")
     _describe(cfg)
+    for line in maps.describe():
+        print(f"  {line}")
     return 0
 
 

@@ -31,6 +31,7 @@ from topdress.sim.live import LiveMachine
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.app import Terminal
+from topdress.terminal.site import load_maps
 from topdress.view.commands import CONSOLE_HELP
 from topdress.view.snapshot import Snapshot
 
@@ -138,7 +139,12 @@ def run_terminal(
             'warning: can.interface = "virtual" is the simulator\'s in-process bus: no ECU can '
             "answer there (set [can] interface and channel, e.g. socketcan can0)"
         )
-    # Devices first: one that cannot be opened stops here, before a session file is made.
+    # The maps first: a prescription or boundary that cannot be used stops here, before any
+    # device is opened or a session file made; what was loaded is said.
+    maps = load_maps(cfg, console.message)
+    for line in maps.describe():
+        console.message(line)
+    # Devices next: one that cannot be opened stops here, before a session file is made.
     bus = open_bus(cfg.can)
     try:
         gnss, crop = open_line_source(cfg.gnss), open_line_source(cfg.crop)
@@ -158,6 +164,7 @@ def run_terminal(
         start=start,
         on_event=console.message,
         config_path=config_path,
+        maps=maps,
     )
     shown = None
     if display is not None:  # the web display beside the console (topdress.display)

@@ -1,5 +1,14 @@
-"""As-applied records of a session: one point per state row with a position, one swath
-polygon per interval the machine moved, with the target and the actual rate per layer.
+"""As-applied records of a session: one point per state row with a position, and swath
+polygons where product was applied, with the target and the actual rate per layer.
+
+Swaths follow the machine's path, not its raw fixes: the outlet positions are smoothed with
+the steps the machine itself measured (selected speed x interval, along the heading), which
+takes a fix's jitter out of the length and the shape; only intervals with a meter turning and
+the machine moving make swaths, cut every SWATH_M of path (and where the zone or the
+prescription rate changes), each across the path's own direction so that neighbours share
+their ends. What was metered standing belongs to the swath where the machine stood. Each
+swath's kg and area are sums over its state rows, so the swaths add up to the summary's area
+and kg; ground that earlier swaths had covered is flagged (`Overlap`), not cut away.
 
 Each state row holds until the next (left sums, as `topdress log summary` integrates): the
 fertilizer a row carries is measured metering speed x kg/rev x its interval, so the kg of the
@@ -29,13 +38,13 @@ from pyproj import CRS, Transformer
 
 from topdress.config import MachineConfig, SpeedConfig
 from topdress.errors import MapError
+from topdress.geo.outlet import offset_positions
 from topdress.log.model import STATE_COLUMNS
 from topdress.log.session import SessionReader, session_config
 
 _log = logging.getLogger(__name__)
 
 MAX_GAP_S: Final = 1.0  # as the summary: a longer interval is a gap in the log, not integrated
-MIN_SWATH_M: Final = 0.05  # an interval shorter than this gives no swath polygon
 WGS84: Final = CRS.from_epsg(4326)
 
 FloatArray = npt.NDArray[np.float64]
@@ -111,7 +120,9 @@ def build(reader: SessionReader) -> AsApplied:
     ):
         if col not in present:
             out.notes.append(f"this session log has no {col} column: {what}")
-    _points(out, rows, cfg.machine, cfg.speed, reader.meta.get("created_utc"))
+    _points(
+        out, rows, cfg.machine, cfg.speed, reader.meta.get("created_utc"), "outlet_lat" in present
+    )
     return out
 
 
@@ -121,6 +132,7 @@ def _points(
     m: MachineConfig,
     speed: SpeedConfig,
     created_utc: str | None,
+    has_outlet: bool = True,
 ) -> None:
     if not rows["t"]:
         out.notes.append("no state rows")
@@ -136,6 +148,15 @@ def _points(
     heading = _opt(rows, "heading_deg")
     if np.isnan(heading).all():
         heading = _track_heading(lat, lon)
+    # Until the machine first moves its heading is not known, and the terminal logs no outlet
+    # position: the machine starts in the direction it first takes, so the outlet is placed
+    # with that heading (else the swaths jump from the antenna to the outlet).
+    path_heading = _fill(heading)
+    if has_outlet and (m.outlet_along_m or m.outlet_across_m):
+        fix = antenna & ~np.isnan(lat) & ~np.isnan(path_heading)
+        lat[fix], lon[fix] = offset_positions(
+            lat[fix], lon[fix], path_heading[fix], m.outlet_along_m, m.outlet_across_m
+        )
     utc = _opt(rows, "utc")
     src = _text(rows, "utc_source")
     missing = np.isnan(utc)
@@ -189,7 +210,19 @@ def _points(
     out.point_geom = shapely.points(lon[has], lat[has])
     if has.any():
         out.utm = utm_crs(float(np.nanmean(lat[has])), float(np.nanmean(lon[has])))
-        _swaths(out, cols, lat, lon, dt, m.width_m)
+        _swaths(out, cols, lat, lon, dt, m.width_m, path_heading)
+
+
+def _fill(values: FloatArray) -> FloatArray:
+    """NaNs take the last value before them; those before the first value, the first."""
+    ok = ~np.isnan(values)
+    if not ok.any():
+        return values.copy()
+    idx = np.where(ok, np.arange(values.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    out = values[idx]
+    out[: int(np.argmax(ok))] = values[int(np.argmax(ok))]
+    return np.asarray(out, dtype=float)
 
 
 def _created(text: str | None) -> float | None:
@@ -229,57 +262,83 @@ def _swaths(
     lon: FloatArray,
     dt: FloatArray,
     width_m: float,
+    heading_deg: FloatArray,
 ) -> None:
-    """A rectangle of the working width over each interval between two positioned rows."""
+    """Swaths along the machine's smoothed path while product is applied (see the module's
+    doc): the attributes are sums over the state rows each swath holds, so the map adds up to
+    the summary."""
     assert out.utm is not None
     fwd = Transformer.from_crs(WGS84, out.utm, always_xy=True)
     back = Transformer.from_crs(out.utm, WGS84, always_xy=True)
     x, y = fwd.transform(lon, lat)
-    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-    dx, dy = np.diff(x), np.diff(y)
-    length = np.hypot(dx, dy)
-    ok = (dt[:-1] > 0) & np.isfinite(length) & (length >= MIN_SWATH_M)
-    i = np.nonzero(ok)[0]
-    if i.size == 0:
+    path = _Path(
+        x=np.asarray(x, dtype=float),
+        y=np.asarray(y, dtype=float),
+        step_m=np.asarray(cols["SPEED"], dtype=float) / 3.6 * dt,
+        dt=dt,
+        heading_deg=heading_deg,
+        work=np.asarray(cols["WorkState"]) > 0,
+        breaks=_breaks(cols),
+    )
+    built = _build_swaths(path, width_m)
+    if built.notes:
+        out.notes.extend(built.notes)
+    if built.geoms.size == 0:
         return
-    # Across the heading where it is known (consecutive positions a few decimetres apart
-    # carry the receiver's noise in their direction), else across the segment.
-    h = np.radians(np.asarray(cols["Heading"], dtype=float)[i])
-    ux = np.where(np.isnan(h), dx[i] / length[i], np.sin(h))
-    uy = np.where(np.isnan(h), dy[i] / length[i], np.cos(h))
-    nx, ny = -uy * width_m / 2, ux * width_m / 2
-    xs = np.stack([x[i] + nx, x[i + 1] + nx, x[i + 1] - nx, x[i] - nx, x[i] + nx], axis=1)
-    ys = np.stack([y[i] + ny, y[i + 1] + ny, y[i + 1] - ny, y[i] - ny, y[i] + ny], axis=1)
-    lo, la = back.transform(xs.ravel(), ys.ravel())
-    ring = np.stack([np.asarray(lo), np.asarray(la)], axis=1).reshape(i.size, 5, 2)
-    out.swath_geom = shapely.polygons(ring)
-    area_ha = length[i] * width_m / 10_000.0
-    kg = np.asarray(cols["AppliedKg"], dtype=float)[i]
-    tkg = np.asarray(cols["TargetKg"], dtype=float)[i]
+    geoms = shapely.transform(
+        built.geoms, lambda xy: np.column_stack(back.transform(xy[:, 0], xy[:, 1]))
+    )
+    # RFC 7946: exterior rings counter-clockwise (GDAL writes Shapefiles clockwise itself)
+    out.swath_geom = np.asarray(shapely.orient_polygons(geoms, exterior_cw=False))
+    sid, first = built.swath_of_row, built.first_row
+    n = built.geoms.size
+
+    def total(values: npt.NDArray[np.generic]) -> FloatArray:
+        w = np.nan_to_num(np.asarray(values, dtype=float))
+        ok = sid >= 0
+        return np.bincount(sid[ok], weights=w[ok], minlength=n).astype(float)
+
+    step = np.asarray(path.step_m, dtype=float)
+    dist = total(step * built.moving)
+    secs = total(dt * built.moving)
+    area_ha = total(step * width_m / 10_000.0)
+    kg = total(cols["AppliedKg"])
+    tkg = total(cols["TargetKg"])
     out.swaths = {
-        "IsoTime": cols["IsoTime"][i],
-        "LogTime": cols["LogTime"][i],
-        "Heading": cols["Heading"][i],
-        "SPEED": cols["SPEED"][i],
-        "DISTANCE": length[i],
-        "SWATHWIDTH": cols["SWATHWIDTH"][i],
+        "IsoTime": cols["IsoTime"][first],
+        "LogTime": cols["LogTime"][first],
+        "Heading": built.heading_deg,
+        "SPEED": _ratio(dist * 3.6, secs),
+        "DISTANCE": dist,
+        "DURATION": secs,
+        "SWATHWIDTH": np.full(n, width_m),
         "AREA": area_ha,
-        # the swath's mean rates: of the rows at its two ends
-        "AppliedRate": _mean_ends(cols["AppliedRate"], i),
-        "TargetRate": _mean_ends(cols["TargetRate"], i),
-        "CmdRate": cols["TargetRate"][i],
-        "RpmUp": cols["RpmUp"][i],
-        "RpmLo": cols["RpmLo"][i],
+        # the dose on the swath's ground: what was metered over it per its area
+        "AppliedRate": _ratio(kg, area_ha),
+        "TargetRate": _ratio(tkg, area_ha),
+        "CmdRate": _ratio(total(np.asarray(cols["TargetRate"], float) * step), dist),
+        "RpmUp": _ratio(total(np.asarray(cols["RpmUp"], float) * dt), total(dt)),
+        "RpmLo": _ratio(total(np.asarray(cols["RpmLo"], float) * dt), total(dt)),
         "AppliedKg": kg,
         "TargetKg": tkg,
-        "Zone": cols["Zone"][i],
-        "PrescRate": cols["PrescRate"][i],
+        "Overlap": built.overlap_pct,
+        "Zone": cols["Zone"][first],
+        "PrescRate": cols["PrescRate"][first],
     }
 
 
-def _mean_ends(col: npt.NDArray[np.generic], i: npt.NDArray[np.intp]) -> FloatArray:
-    c = np.asarray(col, dtype=float)
-    return np.asarray((c[i] + c[i + 1]) / 2.0, dtype=float)
+def _breaks(cols: dict[str, npt.NDArray[np.generic]]) -> npt.NDArray[np.bool_]:
+    """Rows where the zone or the prescription rate changes: a swath ends there, so that its
+    Zone and PrescRate hold over all of it."""
+    zone = np.asarray(cols["Zone"], dtype=object)
+    presc = np.nan_to_num(np.asarray(cols["PrescRate"], dtype=float), nan=-1.0)
+    out = np.zeros(zone.size, dtype=bool)
+    out[1:] = (zone[1:] != zone[:-1]) | (presc[1:] != presc[:-1])
+    return out
+
+
+def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
+    return np.divide(a, b, out=np.zeros_like(a), where=b > 0)
 
 
 def require_points(data: AsApplied) -> None:
@@ -287,3 +346,292 @@ def require_points(data: AsApplied) -> None:
         raise MapError(
             f"{data.path}: no state row has a position (no GNSS fix in the session): nothing to map"
         )
+
+
+# ---- swaths: the machine's path, cut into pieces while product is applied --------------------
+
+SWATH_M: Final = 1.0  # a swath is cut after this much path (and where zone or prescription change)
+MIN_RUN_M: Final = 0.25  # a work run shorter than this has no polygon (its kg go to a neighbour)
+POS_SD_M: Final = 0.3  # position noise the smoother takes off (a fix's jitter, not its bias)
+STEP_SD_M: Final = 0.01  # dead-reckoning error per row: this plus STEP_SD_FRAC of the step
+STEP_SD_FRAC: Final = 0.05  # (speed and heading errors of a few percent and degrees)
+TANGENT_M: Final = 0.25  # the path's direction is taken over this much path either side
+
+
+@dataclass(frozen=True)
+class _Path:
+    """Per state row: the outlet in metres (UTM; NaN without a position), the step to the next
+    row by the selected speed (m), the interval (s), the heading, whether a meter turns, and
+    where a swath must end."""
+
+    x: FloatArray
+    y: FloatArray
+    step_m: FloatArray
+    dt: FloatArray
+    heading_deg: FloatArray
+    work: npt.NDArray[np.bool_]
+    breaks: npt.NDArray[np.bool_]
+
+
+@dataclass
+class _Swaths:
+    geoms: npt.NDArray[np.object_]  # UTM polygons
+    swath_of_row: npt.NDArray[np.intp]  # the swath each row's interval counts in, -1: none
+    first_row: npt.NDArray[np.intp]
+    moving: npt.NDArray[np.bool_]  # rows whose interval is part of a swath's path
+    heading_deg: FloatArray
+    overlap_pct: FloatArray
+    notes: list[str]
+
+
+def _build_swaths(p: _Path, width_m: float) -> _Swaths:
+    n = p.x.size
+    has = np.isfinite(p.x) & np.isfinite(p.y)
+    link = np.zeros(n, dtype=bool)  # interval i (row i to i+1) is a usable step
+    link[:-1] = has[:-1] & has[1:] & (p.dt[:-1] > 0)
+    step = np.where(link, p.step_m, 0.0)
+    sx, sy = smooth_path(p.x, p.y, step, p.heading_deg, link)
+    moving = link & p.work & (step > 0)
+    runs = _runs(moving, p.breaks, step)
+    tangent = _tangents(sx, sy, step, link, p.heading_deg)
+    geoms: list[Any] = []
+    first: list[int] = []
+    heading: list[float] = []
+    sid = np.full(n, -1, dtype=np.intp)
+    repaired = 0
+    for rows in runs:
+        poly, fixed = _strip(sx, sy, rows, width_m, tangent)
+        repaired += fixed
+        if poly is None:
+            continue
+        k = len(geoms)
+        sid[rows] = k
+        geoms.append(poly)
+        first.append(int(rows[0]))
+        a, b = rows[0], rows[-1] + 1
+        heading.append(math.degrees(math.atan2(sx[b] - sx[a], sy[b] - sy[a])) % 360.0)
+    # What was metered off the path (standing, a run too short to draw, a step to a row
+    # without a position) belongs to the swath where the machine was: the one before it
+    # (or, before the first, the next one).
+    metered = has & p.work & (p.dt > 0)
+    _attach(sid, metered)
+    notes = []
+    if repaired:
+        notes.append(f"{repaired} swaths in tight turns were repaired (inner edge folded)")
+    g = np.array(geoms, dtype=object)
+    return _Swaths(
+        geoms=g,
+        swath_of_row=sid,
+        first_row=np.array(first, dtype=np.intp),
+        moving=moving & (sid >= 0),
+        heading_deg=np.array(heading, dtype=float),
+        overlap_pct=_overlap_pct(g),
+        notes=notes,
+    )
+
+
+def smooth_path(
+    x: FloatArray,
+    y: FloatArray,
+    step_m: FloatArray,
+    heading_deg: FloatArray,
+    link: npt.NDArray[np.bool_],
+) -> tuple[FloatArray, FloatArray]:
+    """The path that best fits both the positions and the machine's own steps (selected
+    speed x interval along the heading): least squares of the positions (POS_SD_M) and the
+    steps (STEP_SD_M + STEP_SD_FRAC of each), a tridiagonal system solved once. A fix's
+    jitter no longer lengthens the path; a heading that is not known links nothing."""
+    n = x.size
+    h0 = np.radians(heading_deg)
+    h1 = np.empty_like(h0)
+    h1[:-1], h1[-1:] = h0[1:], h0[-1:]
+    # the interval's heading: the mean of its two ends (a turn's step is a chord)
+    hx = np.nan_to_num(np.sin(h0)) + np.nan_to_num(np.sin(h1))
+    hy = np.nan_to_num(np.cos(h0)) + np.nan_to_num(np.cos(h1))
+    norm = np.hypot(hx, hy)
+    ok = link & (norm > 1e-9)
+    ux = np.divide(hx, norm, out=np.zeros(n), where=ok)
+    uy = np.divide(hy, norm, out=np.zeros(n), where=ok)
+    lam = np.where(ok, (POS_SD_M / (STEP_SD_M + STEP_SD_FRAC * step_m)) ** 2, 0.0)
+    dx, dy = (ux * step_m).tolist(), (uy * step_m).tolist()
+    px, py = np.nan_to_num(x).tolist(), np.nan_to_num(y).tolist()
+    lm = lam.tolist()
+    # Thomas algorithm; row i: (1 + l[i-1] + l[i]) s[i] - l[i-1] s[i-1] - l[i] s[i+1]
+    #                          = p[i] + l[i-1] d[i-1] - l[i] d[i]
+    cp = [0.0] * n
+    qx, qy = [0.0] * n, [0.0] * n
+    lo = c_prev = qx_prev = qy_prev = 0.0
+    dx_prev = dy_prev = 0.0
+    for i in range(n):
+        hi = lm[i] if i < n - 1 else 0.0
+        denom = 1.0 + lo + hi - lo * c_prev
+        c_prev = hi / denom
+        qx_prev = (px[i] + lo * dx_prev - hi * dx[i] + lo * qx_prev) / denom
+        qy_prev = (py[i] + lo * dy_prev - hi * dy[i] + lo * qy_prev) / denom
+        cp[i], qx[i], qy[i] = c_prev, qx_prev, qy_prev
+        lo, dx_prev, dy_prev = hi, dx[i], dy[i]
+    sx, sy = [0.0] * n, [0.0] * n
+    nx = ny = 0.0
+    for i in range(n - 1, -1, -1):
+        nx = qx[i] + cp[i] * nx
+        ny = qy[i] + cp[i] * ny
+        sx[i], sy[i] = nx, ny
+    out_x, out_y = np.array(sx), np.array(sy)
+    missing = ~(np.isfinite(x) & np.isfinite(y))
+    out_x[missing] = out_y[missing] = math.nan
+    return out_x, out_y
+
+
+def _runs(
+    moving: npt.NDArray[np.bool_], breaks: npt.NDArray[np.bool_], step: FloatArray
+) -> list[npt.NDArray[np.intp]]:
+    """The rows (intervals) of each swath: consecutive moving intervals, cut after SWATH_M of
+    path and where a break row starts; a last piece shorter than half of SWATH_M joins the
+    one before it in its run."""
+    idx = np.nonzero(moving)[0]
+    if idx.size == 0:
+        return []
+    cut_run = np.concatenate([[True], np.diff(idx) != 1])
+    out: list[list[int]] = []
+    acc = 0.0
+    run_start = 0  # index in `out` of the first swath of the current run
+    for i, new_run, brk in zip(idx.tolist(), cut_run.tolist(), breaks[idx].tolist(), strict=True):
+        if new_run:
+            if out and len(out) - run_start > 1 and _length(out[-1], step) < SWATH_M / 2:
+                out[-2].extend(out.pop())
+            run_start = len(out)
+            out.append([i])
+            acc = float(step[i])
+            continue
+        if acc >= SWATH_M or brk:
+            out.append([i])
+            acc = float(step[i])
+        else:
+            out[-1].append(i)
+            acc += float(step[i])
+    if len(out) - run_start > 1 and _length(out[-1], step) < SWATH_M / 2:
+        out[-2].extend(out.pop())
+    return [np.array(r, dtype=np.intp) for r in out if _length(r, step) >= MIN_RUN_M]
+
+
+def _length(rows: list[int], step: FloatArray) -> float:
+    return float(np.sum(step[rows]))
+
+
+def _strip(
+    sx: FloatArray,
+    sy: FloatArray,
+    rows: npt.NDArray[np.intp],
+    width_m: float,
+    tangent: tuple[FloatArray, FloatArray],
+) -> tuple[Any, int]:
+    """The swath over intervals `rows` (consecutive): the working width across the path's
+    direction at each of its rows and at the row after the last (so that swaths along a pass
+    share their ends). Returns (polygon or None when degenerate, 1 if it was repaired)."""
+    v = np.append(rows, rows[-1] + 1)
+    x, y = sx[v], sy[v]
+    tx, ty = tangent[0][v], tangent[1][v]
+    half = width_m / 2.0
+    rx, ry = ty * half, -tx * half  # to the right of the direction of travel
+    right = _no_backstep(np.column_stack([x + rx, y + ry]), tx, ty)
+    left = _no_backstep(np.column_stack([x - rx, y - ry]), tx, ty)
+    ring = np.concatenate([left, right[::-1], left[:1]])
+    poly = shapely.Polygon(ring)
+    fixed = 0
+    if not poly.is_valid:
+        poly, fixed = _repair(poly), 1
+    if poly is None or poly.is_empty or poly.area < 1e-4:
+        return None, fixed
+    return poly, fixed
+
+
+def _tangents(
+    sx: FloatArray,
+    sy: FloatArray,
+    step: FloatArray,
+    link: npt.NDArray[np.bool_],
+    heading_deg: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """The path's direction at each row: the chord from TANGENT_M of path behind to as far
+    ahead (rows a few centimetres apart would turn a centimetre of jitter into degrees),
+    within the stretch of linked rows; the heading where the path has not moved."""
+    n = sx.size
+    s = np.concatenate([[0.0], np.cumsum(step[:-1])])
+    comp = np.concatenate([[0], np.cumsum(~link[:-1])])
+    starts = np.searchsorted(comp, comp, side="left")
+    ends = np.searchsorted(comp, comp, side="right") - 1
+    ahead = np.clip(np.searchsorted(s, s + TANGENT_M, side="left"), starts, ends)
+    behind = np.clip(np.searchsorted(s, s - TANGENT_M, side="right") - 1, starts, ends)
+    ahead = np.minimum(ahead, n - 1)
+    tx, ty = sx[ahead] - sx[behind], sy[ahead] - sy[behind]
+    norm = np.hypot(tx, ty)
+    h = np.radians(heading_deg)
+    flat = ~(norm > 1e-3)
+    tx = np.where(flat, np.nan_to_num(np.sin(h)), tx / np.where(flat, 1.0, norm))
+    ty = np.where(flat, np.nan_to_num(np.cos(h)), ty / np.where(flat, 1.0, norm))
+    return tx, ty
+
+
+def _no_backstep(side: FloatArray, tx: FloatArray, ty: FloatArray) -> FloatArray:
+    """An edge of the swath never runs backwards: in a turn tighter than half the width the
+    inner edge pivots (stands) instead of sweeping back over ground already passed."""
+    out = side.copy()
+    for k in range(1, len(out)):
+        if (out[k, 0] - out[k - 1, 0]) * tx[k] + (out[k, 1] - out[k - 1, 1]) * ty[k] < 0.0:
+            out[k] = out[k - 1]
+    return out
+
+
+def _repair(poly: Any) -> Any:
+    """A folded swath made valid; parts that only touch are joined, else the largest part."""
+    g = shapely.make_valid(poly)
+    parts = [q for q in shapely.get_parts(g) if q.geom_type == "Polygon" and q.area > 0]
+    if not parts:
+        return None
+    if len(parts) > 1:
+        joined = (
+            shapely.union_all(parts)
+            .buffer(0.001, join_style="mitre")
+            .buffer(-0.001, join_style="mitre")
+        )
+        parts = [q for q in shapely.get_parts(joined) if q.geom_type == "Polygon"]
+    best = max(parts, key=lambda q: q.area) if parts else None
+    return best if best is not None and best.is_valid else None
+
+
+def _attach(sid: npt.NDArray[np.intp], metered: npt.NDArray[np.bool_]) -> None:
+    """Rows metered but in no swath take the swath of the nearest row before them that has
+    one (the first swath for those before it)."""
+    have = sid >= 0
+    if not have.any():
+        return
+    idx = np.where(have, np.arange(sid.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    before = sid[idx]
+    first = int(np.argmax(have))
+    before[:first] = sid[first]
+    todo = metered & ~have
+    sid[todo] = before[todo]
+
+
+def _overlap_pct(geoms: npt.NDArray[np.object_]) -> FloatArray:
+    """Per swath, the % of its area that earlier swaths had covered already."""
+    out = np.zeros(geoms.size)
+    if geoms.size < 2:
+        return out
+    tree = shapely.STRtree(geoms)
+    k, j = tree.query(geoms, predicate="intersects")
+    keep = j < k
+    k, j = k[keep], j[keep]
+    area = shapely.area(shapely.intersection(geoms[k], geoms[j]))
+    real = area > 1e-4  # neighbours along a pass share an edge, not area
+    k, j, area = k[real], j[real], area[real]
+    if k.size == 0:
+        return out
+    counts = np.bincount(k, minlength=geoms.size)
+    single = counts[k] == 1
+    out[k[single]] = area[single]
+    for kk in np.unique(k[~single]):  # several earlier swaths: their union, not the sum
+        earlier = shapely.union_all(geoms[j[k == kk]])
+        out[kk] = shapely.area(shapely.intersection(geoms[kk], earlier))
+    return np.asarray(100.0 * out / shapely.area(geoms), dtype=float)

@@ -25,8 +25,11 @@ from topdress.geo.polygons import read_polygons
 
 
 class FieldBoundary:
-    def __init__(self, source: Path, boundary_wgs84: Any, headland_m: float) -> None:
+    def __init__(
+        self, source: Path, boundary_wgs84: Any, headland_m: float, crs: str = "EPSG:4326"
+    ) -> None:
         self.source = source
+        self.crs_read = crs
         self.headland_m = headland_m
         self.boundary = boundary_wgs84
         c = boundary_wgs84.centroid
@@ -54,6 +57,21 @@ class FieldBoundary:
             for o, i in zip(outer, inner, strict=True)
         ]
 
+    def describe(self) -> str:
+        """What was loaded: polygons, area, the field left inside the headland, extent, CRS."""
+        n = len(shapely.get_parts(self.boundary))
+        lon0, lat0, lon1, lat1 = self.boundary.bounds
+        return (
+            f"{n} polygon{'s' if n != 1 else ''}, {self.outer.area / 10_000:.2f} ha, "
+            f"headland {self.headland_m:g} m leaves {self.inner.area / 10_000:.2f} ha, "
+            f"extent {lat0:.6f}..{lat1:.6f} N, {lon0:.6f}..{lon1:.6f} E, read in {self.crs_read}"
+        )
+
+    def distance_m(self, lat: float, lon: float) -> float:
+        """From (lat, lon) to the boundary, m (0 inside it)."""
+        x, y = self._fwd.transform(lon, lat)
+        return float(shapely.distance(self.outer, shapely.Point(x, y)))
+
     def inner_wgs84(self) -> Any:
         back = Transformer.from_crs(self.crs, WGS84, always_xy=True)
         return shapely.transform(
@@ -63,13 +81,15 @@ class FieldBoundary:
 
 def load_boundary(cfg: BoundaryConfig) -> FieldBoundary:
     path = Path(cfg.path)
+    crs = "EPSG:4326 (ISOXML)"
     if path.suffix.lower() == ".xml":
         geom = read_partfield_boundary(path)
     else:
-        geom = shapely.union_all(read_polygons(path, cfg.layer).geoms)
+        polys = read_polygons(path, cfg.layer)
+        geom, crs = shapely.union_all(polys.geoms), polys.crs
     if geom.is_empty or geom.area == 0:
         raise MapError(f"{path}: the boundary encloses no area")
-    out = FieldBoundary(path, geom, cfg.headland_m)
+    out = FieldBoundary(path, geom, cfg.headland_m, crs)
     if out.inner.is_empty:
         raise MapError(
             f"{path}: a headland of {cfg.headland_m:g} m (boundary.headland_m) leaves no field "

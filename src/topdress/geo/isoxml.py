@@ -36,6 +36,7 @@ polygon (PLN type 1, LSG type 1 exterior and 2 interior rings).
 from __future__ import annotations
 
 import math
+import re
 import struct
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -127,7 +128,8 @@ def _dlvs() -> list[_Dlv]:
 
 
 def _iso_time(utc: float) -> str:
-    return datetime.fromtimestamp(utc, UTC).isoformat(timespec="seconds").replace("+00:00", "")
+    """xs:dateTime in UTC, marked so (without the Z a reader takes it as local time)."""
+    return datetime.fromtimestamp(utc, UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
 def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Path]:
@@ -251,7 +253,7 @@ class Grid:
 def _parse(path: Path) -> ET.Element:
     try:
         return ET.parse(path).getroot()
-    except (OSError, ET.ParseError) as exc:
+    except (OSError, ET.ParseError, LookupError, ValueError) as exc:  # LookupError: encoding
         raise MapError(f"{path}: not a readable ISOXML file: {exc}") from exc
 
 
@@ -273,11 +275,31 @@ def _float(el: ET.Element, key: str, path: Path, what: str) -> float:
     return value
 
 
+_DDI = re.compile(r"^[0-9A-Fa-f]{4}$")
+_INT = re.compile(r"^[+-]?[0-9]{1,12}$")
+MAX_GRID_CELLS: Final = 50_000_000  # 50 M cells: a 1 m grid over 5,000 ha, far beyond a field
+
+
+def _ddi(el: ET.Element, path: Path, what: str) -> int:
+    text = _attr(el, "A", path, what)
+    if not _DDI.match(text):
+        raise MapError(f"{path}: {what}: A = {text!r} is not a DDI (4 hex digits, e.g. 0006)")
+    return int(text, 16)
+
+
+def _int(el: ET.Element, key: str, path: Path, what: str, lo: int, hi: int) -> int:
+    """A whole-number attribute within lo..hi (ISO 11783-10 writes them as plain digits)."""
+    text = _attr(el, key, path, what)
+    if not _INT.match(text.strip()) or not lo <= int(text) <= hi:
+        raise MapError(f"{path}: {what}: {key} = {text!r} is not a whole number in {lo}..{hi}")
+    return int(text)
+
+
 def _zone_values(tzn: ET.Element, path: Path) -> dict[int, float]:
     """DDI -> value of a treatment zone's process data variables."""
     out: dict[int, float] = {}
     for pdv in tzn.findall("PDV"):
-        ddi = int(_attr(pdv, "A", path, f"TZN {tzn.get('A')} PDV"), 16)
+        ddi = _ddi(pdv, path, f"TZN {tzn.get('A')} PDV")
         out[ddi] = _float(pdv, "B", path, f"TZN {tzn.get('A')} PDV {ddi}")
     return out
 
@@ -296,12 +318,19 @@ def _grid(path: Path, tsk: ET.Element, grd: ET.Element) -> Grid:
     what = f"task {tsk.get('A')} grid"
     min_lat, min_lon = _float(grd, "A", path, what), _float(grd, "B", path, what)
     cell_lat, cell_lon = _float(grd, "C", path, what), _float(grd, "D", path, what)
-    cols, rows = int(_float(grd, "E", path, what)), int(_float(grd, "F", path, what))
-    if cell_lat <= 0 or cell_lon <= 0 or cols <= 0 or rows <= 0:
-        raise MapError(f"{path}: {what}: cell sizes and counts must be positive")
+    cols = _int(grd, "E", path, what, 1, MAX_GRID_CELLS)
+    rows = _int(grd, "F", path, what, 1, MAX_GRID_CELLS)
+    if cell_lat <= 0 or cell_lon <= 0:
+        raise MapError(f"{path}: {what}: cell sizes must be positive")
+    if rows * cols > MAX_GRID_CELLS:
+        raise MapError(f"{path}: {what}: {rows} x {cols} cells is beyond any field")
+    if not (min_lat + rows * cell_lat <= 90.0 and min_lon + cols * cell_lon <= 180.0):
+        raise MapError(f"{path}: {what}: the grid reaches beyond the earth (cell sizes?)")
     if not (-90 <= min_lat <= 90 and -180 <= min_lon <= 180):
         raise MapError(f"{path}: {what}: origin {min_lat}, {min_lon} is not a WGS 84 position")
     name = _attr(grd, "G", path, what)
+    if not re.fullmatch(r"[A-Za-z0-9_]{1,32}", name):
+        raise MapError(f"{path}: {what}: G = {name!r} is not a grid file name (GRD00001)")
     gtype = _attr(grd, "I", path, what)
     bin_path = path.parent / f"{name}.BIN"
     if not bin_path.exists():
@@ -311,7 +340,7 @@ def _grid(path: Path, tsk: ET.Element, grd: ET.Element) -> Grid:
     except OSError as exc:
         raise MapError(f"{path}: {what}: cannot read its binary {bin_path.name}: {exc}") from exc
     zones = {
-        int(_attr(z, "A", path, "treatment zone")): _zone_values(z, path)
+        _int(z, "A", path, "treatment zone", 0, 254): _zone_values(z, path)
         for z in tsk.findall("TZN")
     }
     shape = (rows, cols)
@@ -338,11 +367,11 @@ def _grid(path: Path, tsk: ET.Element, grd: ET.Element) -> Grid:
             high[sel] = _kg_ha(zone.get(DDI_MAX_MASS_PER_AREA))
         return Grid(min_lat, min_lon, cell_lat, cell_lon, values, low, high)
     if gtype == "2":
-        code = int(_float(grd, "J", path, what))
+        code = _int(grd, "J", path, what, 0, 254)
         zone_el = next((z for z in tsk.findall("TZN") if z.get("A") == str(code)), None)
         if zone_el is None:
             raise MapError(f"{path}: {what} names treatment zone {code}, which is not defined")
-        ddis = [int(_attr(p, "A", path, f"TZN {code} PDV"), 16) for p in zone_el.findall("PDV")]
+        ddis = [_ddi(p, path, f"TZN {code} PDV") for p in zone_el.findall("PDV")]
         if DDI_SETPOINT_MASS_PER_AREA not in ddis:
             _check_units(dict.fromkeys(ddis, 0.0), path, f"treatment zone {code}")
             raise MapError(
@@ -401,10 +430,7 @@ def read_partfield_boundary(path: Path) -> shapely.MultiPolygon:
             shell: list[tuple[float, float]] | None = None
             holes: list[list[tuple[float, float]]] = []
             for lsg in pln.findall("LSG"):
-                ring = [
-                    (_float(pnt, "D", path, what), _float(pnt, "C", path, what))
-                    for pnt in lsg.findall("PNT")
-                ]
+                ring = [_lonlat(pnt, path, what) for pnt in lsg.findall("PNT")]
                 if len(ring) < 3:
                     raise MapError(f"{path}: {what}: a ring of {len(ring)} points")
                 if lsg.get("A") == "1":
@@ -413,7 +439,17 @@ def read_partfield_boundary(path: Path) -> shapely.MultiPolygon:
                     holes.append(ring)
             if shell is None:
                 raise MapError(f"{path}: {what} has no exterior ring (LSG type 1)")
-            polys.append(shapely.Polygon(shell, holes))
+            poly = shapely.Polygon(shell, holes)
+            if not poly.is_valid:  # a hand-drawn ring that touches itself: repaired
+                poly = shapely.make_valid(poly)
+            polys.extend(q for q in shapely.get_parts(poly) if q.geom_type == "Polygon")
     if not polys:
         raise MapError(f"{path}: no partfield boundary (PFD with a PLN of type 1)")
     return shapely.MultiPolygon(polys)
+
+
+def _lonlat(pnt: ET.Element, path: Path, what: str) -> tuple[float, float]:
+    lat, lon = _float(pnt, "C", path, what), _float(pnt, "D", path, what)
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise MapError(f"{path}: {what}: point {lat}, {lon} is not a WGS 84 position")
+    return lon, lat

@@ -10,6 +10,7 @@ point on a zone's edge is in it); where zones overlap, the first in the file win
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, Protocol
@@ -21,7 +22,7 @@ import shapely
 from topdress.config import PrescriptionConfig
 from topdress.errors import MapError
 from topdress.geo.isoxml import Grid, read_grid
-from topdress.geo.polygons import read_polygons
+from topdress.geo.polygons import PROGRESS_FEATURES, read_polygons
 
 KG_HA_PER_UNIT: Final = {"kg/ha": 1.0, "lb/ac": 0.45359237 / 0.40468564224, "t/ha": 1000.0}
 MAX_KG_HA: Final = 1200.0  # beyond any topdressing rate: a value in other units
@@ -40,6 +41,40 @@ class RateMap(Protocol):
 
     def lookup(self, lat: float, lon: float) -> Zone | None: ...
 
+    def describe(self) -> MapInfo: ...
+
+
+@dataclass(frozen=True)
+class MapInfo:
+    """What a map holds, said when it is loaded: its parts (zones or cells), the rate range in
+    the file's units, the extent (WGS 84) and the CRS it was read in."""
+
+    parts: str  # "5000 zones", "20 grid cells (5 x 4) in 3 treatment zones"
+    rate_lo: float  # kg/ha
+    rate_hi: float
+    units: str
+    bounds: tuple[float, float, float, float]  # lon min, lat min, lon max, lat max
+    crs: str
+
+    def text(self) -> str:
+        lon0, lat0, lon1, lat1 = self.bounds
+        f = KG_HA_PER_UNIT.get(self.units, 1.0)
+        mid = math.radians((lat0 + lat1) / 2)
+        ew, ns = (lon1 - lon0) * 111_320.0 * math.cos(mid), (lat1 - lat0) * 110_540.0
+        return (
+            f"{self.parts}, {self.rate_lo / f:g}..{self.rate_hi / f:g} {self.units}"
+            + (f" ({self.rate_lo:.4g}..{self.rate_hi:.4g} kg/ha)" if f != 1.0 else "")
+            + f", extent {lat0:.6f}..{lat1:.6f} N, {lon0:.6f}..{lon1:.6f} E"
+            + f" ({ew:.0f} x {ns:.0f} m), read in {self.crs}"
+        )
+
+    def distance_m(self, lat: float, lon: float) -> float:
+        """From (lat, lon) to the extent, m (0 inside it)."""
+        lon0, lat0, lon1, lat1 = self.bounds
+        dlat = max(lat0 - lat, 0.0, lat - lat1) * 110_540.0
+        dlon = max(lon0 - lon, 0.0, lon - lon1) * 111_320.0 * math.cos(math.radians(lat))
+        return math.hypot(dlat, dlon)
+
 
 class PolygonPrescription:
     def __init__(
@@ -49,22 +84,38 @@ class PolygonPrescription:
         rate: npt.NDArray[np.float64],
         low: npt.NDArray[np.float64],
         high: npt.NDArray[np.float64],
-        labels: list[str],
+        label: Callable[[int], str] = lambda i: f"feature {i}",
+        units: str = "kg/ha",
+        crs: str = "EPSG:4326",
     ) -> None:
         self.source = source
         self.geoms = geoms
         self.tree = shapely.STRtree(geoms)
-        self.zones = [
-            Zone(float(r), float(lo), float(hi), lab)
-            for r, lo, hi, lab in zip(rate, low, high, labels, strict=True)
-        ]
+        # Zones are made when looked up: a million Zone objects cost seconds and memory.
+        self.rate, self.low, self.high = rate, low, high
+        self.label = label
+        self.units = units
+        self.crs = crs
 
     def lookup(self, lat: float, lon: float) -> Zone | None:
         # One GEOS call: the tree's bounding boxes, then the exact test on the candidates.
         hits = self.tree.query(shapely.Point(lon, lat), predicate="intersects")
         if hits.size == 0:
             return None
-        return self.zones[int(hits.min())]  # overlapping zones: the first in the file
+        i = int(hits.min())  # overlapping zones: the first in the file
+        return Zone(float(self.rate[i]), float(self.low[i]), float(self.high[i]), self.label(i))
+
+    def describe(self) -> MapInfo:
+        b = shapely.total_bounds(self.geoms)
+        n = self.geoms.size
+        return MapInfo(
+            f"{n} zone{'s' if n != 1 else ''}",
+            float(np.min(self.rate)),
+            float(np.max(self.rate)),
+            self.units,
+            (float(b[0]), float(b[1]), float(b[2]), float(b[3])),
+            self.crs,
+        )
 
 
 class GridPrescription:
@@ -85,9 +136,27 @@ class GridPrescription:
         label = f"cell row {row} column {col}"
         return Zone(rate, float(g.low[row, col]), float(g.high[row, col]), label)
 
+    def describe(self) -> MapInfo:
+        g = self.grid
+        rows, cols = g.values.shape
+        rated = g.values[np.isfinite(g.values)]
+        zones = np.unique(rated).size
+        return MapInfo(
+            f"{rows * cols} grid cells ({rows} x {cols}), {rated.size} with a rate, "
+            f"{zones} rate{'s' if zones != 1 else ''}",
+            float(np.min(rated)) if rated.size else 0.0,
+            float(np.max(rated)) if rated.size else 0.0,
+            "kg/ha",
+            (g.min_lon, g.min_lat, g.min_lon + cols * g.cell_lon, g.min_lat + rows * g.cell_lat),
+            "EPSG:4326 (ISOXML)",
+        )
 
-def load_prescription(cfg: PrescriptionConfig) -> RateMap:
-    """The map `cfg.path` names; MapError naming the file (and feature) when it is not usable."""
+
+def load_prescription(
+    cfg: PrescriptionConfig, progress: Callable[[str], None] | None = None
+) -> RateMap:
+    """The map `cfg.path` names; MapError naming the file (and feature) when it is not usable.
+    `progress` gets a line per stage of a large file."""
     path = Path(cfg.path)
     if path.suffix.lower() == ".xml":
         grid = read_grid(path)
@@ -96,34 +165,39 @@ def load_prescription(cfg: PrescriptionConfig) -> RateMap:
                 f"{path}: prescription.mode = bound needs the zones' limits (DDIs 9 and 10, "
                 "minimum and maximum mass per area), which this grid does not give"
             )
-        _check_range(path, grid.values[np.isfinite(grid.values)], ["a cell"] * grid.values.size)
+        _check_range(path, grid.values[np.isfinite(grid.values)], lambda i: "a cell")
         return GridPrescription(path, grid)
     attrs: tuple[str, ...] = (cfg.attribute,)
     if cfg.mode == "bound":
         attrs += (cfg.min_attribute, cfg.max_attribute)
-    polys = read_polygons(path, cfg.layer, attrs)
+    polys = read_polygons(path, cfg.layer, attrs, progress)
     factor = KG_HA_PER_UNIT[cfg.units]
     rate = polys.values[cfg.attribute] * factor
-    _check_range(path, rate, polys.labels, cfg.attribute, cfg.units)
+    _check_range(path, rate, polys.label, cfg.attribute, cfg.units)
     if cfg.mode == "bound":
         low = polys.values[cfg.min_attribute] * factor
         high = polys.values[cfg.max_attribute] * factor
         for name, col in ((cfg.min_attribute, low), (cfg.max_attribute, high)):
-            _check_range(path, col, polys.labels, name, cfg.units)
+            _check_range(path, col, polys.label, name, cfg.units)
         bad = np.nonzero(low > high)[0]
         if bad.size:
             raise MapError(
-                f"{path}: {polys.labels[bad[0]]}: {cfg.min_attribute} is above {cfg.max_attribute}"
+                f"{path}: {polys.label(int(bad[0]))}: {cfg.min_attribute} is above "
+                f"{cfg.max_attribute}"
             )
     else:
         low = high = np.full_like(rate, math.nan)
-    return PolygonPrescription(path, polys.geoms, rate, low, high, polys.labels)
+    if progress is not None and rate.size >= PROGRESS_FEATURES:
+        progress(f"{path.name}: indexing {rate.size:,} zones")
+    return PolygonPrescription(
+        path, polys.geoms, rate, low, high, polys.label, cfg.units, polys.crs
+    )
 
 
 def _check_range(
     path: Path,
     kg_ha: npt.NDArray[np.float64],
-    labels: list[str],
+    label: Callable[[int], str],
     attr: str = "rate",
     units: str = "kg/ha",
 ) -> None:
@@ -132,6 +206,6 @@ def _check_range(
         i = int(bad[0])
         value = kg_ha[i] / KG_HA_PER_UNIT.get(units, 1.0)
         raise MapError(
-            f"{path}: {labels[i]}: {attr} = {value:g} {units} is outside 0..{MAX_KG_HA:g} kg/ha "
+            f"{path}: {label(i)}: {attr} = {value:g} {units} is outside 0..{MAX_KG_HA:g} kg/ha "
             "(are prescription.units right?)"
         )

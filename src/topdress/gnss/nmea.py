@@ -4,6 +4,12 @@ The decoder never raises on input: every line gives a GnssFix, with `ok=False` a
 reason for a line that cannot be trusted, and every reason is counted in `NmeaDecoder.counters`.
 Only RMC, VTG and GGA are parsed into fields (any talker); other well-formed sentences are
 accepted (`ok=True`) and carry no fix.
+
+A checksum-valid sentence whose only faults are in fields the fix does not stand on (RMC's
+date, course and magnetic variation, VTG's courses, GGA's satellites, HDOP, altitude and
+differential fields) keeps the rest, as GPSD does: a real receiver wrote `2208-1` for a date
+and lost a valid position and speed with it. The bad fields are left out (`dropped`) and the
+line is counted as `bad_field` (besides `ok`).
 """
 
 from __future__ import annotations
@@ -12,7 +18,7 @@ import datetime as dt
 import math
 import re
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pynmeagps import NMEAReader
@@ -51,6 +57,32 @@ _LIMITS = {
     "VTG": {"cogt": (0.0, 360.0), "sogn": (0.0, math.inf), "sogk": (0.0, math.inf)},
     "GGA": {"lat": (-90.0, 90.0), "lon": (-180.0, 180.0)},
 }
+# Fields a fix does not stand on: index -> name (as in GnssFix.dropped). A malformed one is
+# left out of the fix, not a reason to refuse the sentence.
+_OPTIONAL = {
+    "RMC": {7: "course", 8: "date", 9: "magvar", 10: "magvar_ew"},
+    "VTG": {0: "course", 1: "course_ref", 2: "course_mag", 3: "course_mag_ref"},
+    "GGA": {
+        6: "satellites",
+        7: "hdop",
+        8: "altitude",
+        9: "altitude_unit",
+        10: "separation",
+        11: "separation_unit",
+        12: "diff_age",
+        13: "diff_station",
+    },
+}
+_DATE = re.compile(rb"^[0-9]{6}$")
+_INTEGER = re.compile(rb"^[0-9]+$")
+_SIGNED = re.compile(rb"^-?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)$")  # altitude, geoid separation
+# The form each optional field must have when not empty (and a check on its value).
+_UNITS = {
+    "course_ref": b"T",
+    "course_mag_ref": b"M",
+    "altitude_unit": b"M",
+    "separation_unit": b"M",
+}
 _ADDRESS = re.compile(rb"^[A-Z][A-Z0-9]{2,9}$")
 _HEX2 = re.compile(rb"^[0-9A-Fa-f]{2}$")
 _PRINTABLE = re.compile(rb"[\x20-\x7e]*")  # printable ASCII only (one scan, not a step per byte)
@@ -71,6 +103,7 @@ class GnssFix:
     lat: float | None = None
     lon: float | None = None
     utc: str | None = None
+    dropped: tuple[str, ...] = ()  # malformed optional fields left out (see the module's doc)
 
 
 def nmea_checksum(body: bytes) -> int:
@@ -90,8 +123,8 @@ def make_sentence(body: str) -> bytes:
 class NmeaDecoder:
     """Decodes NMEA lines. `counters` counts 'ok' and each error reason:
     empty, binary, no_start, no_checksum, truncated, bad_checksum, malformed, out_of_range;
-    and 'resync'
-    for a sentence found after garbage on its line (decoded normally)."""
+    'resync' for a sentence found after garbage on its line (decoded normally) and 'bad_field'
+    for a sentence decoded without a malformed optional field (also counted 'ok')."""
 
     def __init__(self) -> None:
         self.counters: Counter[str] = Counter()
@@ -100,6 +133,8 @@ class NmeaDecoder:
         raw = line.encode("latin-1", "replace") if isinstance(line, str) else bytes(line)
         fix = self._decode(raw.strip(b"\r\n\x00 "))
         self.counters["ok" if fix.ok else _reason(fix.error)] += 1
+        if fix.dropped:
+            self.counters["bad_field"] += 1
         return fix
 
     def _decode(self, raw: bytes) -> GnssFix:
@@ -163,6 +198,11 @@ def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
     if len(fields) < _MIN_FIELDS[kind]:
         msg = f"{kind} has {len(fields)} fields, needs {_MIN_FIELDS[kind]}"
         return _bad("truncated", msg, talker, kind)
+    dropped = _drop_optional(fields, kind)
+    if dropped:
+        # parsed without them: the field parser would refuse the sentence for any one
+        body = b",".join([body.split(b",", 1)[0], *fields])
+        sentence = make_sentence(body.decode("ascii")).rstrip(b"\r\n")
     try:
         msg = NMEAReader.parse(sentence, validate=0)
     except Exception as exc:  # pynmeagps raises many types on odd fields
@@ -187,7 +227,41 @@ def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
         value = getattr(fix, name)
         if value is not None and not math.isfinite(value):
             return _bad("out_of_range", f"{kind} {name} is not finite", talker, kind)
-    return fix
+    return replace(fix, dropped=tuple(dropped)) if dropped else fix
+
+
+def _drop_optional(fields: list[bytes], kind: str) -> list[str]:
+    """Blanks each malformed optional field of `fields` in place; their names."""
+    out = []
+    for index, name in _OPTIONAL[kind].items():
+        text = fields[index]
+        if text and not _optional_ok(name, text):
+            fields[index] = b""
+            out.append(name)
+    return out
+
+
+def _optional_ok(name: str, text: bytes) -> bool:
+    if name == "date":
+        if not _DATE.match(text):
+            return False
+        try:
+            dt.datetime.strptime(text.decode(), "%d%m%y")
+        except ValueError:
+            return False
+        return True
+    if name in _UNITS:
+        return text == _UNITS[name]
+    if name == "magvar_ew":
+        return text in (b"E", b"W")
+    if name in ("satellites", "diff_station"):
+        return _INTEGER.match(text) is not None
+    if name in ("altitude", "separation"):
+        return _SIGNED.match(text) is not None and math.isfinite(float(text))
+    if not _NUMBER.match(text):
+        return False
+    limit = 180.0 if name == "magvar" else 360.0 if name.startswith("course") else math.inf
+    return float(text) <= limit
 
 
 def _opt(value: Any) -> float | None:

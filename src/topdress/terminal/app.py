@@ -50,7 +50,7 @@ from topdress.terminal import signals
 from topdress.terminal.canlink import CanLink, EcuView
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.inbox import Inbox
-from topdress.terminal.site import build_site_rate
+from topdress.terminal.site import Maps, build_site_rate
 from topdress.view.commands import RUNNING, CommandResult
 from topdress.view.links import link_state
 from topdress.view.snapshot import TICK_S, Snapshot, ecu_values
@@ -78,9 +78,11 @@ class Terminal:
         start: bool = True,
         on_event: Callable[[Text], None] | None = None,
         config_path: Path | None = None,
+        maps: Maps | None = None,
     ) -> None:
         """`start`: the meters start at once (headless); else at the operator's Start.
-        `config_path`: where settings changed while running are saved (None: not saved)."""
+        `config_path`: where settings changed while running are saved (None: not saved).
+        `maps`: the prescription and boundary loaded already (None: loaded here)."""
         self.cfg = cfg
         self.gnss = gnss
         self.crop = crop
@@ -98,8 +100,8 @@ class Terminal:
         self.nmea = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
-        # The prescription map and boundary files are read here: a bad one stops start-up.
-        self.site = build_site_rate(cfg, build_rate_model(cfg.rate))
+        # The prescription map and boundary files (`run` reads them before any device opens).
+        self.site = build_site_rate(cfg, build_rate_model(cfg.rate), maps)
         self.utc = UtcClock()
         self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()
@@ -309,9 +311,17 @@ class Terminal:
         ndvi_meters = self.ndvi.update(now, v_sel)
         # Before the meters reach the first spot sensed, the nearest information is the sensors'.
         ndvi = ndvi_meters if ndvi_meters is not None else ndvi_sensors
-        outlet = self.outlet.position(self.ndvi.odometer.distance_m)
-        # The prescription and the boundary at the outlet, the NDVI model as configured.
-        site = self.site.decide(ndvi, (outlet.lat, outlet.lon) if outlet is not None else None)
+        odometer = self.ndvi.odometer.distance_m
+        outlet = self.outlet.position(odometer)
+        # The boundary at the outlet; the prescription where the outlet will be when the
+        # product commanded now lands (speed x the look-ahead, as the NDVI); the NDVI model.
+        ahead_m = max(v_sel, 0.0) / 3.6 * self.ndvi.lookahead_s
+        target = self.outlet.position(odometer + ahead_m) if ahead_m > 0.0 else outlet
+        site = self.site.decide(
+            ndvi,
+            (outlet.lat, outlet.lon) if outlet is not None else None,
+            (target.lat, target.lon) if target is not None else None,
+        )
         if ndvi is None and site.used_ndvi:
             self.counters["no_ndvi_ticks"] += 1
         rates = split_layers(site.total_kg_ha, self.cfg.rate.split_upper, self.cfg.machine.layers)
@@ -474,7 +484,9 @@ class Terminal:
 
     def _counters(self) -> dict[str, int]:
         lc = self.link.counters
-        bad_nmea = sum(v for k, v in self.nmea.counters.items() if k not in ("ok", "resync"))
+        # a sentence decoded without a malformed optional field (bad_field) is also "ok"
+        nmea_other = ("ok", "resync", "bad_field")
+        bad_nmea = sum(v for k, v in self.nmea.counters.items() if k not in nmea_other)
         crop = self.ndvi.sensors.counters
         out = {
             "nmea": self.nmea.counters["ok"],
@@ -488,6 +500,8 @@ class Terminal:
         }
         if self.session is not None:
             out["log_err"] = self.session.errors
+        if self.nmea.counters["bad_field"]:
+            out["nmea_bad_field"] = self.nmea.counters["bad_field"]
         # The loop's own anomalies (no NDVI, CAN receive errors) only when they happen.
         out.update((k, v) for k, v in self.counters.items() if k != "events" and v)
         # Lines a flooding source lost (the oldest of its bounded queue), per source.

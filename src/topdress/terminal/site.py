@@ -3,6 +3,7 @@ combined as configured."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -56,7 +57,15 @@ class SiteRate:
         boundary are read at start only)."""
         self.model = build_rate_model(rate)
 
-    def decide(self, ndvi: float | None, outlet: tuple[float, float] | None) -> SiteDecision:
+    def decide(
+        self,
+        ndvi: float | None,
+        outlet: tuple[float, float] | None,
+        ahead: tuple[float, float] | None = None,
+    ) -> SiteDecision:
+        """`outlet`: where the outlets are (the boundary's zone); `ahead`: where they will be
+        when the product commanded now lands (the look-ahead; the prescription is looked up
+        there, as the NDVI is), None = at the outlet."""
         zone = None
         if self.boundary is not None:
             zone = self.boundary.zone(*outlet) if outlet is not None else None
@@ -65,7 +74,8 @@ class SiteRate:
         if self.prescription is None:
             rate = self.model.rate_kg_ha(ndvi) if ndvi is not None else 0.0
             return SiteDecision(rate, zone)
-        hit = self.prescription.lookup(*outlet) if outlet is not None else None
+        where = ahead if ahead is not None and outlet is not None else outlet
+        hit = self.prescription.lookup(*where) if where is not None else None
         if hit is None:
             return SiteDecision(self.outside_kg_ha, zone, None, used_ndvi=False)
         if self.mode == "alone" or ndvi is None:
@@ -75,16 +85,34 @@ class SiteRate:
         return SiteDecision(rate, zone, hit.rate_kg_ha)
 
 
-def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
+@dataclass(frozen=True)
+class Maps:
+    """The prescription and the boundary the configuration names (None: none named)."""
+
+    prescription: RateMap | None = None
+    boundary: FieldBoundary | None = None
+
+    def describe(self) -> list[str]:
+        """One line per map: what was loaded (for `config check` and the start of `run`)."""
+        out = []
+        if self.prescription is not None:
+            info = self.prescription.describe()
+            out.append(f"prescription: {self.prescription.source}: {info.text()}")
+        if self.boundary is not None:
+            out.append(f"boundary: {self.boundary.source}: {self.boundary.describe()}")
+        return out
+
+
+def load_maps(cfg: TerminalConfig, progress: Callable[[str], None] | None = None) -> Maps:
     """Loads the configured prescription and boundary files (MapError naming the key, the
-    file and the feature)."""
+    file and the feature). `run` and `config check` call it before anything is opened."""
     presc: RateMap | None = None
     boundary: FieldBoundary | None = None
     if cfg.prescription.path:
         from topdress.geo.prescription import load_prescription
 
         try:
-            presc = load_prescription(cfg.prescription)
+            presc = load_prescription(cfg.prescription, progress)
         except MapError as exc:
             raise MapError(f"prescription.path: {exc}") from exc
     if cfg.boundary.path:
@@ -94,4 +122,12 @@ def build_site_rate(cfg: TerminalConfig, model: RateModel) -> SiteRate:
             boundary = load_boundary(cfg.boundary)
         except MapError as exc:
             raise MapError(f"boundary.path: {exc}") from exc
-    return SiteRate(model, presc, boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha)
+    return Maps(presc, boundary)
+
+
+def build_site_rate(cfg: TerminalConfig, model: RateModel, maps: Maps | None = None) -> SiteRate:
+    """The site rate over `maps`, or over the configured files loaded now."""
+    m = maps if maps is not None else load_maps(cfg)
+    return SiteRate(
+        model, m.prescription, m.boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha
+    )
