@@ -47,9 +47,11 @@
 /** Result of a measurement update. */
 typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED = 2 } td_fused_result_t;
 
-/** Wheel history: TD_FUSED_HIST means of TD_FUSED_BUCKET_S each (2.4 s back). */
-#define TD_FUSED_HIST 24u
+/** Wheel history: TD_FUSED_HIST means of TD_FUSED_BUCKET_S each (3.6 s back: a GNSS lag of
+ *  up to 3 s plus the fix's age), kept in mm/s. */
+#define TD_FUSED_HIST 36u
 #define TD_FUSED_BUCKET_S 0.1f
+#define TD_FUSED_HIST_MM_S 0.001f /**< resolution of a bucket, m/s */
 
 typedef struct {
     float v_ms;                /**< ground speed, m/s, >= 0 */
@@ -71,7 +73,7 @@ typedef struct {
     uint8_t hist_n;            /**< complete buckets held, 0..TD_FUSED_HIST */
     float hist_sum;            /**< the bucket being filled: integral of the wheel speed, m */
     float hist_s;              /**< and its length, s */
-    float hist_ms[TD_FUSED_HIST]; /**< mean wheel speed per bucket, m/s (newest at hist_head) */
+    uint16_t hist_mms[TD_FUSED_HIST]; /**< mean wheel speed per bucket, mm/s (newest at hist_head) */
 } td_fused_t;
 
 /** Initialise at rest, scale 1, with the tuning (units of td_params.h). TD_E_ARG on a bad argument. */
@@ -92,6 +94,13 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s);
 /** The recorded wheel speed delay_s ago (m/s, interpolated between buckets); false beyond the history. */
 bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms);
+/**
+ * The wheel's own acceleration from its history, m/s^2 of wheel speed: the mean of the newest
+ * second of buckets less that of the second before, over 1 s. False with less than 2 s held.
+ * It does not depend on the scale or on GNSS, so it tells steady motion from a speed change
+ * when the estimate's acceleration has taken up a wrong scale or lag.
+ */
+bool td_fused_wheel_accel(const td_fused_t *f, float *a_ms2);
 /** GNSS update with speed z_ms valid delay_s (0..10 s) ago. */
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn);
 /** The wheel stands (no pulse for the stop time): speed and acceleration are zero. */

@@ -33,11 +33,13 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define CLOSE_SIGMA2 1.0f     /* closed again within 1 GNSS sigma, or on a change of sign */
 #define REOPEN_S 1.0f         /* one sign for this long */
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
+#define FLAT_A_MS2 0.1f      /* or the wheel's own acceleration below this alone */
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
-#define HIST_Z_MAX_MS 100.0f                  /* a wheel speed beyond this is no number */
+#define HIST_Z_MAX_MS 65.0f                   /* a wheel speed beyond this is no number (mm/s in 16 bits) */
 #define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
+#define ACCEL_BUCKETS 10u /* the wheel's own acceleration: two means of this many buckets (1 s each) */
 #define BUCKET_CLOSE_S (TD_FUSED_BUCKET_S - 1.0e-4f) /* sums of 10 ms steps fall just short */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
@@ -69,7 +71,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->hist_sum = 0.0f;
     f->hist_s = 0.0f;
     for (unsigned i = 0u; i < TD_FUSED_HIST; i++) {
-        f->hist_ms[i] = 0.0f;
+        f->hist_mms[i] = 0u;
     }
     td_fused_tune(f, jerk_ms3, gnss_std_kmh, wheel_noise_pct);
     return TD_OK;
@@ -219,7 +221,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
      * and a long step fills several */
     while (f->hist_s >= BUCKET_CLOSE_S) {
         f->hist_head = (uint8_t)((f->hist_head + 1u) % TD_FUSED_HIST);
-        f->hist_ms[f->hist_head] = f->hist_sum / f->hist_s;
+        f->hist_mms[f->hist_head] = (uint16_t)(f->hist_sum / (f->hist_s * TD_FUSED_HIST_MM_S) + 0.5f);
         if (f->hist_n < TD_FUSED_HIST) {
             f->hist_n++;
         }
@@ -237,11 +239,24 @@ bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms) {
     }
     const unsigned i = (unsigned)x;
     const unsigned k = f->hist_head + TD_FUSED_HIST - i;
-    const float w0 = f->hist_ms[k % TD_FUSED_HIST];
+    const float w0 = (float)f->hist_mms[k % TD_FUSED_HIST] * TD_FUSED_HIST_MM_S;
     /* the older neighbour: at the oldest bucket x is whole and it weighs 0 (every entry is a
      * finite speed: init zeroes the ring, record writes only checked speeds) */
-    const float w1 = f->hist_ms[(k - 1u) % TD_FUSED_HIST];
+    const float w1 = (float)f->hist_mms[(k - 1u) % TD_FUSED_HIST] * TD_FUSED_HIST_MM_S;
     *z_ms = w0 + (x - (float)i) * (w1 - w0);
+    return true;
+}
+
+bool td_fused_wheel_accel(const td_fused_t *f, float *a_ms2) {
+    if (f->hist_n < 2u * ACCEL_BUCKETS) {
+        return false;
+    }
+    int32_t diff = 0; /* newest second less the second before, mm/s summed over its buckets */
+    for (unsigned i = 0u; i < ACCEL_BUCKETS; i++) {
+        diff += (int32_t)f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+        diff -= (int32_t)f->hist_mms[(f->hist_head + TD_FUSED_HIST - i - ACCEL_BUCKETS) % TD_FUSED_HIST];
+    }
+    *a_ms2 = (float)diff * TD_FUSED_HIST_MM_S / ((float)ACCEL_BUCKETS * (float)ACCEL_BUCKETS * TD_FUSED_BUCKET_S);
     return true;
 }
 
@@ -265,9 +280,15 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float g = td_fused_shape(f, z_ms, NULL);
     /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
     const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
-    /* steady: the estimate's a (gating on the wheel's own change over the delay instead let
-     * a bouncing wheel re-open on noise: docs/experiments.md) */
-    const bool steady = fabsf(f->a_ms2) < REOPEN_A_MS2;
+    /* steady: the estimate's a and the wheel's own acceleration over its last 2 s both small,
+     * or the wheel's alone very small: a wrong scale or lag can hold the estimate's a away from
+     * 0 while the wheel says the speed does not change (v - a d takes up the difference; the
+     * wheel's change over the delay alone let a bouncing wheel re-open on noise) */
+    float aw = 0.0f;
+    const bool have_aw = td_fused_wheel_accel(f, &aw);
+    aw = fabsf(aw);
+    const bool steady = (fabsf(f->a_ms2) < REOPEN_A_MS2 && (!have_aw || aw < REOPEN_A_MS2)) ||
+                        (have_aw && aw < FLAT_A_MS2);
     /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
      * REOPEN_SIGMA GNSS sigmas */
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
