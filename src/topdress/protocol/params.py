@@ -53,6 +53,7 @@ _FIELDS: dict[str, tuple[str, int | None]] = {
     "DriveAdapt": ("drive_adapt", None),
     "MeterTau": ("meter_tau_ms", None),
     "LeadStop": ("lead_stop_ms", None),
+    "GnssLagAuto": ("gnss_lag_auto", None),
 }
 
 
@@ -105,7 +106,7 @@ class ParamSpec:
 
 @cache
 def params() -> tuple[ParamSpec, ...]:
-    """Every parameter, by id (1..37)."""
+    """Every parameter, by id (1..39)."""
     specs = []
     for sig in message("PcParamSet").signals:
         if sig.is_multiplexer:
