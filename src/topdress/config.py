@@ -83,6 +83,10 @@ ECU_KEYS: dict[str, tuple[int, float, float, bool]] = {
 
 # [ecu] keys that the terminal's own periods must agree with (see _check_timing).
 ECU_TIMING = ("cmd_timeout_ms", "gnss_timeout_ms", "status_period_ms")
+# [ecu] gnss_lag_ms = "auto" (the default): the ECU learns the GNSS lag (GnssLagAuto 1); a
+# number fixes it (GnssLagAuto 0; the ECU still overrules a lag its data contradict).
+GNSS_LAG_AUTO = "auto"
+GNSS_LAG_AUTO_ID = 39  # PcParamSet id of GnssLagAuto
 SPEED_MODE_IDS = {"paper": 0, "wheel": 1, "gnss": 2, "fused": 3}  # td_speed_mode_t
 SWITCH_COMPARE_IDS = {"gnss": 0, "wheel": 1}  # td_compare_t
 
@@ -300,11 +304,13 @@ class TerminalConfig:
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
     lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
 
-    def ecu_params(self) -> dict[int, float]:
+    def ecu_params(self, lag_start_ms: int | None = None) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start.
 
         Machine and speed parameters are always pushed (the terminal's file is the truth
-        for them); of [ecu], only the keys the user set.
+        for them); of [ecu], only the keys the user set. The GNSS lag: a number fixes it;
+        "auto" (the default) lets the ECU learn it, starting from `lag_start_ms` (the lag
+        learned with this receiver before) when given.
         """
         m, s = self.machine, self.speed
         params: dict[int, float] = {
@@ -328,6 +334,12 @@ class TerminalConfig:
             params[38] = self.lookahead.stop_ms
         for name, value in self.ecu.overrides.items():
             params[ECU_KEYS[name][0]] = value
+        if "gnss_lag_ms" in self.ecu.overrides:
+            params[GNSS_LAG_AUTO_ID] = 0
+        else:
+            params[GNSS_LAG_AUTO_ID] = 1
+            if lag_start_ms is not None:
+                params[ECU_KEYS["gnss_lag_ms"][0]] = min(max(round(lag_start_ms), 0), 3000)
         return dict(sorted(params.items()))
 
 
@@ -543,6 +555,8 @@ def _ecu(table: dict[str, Any]) -> EcuConfig:
     _reject_unknown(table, ECU_KEYS, "ecu.")
     overrides: dict[str, float] = {}
     for name, raw in table.items():
+        if name == "gnss_lag_ms" and raw == GNSS_LAG_AUTO:
+            continue  # the default: the ECU learns the lag
         _, lo, hi, integer = ECU_KEYS[name]
         overrides[name] = _number(raw, f"ecu.{name}", lo, hi, integer)
     return EcuConfig(overrides=overrides)
@@ -691,6 +705,7 @@ min_work_speed_kmh = 0.5   # below this the meters stop
 # gnss_timeout_ms wheel_update_ms wheel_samples meter_counts_per_rev fan_min_rpm fan_ppr
 # enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms slip_comp gnss_lag_ms
 # pid_kp = 0.02
+gnss_lag_ms = "auto"       # GNSS lag: auto = learned on the machine (kept per receiver), or ms
 
 [gnss]
 source = "serial"          # serial | file | stdin
