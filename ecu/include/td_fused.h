@@ -66,6 +66,8 @@ typedef struct {
     float run_s;               /**< how long GNSS against the scaled wheel history has kept one sign, s */
     float run_sum;             /**< its integral over that time, m */
     int8_t run_sign;           /**< their sign (0: none) */
+    float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
+    float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */

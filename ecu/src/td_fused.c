@@ -33,6 +33,9 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define CLOSE_SIGMA2 1.0f     /* closed again within 1 GNSS sigma, or on a change of sign */
 #define REOPEN_S 1.0f         /* one sign for this long */
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
+#define GNSS_AVG_S 1.0f      /* GNSS against its own mean over this long ... */
+#define GNSS_MOVES_MS 0.1f   /* ... beyond this: the speed (or the receiver's filter) still moves */
+#define SETTLE_S 1.0f        /* steady for twice the GNSS delay and this long before learning */
 #define FLAT_A_MS2 0.1f      /* or the wheel's own acceleration below this alone */
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
@@ -63,6 +66,8 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->run_s = 0.0f;
     f->run_sum = 0.0f;
     f->run_sign = 0;
+    f->quiet_s = 0.0f;
+    f->gnss_avg_ms = 0.0f;
     f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
@@ -285,14 +290,20 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
      * 0 while the wheel says the speed does not change (v - a d takes up the difference; the
      * wheel's change over the delay alone let a bouncing wheel re-open on noise) */
     float aw = 0.0f;
-    const bool have_aw = td_fused_wheel_accel(f, &aw);
-    aw = fabsf(aw);
-    const bool steady = (fabsf(f->a_ms2) < REOPEN_A_MS2 && (!have_aw || aw < REOPEN_A_MS2)) ||
-                        (have_aw && aw < FLAT_A_MS2);
+    const bool steady = fabsf(f->a_ms2) < REOPEN_A_MS2 || (td_fused_wheel_accel(f, &aw) && fabsf(aw) < FLAT_A_MS2);
     /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
      * REOPEN_SIGMA GNSS sigmas */
+    /* and settled: a receiver's velocity filter reaches the new speed only some of its time
+     * constants after a change, so GNSS and the wheel are compared for the scale only once
+     * GNSS has stopped moving (against its own 1 s mean) for twice the delay and a second
+     * more. A slip step moves the wheel, not GNSS: it is not held back */
+    const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
+    f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
+    const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
+    f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
+    const bool settled = steady && f->quiet_s >= 2.0f * d + SETTLE_S;
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
-    if (sign != 0 && sign == f->run_sign && steady) {
+    if (sign != 0 && sign == f->run_sign && settled) {
         f->run_s += f->since_gnss_s;
         f->run_sum += ys * f->since_gnss_s;
     } else {
@@ -315,7 +326,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     f->since_gnss_s = 0.0f;
     /* the jerk over the delay; in steady motion a small share of it */
     const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
-    const bool learning = learn || (f->reopened && steady);
+    const bool learning = settled && (learn || f->reopened);
     if (!update(f, h, y, r, learning && !have_w)) {
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
     }
