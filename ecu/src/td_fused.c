@@ -297,9 +297,10 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
      * constants after a change, so GNSS and the wheel are compared for the scale only once
      * GNSS has stopped moving (against its own 1 s mean) for twice the delay and a second
      * more. A slip step moves the wheel, not GNSS: it is not held back */
+    /* against the mean before this fix: at 1 Hz the mean is the previous fix */
+    const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
     const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
     f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
-    const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
     f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
     const bool settled = steady && f->quiet_s >= 2.0f * d + SETTLE_S;
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
