@@ -35,11 +35,12 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
 #define GNSS_AVG_S 1.0f      /* GNSS against its own mean over this long ... */
 #define GNSS_MOVES_MS 0.1f   /* ... beyond this: the speed (or the receiver's filter) still moves */
-#define SETTLE_S 1.0f        /* steady for twice the GNSS delay and this long before learning */
+#define SETTLE_S 1.0f        /* GNSS still for the delay and this long before the scale learns */
 #define FLAT_A_MS2 0.1f      /* or the wheel's own acceleration below this alone */
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
+#define SCALE_PERIOD_S 0.25f /* the scale learns per fix as from a 4-5 Hz receiver */
 #define HIST_Z_MAX_MS 65.0f                   /* a wheel speed beyond this is no number (mm/s in 16 bits) */
 #define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
 #define ACCEL_BUCKETS 10u /* the wheel's own acceleration: two means of this many buckets (1 s each) */
@@ -267,11 +268,14 @@ bool td_fused_wheel_accel(const td_fused_t *f, float *a_ms2) {
 
 /* The scale from the wheel's history against GNSS at the same instant: no motion model between
  * them, so an acceleration cannot take up a scale error. Innovation in wheel m/s. */
-static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g) {
+static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g, float period_s) {
     const float h[3] = { 0.0f, 0.0f, g * z_ms };
     const float sg = f->scale * g;
     const float sd = HIST_REL * w_then;
-    const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss;
+    /* a fix that comes after a longer period stands for that many at 4 Hz (a receiver's fixes
+     * are correlated through its filter), so a 1 Hz receiver teaches the scale as fast */
+    const float n = period_s > SCALE_PERIOD_S ? period_s / SCALE_PERIOD_S : 1.0f;
+    const float r = (sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss) / (n < 4.0f ? n : 4.0f);
     (void)update(f, h, w_then - sg * z_ms, r, true);
 }
 
@@ -295,14 +299,14 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
      * REOPEN_SIGMA GNSS sigmas */
     /* and settled: a receiver's velocity filter reaches the new speed only some of its time
      * constants after a change, so GNSS and the wheel are compared for the scale only once
-     * GNSS has stopped moving (against its own 1 s mean) for twice the delay and a second
-     * more. A slip step moves the wheel, not GNSS: it is not held back */
+     * GNSS has stopped moving (against its own 1 s mean) for the delay and a second more
+     * (twice the delay held the field's loose patches back too long: docs/speed.md). A slip step moves the wheel, not GNSS: it is not held back */
     /* against the mean before this fix: at 1 Hz the mean is the previous fix */
     const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
     const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
     f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
     f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
-    const bool settled = steady && f->quiet_s >= 2.0f * d + SETTLE_S;
+    const bool settled = steady && f->quiet_s >= d + SETTLE_S;
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
     if (sign != 0 && sign == f->run_sign && settled) {
         f->run_s += f->since_gnss_s;
@@ -324,6 +328,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     } else if (f->reopened && ys * ys < CLOSE_SIGMA2 * f->r_gnss) {
         f->reopened = false;
     }
+    const float period_s = f->since_gnss_s;
     f->since_gnss_s = 0.0f;
     /* the jerk over the delay; in steady motion a small share of it */
     const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
@@ -332,7 +337,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
     }
     if (learning && have_w && z_ms > SCALE_MIN_MS) {
-        learn_scale(f, z_ms, w_then, g);
+        learn_scale(f, z_ms, w_then, g, period_s);
     }
     return TD_FUSED_ACCEPTED;
 }
