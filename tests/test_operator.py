@@ -24,7 +24,8 @@ from topdress.terminal import operator as op
 from topdress.terminal.leadcal import LeadCal
 from topdress.terminal.operator import CommandResult
 
-CFG = loads_config(DEFAULT_TOML)
+# the paper's rule: the operator's "why" line and the alarms below are written in its terms
+CFG = loads_config(DEFAULT_TOML.replace('mode = "fused"', 'mode = "paper"', 1))
 
 
 def drive(*segments: Segment) -> Drive:

@@ -50,8 +50,9 @@ class MachineConfig:
 
 @dataclass(frozen=True)
 class SpeedConfig:
-    # paper = the dual speed mode of the paper; wheel / gnss = one source only.
-    mode: str = _choice("paper", "paper", "wheel", "gnss", "fused")
+    # fused = the fused estimate (the default: it learns the GNSS lag itself); paper = the
+    # dual speed mode of the paper; wheel / gnss = one source only.
+    mode: str = _choice("fused", "paper", "wheel", "gnss", "fused")
     queue_len: int = _num(5, 2, 16)
     cv_window: int = _num(5, 2, 16)
     cv_threshold_pct: float = _num(4.2, 0.1, 50.0)
@@ -691,7 +692,7 @@ outlet_along_m = 0.0       # meters' outlet from the GNSS antenna: forward (behi
 outlet_across_m = 0.0      # and to the right (left < 0), m
 
 [speed]
-mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss | fused
+mode = "fused"             # fused (estimate from both) | paper (dual rule) | wheel | gnss
 queue_len = 5              # N, wheel-speed queue length
 cv_window = 5              # n, last speeds of the queue used for the CV
 cv_threshold_pct = 4.2     # CV below this = uniform motion

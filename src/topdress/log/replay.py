@@ -102,9 +102,7 @@ class _WheelInput:
         return c0 + (c1 - c0) * (t_us - t0) // (t1 - t0)
 
 
-def ecu_params(
-    cfg: TerminalConfig, speed_mode: str, lag_start_ms: int | None = None
-) -> EcuParams:
+def ecu_params(cfg: TerminalConfig, speed_mode: str, lag_start_ms: int | None = None) -> EcuParams:
     """The parameters the terminal would push at start, with the replay's speed mode (and
     the GNSS lag to start learning from, as the terminal keeps it per receiver)."""
     pushed = cfg.ecu_params(lag_start_ms)
@@ -148,7 +146,7 @@ def _us(t: float, t0: float) -> int:
 def replay(
     events: Sequence[Event],
     cfg: TerminalConfig,
-    speed_mode: str = "paper",
+    speed_mode: str = "fused",
     stats: ReplayStats | None = None,
 ) -> list[ReplayRow]:
     """Run `events` through a fresh ECU core; rows at each speed update. Events are taken in
