@@ -191,9 +191,7 @@ def with_lag(cfg: TerminalConfig, lag_ms: int | None) -> TerminalConfig:
     return replace(cfg, ecu=EcuConfig(overrides={**cfg.ecu.overrides, "gnss_lag_ms": lag_ms}))
 
 
-def run(
-    rx: Receiver, seed: int, mode: str, lag_ms: int | None, ground_slip: float = 0.02
-) -> Score:
+def run(rx: Receiver, seed: int, mode: str, lag_ms: int | None, ground_slip: float = 0.02) -> Score:
     drive = make_drive(seed)
     events = wheel_events(drive, seed, ground_slip) + gnss_events(drive, rx, seed)
     stats = ReplayStats()
@@ -229,7 +227,9 @@ MATRIX_RECEIVERS = (
 
 
 def table(receivers: Sequence[Receiver], seeds: Sequence[int]) -> None:
-    print("| receiver lag | fused, no setting | paper rule | fused, lag set right | learned lag ms |")
+    print(
+        "| receiver lag | fused, no setting | paper rule | fused, lag set right | learned lag ms |"
+    )
     print("|---|---|---|---|---|")
     for rx in receivers:
         right = round(rx.lag_s * 1000)
