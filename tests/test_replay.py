@@ -18,9 +18,9 @@ from topdress import protocol
 from topdress.cli import main
 from topdress.config import default_config, loads_config
 from topdress.ecu import Ecu
+from topdress.errors import ConfigError
 from topdress.gnss.nmea import NmeaDecoder, make_sentence
 from topdress.gnss.tracker import GnssSpeedTracker
-from topdress.errors import ConfigError
 from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent, read_file, write
 from topdress.log.export import session_events
 from topdress.log.replay import MAX_IDLE_S, ReplayRow, ReplayStats, ecu_params, replay
