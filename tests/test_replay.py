@@ -320,5 +320,5 @@ def test_the_gnss_lag_is_learned_and_a_recorded_one_starts_the_learning() -> Non
     # a configured lag is fixed: the recorded one does not replace it
     fixed = ecu_params(loads_config("[ecu]\ngnss_lag_ms = 1300\n"), "fused", 800)
     assert (fixed.gnss_lag_ms, fixed.gnss_lag_auto) == (1300, 0)
-    with pytest.raises(ConfigError, match="ecu.gnss_lag_ms"):
+    with pytest.raises(ConfigError, match=r"ecu\.gnss_lag_ms"):
         loads_config('[ecu]\ngnss_lag_ms = "soon"\n')
