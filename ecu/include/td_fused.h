@@ -12,13 +12,13 @@
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports).
  * GNSS (delayed by d = age + lag) enters twice:
  *   1. the scale, against the wheel's own history at the fix's time of validity (100 ms means
- *      kept for 2.4 s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
+ *      kept for 3.6 s in mm/s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
  *      R = (4 % of w)^2 + floor^2 + (s g)^2 gnss_std^2. Wheel and GNSS then describe the same
  *      instant, so no motion model stands between them and an acceleration cannot take up a
  *      scale error (it did when the scale was learned through v - a d);
  *   2. the speed through the model: z_g = v(t - d) = v - a*d,  H = [1, -d, 0],
  *      R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it in steady motion), with
- *      the scale's row of the gain zeroed. Beyond the history (a delay over ~2.3 s, or no wheel)
+ *      the scale's row of the gain zeroed. Beyond the history (a delay over ~3.5 s, or no wheel)
  *      the scale is learned through this update instead.
  * The scale is learned only while the caller says (`learn`: GNSS good, motion steady) or while
  * re-opened, and kept through GNSS outages.
@@ -27,15 +27,19 @@
  * longer in steady motion, with a mean beyond 2 GNSS sigmas, says the wheel's scale has
  * changed (a slip step): learning re-opens (`reopened`) while the motion is steady, the scale's
  * variance raised to at least (3 %)^2, until that difference changes sign or falls within
- * 1 GNSS sigma. Steady: |a| < 0.3 m/s^2. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is
- * learned to within 1.5 % in ~4 s. (With a short lag, ~0.6 s at 3-4 m/s, a takes up enough of
- * the difference to exceed 0.3 m/s^2 and the step is not re-learned: docs/speed.md.)
+ * 1 GNSS sigma. Steady: |a| < 0.3 m/s^2, or the wheel's own acceleration (td_fused_wheel_accel)
+ * below 0.1 m/s^2 (with a short lag, ~0.6 s at 3-4 m/s, a takes up a slip step's difference
+ * beyond 0.3 m/s^2; the wheel says the speed holds). Settled: the scale learns (either way) only
+ * once GNSS has stayed within 0.1 m/s of its 1 s mean for the delay + 1 s (a receiver's filter
+ * still settling after a brake taught a wrong slip). A fix after a period longer than 0.25 s
+ * teaches the scale as period / 0.25 s fixes (at most 4). At 2 m/s with GNSS 1.3 s late, a 15 %
+ * slip step is learned to within 1.5 % in ~4 s; at 3.5 m/s with GNSS 0.6 s late, 3 % in 4 s.
  * eq. 5's shape g(v) is held at its 12 km/h value above 12 km/h: the fit's g(v) v falls again
  * above ~14.7 km/h, which gave a wheel reading a second, false speed to run off to.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 176 bytes (68 of state, 108 of wheel history). No heap,
+ * Costs per step: ~120 float operations; 160 bytes (76 of state, 84 of wheel history). No heap,
  * no globals.
  */
 #ifndef TD_FUSED_H
