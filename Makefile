@@ -49,6 +49,7 @@ test: ctest lint pytest
 
 bench: $(STAMP) browser
 	$(BIN)/python bench/ecu_bench.py
+	$(BIN)/python bench/fused_lag_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
 	$(BIN)/python bench/maps_bench.py

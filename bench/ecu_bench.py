@@ -33,6 +33,9 @@ CM4 = [
     "-mfloat-abi=hard",
     "-mfpu=fpv4-sp-d16",
     "-Os",
+    # link-time optimisation: the core's small functions are inlined across files and what a
+    # port never calls is dropped (16,296 -> ~12,400 bytes before the learned GNSS lag)
+    "-flto",
     # the core never reads errno: sqrtf becomes the FPU's VSQRT instead of newlib's wrapper
     "-fno-math-errno",
     "-ffunction-sections",

@@ -95,7 +95,7 @@ def test_the_operator_works_the_demo_in_a_browser(demo: DemoProcess, tmp_path: P
               != first)  # fmt: skip
         until("the swath on the map", lambda: len(driver.find_elements(
             By.CSS_SELECTOR, ".leaflet-overlay-pane path")) > 10)  # fmt: skip
-        until("the GNSS speed in use", lambda: text("source") == "GNSS")
+        until("the fused speed in use (the default mode)", lambda: text("source") == "fused")
         shoot("main", "en")
         el("stop").click()
         until("STOPPED", lambda: text("op_state") == "STOPPED")

@@ -200,6 +200,7 @@ def test_source_decisions_happen_every_500_ms_and_status_every_100_ms() -> None:
         DEFAULT_IDS.targets,
         DEFAULT_IDS.fused,
         DEFAULT_IDS.fused_aux,
+        DEFAULT_IDS.gnss_lag,
     ]
 
 

@@ -114,10 +114,10 @@ def test_frame_ids_outside_29_bits_are_an_error() -> None:
 
 def test_transmit_queue_overflow_is_counted() -> None:
     ecu = _running_ecu()
-    for k in range(2, 102):  # 1 s without draining: 10 periods x 6 frames into 16 slots
+    for k in range(2, 102):  # 1 s without draining: 10 periods x 7 frames into 16 slots
         ecu.step_raw(k * 10_000, 0, 0, 0, 0, 0)
     assert len(ecu.tx_raw()) == 16
-    assert ecu.counters.tx_dropped == 60 - 16
+    assert ecu.counters.tx_dropped == 70 - 16
 
 
 # ---- parameter frames: cantools -> ECU -> acknowledgement -> cantools ---------------------------
@@ -155,6 +155,7 @@ def test_every_parameter_is_settable_over_can(spec: Any) -> None:
         "switch_compare": 1,
         "slip_comp": 1,
         "drive_adapt": 0,
+        "gnss_lag_auto": 0,
     }.get(spec.key, spec.minimum + 5 * spec.scale if spec.integer else spec.maximum / 2)
     msg = encode_param_set(spec.key, value)
     assert ecu.rx(msg, 0) == lib.TD_OK
@@ -178,8 +179,8 @@ def test_parameter_frames_refused() -> None:
     ack = _param_round_trip(ecu, db.encode_message("PcParamSet", {"ParamId": 7, "CvWindow": 6}))
     assert (ack["AckResult"], ack["AckRaw"], ack["rc"]) == (4, 5, lib.TD_E_INCONSISTENT)
     # unknown parameter id
-    ack = _param_round_trip(ecu, bytes([39, 0, 0, 0, 1, 0, 0, 0]))
-    assert (ack["AckParamId"], ack["AckResult"]) == (39, 1)
+    ack = _param_round_trip(ecu, bytes([40, 0, 0, 0, 1, 0, 0, 0]))
+    assert (ack["AckParamId"], ack["AckResult"]) == (40, 1)
     # wrong length
     ack = _param_round_trip(ecu, bytes([8, 0, 0, 0, 1, 0]))
     assert (ack["AckParamId"], ack["AckResult"], ack["rc"]) == (8, 5, lib.TD_E_LENGTH)
@@ -279,10 +280,11 @@ def test_constants_agree() -> None:
         lib.TD_ID_PC_PARAM_SET,
         lib.TD_ID_ECU_PARAM_ACK,
     )
-    assert (ids.gnss_time, ids.fused, ids.fused_aux) == (
+    assert (ids.gnss_time, ids.fused, ids.fused_aux, ids.gnss_lag) == (
         lib.TD_ID_PC_GNSS_TIME,
         lib.TD_ID_ECU_FUSED,
         lib.TD_ID_ECU_FUSED_AUX,
+        lib.TD_ID_ECU_GNSS_LAG,
     )
     assert len(params()) == lib.TD_PARAM_COUNT
 
@@ -294,7 +296,7 @@ def test_parameter_encodings_agree() -> None:
         assert scale[0] == pytest.approx(spec.scale, rel=1e-6)
         assert (lo[0], hi[0]) == (spec.to_raw(spec.minimum), spec.to_raw(spec.maximum))
         assert lib.td_proto_param_raw(spec.id, spec.maximum) == spec.to_raw(spec.maximum)
-    assert lib.td_params_encoding(39, scale, lo, hi) == lib.TD_E_UNKNOWN_PARAM
+    assert lib.td_params_encoding(40, scale, lo, hi) == lib.TD_E_UNKNOWN_PARAM
 
 
 def _c_frame(fn: Any, value: Any) -> tuple[int, bytes]:

@@ -25,7 +25,8 @@ from topdress.terminal.leadcal import LeadCal
 from topdress.view import commands as op
 from topdress.view.commands import CommandResult
 
-CFG = loads_config(DEFAULT_TOML)
+# the paper's rule: the operator's "why" line and the alarms below are written in its terms
+CFG = loads_config(DEFAULT_TOML.replace('mode = "fused"', 'mode = "paper"', 1))
 
 
 def drive(*segments: Segment) -> Drive:

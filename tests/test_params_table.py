@@ -40,7 +40,7 @@ def _a_value(spec: protocol.ParamSpec) -> Any:
 
 def test_the_table_covers_every_parameter_id_of_the_dbc() -> None:
     ids = _dbc_param_ids()
-    assert ids == list(range(1, 39))
+    assert ids == list(range(1, 40))
     assert [s.id for s in protocol.params()] == ids
 
 
@@ -99,9 +99,10 @@ def test_a_speed_mode_has_one_name_in_the_configuration_the_protocol_and_the_ecu
     assert diags and all(d.mode is mode for d in diags)
 
 
-def test_the_default_speed_mode_is_the_papers_dual_rule_by_one_name() -> None:
+def test_the_default_speed_mode_is_fused_and_each_mode_has_one_name() -> None:
     cfg = default_config()
-    assert cfg.speed.mode == SpeedMode.PAPER == "paper"
+    assert cfg.speed.mode == SpeedMode.FUSED == "fused"
+    assert cfg.ecu_params()[protocol.param("speed.mode").id] == SpeedMode.FUSED.code == 3
     assert (
         list(SPEED_MODE_IDS) == [str(m) for m in SpeedMode] == ["paper", "wheel", "gnss", "fused"]
     )

@@ -57,6 +57,7 @@ def test_frame_ids_are_the_dbc_ids_and_the_papers() -> None:
         "PcGnssTime": DEFAULT_IDS.gnss_time,
         "EcuFused": DEFAULT_IDS.fused,
         "EcuFusedAux": DEFAULT_IDS.fused_aux,
+        "EcuGnssLag": DEFAULT_IDS.gnss_lag,
     }
     assert DEFAULT_IDS.status == 0x185C6465 and DEFAULT_IDS.command == 0x0A5C6465
     assert all(m.is_extended_frame and m.length == 8 for m in db.messages)
@@ -198,8 +199,8 @@ def test_decode_diag_speeds_targets() -> None:
 
 def test_parameter_table_covers_every_id_once() -> None:
     specs = params()
-    assert [s.id for s in specs] == list(range(1, 39))
-    assert len({s.key for s in specs}) == 38
+    assert [s.id for s in specs] == list(range(1, 40))
+    assert len({s.key for s in specs}) == 39
     assert param("CvThreshold") is param(8) is param("cv_threshold_pct")
     assert param("kg_per_rev[1]").signal == "LowerKgPerRev"
     assert (param(8).unit, param(8).minimum, param(8).maximum, param(8).scale) == (
@@ -209,7 +210,7 @@ def test_parameter_table_covers_every_id_once() -> None:
         0.01,
     )
     assert (param("LeadStop").id, param(38).unit, param(38).maximum) == (38, "ms", 5000.0)
-    for bad in (0, 39, "kg_per_rev", "Nope"):
+    for bad in (0, 40, "kg_per_rev", "Nope"):
         with pytest.raises(ProtocolError, match="unknown ECU parameter"):
             param(bad)
 
@@ -245,7 +246,7 @@ def test_parameter_values_are_checked() -> None:
     with pytest.raises(ProtocolError, match=r"QueueLength = 17 outside 2..16"):
         decode((DEFAULT_IDS.param_set, bad_raw))
     with pytest.raises(ProtocolError, match="PcParamSet"):
-        decode((DEFAULT_IDS.param_set, bytes([39, 0, 0, 0, 1, 0, 0, 0])))
+        decode((DEFAULT_IDS.param_set, bytes([40, 0, 0, 0, 1, 0, 0, 0])))
 
 
 def test_parameter_ack() -> None:

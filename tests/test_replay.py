@@ -18,9 +18,10 @@ from topdress import protocol
 from topdress.cli.main import main
 from topdress.config import default_config, loads_config
 from topdress.ecu import Ecu
+from topdress.errors import ConfigError
 from topdress.gnss.nmea import NmeaDecoder, make_sentence
 from topdress.gnss.tracker import GnssSpeedTracker
-from topdress.log.events import Event, NmeaEvent, WheelEvent, read_file, write
+from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent, read_file, write
 from topdress.log.export import session_events
 from topdress.log.replay import MAX_IDLE_S, ReplayRow, ReplayStats, ecu_params, replay
 from topdress.log.session import SessionLog, SessionReader
@@ -297,3 +298,27 @@ def test_gnss_beyond_the_frame_is_forwarded_as_25_kmh_as_the_terminal_does() -> 
     events: list[Event] = [NmeaEvent(T0 + k * 0.2, line.decode().rstrip()) for k in range(20)]
     rows = replay(events, default_config(), "gnss")
     assert rows and all(r.v_gnss_kmh == pytest.approx(25.0) for r in rows[1:])
+
+
+def test_the_gnss_lag_is_learned_and_a_recorded_one_starts_the_learning() -> None:
+    # this drive's receiver reports the speed of its fix at once: the lag learned is ~0
+    stats = ReplayStats()
+    replay(drive_events(), default_config(), "fused", stats)
+    assert stats.lag_start_ms is None
+    assert stats.lag_learned_ms is not None and stats.lag_learned_ms <= 150
+    # a recorded session's EcuGnssLag (learned 800 ms, LagState 1, LagAuto) starts the next run
+    frame = bytes([0x20, 0x03, 0x20, 0x03, 30, 5, 0x05, 0])
+    recorded = CanEvent(T0 + 0.5, protocol.DEFAULT_IDS.gnss_lag, frame, "rx")
+    assert protocol.decode((protocol.DEFAULT_IDS.gnss_lag, frame)) == protocol.EcuGnssLag(
+        800, 800, 3.0, 0.05, 1, True
+    )
+    stats = ReplayStats()
+    replay([*drive_events(seconds=3.0), recorded], default_config(), "fused", stats)
+    assert stats.lag_start_ms == 800
+    p = ecu_params(default_config(), "fused", stats.lag_start_ms)
+    assert (p.gnss_lag_ms, p.gnss_lag_auto) == (800, 1)
+    # a configured lag is fixed: the recorded one does not replace it
+    fixed = ecu_params(loads_config("[ecu]\ngnss_lag_ms = 1300\n"), "fused", 800)
+    assert (fixed.gnss_lag_ms, fixed.gnss_lag_auto) == (1300, 0)
+    with pytest.raises(ConfigError, match=r"ecu\.gnss_lag_ms"):
+        loads_config('[ecu]\ngnss_lag_ms = "soon"\n')

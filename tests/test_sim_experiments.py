@@ -187,7 +187,7 @@ def test_cli_writes_table2_json_and_report(tmp_path: Path) -> None:
     md = (out / "table2.md").read_text()
     assert "| 3.5 |" in md and "(0.56)" in md
     assert "WheelUpdatePeriod = 250, WheelSamples = 2, CvThreshold = 5.6" in md
-    assert "## The fused mode" in md and "`GnssLag = 1300`" in md
+    assert "## The fused mode" in md and "`LeadStop = 800`" in md and "GnssLag" not in md
     assert (out / "table2.png").stat().st_size > 1000
 
 

@@ -118,8 +118,8 @@ def test_closed_loop_rate_follows_ndvi_and_meters_follow_eq4(tmp_path: Path) -> 
         assert s.target_rpm[0] == pytest.approx(eq4, rel=0.03, abs=0.05)
     mean_err = sum(abs(s.meter_rpm[0] - s.target_rpm[0]) for s in steady) / len(steady)
     assert mean_err < 0.05 * (sum(s.target_rpm[0] for s in steady) / len(steady))
-    # uniform above 6 km/h: the ECU took the GNSS speed
-    assert any(s.source == "gnss" for s in steady)
+    # the default speed mode: the fused estimate, fed by both sensors in steady work
+    assert all(s.source == "fused" for s in steady)
     # and every input went to the log, with a state row every 100 ms
     with SessionReader(session.path) as reader:
         counts = reader.raw_counts()
@@ -227,7 +227,7 @@ def test_ecu_powered_after_the_terminal_is_waited_for_then_meters(tmp_path: Path
         assert len(ready) == 1 and 4.0 < ready[0][0] < 4.5
         assert ready[0][1].startswith("ECU ready: every parameter acknowledged, 4.")
         s = rig.term.snapshot
-        assert s.ecu_link == "ok" and s.running and s.source == "gnss"
+        assert s.ecu_link == "ok" and s.running and s.source == "fused"  # the default mode
         m = rig.cfg.machine
         eq4 = meter_target_rpm(m.width_m, s.rate_kg_ha[0], s.v_kmh, m.kg_per_rev_upper)
         assert s.target_rpm[0] == pytest.approx(eq4, rel=0.03)
@@ -410,8 +410,9 @@ def test_ecu_back_after_a_link_glitch_keeps_the_meters_running(tmp_path: Path) -
         for k in range(1, 301):  # 3 s after it is heard again, step by step
             rig.run(11.0 + k * 0.01)
             stopped += [] if rig.world.ecu.state.running else [rig.world.t_s]
-        # the parameters went again (answered Busy with our values) and nothing stopped
-        assert rig.term.link.params_done and rig.term.link.counters.tx_params == 24
+        # the parameters went again (answered Busy with our values) and nothing stopped:
+        # 13 per push (machine, speed, GnssLagAuto)
+        assert rig.term.link.params_done and rig.term.link.counters.tx_params == 26
         assert stopped == []
     finally:
         rig.close()

@@ -29,6 +29,7 @@
 #include "td_drive.h"
 #include "td_edge.h"
 #include "td_fused.h"
+#include "td_lag.h"
 #include "td_params.h"
 #include "td_pid.h"
 #include "td_port.h"
@@ -70,6 +71,12 @@ typedef struct {
     float v_lead_kmh;          /**< speed predicted lead_meter_ms + lead_air_ms ahead, km/h: drives eq. 4 (= v_kmh without look-ahead) */
     float drive_rpm_per_duty[2]; /**< metering drive slope in use (learned), r/min per unit duty */
     uint16_t gnss_delay_ms;    /**< delay (age + lag) of the last GNSS speed applied to the estimate, ms */
+    uint16_t gnss_lag_ms;      /**< the GNSS lag in use, ms (GnssLag, or the learned lag: lag_state) */
+    uint16_t lag_learned_ms;   /**< the lag learned from the wheel, ms; 0xFFFF until learned (td_lag.h) */
+    uint8_t lag_state;         /**< td_lag_state_t: where gnss_lag_ms comes from */
+    uint8_t lag_overruled;     /**< times a fixed GnssLag was overruled by the data (wrapping) */
+    float lag_evidence_s;      /**< seconds of speed change behind the learned lag (decayed) */
+    float lag_fit;             /**< its misfit r_min / r_max, 0..1 (small: a clear lag) */
     bool slip_learning;        /**< the wheel scale is being learned now (GNSS good, motion steady) */
     bool edge_timing;          /**< the port supplied a wheel edge time at the last step */
     bool gnss_fused;           /**< the estimate accepted a GNSS speed within gnss_timeout_ms */
@@ -116,6 +123,7 @@ typedef struct {
     /* fused estimate */
     td_edge_t edge;
     td_fused_t fused;
+    td_lag_t lag;              /**< the GNSS lag learned against the wheel's history */
     float gnss_pend_ms;        /**< GNSS speed waiting for the next step, m/s */
     uint32_t gnss_pend_us;     /**< its time of validity as the PC gave it (reception - age) */
     uint32_t gnss_time_us;     /**< last PcGnssTime received */

@@ -12,13 +12,13 @@
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports).
  * GNSS (delayed by d = age + lag) enters twice:
  *   1. the scale, against the wheel's own history at the fix's time of validity (100 ms means
- *      kept for 2.4 s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
+ *      kept for 3.6 s in mm/s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
  *      R = (4 % of w)^2 + floor^2 + (s g)^2 gnss_std^2. Wheel and GNSS then describe the same
  *      instant, so no motion model stands between them and an acceleration cannot take up a
  *      scale error (it did when the scale was learned through v - a d);
  *   2. the speed through the model: z_g = v(t - d) = v - a*d,  H = [1, -d, 0],
  *      R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it in steady motion), with
- *      the scale's row of the gain zeroed. Beyond the history (a delay over ~2.3 s, or no wheel)
+ *      the scale's row of the gain zeroed. Beyond the history (a delay over ~3.5 s, or no wheel)
  *      the scale is learned through this update instead.
  * The scale is learned only while the caller says (`learn`: GNSS good, motion steady) or while
  * re-opened, and kept through GNSS outages.
@@ -27,15 +27,19 @@
  * longer in steady motion, with a mean beyond 2 GNSS sigmas, says the wheel's scale has
  * changed (a slip step): learning re-opens (`reopened`) while the motion is steady, the scale's
  * variance raised to at least (3 %)^2, until that difference changes sign or falls within
- * 1 GNSS sigma. Steady: |a| < 0.3 m/s^2. At 2 m/s with GNSS 1.3 s late, a 15 % slip step is
- * learned to within 1.5 % in ~4 s. (With a short lag, ~0.6 s at 3-4 m/s, a takes up enough of
- * the difference to exceed 0.3 m/s^2 and the step is not re-learned: docs/speed.md.)
+ * 1 GNSS sigma. Steady: |a| < 0.3 m/s^2, or the wheel's own acceleration (td_fused_wheel_accel)
+ * below 0.1 m/s^2 (with a short lag, ~0.6 s at 3-4 m/s, a takes up a slip step's difference
+ * beyond 0.3 m/s^2; the wheel says the speed holds). Settled: the scale learns (either way) only
+ * once GNSS has stayed within 0.1 m/s of its 1 s mean for the delay + 1 s (a receiver's filter
+ * still settling after a brake taught a wrong slip). A fix after a period longer than 0.25 s
+ * teaches the scale as period / 0.25 s fixes (at most 4). At 2 m/s with GNSS 1.3 s late, a 15 %
+ * slip step is learned to within 1.5 % in ~4 s; at 3.5 m/s with GNSS 0.6 s late, 3 % in 4 s.
  * eq. 5's shape g(v) is held at its 12 km/h value above 12 km/h: the fit's g(v) v falls again
  * above ~14.7 km/h, which gave a wheel reading a second, false speed to run off to.
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 176 bytes (68 of state, 108 of wheel history). No heap,
+ * Costs per step: ~120 float operations; 160 bytes (76 of state, 84 of wheel history). No heap,
  * no globals.
  */
 #ifndef TD_FUSED_H
@@ -47,9 +51,11 @@
 /** Result of a measurement update. */
 typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED = 2 } td_fused_result_t;
 
-/** Wheel history: TD_FUSED_HIST means of TD_FUSED_BUCKET_S each (2.4 s back). */
-#define TD_FUSED_HIST 24u
+/** Wheel history: TD_FUSED_HIST means of TD_FUSED_BUCKET_S each (3.6 s back: a GNSS lag of
+ *  up to 3 s plus the fix's age), kept in mm/s. */
+#define TD_FUSED_HIST 36u
 #define TD_FUSED_BUCKET_S 0.1f
+#define TD_FUSED_HIST_MM_S 0.001f /**< resolution of a bucket, m/s */
 
 typedef struct {
     float v_ms;                /**< ground speed, m/s, >= 0 */
@@ -64,6 +70,8 @@ typedef struct {
     float run_s;               /**< how long GNSS against the scaled wheel history has kept one sign, s */
     float run_sum;             /**< its integral over that time, m */
     int8_t run_sign;           /**< their sign (0: none) */
+    float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
+    float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
@@ -71,7 +79,7 @@ typedef struct {
     uint8_t hist_n;            /**< complete buckets held, 0..TD_FUSED_HIST */
     float hist_sum;            /**< the bucket being filled: integral of the wheel speed, m */
     float hist_s;              /**< and its length, s */
-    float hist_ms[TD_FUSED_HIST]; /**< mean wheel speed per bucket, m/s (newest at hist_head) */
+    uint16_t hist_mms[TD_FUSED_HIST]; /**< mean wheel speed per bucket, mm/s (newest at hist_head) */
 } td_fused_t;
 
 /** Initialise at rest, scale 1, with the tuning (units of td_params.h). TD_E_ARG on a bad argument. */
@@ -92,6 +100,13 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s);
 /** The recorded wheel speed delay_s ago (m/s, interpolated between buckets); false beyond the history. */
 bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms);
+/**
+ * The wheel's own acceleration from its history, m/s^2 of wheel speed: the mean of the newest
+ * second of buckets less that of the second before, over 1 s. False with less than 2 s held.
+ * It does not depend on the scale or on GNSS, so it tells steady motion from a speed change
+ * when the estimate's acceleration has taken up a wrong scale or lag.
+ */
+bool td_fused_wheel_accel(const td_fused_t *f, float *a_ms2);
 /** GNSS update with speed z_ms valid delay_s (0..10 s) ago. */
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn);
 /** The wheel stands (no pulse for the stop time): speed and acceleration are zero. */

@@ -47,7 +47,8 @@ typedef struct {
     uint8_t slip_comp;              /**< (28) td_slip_comp_t, 0..2, default TD_SLIP_OFF: modes dual/wheel/GNSS: off, the learned
                                          constant scale, eq. 5; the fused mode: eq. 5's shape x a learned factor, unless
                                          TD_SLIP_LEARNED (a learned constant scale) */
-    uint16_t gnss_lag_ms;           /**< (29) added to every GNSS speed's age: receiver latency + velocity filter lag, 0..3000, default 0 */
+    uint16_t gnss_lag_ms;           /**< (29) added to every GNSS speed's age: receiver latency + velocity filter lag, 0..3000,
+                                         default 0; with gnss_lag_auto the start value until the lag is learned */
     uint16_t lead_meter_ms;         /**< (30) look-ahead: metering drive response, 0..3000, default 0 (off) */
     uint16_t lead_air_ms;           /**< (31) look-ahead: air-line transport, 0..5000, default 0 (off) */
     float fused_jerk_ms3;           /**< (32) process noise: white-jerk density sqrt, m/s^3 per sqrt(Hz), 0.01..50, default 0.3 */
@@ -58,6 +59,9 @@ typedef struct {
     uint16_t meter_tau_ms;          /**< (37) time constant of the metering drive + speed window (reference model), 0..2000, default 200 */
     uint16_t lead_stop_ms;          /**< (38) look-ahead while the speed falls (slowing, the stop), 0..5000, default 0:
                                          the same as rising, lead_meter_ms + lead_air_ms */
+    uint8_t gnss_lag_auto;          /**< (39) 1 (default): the GNSS lag is learned from the wheel (td_lag.h), gnss_lag_ms only
+                                         its start value; 0: gnss_lag_ms is used unless the learned lag differs by more than
+                                         0.3 s (then the learned one, state Overruled) */
     /* not on CAN: fixed properties of the build */
     float fan_rpm_at_full_duty;     /**< fan feed-forward scale, rpm, (0, 60000], default 4000 */
     uint16_t fan_spinup_ms;         /**< grace after start before FAN_LOW is flagged, default 3000 */
@@ -66,7 +70,7 @@ typedef struct {
 } td_params_t;
 
 /** Number of the highest parameter id. */
-#define TD_PARAM_COUNT 38u
+#define TD_PARAM_COUNT 39u
 
 /** Fill `p` with the defaults. */
 void td_params_default(td_params_t *p);

@@ -23,6 +23,7 @@
 #define TD_ID_PC_GNSS_TIME 0x0A626465u
 #define TD_ID_ECU_FUSED 0x18636465u
 #define TD_ID_ECU_FUSED_AUX 0x18666465u
+#define TD_ID_ECU_GNSS_LAG 0x18696465u
 
 #define TD_RUN_STOPPED 0x00u
 #define TD_RUN_RUNNING 0x0Au
@@ -100,6 +101,16 @@ typedef struct {
     uint16_t gnss_delay_ms;    /**< delay (age + lag) of the last GNSS speed applied, ms, saturating */
 } td_fused_aux_t;
 
+/** EcuGnssLag: the GNSS lag in use, learned, and where it comes from (td_lag.h). */
+typedef struct {
+    uint16_t in_use_ms;        /**< lag added to every GNSS speed's age, ms */
+    uint16_t learned_ms;       /**< learned lag, ms; 0xFFFF = not learned yet */
+    float evidence_s;          /**< seconds of speed change behind it, 0.1 s, saturating at 25.5 */
+    float fit;                 /**< misfit r_min / r_max, 0..1 (sent in whole %) */
+    uint8_t state;             /**< td_lag_state_t */
+    bool automatic;            /**< GnssLagAuto */
+} td_gnss_lag_t;
+
 int td_proto_decode_command(const td_can_frame_t *f, td_command_t *out);
 int td_proto_encode_command(const td_command_t *c, td_can_frame_t *f);
 int td_proto_encode_status(const td_status_t *s, td_can_frame_t *f);
@@ -112,6 +123,7 @@ int td_proto_decode_gnss_time(const td_can_frame_t *f, td_gnss_time_t *out);
 int td_proto_encode_gnss_time(const td_gnss_time_t *g, td_can_frame_t *f);
 int td_proto_encode_fused(const td_fused_diag_t *d, td_can_frame_t *f);
 int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f);
+int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f);
 /**
  * Decode PcParamSet into the parameter id and its physical value (units of td_params.h).
  * TD_E_UNKNOWN_PARAM for an id outside 1..TD_PARAM_COUNT, TD_E_RANGE outside the DBC range.

@@ -36,6 +36,11 @@
 /* A GNSS speed older than this (age + lag) is not applied. */
 #define TD_GNSS_MAX_DELAY_US 10000000u
 #define TD_KMH_PER_MS 3.6f
+/* A fixed GnssLag is overruled when the learned lag differs by more than this, ms, and is
+ * used again once within TD_LAG_AGREE_MS. */
+#define TD_LAG_CONTRADICT_MS 300.0f
+#define TD_LAG_AGREE_MS 200.0f
+#define TD_LAG_NONE 0xFFFFu
 /* Eq. 5 compensation: the slip is taken within 0..50 %. */
 #define TD_SLIP_MAX 0.5f
 
@@ -102,6 +107,32 @@ static void refresh_cv_and_source(td_app_t *app) {
     decide_source(app);
 }
 
+/* The GNSS lag in use: learned (GnssLagAuto 1, once learned), GnssLag (before, or fixed), or the
+ * learned one again where the data contradict a fixed GnssLag (counted: lag_overruled). */
+static void choose_lag(td_app_t *app) {
+    td_state_t *st = &app->st;
+    const td_lag_t *l = &app->lag;
+    const float learned_ms = l->lag_s * 1000.0f;
+    st->lag_learned_ms = l->learned ? (uint16_t)(learned_ms + 0.5f) : (uint16_t)TD_LAG_NONE;
+    st->lag_evidence_s = l->evidence_s;
+    st->lag_fit = l->fit;
+    td_lag_state_t state;
+    if (app->p.gnss_lag_auto != 0u) {
+        state = l->learned ? TD_LAG_LEARNED : TD_LAG_START;
+    } else if (!l->learned) {
+        state = TD_LAG_FIXED;
+    } else {
+        const float off = fabsf(learned_ms - (float)app->p.gnss_lag_ms);
+        const bool over = st->lag_state == (uint8_t)TD_LAG_OVERRULED ? off > TD_LAG_AGREE_MS : off > TD_LAG_CONTRADICT_MS;
+        state = over ? TD_LAG_OVERRULED : TD_LAG_FIXED;
+        if (over && st->lag_state != (uint8_t)TD_LAG_OVERRULED) {
+            st->lag_overruled++;
+        }
+    }
+    st->lag_state = (uint8_t)state;
+    st->gnss_lag_ms = state == TD_LAG_LEARNED || state == TD_LAG_OVERRULED ? st->lag_learned_ms : app->p.gnss_lag_ms;
+}
+
 int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
     if (app == NULL || params == NULL) {
         return TD_E_ARG;
@@ -120,6 +151,8 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
     init_speed_chain(app);
     (void)td_fused_init(&app->fused, app->p.fused_jerk_ms3, app->p.fused_gnss_std_kmh, app->p.fused_wheel_noise_pct);
     app->fused.slip_shape = app->p.slip_comp != (uint8_t)TD_SLIP_LEARNED;
+    td_lag_init(&app->lag);
+    choose_lag(app);
     app->st.drive_rpm_per_duty[TD_UPPER] = td_drive_rpm_per_duty(&app->meter_drive[TD_UPPER]);
     app->st.drive_rpm_per_duty[TD_LOWER] = td_drive_rpm_per_duty(&app->meter_drive[TD_LOWER]);
     app->last_step_us = now_us;
@@ -291,6 +324,7 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
             }
             td_fused_tune(&app->fused, app->p.fused_jerk_ms3, app->p.fused_gnss_std_kmh, app->p.fused_wheel_noise_pct);
             app->fused.slip_shape = app->p.slip_comp != (uint8_t)TD_SLIP_LEARNED;
+            choose_lag(app); /* GnssLag, GnssLagAuto: the learned lag is kept */
             /* n, threshold, switch speed, mode, compare act at once, not at the next wheel update */
             refresh_cv_and_source(app);
         } else {
@@ -436,7 +470,12 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
     }
     if (app->gnss_pend) {
         app->gnss_pend = false;
-        const uint32_t delay_us = td_age_us(now_us, app->gnss_pend_us) + (uint32_t)app->p.gnss_lag_ms * 1000u;
+        const uint32_t age_us = td_age_us(now_us, app->gnss_pend_us);
+        /* the lag is learned from this fix first and used for it at once */
+        if (gnss_ok && td_lag_fix(&app->lag, f, app->gnss_pend_ms, (float)age_us * 1.0e-6f, f->since_gnss_s)) {
+            choose_lag(app);
+        }
+        const uint32_t delay_us = age_us + (uint32_t)st->gnss_lag_ms * 1000u;
         if (gnss_ok && delay_us <= TD_GNSS_MAX_DELAY_US) {
             st->gnss_delay_ms = (uint16_t)(delay_us / 1000u);
             if (td_fused_gnss(f, app->gnss_pend_ms, (float)delay_us * 1.0e-6f, st->slip_learning) ==
@@ -617,6 +656,10 @@ static void emit_status(td_app_t *app) {
                                 { st->drive_rpm_per_duty[TD_UPPER], st->drive_rpm_per_duty[TD_LOWER] },
                                 st->gnss_delay_ms };
     (void)td_proto_encode_fused_aux(&fa, &f);
+    txq_push(app, &f);
+    const td_gnss_lag_t gl = { st->gnss_lag_ms, st->lag_learned_ms, st->lag_evidence_s,
+                               st->lag_fit,     st->lag_state,      app->p.gnss_lag_auto != 0u };
+    (void)td_proto_encode_gnss_lag(&gl, &f);
     txq_push(app, &f);
 }
 

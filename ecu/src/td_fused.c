@@ -33,11 +33,17 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define CLOSE_SIGMA2 1.0f     /* closed again within 1 GNSS sigma, or on a change of sign */
 #define REOPEN_S 1.0f         /* one sign for this long */
 #define REOPEN_A_MS2 0.3f     /* in motion this steady */
+#define GNSS_AVG_S 1.0f      /* GNSS against its own mean over this long ... */
+#define GNSS_MOVES_MS 0.1f   /* ... beyond this: the speed (or the receiver's filter) still moves */
+#define SETTLE_S 1.0f        /* GNSS still for the delay and this long before the scale learns */
+#define FLAT_A_MS2 0.1f      /* or the wheel's own acceleration below this alone */
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
-#define HIST_Z_MAX_MS 100.0f                  /* a wheel speed beyond this is no number */
+#define SCALE_PERIOD_S 0.25f /* the scale learns per fix as from a 4-5 Hz receiver */
+#define HIST_Z_MAX_MS 65.0f                   /* a wheel speed beyond this is no number (mm/s in 16 bits) */
 #define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
+#define ACCEL_BUCKETS 10u /* the wheel's own acceleration: two means of this many buckets (1 s each) */
 #define BUCKET_CLOSE_S (TD_FUSED_BUCKET_S - 1.0e-4f) /* sums of 10 ms steps fall just short */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
@@ -61,6 +67,8 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->run_s = 0.0f;
     f->run_sum = 0.0f;
     f->run_sign = 0;
+    f->quiet_s = 0.0f;
+    f->gnss_avg_ms = 0.0f;
     f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
@@ -69,7 +77,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->hist_sum = 0.0f;
     f->hist_s = 0.0f;
     for (unsigned i = 0u; i < TD_FUSED_HIST; i++) {
-        f->hist_ms[i] = 0.0f;
+        f->hist_mms[i] = 0u;
     }
     td_fused_tune(f, jerk_ms3, gnss_std_kmh, wheel_noise_pct);
     return TD_OK;
@@ -219,7 +227,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
      * and a long step fills several */
     while (f->hist_s >= BUCKET_CLOSE_S) {
         f->hist_head = (uint8_t)((f->hist_head + 1u) % TD_FUSED_HIST);
-        f->hist_ms[f->hist_head] = f->hist_sum / f->hist_s;
+        f->hist_mms[f->hist_head] = (uint16_t)(f->hist_sum / (f->hist_s * TD_FUSED_HIST_MM_S) + 0.5f);
         if (f->hist_n < TD_FUSED_HIST) {
             f->hist_n++;
         }
@@ -237,21 +245,37 @@ bool td_fused_wheel_at(const td_fused_t *f, float delay_s, float *z_ms) {
     }
     const unsigned i = (unsigned)x;
     const unsigned k = f->hist_head + TD_FUSED_HIST - i;
-    const float w0 = f->hist_ms[k % TD_FUSED_HIST];
+    const float w0 = (float)f->hist_mms[k % TD_FUSED_HIST] * TD_FUSED_HIST_MM_S;
     /* the older neighbour: at the oldest bucket x is whole and it weighs 0 (every entry is a
      * finite speed: init zeroes the ring, record writes only checked speeds) */
-    const float w1 = f->hist_ms[(k - 1u) % TD_FUSED_HIST];
+    const float w1 = (float)f->hist_mms[(k - 1u) % TD_FUSED_HIST] * TD_FUSED_HIST_MM_S;
     *z_ms = w0 + (x - (float)i) * (w1 - w0);
+    return true;
+}
+
+bool td_fused_wheel_accel(const td_fused_t *f, float *a_ms2) {
+    if (f->hist_n < 2u * ACCEL_BUCKETS) {
+        return false;
+    }
+    int32_t diff = 0; /* newest second less the second before, mm/s summed over its buckets */
+    for (unsigned i = 0u; i < ACCEL_BUCKETS; i++) {
+        diff += (int32_t)f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+        diff -= (int32_t)f->hist_mms[(f->hist_head + TD_FUSED_HIST - i - ACCEL_BUCKETS) % TD_FUSED_HIST];
+    }
+    *a_ms2 = (float)diff * TD_FUSED_HIST_MM_S / ((float)ACCEL_BUCKETS * (float)ACCEL_BUCKETS * TD_FUSED_BUCKET_S);
     return true;
 }
 
 /* The scale from the wheel's history against GNSS at the same instant: no motion model between
  * them, so an acceleration cannot take up a scale error. Innovation in wheel m/s. */
-static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g) {
+static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g, float period_s) {
     const float h[3] = { 0.0f, 0.0f, g * z_ms };
     const float sg = f->scale * g;
     const float sd = HIST_REL * w_then;
-    const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss;
+    /* a fix that comes after a longer period stands for that many at 4 Hz (a receiver's fixes
+     * are correlated through its filter), so a 1 Hz receiver teaches the scale as fast */
+    const float n = period_s > SCALE_PERIOD_S ? period_s / SCALE_PERIOD_S : 1.0f;
+    const float r = (sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss) / (n < 4.0f ? n : 4.0f);
     (void)update(f, h, w_then - sg * z_ms, r, true);
 }
 
@@ -265,13 +289,26 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float g = td_fused_shape(f, z_ms, NULL);
     /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
     const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
-    /* steady: the estimate's a (gating on the wheel's own change over the delay instead let
-     * a bouncing wheel re-open on noise: docs/experiments.md) */
-    const bool steady = fabsf(f->a_ms2) < REOPEN_A_MS2;
+    /* steady: the estimate's a and the wheel's own acceleration over its last 2 s both small,
+     * or the wheel's alone very small: a wrong scale or lag can hold the estimate's a away from
+     * 0 while the wheel says the speed does not change (v - a d takes up the difference; the
+     * wheel's change over the delay alone let a bouncing wheel re-open on noise) */
+    float aw = 0.0f;
+    const bool steady = fabsf(f->a_ms2) < REOPEN_A_MS2 || (td_fused_wheel_accel(f, &aw) && fabsf(aw) < FLAT_A_MS2);
     /* a changed wheel scale: innovations of one sign for REOPEN_S whose mean is beyond
      * REOPEN_SIGMA GNSS sigmas */
+    /* and settled: a receiver's velocity filter reaches the new speed only some of its time
+     * constants after a change, so GNSS and the wheel are compared for the scale only once
+     * GNSS has stopped moving (against its own 1 s mean) for the delay and a second more
+     * (twice the delay held the field's loose patches back too long: docs/speed.md). A slip step moves the wheel, not GNSS: it is not held back */
+    /* against the mean before this fix: at 1 Hz the mean is the previous fix */
+    const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
+    const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
+    f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
+    f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
+    const bool settled = steady && f->quiet_s >= d + SETTLE_S;
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
-    if (sign != 0 && sign == f->run_sign && steady) {
+    if (sign != 0 && sign == f->run_sign && settled) {
         f->run_s += f->since_gnss_s;
         f->run_sum += ys * f->since_gnss_s;
     } else {
@@ -291,15 +328,16 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     } else if (f->reopened && ys * ys < CLOSE_SIGMA2 * f->r_gnss) {
         f->reopened = false;
     }
+    const float period_s = f->since_gnss_s;
     f->since_gnss_s = 0.0f;
     /* the jerk over the delay; in steady motion a small share of it */
     const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
-    const bool learning = learn || (f->reopened && steady);
+    const bool learning = settled && (learn || f->reopened);
     if (!update(f, h, y, r, learning && !have_w)) {
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
     }
     if (learning && have_w && z_ms > SCALE_MIN_MS) {
-        learn_scale(f, z_ms, w_then, g);
+        learn_scale(f, z_ms, w_then, g, period_s);
     }
     return TD_FUSED_ACCEPTED;
 }

@@ -60,6 +60,7 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
     P(drive_adapt, U8, 1.0f, 0u, 1u),
     P(meter_tau_ms, U16, 1.0f, 0u, 2000u),
     P(lead_stop_ms, U16, 1.0f, 0u, 5000u),
+    P(gnss_lag_auto, U8, 1.0f, 0u, 1u),
 };
 
 /* Float rounding of a value that went through raw * scale stays well inside this many raw units. */
@@ -70,7 +71,7 @@ static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
 static bool id_taken(uint32_t id) {
     return id == TD_ID_ECU_DIAG || id == TD_ID_ECU_SPEEDS || id == TD_ID_ECU_TARGETS || id == TD_ID_PC_PARAM_SET ||
            id == TD_ID_ECU_PARAM_ACK || id == TD_ID_PC_GNSS_TIME || id == TD_ID_ECU_FUSED ||
-           id == TD_ID_ECU_FUSED_AUX || id == TD_ID_PC_CAL_COMMAND || id == TD_ID_ECU_CAL_STATUS;
+           id == TD_ID_ECU_FUSED_AUX || id == TD_ID_ECU_GNSS_LAG || id == TD_ID_PC_CAL_COMMAND || id == TD_ID_ECU_CAL_STATUS;
 }
 
 void td_params_default(td_params_t *p) {
@@ -119,6 +120,7 @@ void td_params_default(td_params_t *p) {
     p->drive_adapt = 1u;
     p->meter_tau_ms = 200u;
     p->lead_stop_ms = 0u;
+    p->gnss_lag_auto = 1u;
     p->fan_rpm_at_full_duty = 4000.0f;
     p->fan_spinup_ms = 3000u;
     p->status_id = 0x185C6465u;

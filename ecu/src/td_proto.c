@@ -301,3 +301,19 @@ int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f) {
     (void)td_can_ecu_fused_aux_pack(f->data, &m, sizeof f->data);
     return TD_OK;
 }
+
+int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f) {
+    if (g == NULL || f == NULL) {
+        return TD_E_ARG;
+    }
+    struct td_can_ecu_gnss_lag_t m;
+    m.lag_in_use = g->in_use_ms;
+    m.lag_learned = g->learned_ms;
+    m.lag_evidence = (uint8_t)to_raw(g->evidence_s, 0.1f, 0xFFu);
+    m.lag_fit = (uint8_t)to_raw(g->fit, 0.01f, 100u);
+    m.lag_state = (uint8_t)(g->state & 0x03u);
+    m.lag_auto = g->automatic ? 1u : 0u;
+    frame_head(f, TD_ID_ECU_GNSS_LAG);
+    (void)td_can_ecu_gnss_lag_pack(f->data, &m, sizeof f->data);
+    return TD_OK;
+}

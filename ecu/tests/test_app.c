@@ -415,11 +415,12 @@ static void test_parameter_frames_and_acks(void **state) {
     assert_float_equal(r.app.p.working_width_m, 4.0, 1e-5);
     assert_int_equal(param_set(&r, 1, 400u, 8, 2, 4000u), TD_E_RANGE); /* 0.4 m: out of range */
     assert_int_equal(param_set(&r, 1, 30001u, 8, 2, 4000u), TD_E_RANGE);
-    assert_int_equal(param_set(&r, 39, 1u, 8, 1, 0u), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(param_set(&r, 40, 1u, 8, 1, 0u), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(param_set(&r, 39, 2u, 8, 2, 1u), TD_E_RANGE); /* GnssLagAuto: 0 or 1 */
     assert_int_equal(param_set(&r, 7, 6u, 8, 4, 5u), TD_E_INCONSISTENT); /* n = 6 > N = 5 */
     assert_int_equal(param_set(&r, 1, 4000u, 5, 5, 0u), TD_E_LENGTH);
     assert_int_equal(param_set(&r, 9, 900u, 8, 0, 900u), TD_OK); /* switch speed 9.00 km/h */
-    assert_int_equal(r.app.cnt.rx_param_rejected, 4u);
+    assert_int_equal(r.app.cnt.rx_param_rejected, 5u);
     assert_int_equal(r.app.cnt.rx_bad_length, 1u);
     assert_int_equal(r.app.cnt.rx_ok, 2u);
     /* N = 3 (after n = 3): queue G is rebuilt with the new length */
@@ -446,16 +447,16 @@ static void test_tx_queue_overflow_counted(void **state) {
     rig_t r;
     rig_init(&r, NULL, 0u);
     r.pc_sending = false;
-    for (int k = 0; k <= 50; k++) { /* status at 100..500 ms: 5 x 6 frames into 16 places */
+    for (int k = 0; k <= 50; k++) { /* status at 100..500 ms: 5 x 7 frames into 16 places */
         rig_step(&r);
     }
-    assert_int_equal(r.app.cnt.tx_dropped, 14u);
-    const uint32_t order[6] = { TD_ID_ECU_STATUS,  TD_ID_ECU_DIAG,  TD_ID_ECU_SPEEDS,
-                                TD_ID_ECU_TARGETS, TD_ID_ECU_FUSED, TD_ID_ECU_FUSED_AUX };
+    assert_int_equal(r.app.cnt.tx_dropped, 19u);
+    const uint32_t order[7] = { TD_ID_ECU_STATUS, TD_ID_ECU_DIAG,      TD_ID_ECU_SPEEDS,  TD_ID_ECU_TARGETS,
+                                TD_ID_ECU_FUSED,  TD_ID_ECU_FUSED_AUX, TD_ID_ECU_GNSS_LAG };
     td_can_frame_t f;
     for (int i = 0; i < 16; i++) {
         assert_int_equal(td_app_tx_pop(&r.app, &f), 1);
-        assert_int_equal(f.id, order[i % 6]);
+        assert_int_equal(f.id, order[i % 7]);
     }
     assert_int_equal(td_app_tx_pop(&r.app, &f), 0);
     /* a parameter ack into a full queue is dropped and counted too */

@@ -96,14 +96,17 @@ static void test_fused_gnss_lost_uses_the_wheel_with_its_scale(void **state) {
     const td_params_t p = fused_params();
     rig_t r;
     start_fused(&r, &p);
-    const float slip = rig_st(&r)->slip_pct;
     r.pc_gnss_kmh = -1.0;
-    rig_run_ms(&r, 10000);
+    rig_run_ms(&r, 1000); /* the last fix sent before the loss has been applied */
+    const float slip = rig_st(&r)->slip_pct;
+    const float scale = r.app.fused.scale;
+    rig_run_ms(&r, 9000);
     const td_state_t *st = rig_st(&r);
     assert_int_equal(st->source, TD_SRC_WHEEL);
     assert_true((st->faults & TD_FAULT_GNSS_LOST) != 0u);
     assert_false(st->slip_learning);
-    assert_float_equal(st->slip_pct, slip, 1e-4);
+    assert_float_equal(r.app.fused.scale, scale, 0.0); /* kept as it was */
+    assert_float_equal(st->slip_pct, slip, 1e-2);      /* (the slip moves with eq. 5's shape in v) */
     assert_float_equal(st->v_kmh, 8.0, 0.15);
     assert_true(st->target_rpm[TD_UPPER] > 0.0f);
     r.pc_gnss_kmh = 8.0;
@@ -322,8 +325,61 @@ static void test_slip_compensation_in_wheel_mode(void **state) {
     }
 }
 
+/* A receiver 0.6 s late, launched from rest to 8 km/h and back to 4 km/h: a fixed GnssLag of
+ * 2.5 s (GnssLagAuto 0) is overruled by the learned lag, counted and reported in EcuGnssLag;
+ * with GnssLagAuto 1 the same 2.5 s is only where the learning starts. */
+static void test_gnss_lag_learned_and_a_wrong_fixed_lag_overruled(void **state) {
+    (void)state;
+    for (int automatic = 0; automatic < 2; automatic++) {
+        td_params_t p = fused_params();
+        p.gnss_lag_ms = 2500u;
+        p.gnss_lag_auto = (uint8_t)automatic;
+        rig_t r;
+        rig_start(&r, &p, 5000u, 0.0, 0.0);
+        r.edge_timing = true;
+        rig_run_ms(&r, 4000);
+        assert_int_equal(rig_st(&r)->lag_state, automatic ? TD_LAG_START : TD_LAG_FIXED);
+        assert_int_equal(rig_st(&r)->gnss_lag_ms, 2500u);
+        assert_int_equal(rig_st(&r)->lag_learned_ms, 0xFFFFu);
+        for (int k = 1; k <= 1500; k++) { /* 0.55 m/s^2 for 4 s, hold, -0.5 m/s^2 at 9 s */
+            const double t = k * 0.01;
+            const double tg = t - 0.6;
+            const double v = t < 4.0 ? 2.0 * t : (t < 9.0 ? 8.0 : (t < 11.0 ? 8.0 - 2.0 * (t - 9.0) : 4.0));
+            const double vg = tg < 0.0 ? 0.0 : (tg < 4.0 ? 2.0 * tg : (tg < 9.0 ? 8.0 : (tg < 11.0 ? 8.0 - 2.0 * (tg - 9.0) : 4.0)));
+            r.pc_gnss_kmh = vg;
+            r.wheel_kmh = v * 0.93;
+            rig_step(&r);
+            (void)rig_drain(&r, 0u);
+        }
+        const td_state_t *st = rig_st(&r);
+        assert_true(st->lag_learned_ms != 0xFFFFu);
+        /* each command carries the receiver's speed of that instant, 0.6 s late (measured 617) */
+        assert_float_equal(st->lag_learned_ms, 600.0, 100.0);
+        assert_int_equal(st->lag_state, automatic ? TD_LAG_LEARNED : TD_LAG_OVERRULED);
+        assert_int_equal(st->gnss_lag_ms, st->lag_learned_ms);
+        assert_int_equal(st->lag_overruled, automatic ? 0u : 1u);
+        assert_float_equal(st->v_kmh, 4.0, 0.3);
+        td_can_frame_t f;
+        bool seen = false;
+        for (int k = 0; k < 10; k++) {
+            rig_step(&r);
+            while (td_app_tx_pop(&r.app, &f)) {
+                if (f.id == TD_ID_ECU_GNSS_LAG) {
+                    seen = true;
+                    assert_int_equal(f.data[0] | (f.data[1] << 8), st->gnss_lag_ms);
+                    assert_int_equal(f.data[2] | (f.data[3] << 8), st->lag_learned_ms);
+                    assert_int_equal(f.data[6] & 0x03, automatic ? TD_LAG_LEARNED : TD_LAG_OVERRULED);
+                    assert_int_equal((f.data[6] >> 2) & 0x01, automatic);
+                }
+            }
+        }
+        assert_true(seen);
+    }
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_gnss_lag_learned_and_a_wrong_fixed_lag_overruled),
         cmocka_unit_test(test_fused_meters_on_the_estimate_with_learned_slip),
         cmocka_unit_test(test_fused_on_a_counts_only_port),
         cmocka_unit_test(test_fused_gnss_lost_uses_the_wheel_with_its_scale),

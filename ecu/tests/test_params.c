@@ -63,9 +63,11 @@ static void test_range_boundaries(void **state) {
     assert_int_equal(td_params_set(&p, 0, 1.0f), TD_E_UNKNOWN_PARAM);
     assert_int_equal(td_params_set(&p, 38, 5000.0f), TD_OK); /* LeadStop */
     assert_int_equal(td_params_set(&p, 38, 5001.0f), TD_E_RANGE);
-    assert_int_equal(td_params_set(&p, 39, 1.0f), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(td_params_set(&p, 39, 0.0f), TD_OK); /* GnssLagAuto */
+    assert_int_equal(td_params_set(&p, 39, 2.0f), TD_E_RANGE);
+    assert_int_equal(td_params_set(&p, 40, 1.0f), TD_E_UNKNOWN_PARAM);
     float v;
-    assert_int_equal(td_params_get(&p, 39, &v), TD_E_UNKNOWN_PARAM);
+    assert_int_equal(td_params_get(&p, 40, &v), TD_E_UNKNOWN_PARAM);
     assert_int_equal(td_params_set(&p, 28, 2.0f), TD_OK); /* slip compensation by eq. 5 */
     assert_int_equal(td_params_set(&p, 28, 3.0f), TD_E_RANGE);
     assert_int_equal(td_params_set(&p, 32, 0.0f), TD_E_RANGE); /* the filter needs process noise */
@@ -125,7 +127,7 @@ static const struct {
     GEN(fan_pulses_per_rev), GEN(enc_fault_gnss_speed), GEN(enc_fault_time), GEN(blocked_time),
     GEN(status_period), GEN(slip_comp), GEN(gnss_lag), GEN(lead_meter), GEN(lead_air_line),
     GEN(fused_jerk), GEN(fused_gnss_std), GEN(fused_wheel_noise), GEN(wheel_stop_time),
-    GEN(drive_adapt), GEN(meter_tau), GEN(lead_stop),
+    GEN(drive_adapt), GEN(meter_tau), GEN(lead_stop), GEN(gnss_lag_auto),
 };
 
 /* The range table of td_params.c is the DBC's: same scale and raw limits as the generated codec. */

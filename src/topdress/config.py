@@ -58,8 +58,9 @@ class MachineConfig:
 
 @dataclass(frozen=True)
 class SpeedConfig:
-    # paper = the dual speed mode of the paper; wheel / gnss = one source only.
-    mode: str = _choice(str(SpeedMode.PAPER), *map(str, SpeedMode))
+    # fused = the fused estimate (the default: it learns the GNSS lag itself); paper = the
+    # dual speed mode of the paper; wheel / gnss = one source only.
+    mode: str = _choice(str(SpeedMode.FUSED), *map(str, SpeedMode))
     queue_len: int = _param("speed.queue_len", 5)
     cv_window: int = _param("speed.cv_window", 5)
     cv_threshold_pct: float = _param("speed.cv_threshold_pct", 4.2)
@@ -76,6 +77,10 @@ ECU_KEYS: dict[str, ParamSpec] = {p.name: p for p in params() if p.section == "e
 ECU_TIMING = ("cmd_timeout_ms", "gnss_timeout_ms", "status_period_ms")
 SPEED_MODE_IDS = {str(m): m.code for m in SpeedMode}  # td_speed_mode_t
 SWITCH_COMPARE_IDS = {str(c): c.code for c in Compare}  # td_compare_t
+# [ecu] gnss_lag_ms = "auto" (the default): the ECU learns the GNSS lag (GnssLagAuto 1); a
+# number fixes it (GnssLagAuto 0, unless gnss_lag_auto is set too; the ECU still overrules a
+# lag its data contradict).
+GNSS_LAG_AUTO = "auto"
 
 
 @dataclass(frozen=True)
@@ -291,25 +296,32 @@ class TerminalConfig:
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
     lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
 
-    def ecu_params(self) -> dict[int, float]:
+    def ecu_params(self, lag_start_ms: int | None = None) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start, by the table
         of topdress.protocol.params.
 
         Machine and speed parameters are always pushed (the terminal's file is the truth
-        for them); the look-ahead's once set; of [ecu], only the keys the user set.
+        for them); the look-ahead's once set; of [ecu], only the keys the user set. The GNSS
+        lag: a number fixes it; "auto" (the default) lets the ECU learn it, starting from
+        `lag_start_ms` (the lag learned with this receiver before) when given.
         """
         out: dict[int, float] = {}
         for spec in params():
-            value = self._param_value(spec)
+            value = self._param_value(spec, lag_start_ms)
             if value is not None:
                 out[spec.id] = value
         return out
 
-    def _param_value(self, spec: ParamSpec) -> float | None:
+    def _param_value(self, spec: ParamSpec, lag_start_ms: int | None) -> float | None:
         """The value of one ECU parameter to push, None when the ECU keeps its own."""
         section, key = spec.section, spec.name
         if section == "ecu":
-            return self.ecu.overrides.get(key)
+            overrides = self.ecu.overrides
+            if key == "gnss_lag_auto" and key not in overrides:
+                return 0 if "gnss_lag_ms" in overrides else 1
+            if key == "gnss_lag_ms" and key not in overrides and lag_start_ms is not None:
+                return float(min(max(round(lag_start_ms), 0), 3000))
+            return overrides.get(key)
         if section == "lookahead":
             la = self.lookahead
             # LeadMeter and LeadAirLine go together once either is set; LeadStop when set
@@ -538,6 +550,8 @@ def _ecu(table: dict[str, Any]) -> EcuConfig:
     _reject_unknown(table, ECU_KEYS, "ecu.")
     overrides: dict[str, float] = {}
     for name, raw in table.items():
+        if name == "gnss_lag_ms" and raw == GNSS_LAG_AUTO:
+            continue  # the default: the ECU learns the lag
         spec = ECU_KEYS[name]
         overrides[name] = _number(raw, f"ecu.{name}", spec.minimum, spec.maximum, spec.integer)
     return EcuConfig(overrides=overrides)
@@ -669,7 +683,7 @@ outlet_along_m = 0.0       # meters' outlet from the GNSS antenna: forward (behi
 outlet_across_m = 0.0      # and to the right (left < 0), m
 
 [speed]
-mode = "paper"             # paper (dual: GNSS + ground wheel) | wheel | gnss | fused
+mode = "fused"             # fused (estimate from both) | paper (dual rule) | wheel | gnss
 queue_len = 5              # N, wheel-speed queue length
 cv_window = 5              # n, last speeds of the queue used for the CV
 cv_threshold_pct = 4.2     # CV below this = uniform motion
@@ -683,8 +697,9 @@ min_work_speed_kmh = 0.5   # below this the meters stop
 # gnss_timeout_ms wheel_update_ms wheel_samples meter_counts_per_rev fan_min_rpm fan_ppr
 # enc_fault_gnss_kmh enc_fault_time_ms blocked_time_ms status_period_ms slip_comp gnss_lag_ms
 # fused_jerk_ms3 fused_gnss_std_kmh fused_wheel_noise_pct wheel_stop_ms drive_adapt
-# meter_tau_ms
+# meter_tau_ms gnss_lag_auto
 # pid_kp = 0.02
+gnss_lag_ms = "auto"       # GNSS lag: auto = learned on the machine (kept per receiver), or ms
 
 [gnss]
 source = "serial"          # serial | file | stdin

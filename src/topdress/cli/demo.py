@@ -227,7 +227,7 @@ def _report(out: TextIO, path: Path | None, errors: int) -> None:
         + "\n"
         + f"  summary:  topdress log summary {path}\n"
         + f"  export:   topdress log export {path} --events events.ndjson --csv state.csv\n"
-        + "  replay:   topdress replay events.ndjson --speed-mode paper --out replay.csv\n"
+        + "  replay:   topdress replay events.ndjson --speed-mode fused --out replay.csv\n"
     )
     out.flush()
 

@@ -85,9 +85,9 @@ def register(sub: Any) -> None:
     replay.add_argument(
         "--speed-mode",
         choices=("paper", "gnss", "wheel", "fused"),
-        default="paper",
-        help="paper = the dual speed mode; gnss / wheel = one source only; fused = the fused "
-        "estimate (default: paper)",
+        default="fused",
+        help="fused = the fused estimate (default); paper = the dual speed mode; gnss / wheel = "
+        "one source only",
     )
     replay.add_argument("--config", type=Path, metavar="FILE", help="terminal configuration")
     replay.add_argument("--out", type=Path, required=True, metavar="OUT.csv")

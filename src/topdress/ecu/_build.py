@@ -87,6 +87,7 @@ typedef struct {
     uint8_t drive_adapt;
     uint16_t meter_tau_ms;
     uint16_t lead_stop_ms;
+    uint8_t gnss_lag_auto;
     float fan_rpm_at_full_duty;
     uint16_t fan_spinup_ms;
     uint32_t status_id;
@@ -194,6 +195,7 @@ td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float c
 #define TD_ID_PC_GNSS_TIME ...
 #define TD_ID_ECU_FUSED ...
 #define TD_ID_ECU_FUSED_AUX ...
+#define TD_ID_ECU_GNSS_LAG ...
 #define TD_RUN_STOPPED ...
 #define TD_RUN_RUNNING ...
 typedef struct {
@@ -252,6 +254,12 @@ typedef struct {
     float v_lead_kmh;
     float drive_rpm_per_duty[2];
     uint16_t gnss_delay_ms;
+    uint16_t gnss_lag_ms;
+    uint16_t lag_learned_ms;
+    uint8_t lag_state;
+    uint8_t lag_overruled;
+    float lag_evidence_s;
+    float lag_fit;
     bool slip_learning;
     bool edge_timing;
     bool gnss_fused;

@@ -61,6 +61,15 @@ class EcuState:
     v_lead_kmh: float
     drive_rpm_per_duty: tuple[float, float]
     gnss_delay_ms: int
+    # the GNSS lag in use (ms), the one learned (None until learned), where it comes from
+    # (0 start value, 1 learned, 2 fixed, 3 a fixed lag overruled by the data), how often a
+    # fixed lag was overruled, and the evidence (s of speed change) and misfit behind it
+    gnss_lag_ms: int
+    lag_learned_ms: int | None
+    lag_state: int
+    lag_overruled: int
+    lag_evidence_s: float
+    lag_fit: float
     slip_learning: bool
     edge_timing: bool
     gnss_fused: bool
@@ -216,6 +225,12 @@ class Ecu:
             v_lead_kmh=float(s.v_lead_kmh),
             drive_rpm_per_duty=_pair(s.drive_rpm_per_duty),
             gnss_delay_ms=int(s.gnss_delay_ms),
+            gnss_lag_ms=int(s.gnss_lag_ms),
+            lag_learned_ms=None if s.lag_learned_ms == 0xFFFF else int(s.lag_learned_ms),
+            lag_state=int(s.lag_state),
+            lag_overruled=int(s.lag_overruled),
+            lag_evidence_s=float(s.lag_evidence_s),
+            lag_fit=float(s.lag_fit),
             slip_learning=bool(s.slip_learning),
             edge_timing=bool(s.edge_timing),
             gnss_fused=bool(s.gnss_fused),

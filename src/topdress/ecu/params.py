@@ -75,6 +75,7 @@ class EcuParams:
     drive_adapt: int
     meter_tau_ms: int
     lead_stop_ms: int
+    gnss_lag_auto: int
     fan_rpm_at_full_duty: float
     fan_spinup_ms: int
     status_id: int

@@ -16,6 +16,9 @@ event due by then is applied (the ECU sees its effect from the next step):
 - `can` terminal->ECU PcCommand: its start flag, fan speed and rates are kept for the next
   commands (its GNSS speed is not: that comes from the NMEA). Other frames are ignored.
 - `crop`: ignored (the speeds do not depend on it).
+- `can` ECU->terminal EcuGnssLag: the last lag the ECU reported as learned is pushed as the
+  start of this run's learning (`[ecu] gnss_lag_ms = "auto"`), as the terminal does with the
+  lag it keeps per receiver; a configured number still fixes it.
 Output: one row at every ECU speed update (wheel_updates increments).
 A pause longer than MAX_IDLE_S between two events (two sessions in one file, a bogus time) is
 cut to MAX_IDLE_S: every ECU timeout has run out by then, and stepping through hours (or 1e300 s)
@@ -67,6 +70,8 @@ class ReplayStats:
     bad_commands: int = 0  # recorded PcCommand frames that did not decode
     ecu_rx_refused: int = 0
     gaps_cut: int = 0  # pauses between events longer than MAX_IDLE_S, cut to it
+    lag_start_ms: int | None = None  # the learned lag found in the recorded frames (None: none)
+    lag_learned_ms: int | None = None  # the GNSS lag the ECU learned by the end (None: not)
 
 
 @dataclass
@@ -97,9 +102,10 @@ class _WheelInput:
         return c0 + (c1 - c0) * (t_us - t0) // (t1 - t0)
 
 
-def ecu_params(cfg: TerminalConfig, speed_mode: str) -> EcuParams:
-    """The parameters the terminal would push at start, with the replay's speed mode."""
-    pushed = cfg.ecu_params()
+def ecu_params(cfg: TerminalConfig, speed_mode: str, lag_start_ms: int | None = None) -> EcuParams:
+    """The parameters the terminal would push at start, with the replay's speed mode (and
+    the GNSS lag to start learning from, as the terminal keeps it per receiver)."""
+    pushed = cfg.ecu_params(lag_start_ms)
     pushed[protocol.param("speed_mode").id] = SPEED_MODE_IDS[speed_mode]
     base = EcuParams.defaults()
     kg = list(base.kg_per_rev)
@@ -120,11 +126,26 @@ def ecu_params(cfg: TerminalConfig, speed_mode: str) -> EcuParams:
 
 
 def needed(event: Event) -> bool:
-    """The events replay acts on (NMEA, wheel counts, frames to the ECU); crop lines and the
-    ECU's own frames are ignored, so a reader need not keep them (a 12 h day: 70 % of them)."""
-    return not isinstance(event, CropEvent) and not (
-        isinstance(event, CanEvent) and event.dir == "rx"
-    )
+    """The events replay acts on (NMEA, wheel counts, frames to the ECU, and the ECU's learned
+    GNSS lag); crop lines and the ECU's other frames are ignored, so a reader need not keep
+    them (a 12 h day: 70 % of them)."""
+    if isinstance(event, CanEvent) and event.dir == "rx":
+        return event.can_id == protocol.DEFAULT_IDS.gnss_lag
+    return not isinstance(event, CropEvent)
+
+
+def learned_lag_ms(events: Sequence[Event], ids: protocol.FrameIds) -> int | None:
+    """The last GNSS lag the ECU reported as learned in recorded EcuGnssLag frames, or None."""
+    learned: int | None = None
+    for e in events:
+        if isinstance(e, CanEvent) and e.dir != "tx" and e.can_id == ids.gnss_lag:
+            try:
+                frame = protocol.decode((e.can_id, e.data), ids)
+            except ProtocolError:
+                continue
+            if isinstance(frame, protocol.EcuGnssLag) and frame.learned_ms is not None:
+                learned = frame.learned_ms
+    return learned
 
 
 def _us(t: float, t0: float) -> int:
@@ -134,7 +155,7 @@ def _us(t: float, t0: float) -> int:
 def replay(
     events: Sequence[Event],
     cfg: TerminalConfig,
-    speed_mode: str = "paper",
+    speed_mode: str = "fused",
     stats: ReplayStats | None = None,
 ) -> list[ReplayRow]:
     """Run `events` through a fresh ECU core; rows at each speed update. Events are taken in
@@ -157,8 +178,13 @@ class _Replayer:
         self.t0 = events[0].t
         self._cut_gaps()
         self.ids = protocol.FrameIds(**cfg.can.ids)
+        # The lag learned in the recorded session is where this run's learning starts (the
+        # terminal would have pushed it for the next session with the same receiver).
+        self.lag_start_ms = learned_lag_ms(events, self.ids)
+        stats.lag_start_ms = self.lag_start_ms
         # Initialised one period before its first step, as a port's ECU is.
-        self.ecu = Ecu(ecu_params(cfg, speed_mode), now_us=-STEP_US & 0xFFFFFFFF)
+        params = ecu_params(cfg, speed_mode, self.lag_start_ms)
+        self.ecu = Ecu(params, now_us=-STEP_US & 0xFFFFFFFF)
         self.wheel = _WheelInput()
         for e, t in zip(events, self.times, strict=True):
             if isinstance(e, WheelEvent):
@@ -224,6 +250,7 @@ class _Replayer:
             if due or (new_fix and self.cfg.can.send_on_gnss):
                 self._send_command(now_us)
             now_us += STEP_US
+        self.stats.lag_learned_ms = self.ecu.state.lag_learned_ms
         return rows
 
     def _take(self, e: Event) -> bool:

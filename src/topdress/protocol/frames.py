@@ -189,6 +189,24 @@ class EcuFusedAux:
     gnss_delay_ms: int
 
 
+LAG_NONE_RAW = 0xFFFF  # EcuGnssLag.LagLearned: not learned yet
+
+
+@dataclass(frozen=True)
+class EcuGnssLag:
+    """The GNSS lag the ECU adds to every fix's age (ms), the one it learned from the wheel
+    (ms, None until learned), the seconds of speed change and the misfit (0..1) behind it, where
+    the lag in use comes from (0 start value, 1 learned, 2 fixed, 3 a fixed lag overruled by
+    the data) and whether GnssLagAuto is on."""
+
+    in_use_ms: int
+    learned_ms: int | None
+    evidence_s: float
+    fit: float
+    state: int
+    automatic: bool
+
+
 Frame = (
     PcCommand
     | EcuStatus
@@ -202,6 +220,7 @@ Frame = (
     | PcGnssTime
     | EcuFused
     | EcuFusedAux
+    | EcuGnssLag
 )
 
 
@@ -430,6 +449,21 @@ def _decode_fused_aux(data: bytes) -> EcuFusedAux:
     return EcuFusedAux(v[0], v[1], v[2], v[3], raw[4])
 
 
+def _decode_gnss_lag(data: bytes) -> EcuGnssLag:
+    raw, v = _plain(
+        "EcuGnssLag", "LagInUse", "LagLearned", "LagEvidence", "LagFit", "LagState", "LagAuto"
+    ).decode(data)
+    learned = raw[1]
+    return EcuGnssLag(
+        in_use_ms=raw[0],
+        learned_ms=None if learned == LAG_NONE_RAW else learned,
+        evidence_s=v[2],
+        fit=raw[3] / 100,
+        state=raw[4],
+        automatic=bool(raw[5]),
+    )
+
+
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
     """True for the identifier of a frame of the protocol (to tell malformed from foreign)."""
     return frame_id in (
@@ -445,6 +479,7 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
         ids.gnss_time,
         ids.fused,
         ids.fused_aux,
+        ids.gnss_lag,
     )
 
 
@@ -475,6 +510,7 @@ def _decoders(ids: FrameIds) -> dict[int, Callable[[bytes], Frame]]:
         ids.gnss_time: _decode_gnss_time,
         ids.fused: _decode_fused,
         ids.fused_aux: _decode_fused_aux,
+        ids.gnss_lag: _decode_gnss_lag,
     }
 
 

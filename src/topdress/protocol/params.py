@@ -61,6 +61,7 @@ _TABLE: dict[str, tuple[str, int | None, str, float]] = {
     "DriveAdapt": ("drive_adapt", None, "ecu.drive_adapt", 1),
     "MeterTau": ("meter_tau_ms", None, "ecu.meter_tau_ms", 200),
     "LeadStop": ("lead_stop_ms", None, "lookahead.stop_ms", 0),
+    "GnssLagAuto": ("gnss_lag_auto", None, "ecu.gnss_lag_auto", 1),
 }
 
 # A multiplexed signal of PcParamSet: ` SG_ Name m12 : 32|32@1+ (0.01,0) [0|25] "km/h" ECU`.
@@ -133,7 +134,7 @@ class ParamSpec:
 
 @cache
 def params() -> tuple[ParamSpec, ...]:
-    """Every parameter, by id (1..38)."""
+    """Every parameter, by id (1..39)."""
     specs = []
     for line in _param_set_lines():
         m = _SIGNAL.match(line)

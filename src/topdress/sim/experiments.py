@@ -72,13 +72,13 @@ FASTER: tuple[tuple[str, float], ...] = (
 # of the simulated drive (66 r/min per unit duty instead of the default 60), so a step of the
 # target no longer over-steps the duty by 10 %. Table 5 reports it beside the defaults.
 MATCHED_FF: tuple[tuple[str, float], ...] = (("PidKff", 0.01515),)
-# The fused mode's ECU parameters, tuned on the simulator (docs/experiments.md): GnssLag =
-# the receiver's latency 0.3 s + its velocity filter 1.0 s; LeadMeter + LeadAirLine = the time
+# The fused mode's ECU parameters, tuned on the simulator (docs/experiments.md): no GnssLag
+# (the ECU learns it: the simulated receiver's latency 0.3 s + velocity filter 1.0 s was the
+# setting before it did); LeadMeter + LeadAirLine = the time
 # from a target change to product on the ground (drive reference model 0.2 s, release and air
 # line ~0.2 s, and the PID's share); LeadStop = the look-ahead while the speed falls, longer as
 # the meters' run-down and the estimate's lag at the braking land the last product later.
 FUSED: tuple[tuple[str, float], ...] = (
-    ("GnssLag", 1300.0),
     ("LeadMeter", 200.0),
     ("LeadAirLine", 400.0),
     ("LeadStop", 800.0),
