@@ -126,6 +126,7 @@ class FrameIds:
     gnss_time: int = 0x0A626465
     fused: int = 0x18636465
     fused_aux: int = 0x18666465
+    ident: int = 0x18676465
 
 
 DEFAULT_IDS = FrameIds()
