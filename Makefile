@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps browser screenshots clean
+.PHONY: demo test ctest pytest lint bench sysdeps browser screenshots clean firmware
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -24,6 +24,12 @@ sysdeps:
 
 browser:
 	bash scripts/sysdeps.sh browser
+
+# The ECU firmware for the STM32F405/407 (docs/firmware.md): build/fw/topdress-ecu-stm32f4.elf,
+# .bin, .hex, with its flash, RAM and worst stack figures.
+firmware:
+	bash scripts/sysdeps.sh firmware
+	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk
 
 ctest: sysdeps
 	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null
