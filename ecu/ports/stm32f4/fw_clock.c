@@ -71,6 +71,21 @@ void fw_clock_init(fw_clock_t *c) {
     c->tim_apb2_hz = BOARD_CORE_HZ; /* an APB prescaler > 1 doubles the timers' clock (6.2) */
 }
 
+/* SysTick's value and TIM2's count at one moment: SysTick read before and after TIM2, retried
+ * until the two lie within `close` core cycles (10 us; a few instructions on the chip). */
+static void read_pair(uint32_t close, uint32_t *systick_val, uint32_t *tim2_cnt) {
+    for (;;) {
+        const uint32_t a = SYSTICK->VAL;
+        const uint32_t t = TIM2->CNT;
+        const uint32_t b = SYSTICK->VAL;
+        if (b <= a && a - b <= close) { /* SysTick counts down */
+            *systick_val = a - (a - b) / 2u;
+            *tim2_cnt = t;
+            return;
+        }
+    }
+}
+
 void fw_time_init(fw_clock_t *c) {
     RCC->APB1ENR |= RCC_APB1ENR_TIM2;
     (void)RCC->APB1ENR;
@@ -79,22 +94,24 @@ void fw_time_init(fw_clock_t *c) {
     TIM2->ARR = 0xFFFFFFFFu;
     TIM2->EGR = TIM_EGR_UG;
     TIM2->CR1 = TIM_CR1_CEN;
-    /* TIM2 ticks over 10 ms of core clock, both counters read together: SysTick's current
-     * value rather than its wrap flag, which an emulator may raise late */
+    /* TIM2 ticks over 10 ms of core clock. SysTick's current value, not its wrap flag (which
+     * an emulator may raise late), read together with TIM2 (read_pair): an emulator descheduled
+     * between the two counters would skew the ratio. */
     SYSTICK->CTRL = 0u;
     SYSTICK->LOAD = 0x00FFFFFFu;
     SYSTICK->VAL = 0u;
     SYSTICK->CTRL = SYSTICK_CTRL_CLKSOURCE | SYSTICK_CTRL_ENABLE;
     while (SYSTICK->VAL == 0u) { /* the reload to 0xFFFFFF */
     }
-    const uint32_t v0 = SYSTICK->VAL;
-    const uint32_t t0 = TIM2->CNT;
     const uint32_t window = c->core_hz / 100u; /* 10 ms, < 2^24 cycles up to 1.6 GHz */
+    uint32_t v0;
+    uint32_t t0;
     uint32_t v1;
     uint32_t t1;
+    const uint32_t close = c->core_hz / 100000u;
+    read_pair(close, &v0, &t0);
     do {
-        v1 = SYSTICK->VAL;
-        t1 = TIM2->CNT;
+        read_pair(close, &v1, &t1);
     } while (v1 <= v0 && v0 - v1 < window);
     SYSTICK->CTRL = 0u;
     const uint32_t cycles = v1 <= v0 ? v0 - v1 : window;

@@ -29,6 +29,7 @@ from typing import Any
 
 import can
 import cantools
+from can.interfaces.slcan import slcanBus as SlcanBus
 
 from topdress import protocol
 from topdress.errors import DeviceError, EcuParamError
@@ -120,15 +121,14 @@ class QemuEcu:
             self._stop()
             raise
 
-    def _connect(self) -> can.BusABC:
+    def _connect(self) -> SlcanBus:
         deadline = time.monotonic() + self.opts.connect_timeout_s
         while True:
             if self._proc.poll() is not None:
                 err = self._proc.stderr.read().decode(errors="replace") if self._proc.stderr else ""
                 raise DeviceError(f"qemu-system-arm exited: {err.strip()}")
             try:
-                bus = can.Bus(
-                    interface="slcan",
+                bus = SlcanBus(
                     channel=f"socket://127.0.0.1:{self.port}",
                     sleep_after_open=0.0,
                     timeout=0.001,
@@ -144,7 +144,7 @@ class QemuEcu:
             if time.monotonic() > deadline:
                 bus.shutdown()
                 raise DeviceError("the emulated ECU does not answer on its SLCAN link")
-        bus.open()  # type: ignore[attr-defined]
+        bus.open()
         return bus
 
     def _stop(self) -> None:
@@ -336,7 +336,7 @@ class QemuWorld(World):
         if last is not None:
             self.timing.intervals_us.append((st.time_us - last.time_us) & _U32)
             self.timing.costs_us.append(st.cost_us)
-        self.timing.late_inputs = st.late_inputs
+            self.timing.late_inputs += (st.late_inputs - last.late_inputs) & 0xFF  # mod 256
         self.last_step = st
         self.duties = st.duties
         self._ws.duty = list(st.duties)
