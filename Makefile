@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps browser screenshots clean
+.PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -25,6 +25,16 @@ sysdeps:
 browser:
 	bash scripts/sysdeps.sh browser
 
+# the emulated firmware's tests (tests/test_ecu_qemu.py): qemu-system-arm and the firmware's compiler
+qemu:
+	bash scripts/sysdeps.sh qemu
+
+# The ECU firmware for the STM32F405/407 (docs/firmware.md): build/fw/topdress-ecu-stm32f4.elf,
+# .bin, .hex, with its flash, RAM and worst stack figures.
+firmware:
+	bash scripts/sysdeps.sh firmware
+	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk
+
 ctest: sysdeps
 	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null
 	cmake --build build/ecu -j2
@@ -38,7 +48,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
 
-pytest: $(STAMP) browser
+pytest: $(STAMP) browser qemu
 	$(BIN)/python -m pytest -q
 
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
@@ -50,6 +60,7 @@ test: ctest lint pytest
 bench: $(STAMP) browser
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/fused_lag_bench.py
+	$(BIN)/python bench/fw_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
 	$(BIN)/python bench/maps_bench.py

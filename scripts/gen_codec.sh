@@ -1,9 +1,14 @@
 #!/usr/bin/env bash
-# Regenerate the C codec ecu/src/gen/td_can.[ch] from protocol/topdress.dbc (never edit them by hand).
-# Usage: scripts/gen_codec.sh [OUTPUT_DIR]   (default ecu/src/gen; tests pass a temporary directory)
+# Regenerate the C codecs from the DBCs (never edit them by hand):
+#   protocol/topdress.dbc     -> ecu/src/gen/td_can.[ch]           (the bus protocol)
+#   protocol/topdress_hil.dbc -> ecu/ports/common/gen/td_hilcan.[ch]  (the emulator link's HIL frames)
+# Usage: scripts/gen_codec.sh [OUTPUT_DIR]   (tests pass a temporary directory: both go there)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-ecu/src/gen}"
+hil_out="${1:-ecu/ports/common/gen}"
 python="${PYTHON:-.venv/bin/python}"
 "$python" -m cantools generate_c_source --use-float --database-name td_can \
     protocol/topdress.dbc -o "$out"
+"$python" -m cantools generate_c_source --use-float --database-name td_hilcan \
+    protocol/topdress_hil.dbc -o "$hil_out"

@@ -2,6 +2,8 @@
 # System packages topdress needs, installed with apt-get when missing (as root).
 #   sysdeps.sh python   - what building the venv needs: venv/ensurepip and Python headers (cffi)
 #   sysdeps.sh ctest    - what the C tests need: cmocka and pkg-config
+#   sysdeps.sh firmware - what the ECU firmware needs: Debian's arm-none-eabi-gcc with newlib-nano
+#   sysdeps.sh qemu     - what the emulated firmware's tests need: qemu-system-arm (and the firmware's)
 #   sysdeps.sh browser  - what the display's end-to-end test needs: Debian's Chromium and its
 #                         chromedriver (nothing downloads a browser), a CJK font for Chinese
 set -euo pipefail
@@ -24,6 +26,13 @@ ctest)
     command -v pkg-config >/dev/null || missing+=(pkg-config)
     command -v cmake >/dev/null || missing+=(cmake)
     ;;
+firmware | qemu)
+    command -v arm-none-eabi-gcc >/dev/null || missing+=(gcc-arm-none-eabi)
+    [ -f /usr/lib/arm-none-eabi/newlib/thumb/v7e-m+fp/hard/libc_nano.a ] || missing+=(libnewlib-arm-none-eabi)
+    if [ "$what" = qemu ]; then
+        command -v qemu-system-arm >/dev/null || missing+=(qemu-system-arm)
+    fi
+    ;;
 browser)
     [ -x /usr/bin/chromium ] || missing+=(chromium)
     [ -x /usr/bin/chromedriver ] || missing+=(chromium-driver)
@@ -32,7 +41,7 @@ browser)
     fi
     ;;
 *)
-    echo "usage: $0 python|ctest|browser" >&2
+    echo "usage: $0 python|ctest|firmware|qemu|browser" >&2
     exit 2
     ;;
 esac

@@ -135,6 +135,8 @@ typedef struct {
     td_can_frame_t txq[TD_TXQ_LEN];
     uint8_t tx_head, tx_count;
     td_cal_t cal;              /**< metering catch test (td_cal.h) */
+    td_ident_t ident;          /**< who the ECU is (EcuIdent); host until the port says otherwise */
+    bool ident_due;            /**< EcuIdent goes out at the next step */
 } td_app_t;
 
 /** Initialise with a parameter set (validated: TD_E_RANGE / TD_E_INCONSISTENT on a bad one). */
@@ -154,6 +156,16 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
 
 /** Pop the oldest frame to send. Returns 1 and fills *frame, or 0 when the queue is empty. */
 int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
+
+/**
+ * The port's identity for EcuIdent: target, transport, reset cause, clock fallback. td_app_init()
+ * sets {TD_TARGET_HOST, TD_TRANSPORT_IN_PROCESS, TD_RESET_UNKNOWN, false}; a port on a target
+ * calls this right after td_app_init(). EcuIdent goes out at the next step (after any status
+ * frames of that step), and again at the next step after the first valid PcCommand following
+ * power-up or a command timeout (a PC that (re)connects learns who it talks to at once).
+ * TD_E_ARG for a value outside its enum.
+ */
+int td_app_set_ident(td_app_t *app, const td_ident_t *ident);
 
 /** Read-only view of the state. */
 const td_state_t *td_app_state(const td_app_t *app);

@@ -24,6 +24,7 @@
 #define TD_ID_ECU_FUSED 0x18636465u
 #define TD_ID_ECU_FUSED_AUX 0x18666465u
 #define TD_ID_ECU_GNSS_LAG 0x18696465u
+#define TD_ID_ECU_IDENT 0x18676465u
 
 #define TD_RUN_STOPPED 0x00u
 #define TD_RUN_RUNNING 0x0Au
@@ -110,6 +111,26 @@ typedef struct {
     uint8_t state;             /**< td_lag_state_t */
     bool automatic;            /**< GnssLagAuto */
 } td_gnss_lag_t;
+/** Targets, transports and reset causes of EcuIdent (DBC value tables). */
+typedef enum { TD_TARGET_HOST = 0, TD_TARGET_STM32F4 = 1 } td_target_t;
+typedef enum { TD_TRANSPORT_IN_PROCESS = 0, TD_TRANSPORT_CAN = 1, TD_TRANSPORT_SLCAN_HIL = 2 } td_transport_t;
+typedef enum {
+    TD_RESET_UNKNOWN = 0,
+    TD_RESET_POWER_ON = 1,
+    TD_RESET_PIN = 2,
+    TD_RESET_WATCHDOG = 3,
+    TD_RESET_HARD_FAULT = 4,
+    TD_RESET_SOFTWARE = 5,
+    TD_RESET_BROWN_OUT = 6
+} td_reset_cause_t;
+
+/** What the port says of itself (td_app_set_ident); the versions come from td_version.h. */
+typedef struct {
+    uint8_t target;            /**< td_target_t */
+    uint8_t transport;         /**< td_transport_t */
+    uint8_t reset_cause;       /**< td_reset_cause_t of the last reset */
+    bool clock_fallback;       /**< the crystal did not start: running on the internal oscillator */
+} td_ident_t;
 
 int td_proto_decode_command(const td_can_frame_t *f, td_command_t *out);
 int td_proto_encode_command(const td_command_t *c, td_can_frame_t *f);
@@ -124,6 +145,9 @@ int td_proto_encode_gnss_time(const td_gnss_time_t *g, td_can_frame_t *f);
 int td_proto_encode_fused(const td_fused_diag_t *d, td_can_frame_t *f);
 int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f);
 int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f);
+/** EcuIdent: the port's identity with the firmware and protocol versions of td_version.h.
+ *  TD_E_ARG for a target, transport or reset cause outside its value table. */
+int td_proto_encode_ident(const td_ident_t *id, td_can_frame_t *f);
 /**
  * Decode PcParamSet into the parameter id and its physical value (units of td_params.h).
  * TD_E_UNKNOWN_PARAM for an id outside 1..TD_PARAM_COUNT, TD_E_RANGE outside the DBC range.

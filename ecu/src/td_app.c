@@ -163,6 +163,20 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
     app->st.source = TD_SRC_WHEEL;
     app->st.faults = TD_FAULT_GNSS_LOST;
     td_cal_init(&app->cal);
+    app->ident.target = (uint8_t)TD_TARGET_HOST;
+    app->ident.transport = (uint8_t)TD_TRANSPORT_IN_PROCESS;
+    app->ident.reset_cause = (uint8_t)TD_RESET_UNKNOWN;
+    app->ident_due = true;
+    return TD_OK;
+}
+
+int td_app_set_ident(td_app_t *app, const td_ident_t *ident) {
+    td_can_frame_t probe;
+    if (app == NULL || td_proto_encode_ident(ident, &probe) != TD_OK) {
+        return TD_E_ARG;
+    }
+    app->ident = *ident;
+    app->ident_due = true;
     return TD_OK;
 }
 
@@ -218,6 +232,10 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
     const int rc = count_rx(app, td_proto_decode_command(frame, &c));
     if (rc != TD_OK) {
         return rc;
+    }
+    /* a PC starts commanding (power-up, or back after a timeout): tell it who we are */
+    if (!app->have_cmd || (app->st.faults & TD_FAULT_CMD_TIMEOUT) != 0u) {
+        app->ident_due = true;
     }
     app->have_cmd = true;
     app->last_cmd_us = now_us;
@@ -719,6 +737,12 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
         if (td_elapsed_us(now_us, app->last_status_us) >= period_us) {
             app->last_status_us = now_us;
         }
+    }
+    if (app->ident_due) {
+        td_can_frame_t f;
+        (void)td_proto_encode_ident(&app->ident, &f);
+        txq_push(app, &f);
+        app->ident_due = false;
     }
     return TD_OK;
 }

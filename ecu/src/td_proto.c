@@ -12,6 +12,7 @@
 #include "td_can.h"
 #include "td_common.h"
 #include "td_params.h"
+#include "td_version.h"
 
 #define TD_GNSS_RAW_NA 0xFFu
 #define TD_GNSS_RAW_MAX 250u   /* 25.0 km/h; 251..254 are out of range */
@@ -315,5 +316,25 @@ int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f) {
     m.lag_auto = g->automatic ? 1u : 0u;
     frame_head(f, TD_ID_ECU_GNSS_LAG);
     (void)td_can_ecu_gnss_lag_pack(f->data, &m, sizeof f->data);
+    return TD_OK;
+}
+
+int td_proto_encode_ident(const td_ident_t *id, td_can_frame_t *f) {
+    if (id == NULL || f == NULL || id->target > (uint8_t)TD_TARGET_STM32F4 ||
+        id->transport > (uint8_t)TD_TRANSPORT_SLCAN_HIL || id->reset_cause > (uint8_t)TD_RESET_BROWN_OUT) {
+        return TD_E_ARG;
+    }
+    struct td_can_ecu_ident_t m;
+    m.target = id->target;
+    m.firmware_major = (uint8_t)TD_FW_VERSION_MAJOR;
+    m.firmware_minor = (uint8_t)TD_FW_VERSION_MINOR;
+    m.firmware_patch = (uint8_t)TD_FW_VERSION_PATCH;
+    m.protocol_major = (uint8_t)TD_PROTO_VERSION_MAJOR;
+    m.protocol_minor = (uint8_t)TD_PROTO_VERSION_MINOR;
+    m.transport = id->transport;
+    m.reset_cause = id->reset_cause;
+    m.clock_fallback = id->clock_fallback ? 1u : 0u;
+    frame_head(f, TD_ID_ECU_IDENT);
+    (void)td_can_ecu_ident_pack(f->data, &m, sizeof f->data);
     return TD_OK;
 }

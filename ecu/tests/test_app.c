@@ -447,14 +447,16 @@ static void test_tx_queue_overflow_counted(void **state) {
     rig_t r;
     rig_init(&r, NULL, 0u);
     r.pc_sending = false;
-    for (int k = 0; k <= 50; k++) { /* status at 100..500 ms: 5 x 7 frames into 16 places */
+    for (int k = 0; k <= 50; k++) { /* EcuIdent, then status at 100..500 ms: 1 + 5 x 7 frames into 16 places */
         rig_step(&r);
     }
-    assert_int_equal(r.app.cnt.tx_dropped, 19u);
+    assert_int_equal(r.app.cnt.tx_dropped, 20u);
     const uint32_t order[7] = { TD_ID_ECU_STATUS, TD_ID_ECU_DIAG,      TD_ID_ECU_SPEEDS,  TD_ID_ECU_TARGETS,
                                 TD_ID_ECU_FUSED,  TD_ID_ECU_FUSED_AUX, TD_ID_ECU_GNSS_LAG };
     td_can_frame_t f;
-    for (int i = 0; i < 16; i++) {
+    assert_int_equal(td_app_tx_pop(&r.app, &f), 1);
+    assert_int_equal(f.id, TD_ID_ECU_IDENT);
+    for (int i = 0; i < 15; i++) {
         assert_int_equal(td_app_tx_pop(&r.app, &f), 1);
         assert_int_equal(f.id, order[i % 7]);
     }

@@ -230,7 +230,8 @@ static void drain(td_app_t *app, tally_t *t) {
         assert_int_equal(f.dlc, 8);
         assert_true(f.id == app->p.status_id || f.id == TD_ID_ECU_DIAG || f.id == TD_ID_ECU_SPEEDS ||
                     f.id == TD_ID_ECU_TARGETS || f.id == TD_ID_ECU_PARAM_ACK || f.id == TD_ID_ECU_FUSED ||
-                    f.id == TD_ID_ECU_FUSED_AUX || f.id == TD_ID_ECU_GNSS_LAG);
+                    f.id == TD_ID_ECU_FUSED_AUX || f.id == TD_ID_ECU_GNSS_LAG ||
+                    f.id == TD_ID_ECU_IDENT);
     }
     assert_int_equal(app->tx_count, 0);
     t->tx_frames += n;

@@ -207,6 +207,34 @@ class EcuGnssLag:
     automatic: bool
 
 
+#: EcuIdent's value tables (DBC): the target, the transport, the cause of the last reset.
+TARGETS = ("host", "stm32f4")
+TRANSPORTS = ("in-process", "can", "slcan-hil")
+RESET_CAUSES = ("unknown", "power-on", "pin", "watchdog", "hard fault", "software", "brown-out")
+
+
+@dataclass(frozen=True)
+class EcuIdent:
+    """Who the ECU is: target, firmware version, the protocol (DBC) version it was built with,
+    its transport, the cause of its last reset and whether its clock fell back to the internal
+    oscillator."""
+
+    target: str  # TARGETS
+    firmware: tuple[int, int, int]
+    protocol: tuple[int, int]
+    transport: str  # TRANSPORTS
+    reset_cause: str  # RESET_CAUSES
+    clock_fallback: bool
+
+    @property
+    def firmware_version(self) -> str:
+        return ".".join(str(v) for v in self.firmware)
+
+    @property
+    def protocol_version(self) -> str:
+        return f"{self.protocol[0]}.{self.protocol[1]}"
+
+
 Frame = (
     PcCommand
     | EcuStatus
@@ -221,6 +249,7 @@ Frame = (
     | EcuFused
     | EcuFusedAux
     | EcuGnssLag
+    | EcuIdent
 )
 
 
@@ -464,6 +493,29 @@ def _decode_gnss_lag(data: bytes) -> EcuGnssLag:
     )
 
 
+def _decode_ident(data: bytes) -> EcuIdent:
+    raw, _ = _plain(
+        "EcuIdent",
+        "Target",
+        "FirmwareMajor",
+        "FirmwareMinor",
+        "FirmwarePatch",
+        "ProtocolMajor",
+        "ProtocolMinor",
+        "Transport",
+        "ResetCause",
+        "ClockFallback",
+    ).decode(data)
+    return EcuIdent(
+        target=TARGETS[raw[0]],
+        firmware=(raw[1], raw[2], raw[3]),
+        protocol=(raw[4], raw[5]),
+        transport=TRANSPORTS[raw[6]],
+        reset_cause=RESET_CAUSES[raw[7]],
+        clock_fallback=bool(raw[8]),
+    )
+
+
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
     """True for the identifier of a frame of the protocol (to tell malformed from foreign)."""
     return frame_id in (
@@ -480,6 +532,7 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
         ids.fused,
         ids.fused_aux,
         ids.gnss_lag,
+        ids.ident,
     )
 
 
@@ -511,6 +564,7 @@ def _decoders(ids: FrameIds) -> dict[int, Callable[[bytes], Frame]]:
         ids.fused: _decode_fused,
         ids.fused_aux: _decode_fused_aux,
         ids.gnss_lag: _decode_gnss_lag,
+        ids.ident: _decode_ident,
     }
 
 

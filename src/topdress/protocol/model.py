@@ -128,6 +128,7 @@ class FrameIds:
     fused: int = 0x18636465
     fused_aux: int = 0x18666465
     gnss_lag: int = 0x18696465
+    ident: int = 0x18676465
 
 
 DEFAULT_IDS = FrameIds()

@@ -1,0 +1,81 @@
+"""ECU firmware benchmark (`make bench`): the STM32F4 image's footprint and its 10 ms step in QEMU.
+
+Prints exactly:
+    fw_flash_bytes: N          text + data of build/fw/topdress-ecu-stm32f4.elf (budget 65536)
+    fw_ram_bytes: N            data + bss + the stack reservation (budget 16384)
+    fw_stack_worst_bytes: N    deepest thread path + one handler per preemption level with
+                               exception frames (scripts/fw_report.py)
+    fw_qemu_step_mean_us: X    the firmware's step interval on its own clock, QEMU netduinoplus2
+    fw_qemu_step_sd_us: X      with the simulated machine in the loop (sim.qemu_ecu), 10 s of
+    fw_qemu_step_p99_us: X     a 6.5 km/h pass, guest on the host clock (TCG)
+    fw_qemu_step_max_us: N
+    fw_qemu_late_share: X      share of steps that found no fresh counters
+    fw_qemu_step_cost_max_us: N  longest step (receive + core) on the emulated chip
+Details go to stderr. Without qemu-system-arm the qemu figures are left out (said on stderr).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SECONDS = 10.0
+
+
+def log(msg: str) -> None:
+    print(f"fw_bench: {msg}", file=sys.stderr)
+
+
+def footprint() -> dict[str, int]:
+    done = subprocess.run(
+        ["make", "--no-print-directory", "-s", "-f", "ecu/ports/stm32f4/firmware.mk"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        sys.exit(f"fw_bench: make firmware failed:\n{done.stderr}")
+    log(done.stderr.strip())
+    figures = dict(line.split(": ") for line in done.stdout.splitlines() if ": " in line)
+    return {k: int(v) for k, v in figures.items()}
+
+
+def qemu_timing() -> dict[str, float] | None:
+    from topdress.sim.qemu_ecu import QemuEcu, QemuSil, QemuWorld, qemu_missing
+    from topdress.sim.sil import PcParams
+    from topdress.sim.tractor import Drive, Segment
+
+    why = qemu_missing()
+    if why is not None:
+        log(f"no qemu figures: {why}")
+        return None
+    drive = Drive([Segment("stop", duration_s=1.0), Segment("straight", 6.5, length_m=1000.0)])
+    with QemuEcu() as ecu:
+        world = QemuWorld(ecu, drive=drive)
+        with QemuSil(world, PcParams(), record=False) as sil:
+            while world.t_s < SECONDS:
+                sil.step()
+        return world.timing.summary()
+
+
+def main() -> int:
+    f = footprint()
+    print(f"fw_flash_bytes: {f['flash_bytes']}")
+    print(f"fw_ram_bytes: {f['ram_bytes']}")
+    print(f"fw_stack_worst_bytes: {f['stack_worst_bytes']}")
+    t = qemu_timing()
+    if t is not None:
+        print(f"fw_qemu_step_mean_us: {t['mean_us']:.1f}")
+        print(f"fw_qemu_step_sd_us: {t['sd_us']:.1f}")
+        print(f"fw_qemu_step_p99_us: {t['p99_us']:.0f}")
+        print(f"fw_qemu_step_max_us: {t['max_us']:.0f}")
+        print(f"fw_qemu_late_share: {t['late_inputs'] / t['steps']:.4f}")
+        print(f"fw_qemu_step_cost_max_us: {t['max_cost_us']:.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

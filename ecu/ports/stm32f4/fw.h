@@ -1,0 +1,80 @@
+/**
+ * @file fw.h
+ * @brief The STM32F4 port's modules: clocks and time, I/O, bxCAN, the SLCAN serial link,
+ *        watchdog and reset cause. main.c runs the port contract of td_port.h on them.
+ */
+#ifndef TD_FW_H
+#define TD_FW_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include "td_port.h"
+#include "td_proto.h"
+
+/* ---- fw_clock.c: clock tree, microsecond clock, step tick -------------------------------- */
+typedef enum {
+    FW_CLOCK_PLL_HSE = 0,      /**< 168 MHz from the crystal, as designed */
+    FW_CLOCK_HSI = 1,          /**< the crystal or the PLL did not start: 16 MHz internal RC */
+    FW_CLOCK_UNMODELLED = 2    /**< the clock controller does not answer at all (an emulator):
+                                    the core runs at what the machine gives, taken as 168 MHz */
+} fw_clock_source_t;
+
+typedef struct {
+    uint32_t core_hz;          /**< SYSCLK = HCLK */
+    uint32_t apb1_hz;          /**< APB1 (bxCAN) */
+    uint32_t apb2_hz;          /**< APB2 (USART1) */
+    uint32_t tim2_hz;          /**< TIM2's input clock as measured against the core clock */
+    uint32_t tim_apb2_hz;      /**< APB2 timers' clock (TIM8, TIM9) */
+    uint8_t source;            /**< fw_clock_source_t */
+} fw_clock_t;
+
+/** Clock tree: HSE + PLL to 168 MHz, with time-outs on every ready flag. */
+void fw_clock_init(fw_clock_t *c);
+/** TIM2 as the free-running 32-bit microsecond clock (prescaler from its measured clock). */
+void fw_time_init(fw_clock_t *c);
+/** The microsecond clock now (wraps every 71.6 min, as td_port.h expects). */
+uint32_t fw_micros(void);
+/** SysTick every 1 / BOARD_STEP_HZ; fw_wait_step() sleeps until the next tick. */
+void fw_tick_start(const fw_clock_t *c);
+void fw_wait_step(void);
+
+/* ---- fw_io.c: encoders, capture, tachometers, PWM, safe state ---------------------------- */
+void fw_io_init(const fw_clock_t *c);
+/** The counters and the wheel's edge as td_io_in_t (capture read with its interrupt masked). */
+void fw_io_read(td_io_in_t *in);
+/** Duties to the PWM compare registers; the outputs drive only while enabled. */
+void fw_io_write(const td_io_out_t *out);
+/** Enable or disable the PWM outputs (disabled: every output at its idle level, low). */
+void fw_io_enable(bool on);
+/** All PWM off now, with no stack and no state (hard fault, watchdog warning, reset). */
+void fw_io_safe(void);
+
+/* ---- fw_can.c: bxCAN CAN1 --------------------------------------------------------------- */
+/** Initialise CAN1 at `bitrate` with filters for `ids` (29-bit). false: the controller never
+ *  acknowledged its initialisation request (absent, as in an emulator) or no timing fits. */
+bool fw_can_init(const fw_clock_t *c, uint32_t bitrate, const uint32_t *ids, unsigned n);
+bool fw_can_read(td_can_frame_t *f);
+/** Queue a frame for transmission; false when the queue is full (counted). */
+bool fw_can_write(const td_can_frame_t *f);
+
+typedef struct {
+    uint32_t rx_frames, rx_overruns, rx_ring_dropped, tx_frames, tx_dropped, bus_off;
+} fw_can_stats_t;
+void fw_can_stats(fw_can_stats_t *s);
+
+/* ---- fw_uart.c: the SLCAN serial link on USART1 ------------------------------------------ */
+void fw_uart_init(const fw_clock_t *c, uint32_t baud);
+bool fw_uart_getc(uint8_t *b);
+/** Queue bytes for sending, all or none (false: no room, counted). */
+bool fw_uart_write(const uint8_t *b, uint32_t n);
+/** Move queued bytes to the transmitter while it takes them (the interrupt does the rest). */
+void fw_uart_pump(void);
+
+/* ---- fw_sys.c: watchdog, reset cause ------------------------------------------------------ */
+/** The cause of the last reset (RCC_CSR, and the hard-fault mark), flags cleared. */
+td_reset_cause_t fw_reset_cause(void);
+/** Independent watchdog, ~100 ms (LSI 32 kHz / 32, reload 100; 68..188 ms over LSI's spread). */
+void fw_watchdog_start(void);
+void fw_watchdog_feed(void);
+
+#endif /* TD_FW_H */

@@ -1,0 +1,133 @@
+/**
+ * @file main.c
+ * @brief The topdress ECU on an STM32F405/407: the port contract of td_port.h on this chip.
+ *
+ * Transport, chosen at start: CAN1 when the bxCAN controller answers its initialisation
+ * request; otherwise (an emulator, which has none) SLCAN on USART1 with the simulated machine
+ * in the loop: its counters come in as HIL frames instead of from the timers and the duties go
+ * out as HIL frames, the PWM pins staying off. Everything between (td_app_rx, td_app_step,
+ * td_app_tx_pop) is the same code on the same path either way.
+ *
+ * Safe state: at reset the PWM timer is stopped and its pins are inputs (pull-downs on the
+ * driver board); after init the outputs are driven low (MOE = 0) until the first valid
+ * PcCommand; a hard fault turns them off and resets; the independent watchdog resets a loop
+ * that stops feeding it (~100 ms), which again starts with the outputs off.
+ */
+#include <stddef.h>
+#include "board.h"
+#include "fw.h"
+#include "td_app.h"
+#include "td_hil.h"
+#include "td_slcan.h"
+
+static td_app_t app; /* the one instance (td_port.h) */
+static td_hil_t hil;
+static td_slcan_parser_t slcan;
+static bool slcan_open;
+static bool hil_mode;
+static uint32_t slcan_tx_dropped;
+
+static void slcan_send(const td_can_frame_t *f) {
+    char line[TD_SLCAN_FRAME_MAX];
+    const int n = td_slcan_encode(f, line, sizeof line);
+    if (slcan_open && n > 0 && !fw_uart_write((const uint8_t *)line, (uint32_t)n)) {
+        slcan_tx_dropped++;
+    }
+}
+
+/* Serial bytes to SLCAN lines: commands answered, HIL frames to the link, the rest to the core. */
+static td_ident_t ident;
+
+static void slcan_receive(uint32_t now_us) {
+    uint8_t b;
+    while (fw_uart_getc(&b)) {
+        td_can_frame_t f;
+        uint8_t arg;
+        const td_slcan_event_t ev = td_slcan_feed(&slcan, b, &f, &arg);
+        if (ev == TD_SLCAN_NONE) {
+            continue;
+        }
+        if (ev == TD_SLCAN_FRAME) {
+            if (td_hil_rx(&hil, &f) == 0) {
+                (void)td_app_rx(&app, &f, now_us);
+            }
+            continue;
+        }
+        if (ev == TD_SLCAN_OPEN) {
+            slcan_open = true;
+            (void)td_app_set_ident(&app, &ident); /* a new listener: EcuIdent at the next step */
+        } else if (ev == TD_SLCAN_CLOSE) {
+            slcan_open = false;
+        }
+        char reply[8];
+        const unsigned n = td_slcan_reply(ev, reply, sizeof reply);
+        if (n > 0u) {
+            (void)fw_uart_write((const uint8_t *)reply, n);
+        }
+    }
+}
+
+int main(void) {
+    const td_reset_cause_t cause = fw_reset_cause();
+    fw_clock_t clk;
+    fw_clock_init(&clk);
+    fw_time_init(&clk);
+    fw_io_init(&clk);
+    td_params_t p;
+    td_params_default(&p); /* the terminal pushes its parameters over CAN at every connection */
+    const uint32_t ids[] = { p.command_id, TD_ID_PC_PARAM_SET, TD_ID_PC_CAL_COMMAND, TD_ID_PC_GNSS_TIME };
+    hil_mode = !fw_can_init(&clk, BOARD_CAN_BITRATE, ids, sizeof ids / sizeof ids[0]);
+    if (hil_mode) {
+        td_hil_init(&hil);
+        td_slcan_init(&slcan);
+        fw_uart_init(&clk, BOARD_SLCAN_BAUD);
+    }
+    if (td_app_init(&app, &p, fw_micros()) != TD_OK) {
+        for (;;) { /* defaults that do not validate: no control, the watchdog is not started */
+        }
+    }
+    ident.target = (uint8_t)TD_TARGET_STM32F4;
+    ident.transport = (uint8_t)(hil_mode ? TD_TRANSPORT_SLCAN_HIL : TD_TRANSPORT_CAN);
+    ident.reset_cause = (uint8_t)cause;
+    ident.clock_fallback = clk.source == (uint8_t)FW_CLOCK_HSI;
+    (void)td_app_set_ident(&app, &ident);
+    fw_watchdog_start();
+    fw_tick_start(&clk);
+    for (;;) {
+        fw_wait_step();
+        const uint32_t now = fw_micros();
+        td_can_frame_t f;
+        td_io_in_t in;
+        if (hil_mode) {
+            slcan_receive(now);
+            td_hil_inputs(&hil, &in);
+        } else {
+            while (fw_can_read(&f)) {
+                (void)td_app_rx(&app, &f, now);
+            }
+            fw_io_read(&in);
+        }
+        td_io_out_t out;
+        (void)td_app_step(&app, now, &in, &out);
+        if (!hil_mode) {
+            fw_io_write(&out);
+            fw_io_enable(app.have_cmd); /* outputs stay low until the first valid command */
+        }
+        const uint32_t cost_us = fw_micros() - now;
+        if (hil_mode) {
+            td_can_frame_t step_frames[2];
+            td_hil_outputs(&hil, now, &out, cost_us, step_frames);
+            slcan_send(&step_frames[0]);
+            slcan_send(&step_frames[1]);
+            while (td_app_tx_pop(&app, &f)) {
+                slcan_send(&f);
+            }
+            fw_uart_pump();
+        } else {
+            while (td_app_tx_pop(&app, &f)) {
+                (void)fw_can_write(&f);
+            }
+        }
+        fw_watchdog_feed();
+    }
+}
