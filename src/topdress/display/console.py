@@ -109,11 +109,16 @@ def _alarm(a: AlarmView) -> str:
     return tr(f"alarm.{a.name}") + state
 
 
+def _lag(s: Snapshot) -> str:
+    """The GNSS lag after the speed source ("GNSS lag 0.95 s (learned)"), while the ECU says."""
+    return f"  {render(s.gnss_lag.text())}" if s.ecu_live and s.gnss_lag is not None else ""
+
+
 def _operator_lines(s: Snapshot) -> list[str]:
     lines = [
         f"{_label('con.operator')}{_pad(tr(f'op.state.{s.operator}'), 16)}"
         f"  {tr('con.rate')} {_manual(s.manual)}",
-        f"{_label('main.source')}{render(s.speed_why) or '--'}",
+        f"{_label('main.source')}{render(s.speed_why) or '--'}{_lag(s)}",
     ]
     if s.alarms:
         lines += _wrap(_head("con.alarms"), [_alarm(a) for a in s.alarms])
@@ -204,9 +209,17 @@ def render_line(s: Snapshot) -> str:
         f" target={num(s.target_rpm[0], '.2f')}/{num(s.target_rpm[1], '.2f')}"
         f" meter={num(s.meter_rpm[0], '.2f')}/{num(s.meter_rpm[1], '.2f')}r/min"
         f" fan={num(s.fan_rpm[0], '.0f')}/{num(s.fan_rpm[1], '.0f')}rpm faults={faults}"
+        f" lag={_lag_word(s)}"
         f" ecu={_ecu_where(s)} gnss={s.gnss_link} crop={s.crop_link}"
         f" op={s.operator} rate={s.manual.mode} alarms={len(s.alarms)}"
     )
+
+
+def _lag_word(s: Snapshot) -> str:
+    lag = s.gnss_lag
+    if not s.ecu_live or lag is None:
+        return "--"
+    return f"{lag.in_use_ms / 1000:.2f}s/{lag.state}"
 
 
 def _ecu_where(s: Snapshot) -> str:
