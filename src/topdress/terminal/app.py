@@ -429,33 +429,36 @@ class Terminal:
         frame = self.link.ecu.lag
         if frame is None or not self.link.ecu_alive:
             return
-        change = self.lag_watch.update(frame, self._fixed_lag_ms())
-        if change is None:
-            return
-        self.log_event(now, "gnss_lag.changed", **change.detail())
-        message = change.message()
-        if message is not None:
-            if change.state == "overruled":
-                log.warning("%s", message)
-            self.event(message)
-        if frame.learned_ms is not None:
-            self._keep_lag(now, final=False)
+        change = self.lag_watch.update(now, frame, self._fixed_lag_ms())
+        if change is not None:
+            self.log_event(now, "gnss_lag.changed", **change.detail())
+            if change.tell():
+                self.event(change.message())
+            else:
+                log.info("%s", change.message())
+            if frame.learned_ms is not None:
+                self._keep_lag(now, final=False)
+        warning = self.lag_watch.warning(now)
+        if warning is not None:
+            log.warning("%s", warning)
+            self.event(warning)
 
     def _on_receiver(self, now: float) -> None:
         """The receiver's identity settled: said in the log, and told when the lag pushed at
         start was kept for another receiver on this input."""
         rid = self.receiver.receiver
-        kept = self.lags.for_receiver(rid)
         start = self.lag_start
+        same = start.receiver.same(rid) if start is not None else None
         self.log_event(
             now,
             "gnss_lag.receiver",
             input=rid.input,
             sentences=list(rid.sentences),
             versions=list(rid.versions),
-            kept_ms=kept.lag_ms if kept is not None else None,
+            start_ms=start.lag_ms if start is not None else None,
+            same_receiver=same,
         )
-        if start is not None and not start.receiver.same(rid):
+        if same is False:
             self.event(text("event.gnss_lag_other", input=rid.input))
 
     def _keep_lag(self, now: float, final: bool) -> None:
