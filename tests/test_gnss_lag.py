@@ -3,17 +3,20 @@ pushed as the next session's start (the terminal against the simulated machine, 
 
 from __future__ import annotations
 
+import csv
 import json
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
+from test_replay import drive_events
 from test_terminal import VirtualRig
 from topdress import protocol
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, loads_config
 from topdress.gnss.nmea import NmeaDecoder, make_sentence
+from topdress.log.events import write
 from topdress.log.model import LogEvent
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import lag_summary, summarise
@@ -333,3 +336,22 @@ def test_config_init_writes_fused_and_a_learned_lag(tmp_path: Path) -> None:
     params = cfg.ecu_params()
     assert params[protocol.param("GnssLagAuto").id] == 1
     assert params[protocol.param("SpeedMode").id] == protocol.SpeedMode.FUSED.code
+
+
+def test_replay_defaults_to_the_fused_mode(tmp_path: Path) -> None:
+    events = tmp_path / "drive.ndjson"
+    with events.open("w") as f:
+        write(drive_events(20.0), f)
+    outs = {}
+    for name, mode in (
+        ("default", []),
+        ("fused", ["--speed-mode", "fused"]),
+        ("paper", ["--speed-mode", "paper"]),
+    ):
+        outs[name] = tmp_path / f"{name}.csv"
+        assert main(["replay", str(events), *mode, "--out", str(outs[name])]) == 0
+    text = {k: p.read_text() for k, p in outs.items()}
+    assert text["default"] == text["fused"] and text["default"] != text["paper"]
+    with outs["default"].open() as f:
+        sources = {row["source"] for row in csv.DictReader(f)}
+    assert "fused" in sources
