@@ -25,7 +25,14 @@ from topdress.display.pages import register_pages
 from topdress.i18n import text
 from topdress.view import commands as op
 from topdress.view.commands import CommandResult, ManualView
-from topdress.view.snapshot import AlarmView, CalibrationView, CounterView, DeviceLine, Snapshot
+from topdress.view.snapshot import (
+    AlarmView,
+    CalibrationView,
+    CounterView,
+    DeviceLine,
+    LagView,
+    Snapshot,
+)
 
 LAT0, LON0 = 43.8853, 125.3245
 
@@ -687,3 +694,19 @@ def test_a_taken_port_is_said_before_anything_starts() -> None:
         with pytest.raises(DisplayError, match=f"127.0.0.1:{port} is in use"):
             link.start()
         assert link.pid is None  # no display process was started
+
+
+async def test_main_screen_shows_the_gnss_lag_by_the_speed_source(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(gnss_lag=LagView(950, 950, "learned")))
+    register_pages(hub)
+    await user.open("/")
+    assert text_of(user, "gnss_lag") == "GNSS lag 0.95 s (learned)"
+    hub.publish(working(t_s=12.1, gnss_lag=LagView(500, 500, "overruled", fixed_ms=1800.0)))
+    await shows(user, "gnss_lag", "GNSS lag 0.50 s (learned, not the set 1.80 s)")
+    hub.publish(working(t_s=12.2, ecu_live=False, gnss_lag=LagView(950, 950, "learned")))
+    await shows(user, "gnss_lag", "")  # not while the ECU is not heard
+    i18n.set_language("zh")
+    hub.publish(working(t_s=12.3, gnss_lag=LagView(1300, None, "start")))
+    await user.open("/")
+    assert text_of(user, "gnss_lag") == "GNSS 滞后 1.30 秒（学习中）"

@@ -14,7 +14,7 @@ from topdress.display.console import Console, fault_names, render_line, render_l
 from topdress.i18n import set_language, text, tr
 from topdress.protocol import Fault
 from topdress.view.commands import ManualView
-from topdress.view.snapshot import AlarmView, CalibrationView, Snapshot
+from topdress.view.snapshot import AlarmView, CalibrationView, LagView, Snapshot
 
 WORKING = Snapshot(
     t_s=12.3,
@@ -144,7 +144,7 @@ def test_ecu_values_are_dashes_while_the_ecu_is_lost() -> None:
     assert line == (
         "t=12.3s v=--km/h src=-- cv=--% ndvi=0.587 rate=138.9/138.9kg/ha target=--/-- "
         "meter=--/--r/min fan=--/--rpm faults=-- ecu=lost gnss=ok crop=3/4"
-        " op=stopped rate=off alarms=0"
+        " op=stopped rate=off alarms=0 lag=--"
     )
 
 
@@ -269,3 +269,30 @@ def test_the_configured_language_applies_at_start_without_the_display(tmp_path: 
     assert main(["run", "--config", str(cfg), "--no-display", "--duration", "1"]) == 2
     assert language() == "zh"
     assert "已停止" in "\n".join(render_lines(Snapshot()))
+
+
+def test_the_gnss_lag_follows_the_speed_source_in_both_languages() -> None:
+    learned = replace(WORKING, gnss_lag=LagView(950, 950, "learned"))
+    lines = render_lines(learned)
+    source = next(x for x in lines if x.startswith("source"))
+    assert source.endswith("  GNSS lag 0.95 s (learned)")
+    assert render_line(learned).endswith(" lag=0.95s/learned")
+    # a fixed lag the data contradict says both; too long beside a long reason: a line of its own
+    overruled = replace(BUSY, gnss_lag=LagView(500, 500, "overruled", fixed_ms=1800.0))
+    lines = render_lines(overruled)
+    i = next(i for i, x in enumerate(lines) if x.startswith("source"))
+    assert lines[i + 1] == "        GNSS lag 0.50 s (learned, not the set 1.80 s)"
+    assert max(columns(x) for x in lines) <= 80
+    set_language("zh")
+    text_zh = "\n".join(render_lines(learned))
+    assert "GNSS 滞后 0.95 秒（已学习）" in text_zh
+    assert max(columns(x) for x in render_lines(overruled)) <= 80
+    set_language("en")
+    # the start value while learning, a fixed lag; nothing while the ECU is not heard
+    start = replace(WORKING, gnss_lag=LagView(1300, None, "start"))
+    assert "GNSS lag 1.30 s (learning)" in "\n".join(render_lines(start))
+    fixed = replace(WORKING, gnss_lag=LagView(1300, 1250, "fixed", 1300.0))
+    assert render_line(fixed).endswith(" lag=1.30s/fixed")
+    lost = replace(learned, ecu_live=False)
+    assert "GNSS lag" not in "\n".join(render_lines(lost))
+    assert render_line(lost).endswith(" lag=--")

@@ -109,11 +109,23 @@ def _alarm(a: AlarmView) -> str:
     return tr(f"alarm.{a.name}") + state
 
 
+def _source_lines(s: Snapshot) -> list[str]:
+    """Why the ECU meters on its source, and the GNSS lag it uses ("GNSS lag 0.95 s (learned)",
+    while the ECU says) after it, or on a line of its own when both do not fit."""
+    source = f"{_label('main.source')}{render(s.speed_why) or '--'}"
+    if not s.ecu_live or s.gnss_lag is None:
+        return [source]
+    lag = render(s.gnss_lag.text())
+    if width(source) + 2 + width(lag) <= WIDTH:
+        return [f"{source}  {lag}"]
+    return [source, f"{' ' * width(_label('main.source'))}{lag}"]
+
+
 def _operator_lines(s: Snapshot) -> list[str]:
     lines = [
         f"{_label('con.operator')}{_pad(tr(f'op.state.{s.operator}'), 16)}"
         f"  {tr('con.rate')} {_manual(s.manual)}",
-        f"{_label('main.source')}{render(s.speed_why) or '--'}",
+        *_source_lines(s),
     ]
     if s.alarms:
         lines += _wrap(_head("con.alarms"), [_alarm(a) for a in s.alarms])
@@ -205,8 +217,15 @@ def render_line(s: Snapshot) -> str:
         f" meter={num(s.meter_rpm[0], '.2f')}/{num(s.meter_rpm[1], '.2f')}r/min"
         f" fan={num(s.fan_rpm[0], '.0f')}/{num(s.fan_rpm[1], '.0f')}rpm faults={faults}"
         f" ecu={_ecu_where(s)} gnss={s.gnss_link} crop={s.crop_link}"
-        f" op={s.operator} rate={s.manual.mode} alarms={len(s.alarms)}"
+        f" op={s.operator} rate={s.manual.mode} alarms={len(s.alarms)} lag={_lag_word(s)}"
     )
+
+
+def _lag_word(s: Snapshot) -> str:
+    lag = s.gnss_lag
+    if not s.ecu_live or lag is None:
+        return "--"
+    return f"{lag.in_use_ms / 1000:.2f}s/{lag.state}"
 
 
 def _ecu_where(s: Snapshot) -> str:

@@ -95,6 +95,7 @@ class MainScreen:
                     ui.label(tr("main.source")).classes("text-xs text-gray-500")
                     self.source = ui.badge("--").classes("text-base").mark("source")
                 self.why = ui.label("").classes("text-sm").mark("source_why")
+                self.lag = ui.label("").classes("text-sm").mark("gnss_lag")
             with ui.card().classes("gap-2"):
                 ui.label(tr("main.ndvi")).classes("text-sm font-bold")
                 with ui.row().classes("gap-4"):
@@ -181,6 +182,7 @@ class MainScreen:
         if self.source.props.get("color") != colour:
             self.source.props["color"] = colour
         self.why.set_text(render(s.speed_why) if live else "")
+        self.lag.set_text(render(s.gnss_lag.text()) if live and s.gnss_lag else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
         self.per_sensor.set_text(

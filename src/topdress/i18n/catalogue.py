@@ -57,6 +57,14 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "地轮：地轮静止时 GNSS 速度冻结",
     ),
     "why.no_gnss": ("{source}: no valid GNSS speed", "{source}：无有效 GNSS 速度"),
+    # the GNSS lag in use and where it comes from (EcuGnssLag)
+    "lag.start": ("GNSS lag {s:.2f} s (learning)", "GNSS 滞后 {s:.2f} 秒（学习中）"),
+    "lag.learned": ("GNSS lag {s:.2f} s (learned)", "GNSS 滞后 {s:.2f} 秒（已学习）"),
+    "lag.fixed": ("GNSS lag {s:.2f} s (fixed)", "GNSS 滞后 {s:.2f} 秒（固定）"),
+    "lag.overruled": (
+        "GNSS lag {s:.2f} s (learned, not the set {fixed:.2f} s)",
+        "GNSS 滞后 {s:.2f} 秒（已学习，非设定的 {fixed:.2f} 秒）",
+    ),
     "why.cv": ("CV {cv:.2f} %", "变异系数 {cv:.2f} %"),
     "why.cv_none": ("CV --", "变异系数 --"),
     "why.gnss": (
@@ -266,6 +274,30 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "作物传感器：{lines} 行，均不可用（最后一条：{last}）：请检查 crop.baud 和 [crop.columns]",
     ),
     "event.counters_error": ("counters: {error}", "作业统计：{error}"),
+    "event.gnss_lag_learned": ("GNSS lag learned: {s:.2f} s", "GNSS 滞后已学习：{s:.2f} 秒"),
+    "event.gnss_lag_moved": (
+        "GNSS lag learned: {s:.2f} s (was {was:.2f} s)",
+        "GNSS 滞后已学习：{s:.2f} 秒（原为 {was:.2f} 秒）",
+    ),
+    "event.gnss_lag_overruled": (
+        "warning: the configured gnss_lag_ms ({fixed:.2f} s) contradicts the data; the learned "
+        "lag ({s:.2f} s) is used",
+        "警告：配置的 gnss_lag_ms（{fixed:.2f} 秒）与数据矛盾；采用学习到的滞后（{s:.2f} 秒）",
+    ),
+    "event.gnss_lag_fixed": (
+        "GNSS lag: the configured {fixed:.2f} s is in use (it agrees with the data)",
+        "GNSS 滞后：采用配置的 {fixed:.2f} 秒（与数据一致）",
+    ),
+    "event.gnss_lag_start": (
+        "GNSS lag: learning from {s:.2f} s",
+        "GNSS 滞后：从 {s:.2f} 秒开始学习",
+    ),
+    "event.gnss_lag_other": (
+        "GNSS receiver on {input} is not the one whose lag was kept: its lag is learned at the "
+        "first start",
+        "{input} 上的 GNSS 接收机不是所保存滞后的那台：首次起步时学习其滞后",
+    ),
+    "event.gnss_lag_store": ("GNSS lag file: {error}", "GNSS 滞后文件：{error}"),
     "manual.shown_percent": ("MANUAL model {percent} %", "手动 模型 {percent} %"),
     "main.rate_model": ("model rate", "模型施肥量"),
     "main.rate_applied": ("rate applied", "实际施肥量"),

@@ -80,6 +80,10 @@ EVENT_KINDS: Final = (
     "calibration.wheel",
     "calibration.fan",
     "calibration.lead",
+    "gnss_lag.start",
+    "gnss_lag.receiver",
+    "gnss_lag.changed",
+    "gnss_lag.kept",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

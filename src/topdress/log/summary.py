@@ -60,6 +60,18 @@ class Action:
 
 
 @dataclass
+class LagSummary:
+    """The GNSS lag the ECU learned in the session, from its `gnss_lag.*` events."""
+
+    learned_ms: int | None = None  # the last lag learned (kept at the end, else last reported)
+    start_ms: int | None = None  # the lag kept from an earlier session, pushed at start
+    fixed_ms: float | None = None  # [ecu] gnss_lag_ms when fixed
+    state: str | None = None  # the last state: start, learned, fixed, overruled
+    overruled: int = 0  # times the data overruled a fixed lag
+    changes: int = 0  # gnss_lag.changed events
+
+
+@dataclass
 class Summary:
     path: str
     duration_s: float = 0.0
@@ -85,6 +97,7 @@ class Summary:
     schema: int = 0  # the file's schema version (1: no events recorded)
     events: dict[str, int] = field(default_factory=dict)  # logged events by kind
     actions: list[Action] = field(default_factory=list)  # the operator's, in time order
+    gnss_lag: LagSummary | None = None  # None: no lag event (a session from before them)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -131,6 +144,7 @@ def summarise(reader: SessionReader) -> Summary:
     logged = list(reader.events())
     starts = [x.t for x in (first, logged[0] if logged else None) if x is not None]
     s.actions = operator_actions(logged, min(starts) if starts else 0.0)
+    s.gnss_lag = lag_summary(logged)
     s.area_ha = s.metering_distance_m * machine.width_m / 10_000.0
     for layer in layers:
         if s.area_ha > 0:
@@ -153,6 +167,59 @@ def operator_actions(events: Iterable[LogEvent], t0: float) -> list[Action]:
         for ev in events
         if ev.kind in OPERATOR_KINDS
     ]
+
+
+def _int(value: Any) -> int | None:
+    return value if type(value) is int else None
+
+
+def lag_summary(events: Iterable[LogEvent]) -> LagSummary | None:
+    """The session's GNSS lag from its events: the lag kept at the end (`gnss_lag.kept`), or for
+    a session cut short the last learned one a `gnss_lag.changed` reported (within MOVE_MS, 0.1 s,
+    of the last the ECU had)."""
+    out: LagSummary | None = None
+    kept: int | None = None
+    for ev in events:
+        if not ev.kind.startswith("gnss_lag."):
+            continue
+        out = out or LagSummary()
+        d = ev.detail
+        if ev.kind == "gnss_lag.start":
+            out.start_ms = _int(d.get("kept_ms"))
+            fixed = d.get("fixed_ms")
+            out.fixed_ms = float(fixed) if isinstance(fixed, int | float) else None
+        elif ev.kind == "gnss_lag.changed":
+            out.changes += 1
+            out.state = d.get("state") if isinstance(d.get("state"), str) else out.state
+            if d.get("state") == "overruled" and d.get("was") != "overruled":
+                out.overruled += 1
+            learned = _int(d.get("learned_ms"))
+            out.learned_ms = learned if learned is not None else out.learned_ms
+        elif ev.kind == "gnss_lag.kept":
+            lag = _int(d.get("lag_ms"))
+            kept = lag if lag is not None else kept
+    if out is not None and kept is not None:
+        out.learned_ms = kept
+    return out
+
+
+def lag_text(lag: LagSummary | None) -> str:
+    """The summary's line on the GNSS lag."""
+    if lag is None:
+        return "not recorded (a session from before the terminal logged it)"
+    start = "none" if lag.start_ms is None else f"{lag.start_ms / 1000:.2f} s"
+    if lag.learned_ms is None:
+        head = "not learned (no start or speed change with GNSS)"
+    else:
+        head = f"learned {lag.learned_ms / 1000:.2f} s"
+    parts = [head, f"kept from before {start}"]
+    if lag.fixed_ms is not None:
+        parts.append(f"configured {lag.fixed_ms / 1000:.2f} s")
+    if lag.overruled:
+        parts.append(f"overruled by the data {lag.overruled}x")
+    if lag.state is not None:
+        parts.append(f"last state {lag.state}")
+    return ", ".join(parts)
 
 
 def headland_events(
@@ -249,6 +316,7 @@ def format_text(s: Summary) -> str:
         lines.append("time (GNSS)      none (no fix with a date in the session)")
     sources = ", ".join(f"{k} {v:.1f} s" for k, v in s.source_s.items())
     lines.append(f"speed source     {sources}")
+    lines.append(f"GNSS lag         {lag_text(s.gnss_lag)}")
     faults = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(s.faults_s.items())) or "none"
     lines.append(f"faults           {faults}")
     if s.gaps:

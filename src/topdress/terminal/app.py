@@ -12,7 +12,12 @@ on a device, only on that queue, with a timeout that keeps its 10 Hz tick:
   state row to the session log, and a fresh `Snapshot` for the display.
 
 What happens (operator actions, settings, alarms, links lost and back, the ECU's fault word,
-calibration results) also goes to the session log as events (`log_event`), on the same clock.
+calibration results, the GNSS lag the ECU learns) also goes to the session log as events
+(`log_event`), on the same clock.
+
+The GNSS lag learned with this receiver in an earlier session (topdress.terminal.gnsslag, kept
+beside the session logs) is the start value pushed to the ECU; the lag learned now is kept for
+the next session.
 
 GNSS lost (port vanished, no valid fix, stale speed) is forwarded as "not available", so the
 ECU falls back to the wheel.
@@ -49,11 +54,13 @@ from topdress.protocol import fault_names
 from topdress.terminal import signals
 from topdress.terminal.canlink import CanLink, EcuView
 from topdress.terminal.desk import OperatorDesk
+from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
 from topdress.terminal.inbox import Inbox
+from topdress.terminal.receiver import ReceiverWatch, input_key
 from topdress.terminal.site import Maps, build_site_rate
 from topdress.view.commands import RUNNING, CommandResult
 from topdress.view.links import link_state
-from topdress.view.snapshot import TICK_S, Snapshot, ecu_values
+from topdress.view.snapshot import TICK_S, LagView, Snapshot, ecu_values
 
 log = logging.getLogger(__name__)
 
@@ -120,6 +127,14 @@ class Terminal:
         self._stop = threading.Event()
         self._can_thread: threading.Thread | None = None
         self.desk = OperatorDesk(self, start, config_path)
+        # The GNSS lag: kept per receiver beside the session logs (in memory without a log).
+        self.receiver = ReceiverWatch(input_key(cfg.gnss))
+        where = session.path.parent if session is not None else None
+        self.lags = LagStore(where / STORE_FILE if where is not None else None)
+        self.lag_watch = LagWatch()
+        self.lag_start = self.lags.for_input(self.receiver.input)
+        if self.lags.error:
+            self.event(text("event.gnss_lag_store", error=self.lags.error))
 
     @property
     def bus(self) -> can.BusABC:
@@ -145,7 +160,7 @@ class Terminal:
         """Open the device of a changed [gnss], [crop] or [can] section in place of the one in
         use; DeviceError when it cannot be opened (the old one stays)."""
         if section == "can":
-            self.link.reopen(new.can, new.ecu_params(), now)
+            self.link.reopen(new.can, new.ecu_params(self._lag_start_ms()), now)
             return
         kind = "nmea" if section == "gnss" else "crop"
         source = open_line_source(new.gnss if section == "gnss" else new.crop)
@@ -175,7 +190,16 @@ class Terminal:
         self._t0 = now
         self.gnss.start(lambda t, line: self.inbox.put(("nmea", t, line)))
         self.crop.start(lambda t, line: self.inbox.put(("crop", t, line)))
-        self.link.begin(self.cfg.ecu_params(), now)
+        self.link.begin(self.cfg.ecu_params(self._lag_start_ms()), now)
+        start = self.lag_start
+        self.log_event(
+            now,
+            "gnss_lag.start",
+            input=self.receiver.input,
+            kept_ms=start.lag_ms if start is not None else None,
+            fixed_ms=self._fixed_lag_ms(),
+            error=self.lags.error,
+        )
         if self.desk.op.state == RUNNING:  # headless: the meters start without an operator
             self.log_event(now, "operator.start", was="stopped", auto=True)
 
@@ -194,6 +218,7 @@ class Terminal:
         self.crop.stop()
         if self._can_thread is not None:
             self._can_thread.join(timeout=2.0)
+        self._keep_lag(self.clock(), final=True)
         if self.session is not None:
             self.session.close()
 
@@ -274,6 +299,8 @@ class Terminal:
         if self.session is not None:
             self.session.raw("nmea", t, line.decode("latin-1"))
         fix = self.nmea.decode(line)
+        if self.receiver.see(t, fix, line):
+            self._on_receiver(t)
         if not fix.ok:
             return
         if fix.fix_valid:
@@ -346,6 +373,7 @@ class Terminal:
         # Before the desk's alarms: a link lost is logged ahead of the alarm it raises.
         self._track_links(now)
         self._track_faults(now)
+        self._track_lag(now)
         self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
         if self.session is not None:
             self.session.state(state_row(now, self.snapshot))
@@ -378,6 +406,78 @@ class Terminal:
             set=fault_names(word & ~was),
             cleared=fault_names(was & ~word),
         )
+
+    # ---- the GNSS lag ---------------------------------------------------------------------------
+    def _fixed_lag_ms(self) -> float | None:
+        """[ecu] gnss_lag_ms when it is a number (a fixed lag), None for "auto"."""
+        return self.cfg.ecu.overrides.get("gnss_lag_ms")
+
+    def _lag_start_ms(self) -> int | None:
+        """Where the ECU's learning starts: the lag learned so far in this session, else the
+        one kept for this receiver's input (a fixed gnss_lag_ms overrides both)."""
+        if self.lag_watch.learned_ms is not None:
+            return self.lag_watch.learned_ms
+        return self.lag_start.lag_ms if self.lag_start is not None else None
+
+    def _lag_view(self) -> LagView | None:
+        frame = self.link.ecu.lag
+        if frame is None or not self.link.ecu_alive:
+            return None
+        return LagView.of(frame, self._fixed_lag_ms())
+
+    def _track_lag(self, now: float) -> None:
+        frame = self.link.ecu.lag
+        if frame is None or not self.link.ecu_alive:
+            return
+        change = self.lag_watch.update(now, frame, self._fixed_lag_ms())
+        if change is not None:
+            self.log_event(now, "gnss_lag.changed", **change.detail())
+            if change.tell():
+                self.event(change.message())
+            else:
+                log.info("%s", change.message())
+            if frame.learned_ms is not None:
+                self._keep_lag(now, final=False)
+        warning = self.lag_watch.warning(now)
+        if warning is not None:
+            log.warning("%s", warning)
+            self.event(warning)
+
+    def _on_receiver(self, now: float) -> None:
+        """The receiver's identity settled: said in the log, and told when the lag pushed at
+        start was kept for another receiver on this input."""
+        rid = self.receiver.receiver
+        start = self.lag_start
+        same = start.receiver.same(rid) if start is not None else None
+        self.log_event(
+            now,
+            "gnss_lag.receiver",
+            input=rid.input,
+            sentences=list(rid.sentences),
+            versions=list(rid.versions),
+            start_ms=start.lag_ms if start is not None else None,
+            same_receiver=same,
+        )
+        if same is False:
+            self.event(text("event.gnss_lag_other", input=rid.input))
+
+    def _keep_lag(self, now: float, final: bool) -> None:
+        """Keep the learned lag for this receiver (in the background while running); at the end
+        of the session also the `gnss_lag.kept` event, saying what was kept."""
+        rid = self.receiver.receiver
+        learned = self.lag_watch.learned_ms
+        if learned is not None and rid.known:
+            self.lags.keep(rid, learned, wait=final)
+        if final:
+            self.lags.wait()
+            self.log_event(
+                now,
+                "gnss_lag.kept",
+                input=rid.input,
+                sentences=list(rid.sentences),
+                lag_ms=learned if rid.known else None,
+                error=self.lags.error,
+            )
 
     def _track_gnss_state(self, gnss_kmh: float | None, now: float) -> None:
         if gnss_kmh is not None:
@@ -479,6 +579,7 @@ class Terminal:
             distance_m=self.ndvi.odometer.distance_m,
             counters=self._counters(),
             last_event=self._last_event,
+            gnss_lag=self._lag_view(),
             **site,
         )
 

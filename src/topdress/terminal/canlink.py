@@ -12,7 +12,8 @@ seconds on any monotonic clock (virtual in tests). It
 - sends the paper's PcCommand every `command_period_s`, at once on a new GNSS speed when
   `send_on_gnss` is set, and at once when start, fan or a rate changes when `send_on_rate` is
   set (the terminal sets the command once per 100 ms tick, so at most every 100 ms);
-- decodes EcuStatus, EcuDiag, EcuSpeeds and EcuTargets, counting foreign and malformed frames;
+- decodes EcuStatus, EcuDiag, EcuSpeeds, EcuTargets and EcuGnssLag, counting foreign and
+  malformed frames;
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
   and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
   An ECU never heard is waited for ("wait"), not lost.
@@ -88,6 +89,7 @@ class EcuView:
     status_t: float | None = None
     cal: protocol.EcuCalStatus | None = None  # the catch test's status (calibration)
     cal_t: float | None = None  # when that status arrived (the terminal's clock)
+    lag: protocol.EcuGnssLag | None = None  # the GNSS lag in use and learned
 
 
 @dataclass
@@ -481,6 +483,8 @@ class CanLink:
             self._on_ack(decoded, now)
         elif isinstance(decoded, protocol.EcuCalStatus):
             self.ecu = replace(self.ecu, cal=decoded, cal_t=now)
+        elif isinstance(decoded, protocol.EcuGnssLag):
+            self.ecu = replace(self.ecu, lag=decoded)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
     def _on_heard(self, now: float, back: bool) -> None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from topdress import protocol
-from topdress.i18n import Text
+from topdress.i18n import Text, text
 from topdress.view.commands import ManualView
 
 TICK_S = 0.1  # the control tick, and the period of snapshots and state rows (10 Hz)
@@ -58,6 +58,34 @@ class DeviceLine:
     t_s: float
     raw: str
     decoded: str
+
+
+#: Where the GNSS lag in use comes from (EcuGnssLag.LagState 0..3, docs/protocol.md).
+LAG_STATES = ("start", "learned", "fixed", "overruled")
+
+
+@dataclass(frozen=True)
+class LagView:
+    """The GNSS lag as the ECU reports it (EcuGnssLag): the one in use, the one learned from
+    the wheel (None until learned), where the one in use comes from (LAG_STATES) and the
+    configured fixed lag ([ecu] gnss_lag_ms; None for "auto")."""
+
+    in_use_ms: int
+    learned_ms: int | None
+    state: str
+    fixed_ms: float | None = None
+
+    @classmethod
+    def of(cls, frame: protocol.EcuGnssLag, fixed_ms: float | None) -> LagView:
+        state = LAG_STATES[frame.state] if 0 <= frame.state < len(LAG_STATES) else "start"
+        return cls(frame.in_use_ms, frame.learned_ms, state, fixed_ms)
+
+    def text(self) -> Text:
+        """One short text: "GNSS lag 0.95 s (learned)"."""
+        s = self.in_use_ms / 1000
+        if self.state == "overruled" and self.fixed_ms is not None:
+            return text("lag.overruled", s=s, fixed=self.fixed_ms / 1000)
+        return text(f"lag.{self.state}", s=s)
 
 
 @dataclass(frozen=True)
@@ -119,6 +147,7 @@ class Snapshot:
     outlet_lon: float | None = None
     zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
     prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
+    gnss_lag: LagView | None = None  # the ECU's GNSS lag (None: no EcuGnssLag heard)
 
 
 def ecu_values(

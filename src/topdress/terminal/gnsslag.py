@@ -1,0 +1,274 @@
+"""The GNSS lag the ECU learns: watched, told, and kept per receiver for the next session.
+
+The ECU learns the lag of the GNSS speed behind the wheel and reports it in `EcuGnssLag` every
+100 ms (docs/speed.md, "The GNSS lag, learned"). The terminal
+
+- **watches** it (`LagWatch`): a change of where the lag in use comes from (start value,
+  learned, fixed, a fixed lag overruled by the data) and a learned lag that moves by more than
+  `MOVE_MS` are events (`gnss_lag.changed` in the session log). The operator is told when a lag
+  is first learned, and warned when the data overrule a fixed lag for `WARN_S` (the learner's
+  first estimate, after 1.5 s of speed change, can still be far from where it settles: it
+  overruled a right 1.3 s for 5 s on the simulated machine; the session log has it at once);
+- **keeps** it (`LagStore`): the last learned lag per receiver (topdress.terminal.receiver) in a
+  small JSON file beside the session logs, `STORE_FILE`, written atomically whenever the learned
+  lag changes (a background thread: the write ends in an fsync) and at the end of the session; the
+  next session pushes the lag kept for its GNSS input as `GnssLag`, the start of the learning.
+
+A file that cannot be read or parsed is an error told to the operator and logged, never a crash:
+a damaged one is moved aside (`.damaged`) and the lags are learned anew.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from topdress import protocol
+from topdress.i18n import Text, text
+from topdress.outpath import atomic_write
+from topdress.terminal.receiver import ReceiverId
+from topdress.view.snapshot import LagView
+
+log = logging.getLogger(__name__)
+
+STORE_FILE = "gnss-lag.json"
+STORE_VERSION = 1
+MAX_RECEIVERS = 32  # the file keeps the receivers used most recently
+MAX_LAG_MS = 3000  # GnssLag's range (DBC)
+MOVE_MS = 100  # a learned lag that moves by more than this is an event (and kept)
+WARN_S = 10.0  # a fixed lag overruled this long is a warning to the operator
+
+
+@dataclass(frozen=True)
+class KeptLag:
+    """The lag learned with one receiver, and when (local ISO time)."""
+
+    receiver: ReceiverId
+    lag_ms: int
+    updated: str
+
+
+def _now_iso() -> str:
+    return dt.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+def _strings(raw: Any, name: str) -> tuple[str, ...]:
+    if not isinstance(raw, list) or not all(isinstance(x, str) for x in raw):
+        raise ValueError(f"{name} is not a list of strings")
+    return tuple(raw)
+
+
+def _entry(raw: Any) -> KeptLag:
+    if not isinstance(raw, dict):
+        raise ValueError("a receiver is not an object")
+    lag = raw.get("lag_ms")
+    if type(lag) is not int or not 0 <= lag <= MAX_LAG_MS:
+        raise ValueError(f"lag_ms {lag!r} is not a whole number of ms in 0..{MAX_LAG_MS}")
+    where = raw.get("input")
+    if not isinstance(where, str) or not where:
+        raise ValueError("a receiver has no input")
+    receiver = ReceiverId(
+        where,
+        tuple(sorted(_strings(raw.get("sentences", []), "sentences"))),
+        _strings(raw.get("versions", []), "versions"),
+    )
+    return KeptLag(receiver, lag, str(raw.get("updated", "")))
+
+
+def _as_json(k: KeptLag) -> dict[str, Any]:
+    r = k.receiver
+    return {
+        "input": r.input,
+        "sentences": list(r.sentences),
+        "versions": list(r.versions),
+        "lag_ms": k.lag_ms,
+        "updated": k.updated,
+    }
+
+
+class LagStore:
+    """The lags kept per receiver, in `path` (None: in memory only)."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+        self.error: str | None = None  # the last load/save problem, for the operator
+        self.kept: list[KeptLag] = []  # oldest first: the last is the most recent
+        self._writer: ThreadPoolExecutor | None = None
+        if path is not None:
+            self._load(path)
+
+    def _load(self, path: Path) -> None:
+        try:
+            raw = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return
+        except (OSError, UnicodeDecodeError) as exc:
+            self.error = f"cannot read {path}: {exc}"
+            log.warning("%s", self.error)
+            return
+        try:
+            doc = json.loads(raw)
+            if not isinstance(doc, dict) or not isinstance(doc.get("receivers"), list):
+                raise ValueError("not an object with a list of receivers")
+            self.kept = [_entry(x) for x in doc["receivers"]]
+        except (ValueError, RecursionError) as exc:
+            aside = path.with_name(path.name + ".damaged")
+            try:
+                os.replace(path, aside)
+                where = f"moved to {aside}"
+            except OSError as err:
+                where = f"not moved aside ({err})"
+            self.kept = []
+            self.error = f"{path} damaged ({exc}): {where}; the lag is learned anew"
+            log.warning("%s", self.error)
+
+    def for_input(self, where: str) -> KeptLag | None:
+        """The lag kept most recently for a receiver on this input."""
+        return next((k for k in reversed(self.kept) if k.receiver.input == where), None)
+
+    def for_receiver(self, receiver: ReceiverId) -> KeptLag | None:
+        """The lag kept for this receiver (topdress.terminal.receiver.ReceiverId.same)."""
+        return next((k for k in reversed(self.kept) if k.receiver.same(receiver)), None)
+
+    def keep(self, receiver: ReceiverId, lag_ms: int, wait: bool = True) -> None:
+        """Keep `lag_ms` for `receiver` (it becomes the most recent) and write the file; with
+        `wait` False in the background. The lag is bounded to GnssLag's 0..3000 ms."""
+        lag = min(max(int(lag_ms), 0), MAX_LAG_MS)
+        others = [k for k in self.kept if not k.receiver.same(receiver)]
+        self.kept = [*others, KeptLag(receiver, lag, _now_iso())][-MAX_RECEIVERS:]
+        if self.path is None:
+            return
+        doc = {"version": STORE_VERSION, "receivers": [_as_json(k) for k in self.kept]}
+        body = json.dumps(doc, indent=2) + "\n"
+        if wait:
+            self.wait()
+            self._write(body)
+            return
+        if self._writer is None:
+            self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnss-lag")
+        self._writer.submit(self._write, body)  # one worker: the newest text lands last
+
+    def wait(self) -> None:
+        """Until the background writes are done."""
+        if self._writer is not None:
+            self._writer.shutdown(wait=True)
+            self._writer = None
+
+    def _write(self, body: str) -> None:
+        assert self.path is not None
+        try:
+            atomic_write(self.path, body)
+        except OSError as exc:
+            self.error = f"cannot save {self.path}: {exc}"
+            log.warning("%s", self.error)
+
+
+@dataclass(frozen=True)
+class LagChange:
+    """A change of the ECU's GNSS lag worth an event: where the lag in use comes from (`state`,
+    `was` before; None for the first frame heard), or a learned lag moved by more than MOVE_MS
+    (`moved_from_ms`)."""
+
+    view: LagView
+    was: str | None
+    evidence_s: float
+    fit: float
+    moved_from_ms: int | None = None
+    warned: bool = False  # it ends an overrule the operator was warned of
+
+    @property
+    def state(self) -> str:
+        return self.view.state
+
+    def detail(self) -> dict[str, Any]:
+        """The `gnss_lag.changed` event's detail (docs/log.md)."""
+        v = self.view
+        out: dict[str, Any] = {
+            "state": v.state,
+            "was": self.was,
+            "lag_ms": v.in_use_ms,
+            "learned_ms": v.learned_ms,
+            "evidence_s": round(self.evidence_s, 1),
+            "fit": round(self.fit, 2),
+            "fixed_ms": v.fixed_ms,
+        }
+        if self.moved_from_ms is not None:
+            out["moved_from_ms"] = self.moved_from_ms
+        return out
+
+    def message(self) -> Text:
+        """The change in words (the program log)."""
+        v, s = self.view, self.view.in_use_ms / 1000
+        if self.moved_from_ms is not None and v.learned_ms is not None:
+            was = self.moved_from_ms / 1000
+            return text("event.gnss_lag_moved", s=v.learned_ms / 1000, was=was)
+        if v.state == "overruled":
+            return text("event.gnss_lag_overruled", fixed=(v.fixed_ms or 0.0) / 1000, s=s)
+        if v.state == "fixed" and self.was == "overruled":
+            return text("event.gnss_lag_fixed", fixed=(v.fixed_ms or 0.0) / 1000)
+        if v.state == "start":
+            return text("event.gnss_lag_start", s=s)
+        return text("event.gnss_lag_learned", s=s) if v.learned_ms is not None else v.text()
+
+    def tell(self) -> bool:
+        """Whether the operator is told: a lag learned (not its moves, shown on the screens),
+        learning started again, the end of an overrule they were warned of. The first frame's
+        start and a fixed lag in force are the normal start, and an overrule is told by
+        `LagWatch.warning` once it holds."""
+        if self.moved_from_ms is not None or self.was is None:
+            return False
+        if self.view.state in ("learned", "start"):
+            return True
+        return self.view.state == "fixed" and self.warned
+
+
+class LagWatch:
+    """Turns the stream of EcuGnssLag frames into the changes worth an event."""
+
+    def __init__(self) -> None:
+        self.state: str | None = None
+        self.learned_ms: int | None = None  # the last learned lag the ECU reported
+        self._told_ms: int | None = None  # the learned lag of the last change
+        self._view: LagView | None = None
+        self._overruled_t: float | None = None  # since when the data overrule a fixed lag
+        self._warned = False
+
+    def warning(self, now: float) -> Text | None:
+        """The warning, once, when the data have overruled the fixed lag for WARN_S."""
+        v, since = self._view, self._overruled_t
+        if v is None or since is None or self._warned or now - since < WARN_S - 1e-9:
+            return None
+        self._warned = True
+        return text(
+            "event.gnss_lag_overruled", fixed=(v.fixed_ms or 0.0) / 1000, s=v.in_use_ms / 1000
+        )
+
+    def update(
+        self, now: float, frame: protocol.EcuGnssLag, fixed_ms: float | None
+    ) -> LagChange | None:
+        view = LagView.of(frame, fixed_ms)
+        self._view = view
+        if frame.learned_ms is not None:
+            self.learned_ms = frame.learned_ms
+        was, moved = self.state, None
+        if view.state == was:
+            told, learned = self._told_ms, frame.learned_ms
+            if learned is None or (told is not None and abs(learned - told) <= MOVE_MS):
+                return None
+            if told is None:  # learned while the state stayed (fixed, agreeing)
+                self._told_ms = learned
+                return None
+            moved = told
+        warned = False
+        if view.state != was:
+            warned, self._warned = self._warned, False
+            self._overruled_t = now if view.state == "overruled" else None
+        self.state = view.state
+        self._told_ms = frame.learned_ms
+        return LagChange(view, was, frame.evidence_s, frame.fit, moved, warned)
