@@ -80,6 +80,7 @@ EVENT_KINDS: Final = (
     "calibration.wheel",
     "calibration.fan",
     "calibration.lead",
+    "map.distance",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (
