@@ -10,7 +10,9 @@ import sqlite3
 import struct
 import subprocess
 import sys
+import time
 import xml.etree.ElementTree as ET
+from datetime import UTC, datetime
 from pathlib import Path
 
 import can
@@ -245,6 +247,36 @@ def test_can_trace_reads_in_python_can_and_cantools(session: Path, tmp_path: Pat
         timeout=120,
     ).stdout
     assert played.count("ID: 185c6465") == decoded.count("EcuStatus(")
+
+
+def test_the_asc_header_is_the_sessions_utc_in_any_time_zone(
+    session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    log, asc = tmp_path / "bus.log", tmp_path / "bus.asc"
+    assert main(["log", "export", str(session), "--can", str(log)]) == 0
+    first = next(iter(can.LogReader(log))).timestamp  # candump: UTC seconds
+    want = datetime.fromtimestamp(first, UTC)
+    stamp = want.strftime("%a %b %d %H:%M:%S.") + f"{want.microsecond // 1000:03d} {want.year}"
+    monkeypatch.setenv("TZ", "Asia/Shanghai")  # UTC+8: a local time would read 8 h later
+    time.tzset()
+    try:
+        assert main(["log", "export", str(session), "--can", str(asc)]) == 0
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    head = asc.read_text().splitlines()[:4]
+    # the file's date and its trigger block: the session's first frame, not the export's day
+    assert head[0] == f"date {stamp}" and head[3] == f"Begin Triggerblock {stamp}"
+
+
+def test_a_trace_of_another_format_is_refused_naming_the_users_path(
+    session: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blf, csv = tmp_path / "bus.blf", tmp_path / "state.csv"
+    assert main(["log", "export", str(session), "--csv", str(csv), "--can", str(blf)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"topdress: error: {blf}: a CAN trace is .log (candump) or .asc")
+    assert ".tmp" not in err and not blf.exists() and not csv.exists()  # nothing half done
 
 
 def test_a_session_without_the_added_columns_still_exports(session: Path, tmp_path: Path) -> None:

@@ -116,6 +116,10 @@ def _export(args: argparse.Namespace) -> int:
         )
     for out_path in outs:  # a typo must not truncate the session it reads (or its WAL)
         check_output(out_path, [args.session])
+    if args.can is not None:  # before anything is written, naming the user's path
+        from topdress.geo.cantrace import check_trace_path
+
+        check_trace_path(args.can)
     if len({str(p) for p in outs if not is_stdout(p)}) < len([p for p in outs if not is_stdout(p)]):
         raise OutputError("two outputs name the same file: give each its own")
     if args.out is not None and is_stdout(args.out):
@@ -155,7 +159,10 @@ def _export(args: argparse.Namespace) -> int:
 
             # python-can picks the trace format by the file's extension: keep it on the temp.
             n = write_output(
-                args.can, [args.session], lambda tmp: write_trace(reader, tmp), args.can.suffix
+                args.can,
+                [args.session],
+                lambda tmp: write_trace(reader, tmp, shown=args.can),
+                args.can.suffix,
             )
             print(f"{args.can}: {n} CAN frames", file=report)
     _warn(reader)
