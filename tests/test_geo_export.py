@@ -134,11 +134,19 @@ def test_isoxml_task_data_reads_back(session: Path, tmp_path: Path) -> None:
     task = task_data.tasks[0]
     assert [t.filename for t in task.time_logs] == ["TLG00001"]
     ddis = {int.from_bytes(d.ddi, "big") for d in task_data.devices[0].process_data}
-    assert {6, 7, 67, 81, 141, 397, 400} <= ddis
+    assert {6, 7, 67, 81, 141, 352, 397, 400} <= ddis
     tim = task.times[0]
     assert (tim.start.offset, tim.stop.offset) == (0, 0)  # UTC, not a local time
-    totals = {v.device_element_id_ref: v.process_data_value for v in tim.data_log_values}
-    assert totals["DET2"] + totals["DET3"] == pytest.approx(_summary_kg(session), abs=1.0)
+    totals = {
+        (int.from_bytes(v.process_data_ddi, "big"), v.device_element_id_ref): v.process_data_value
+        for v in tim.data_log_values
+    }
+    kg = _summary_kg(session)
+    # DDI 352 in g: the summary's kg to the gram (one gram of rounding per layer); DDI 81 in
+    # whole kg, its resolution
+    assert totals[(352, "DET2")] + totals[(352, "DET3")] == pytest.approx(kg * 1000.0, abs=2.0)
+    assert totals[(81, "DET2")] == round(totals[(352, "DET2")] / 1000.0)
+    assert totals[(81, "DET2")] + totals[(81, "DET3")] == pytest.approx(kg, abs=1.0)
     records = _read_tlg(out / "TLG00001.XML", bins["TLG00001"])
     _, pts = _read(_gpkg(session, tmp_path), "as_applied_points")
     assert len(records) == len(pts["IsoTime"])
