@@ -182,9 +182,7 @@ def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Pat
         # DDI 81 at its resolution (whole kg) for the software that reads only it; DDI 352
         # the same total in g
         ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS), B=str(round(layer_kg)), C=det)
-        ET.SubElement(
-            tim, "DLV", A=_hex(DDI_TOTAL_MASS_G), B=str(round(layer_kg * 1000.0)), C=det
-        )
+        ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS_G), B=str(round(layer_kg * 1000.0)), C=det)
     ET.SubElement(tsk, "TLG", A=TLG, C="1")  # C 1: binary time log
     files = [directory / "TASKDATA.XML", directory / f"{TLG}.XML", directory / f"{TLG}.BIN"]
     dlvs = _dlvs()
