@@ -331,3 +331,28 @@ def test_eq4_inverted_over_columns_is_the_c_function() -> None:
     got = rate_kg_ha(rpm, v, 3.6, 0.3, 0.5)
     want = [meter_rate_kg_ha(3.6, r, s, 0.3, 0.5) for r, s in zip(rpm, v, strict=True)]
     assert got == pytest.approx(want, rel=1e-5, abs=1e-6)
+
+
+def test_the_fmis_shapefile_has_numeric_attributes_only(session: Path, tmp_path: Path) -> None:
+    out = tmp_path / "f.shp"
+    args = ["log", "export", str(session), "--format", "shp", "--fmis", "--out", str(out)]
+    assert main(args) == 0
+    units = dict(
+        line.split("\t")[:2] for line in (tmp_path / "f_units.txt").read_text().splitlines()[1:]
+    )
+    for layer in ("f_points.shp", "f_swaths.shp"):
+        info = pyogrio.read_info(tmp_path / layer)
+        names = list(info["fields"])
+        assert len(names) <= 20 and all(len(n) <= 10 for n in names)
+        assert all(t in ("float64", "int32", "int64") for t in info["dtypes"])
+        assert set(names) <= set(units)  # every field's unit beside it
+    assert units["AppliedRt"] == "kg/ha" and units["UnixTime"] == "s"
+    _, full = _read(_gpkg(session, tmp_path), "as_applied_points")
+    meta, _, _, fields = pyogrio.raw.read(tmp_path / "f_points.shp")
+    cols = dict(zip(meta["fields"], fields, strict=True))
+    iso = np.array([s.rstrip("Z") for s in full["IsoTime"]], dtype="datetime64[ms]")
+    assert cols["UnixTime"] == pytest.approx(iso.astype(np.int64) / 1000.0, abs=1e-3)
+    assert cols["AppliedRt"] == pytest.approx(full["AppliedRate"])
+    codes = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
+    assert list(cols["SpeedSrc"]) == [codes[s] for s in full["SpeedSrc"]]
+    assert main([*args[:-2], "--format", "gpkg", "--out", str(tmp_path / "x.gpkg")]) == 2
