@@ -14,6 +14,7 @@ import can
 from topdress.config import loads_config
 from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
+from topdress.i18n import render
 from topdress.log.session import SessionLog
 from topdress.sim.gnss import GnssParams
 from topdress.sim.tractor import Drive
@@ -38,16 +39,19 @@ def record(
     drive: Drive,
     until_s: float,
     on_step: Callable[[World], None] | None = None,
+    on_event: list[str] | None = None,
 ) -> Path:
     """Run the terminal with `config_toml` over `drive` until `until_s`; the session file.
-    `on_step` sees the simulated world after each of its steps (its ground truth)."""
+    `on_step` sees the simulated world after each of its steps (its ground truth); `on_event`
+    gets what the operator is told, in English."""
     cfg = loads_config(config_toml)
     cfg = replace(cfg, can=replace(cfg.can, channel=f"test-geo-{next(_channels)}"))
     world = World(seed=5, drive=drive)
     gnss, crop = FakeLineSource(), FakeLineSource()
     pc_bus, ecu_bus = open_bus(cfg.can), open_bus(cfg.can)
     session = SessionLog.create(directory, config_toml)
-    term = Terminal(cfg, gnss, crop, pc_bus, session, clock=lambda: world.t_s)
+    told = (lambda m: on_event.append(render(m, "en"))) if on_event is not None else None
+    term = Terminal(cfg, gnss, crop, pc_bus, session, clock=lambda: world.t_s, on_event=told)
     term.open()
     try:
         while world.t_s < until_s - 1e-9:

@@ -10,7 +10,9 @@ import sqlite3
 import struct
 import subprocess
 import sys
+import time
 import xml.etree.ElementTree as ET
+from datetime import UTC, datetime
 from pathlib import Path
 
 import can
@@ -132,11 +134,19 @@ def test_isoxml_task_data_reads_back(session: Path, tmp_path: Path) -> None:
     task = task_data.tasks[0]
     assert [t.filename for t in task.time_logs] == ["TLG00001"]
     ddis = {int.from_bytes(d.ddi, "big") for d in task_data.devices[0].process_data}
-    assert {6, 7, 67, 81, 141, 397, 400} <= ddis
+    assert {6, 7, 67, 81, 141, 352, 397, 400} <= ddis
     tim = task.times[0]
     assert (tim.start.offset, tim.stop.offset) == (0, 0)  # UTC, not a local time
-    totals = {v.device_element_id_ref: v.process_data_value for v in tim.data_log_values}
-    assert totals["DET2"] + totals["DET3"] == pytest.approx(_summary_kg(session), abs=1.0)
+    totals = {
+        (int.from_bytes(v.process_data_ddi, "big"), v.device_element_id_ref): v.process_data_value
+        for v in tim.data_log_values
+    }
+    kg = _summary_kg(session)
+    # DDI 352 in g: the summary's kg to the gram (one gram of rounding per layer); DDI 81 in
+    # whole kg, its resolution
+    assert totals[(352, "DET2")] + totals[(352, "DET3")] == pytest.approx(kg * 1000.0, abs=2.0)
+    assert totals[(81, "DET2")] == round(totals[(352, "DET2")] / 1000.0)
+    assert totals[(81, "DET2")] + totals[(81, "DET3")] == pytest.approx(kg, abs=1.0)
     records = _read_tlg(out / "TLG00001.XML", bins["TLG00001"])
     _, pts = _read(_gpkg(session, tmp_path), "as_applied_points")
     assert len(records) == len(pts["IsoTime"])
@@ -247,6 +257,36 @@ def test_can_trace_reads_in_python_can_and_cantools(session: Path, tmp_path: Pat
     assert played.count("ID: 185c6465") == decoded.count("EcuStatus(")
 
 
+def test_the_asc_header_is_the_sessions_utc_in_any_time_zone(
+    session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    log, asc = tmp_path / "bus.log", tmp_path / "bus.asc"
+    assert main(["log", "export", str(session), "--can", str(log)]) == 0
+    first = next(iter(can.LogReader(log))).timestamp  # candump: UTC seconds
+    want = datetime.fromtimestamp(first, UTC)
+    stamp = want.strftime("%a %b %d %H:%M:%S.") + f"{want.microsecond // 1000:03d} {want.year}"
+    monkeypatch.setenv("TZ", "Asia/Shanghai")  # UTC+8: a local time would read 8 h later
+    time.tzset()
+    try:
+        assert main(["log", "export", str(session), "--can", str(asc)]) == 0
+    finally:
+        monkeypatch.undo()
+        time.tzset()
+    head = asc.read_text().splitlines()[:4]
+    # the file's date and its trigger block: the session's first frame, not the export's day
+    assert head[0] == f"date {stamp}" and head[3] == f"Begin Triggerblock {stamp}"
+
+
+def test_a_trace_of_another_format_is_refused_naming_the_users_path(
+    session: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blf, csv = tmp_path / "bus.blf", tmp_path / "state.csv"
+    assert main(["log", "export", str(session), "--csv", str(csv), "--can", str(blf)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"topdress: error: {blf}: a CAN trace is .log (candump) or .asc")
+    assert ".tmp" not in err and not blf.exists() and not csv.exists()  # nothing half done
+
+
 def test_a_session_without_the_added_columns_still_exports(session: Path, tmp_path: Path) -> None:
     old = tmp_path / "old.sqlite"
     shutil.copy(session, old)
@@ -291,3 +331,28 @@ def test_eq4_inverted_over_columns_is_the_c_function() -> None:
     got = rate_kg_ha(rpm, v, 3.6, 0.3, 0.5)
     want = [meter_rate_kg_ha(3.6, r, s, 0.3, 0.5) for r, s in zip(rpm, v, strict=True)]
     assert got == pytest.approx(want, rel=1e-5, abs=1e-6)
+
+
+def test_the_fmis_shapefile_has_numeric_attributes_only(session: Path, tmp_path: Path) -> None:
+    out = tmp_path / "f.shp"
+    args = ["log", "export", str(session), "--format", "shp", "--fmis", "--out", str(out)]
+    assert main(args) == 0
+    units = dict(
+        line.split("\t")[:2] for line in (tmp_path / "f_units.txt").read_text().splitlines()[1:]
+    )
+    for layer in ("f_points.shp", "f_swaths.shp"):
+        info = pyogrio.read_info(tmp_path / layer)
+        names = list(info["fields"])
+        assert len(names) <= 20 and all(len(n) <= 10 for n in names)
+        assert all(t in ("float64", "int32", "int64") for t in info["dtypes"])
+        assert set(names) <= set(units)  # every field's unit beside it
+    assert units["AppliedRt"] == "kg/ha" and units["UnixTime"] == "s"
+    _, full = _read(_gpkg(session, tmp_path), "as_applied_points")
+    meta, _, _, fields = pyogrio.raw.read(tmp_path / "f_points.shp")
+    cols = dict(zip(meta["fields"], fields, strict=True))
+    iso = np.array([s.rstrip("Z") for s in full["IsoTime"]], dtype="datetime64[ms]")
+    assert cols["UnixTime"] == pytest.approx(iso.astype(np.int64) / 1000.0, abs=1e-3)
+    assert cols["AppliedRt"] == pytest.approx(full["AppliedRate"])
+    codes = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
+    assert list(cols["SpeedSrc"]) == [codes[s] for s in full["SpeedSrc"]]
+    assert main([*args[:-2], "--format", "gpkg", "--out", str(tmp_path / "x.gpkg")]) == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,9 @@ from geo_rig import record
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML
 from topdress.geo.mapview import rate_classes, rpm_classes
-from topdress.sim.tractor import Drive
+from topdress.log.session import SessionReader
+from topdress.log.summary import summarise
+from topdress.sim.tractor import Drive, Segment
 
 
 @pytest.fixture(scope="module")
@@ -42,9 +45,48 @@ def test_rate_classes_cover_the_values_with_a_class_for_nothing_applied() -> Non
     values = np.array([0.0, 0.0, 152.0, 180.0, 199.0, 240.0, 251.0])
     classes = rate_classes(values, n=5)
     assert classes[0].label == "0 kg/ha"
+    # the first class holds every value above 0 below its top, also those under its 2nd
+    # percentile bound: its label must not say it starts there
+    assert classes[1].lo == 1e-9 and classes[1].label == f"<{classes[1].hi:g} kg/ha"
     assert classes[1].lo < 152.0 and classes[-1].hi == float("inf")
     for v in values:
         hits = [c for c in classes if c.lo <= v < c.hi]
         assert len(hits) == 1
         assert (hits[0] is classes[0]) == (v == 0.0)
     assert rpm_classes()[1].label == "0-10 r/min" and rpm_classes()[-1].label == ">40 r/min"
+
+
+def test_the_map_shows_the_summarys_stops(
+    session: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with SessionReader(session) as r:
+        stops = [e for e in summarise(r).stops if e.kind == "stop"]
+    html = tmp_path / "m.html"
+    assert main(["log", "map", str(session), "--out", str(html)]) == 0
+    assert f", {len(stops)} stops" in capsys.readouterr().out
+    text = html.read_text(encoding="utf-8")
+    drawn = json.loads(text.split("const L_DATA = ", 1)[1].split(";\n", 1)[0])["stops"]
+    assert len(drawn) == len(stops) >= 1
+    for (lon, lat), e in zip(drawn, stops, strict=True):
+        assert (lat, lon) == pytest.approx((e.lat, e.lon), abs=1e-7)
+
+
+def test_the_png_holds_its_legend_and_labels_whole(tmp_path: Path) -> None:
+    # a map wider than high (one pass east): the legend beside it used to run off the image
+    east = Drive(
+        [
+            Segment("stop", duration_s=2.0),
+            Segment("turn", speed_kmh=3.0, angle_deg=-90.0, radius_m=2.0),
+            Segment("straight", speed_kmh=8.0, length_m=60.0),
+            Segment("stop", duration_s=3.0),
+        ]
+    )
+    path = record(tmp_path, DEFAULT_TOML, east, 40.0)
+    png = tmp_path / "map.png"
+    assert main(["log", "map", str(path), "--out", str(png)]) == 0
+    import matplotlib.image
+
+    img = matplotlib.image.imread(png)[:, :, :3]
+    border = np.concatenate([img[0], img[-1], img[:, 0], img[:, -1]])
+    # nothing drawn touches the edge: a cut legend, title or axis label would
+    assert np.all(border > 0.99)

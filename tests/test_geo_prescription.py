@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -531,3 +532,84 @@ def test_config_check_says_what_the_maps_hold(
     assert f"  prescription: {rx}: 2 zones, 100..300 kg/ha, extent 43.8852" in out
     assert "(40 x 50 m), read in EPSG:4326" in out
     assert "  boundary: " in out and "1 polygon, 1.00 ha, headland 10 m leaves 0.64 ha" in out
+
+
+def _with_prescription(rx: Path) -> str:
+    toml = re.sub(r'(\[prescription\][^\n]*\n)path = ""', rf'\1path = "{rx}"', DEFAULT_TOML)
+    assert f'path = "{rx}"' in toml
+    return toml
+
+
+def test_a_map_of_another_field_is_an_alarm_and_an_event_while_metering(tmp_path: Path) -> None:
+    # the issue's case: a map 500 m east of where the machine works; it drives 40 m at 8 km/h
+    rx = write_polygons(tmp_path / "rx.gpkg", [box(500, 0, 560, 60)], {"rate": [150.0]})
+    told: list[str] = []
+    session = record(tmp_path, _with_prescription(rx), _north(40.0), 28.0, on_event=told)
+    with SessionReader(session) as r:
+        events = list(r.events())
+        rows = list(r.states())
+    # the first fix says how far the map is, in the log and to the operator
+    said = [e.detail for e in events if e.kind == "map.distance"]
+    assert len(said) == 1 and said[0]["map"] == "prescription" and said[0]["file"] == "rx.gpkg"
+    assert said[0]["distance_m"] == pytest.approx(500.0, abs=5.0)
+    assert any(re.fullmatch(r"prescription: rx\.gpkg: 50\d m from the machine", t) for t in told)
+    raised = [e for e in events if e.kind == "alarm.raised"]
+    assert [e.detail["name"] for e in raised] == ["wrong_field_prescription"]
+    assert raised[0].detail["distance_m"] == pytest.approx(500.0, abs=5.0)
+    assert raised[0].detail["limit_m"] == 50.0
+    assert any(t.startswith("alarm: metering 50") and "rx.gpkg (limit 50 m)" in t for t in told)
+    assert sum(r.rate_kg_ha_upper + r.rate_kg_ha_lower for r in rows) == 0.0  # nothing metered
+    # raised once: while metering, it stays active (no new event at every tick)
+    assert raised[0].t < 3.5
+
+
+def test_the_wrong_field_alarm_is_off_at_0_and_quiet_on_the_map(tmp_path: Path) -> None:
+    far = write_polygons(tmp_path / "far.gpkg", [box(500, 0, 560, 60)], {"rate": [150.0]})
+    toml = _with_prescription(far).replace("outside_alarm_m = 50.0", "outside_alarm_m = 0.0", 1)
+    assert "outside_alarm_m = 0.0" in toml
+    session = record(tmp_path, toml, _north(10.0), 8.0)
+    with SessionReader(session) as r:
+        assert not [e for e in r.events() if e.kind == "alarm.raised"]
+    near = two_zones(tmp_path / "near.gpkg")
+    session = record(tmp_path, _with_prescription(near), _north(10.0), 8.0)
+    with SessionReader(session) as r:
+        events = list(r.events())
+    assert not [e for e in events if e.kind == "alarm.raised"]
+    assert [e.detail["distance_m"] for e in events if e.kind == "map.distance"] == [0.0]
+    from topdress.config import loads_config
+    from topdress.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"prescription\.outside_alarm_m"):
+        loads_config("[prescription]\noutside_alarm_m = -1\n")
+    with pytest.raises(ConfigError, match=r"boundary\.outside_alarm_m"):
+        loads_config('[boundary]\noutside_alarm_m = "far"\n')
+
+
+def test_the_map_guard_judges_the_boundary_with_hysteresis(tmp_path: Path) -> None:
+    from topdress.terminal.alarms import AlarmBook, AlarmInputs
+    from topdress.terminal.site import MapGuard, Maps
+
+    field = load_boundary(
+        BoundaryConfig(
+            path=str(write_polygons(tmp_path / "f.geojson", [box(0, 0, 100, 100)], {"n": [1]}))
+        )
+    )
+    guard = MapGuard(Maps(None, field), boundary_m=50.0)
+    assert guard.distances(*latlon(50, 50)) == [("boundary", "f.geojson", 0.0)]
+    assert guard.outside(*latlon(145, 50)) == ()  # 45 m out: a headland turn, no alarm
+    (off,) = guard.outside(*latlon(155, 50))
+    assert (off.which, off.name, off.limit_m) == ("boundary", "f.geojson", 50.0)
+    assert off.distance_m == pytest.approx(55.0, abs=0.5)
+    assert guard.outside(*latlon(145, 50)) != ()  # held until back within 80 % of the limit
+    assert guard.outside(*latlon(139, 50)) == ()
+    book = AlarmBook(10.0, 5.0)
+    x = AlarmInputs(False, (0, 0), (0, 0), 0, "ok", "ok", "ok", off_map=(off,))
+    assert book.update(0.0, x) == []  # not metering: the meters are off anyway
+    ((name, what),) = book.update(0.1, replace(x, metering=True))
+    assert name == "wrong_field_boundary" and dict(what.values)["distance_m"] == 55
+    from topdress.i18n import render, set_language
+
+    for lang in ("en", "zh"):
+        set_language(lang)  # type: ignore[arg-type]
+        assert "f.geojson" in render(what) and "55" in render(what)
+    set_language("en")

@@ -7,6 +7,7 @@ from pathlib import Path
 import can
 import pytest
 
+from topdress import protocol
 from topdress.errors import ProtocolError
 from topdress.protocol import (
     DEFAULT_IDS,
@@ -271,3 +272,19 @@ def test_known_ids_and_parameter_names() -> None:
     assert param_name(8) == "CvThreshold" and param_name("kg_per_rev[0]") == "UpperKgPerRev"
     with pytest.raises(ProtocolError):
         param_name(0)
+
+
+def test_speeds_not_available_are_named_in_the_dbc() -> None:
+    # 0xFFFF of the 0.01 km/h speeds is "not available", not 655.35 km/h, in any DBC tool
+    db = protocol.database()
+    for frame, signal in (("EcuSpeeds", "GnssSpeedFine"), ("PcGnssTime", "GnssSpeedPrecise")):
+        msg = db.get_message_by_name(frame)
+        raw = {s.name: 0 for s in msg.signals} | {signal: 0xFFFF}
+        data = msg.encode(raw, scaling=False, strict=False)
+        assert str(msg.decode(data)[signal]) == "not available"
+        assert msg.decode(msg.encode(raw | {signal: 812}, scaling=False, strict=False))[
+            signal
+        ] == pytest.approx(8.12)
+    speeds = protocol.decode((protocol.DEFAULT_IDS.speeds, bytes.fromhex("D007FFFFD0070000")))
+    assert isinstance(speeds, protocol.EcuSpeeds) and speeds.gnss_kmh is None
+    assert speeds.wheel_kmh == pytest.approx(20.0)

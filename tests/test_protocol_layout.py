@@ -23,7 +23,7 @@ def _reference_check(frame: str, sig: Any, raw: int) -> float:
     """The range check as the protocol wrote it before the layouts: scale, round to the
     resolution, value table, DBC range with half a step of tolerance."""
     value = float(round(raw * sig.scale + sig.offset, decimals(sig.scale)))
-    if sig.choices is not None and raw not in sig.choices:
+    if sig.choices is not None and not sig.unit and raw not in sig.choices:
         raise ProtocolError(f"{frame}.{sig.name}: undefined value {raw}")
     tol = sig.scale / 2
     if not sig.minimum - tol <= value <= sig.maximum + tol:

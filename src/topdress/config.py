@@ -221,6 +221,8 @@ class PrescriptionConfig:
     min_attribute: str = "min_rate"  # bound mode: the zone's limits (same units)
     max_attribute: str = "max_rate"
     outside_kg_ha: float = _num(0.0, 0.0, 1200.0)  # outside every zone, and with no position
+    # metering farther than this outside the map's extent is the wrong-field alarm; 0 = off
+    outside_alarm_m: float = _num(50.0, 0.0, 100_000.0)
 
 
 @dataclass(frozen=True)
@@ -229,6 +231,8 @@ class BoundaryConfig:
     path: str = ""
     layer: str = ""
     headland_m: float = _num(0.0, 0.0, 200.0)  # strip inside the boundary with the meters off
+    # metering farther than this outside the boundary is the wrong-field alarm; 0 = off
+    outside_alarm_m: float = _num(50.0, 0.0, 100_000.0)
 
 
 @dataclass(frozen=True)
@@ -811,11 +815,13 @@ mode = "alone"             # alone (the map's rate) | bound (NDVI model within t
 min_attribute = "min_rate" # bound mode: the zone's limits
 max_attribute = "max_rate"
 outside_kg_ha = 0.0        # outside every zone, and while the position is not known
+outside_alarm_m = 50.0     # metering farther than this outside the map: wrong-field alarm; 0 = off
 
 [boundary]                 # the field boundary: meters off outside it and in the headland
 path = ""                  # .gpkg, .shp, .geojson polygons or ISOXML TASKDATA.XML
 layer = ""
 headland_m = 0.0           # headland strip inside the boundary, m
+outside_alarm_m = 50.0     # metering farther than this outside it: wrong-field alarm; 0 = off
 
 [lookahead]
 command_ms = 0             # the terminal's command path (program cycle + command period)

@@ -53,6 +53,12 @@ def register(sub: Any) -> None:
         help="coordinates of --out: WGS 84 (default) or the field's UTM zone",
     )
     export.add_argument(
+        "--fmis",
+        action="store_true",
+        help="with --format shp: numeric attributes only (at most 20, names of at most 10 "
+        "characters), units in NAME_units.txt, as farm management software imports them",
+    )
+    export.add_argument(
         "--can", type=Path, metavar="OUT.log|OUT.asc", help="write the CAN traffic (candump/asc)"
     )
     export.set_defaults(func=_export)
@@ -116,8 +122,14 @@ def _export(args: argparse.Namespace) -> int:
         )
     for out_path in outs:  # a typo must not truncate the session it reads (or its WAL)
         check_output(out_path, [args.session])
+    if args.can is not None:  # before anything is written, naming the user's path
+        from topdress.geo.cantrace import check_trace_path
+
+        check_trace_path(args.can)
     if len({str(p) for p in outs if not is_stdout(p)}) < len([p for p in outs if not is_stdout(p)]):
         raise OutputError("two outputs name the same file: give each its own")
+    if args.fmis and (args.out is None or args.format != "shp"):
+        raise OutputError("--fmis is a Shapefile option: give --out NAME.shp --format shp")
     if args.out is not None and is_stdout(args.out):
         raise OutputError(f"--out -: the {args.format} export writes files; give a path")
     # Reports go to standard error when an output is standard output, so the data stays clean.
@@ -148,14 +160,17 @@ def _export(args: argparse.Namespace) -> int:
         if args.out is not None:
             from topdress.geo.export import export_maps
 
-            for line in export_maps(reader, args.out, args.format, args.crs, None):
+            for line in export_maps(reader, args.out, args.format, args.crs, None, args.fmis):
                 print(line, file=report)
         if args.can is not None:
             from topdress.geo.cantrace import write_trace
 
             # python-can picks the trace format by the file's extension: keep it on the temp.
             n = write_output(
-                args.can, [args.session], lambda tmp: write_trace(reader, tmp), args.can.suffix
+                args.can,
+                [args.session],
+                lambda tmp: write_trace(reader, tmp, shown=args.can),
+                args.can.suffix,
             )
             print(f"{args.can}: {n} CAN frames", file=report)
     _warn(reader)

@@ -8,17 +8,40 @@ up with the as-applied map and with other loggers on the bus.
 
 from __future__ import annotations
 
+import itertools
 import statistics
-from datetime import datetime
+from collections.abc import Iterator
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Final
+from typing import Any, Final, TextIO
 
 import can
 
 from topdress.errors import MapError
 from topdress.log.session import SessionReader
 
-FORMATS: Final = {".log": can.CanutilsLogWriter, ".asc": can.ASCWriter}
+
+class _UtcAscWriter(can.ASCWriter):
+    """Vector ASC with its header in the session's UTC: python-can's writer dates the file
+    with the export's local time and the trigger block with the first frame's local time."""
+
+    def __init__(self, file: str | Path | TextIO, start_utc: float, **kw: Any) -> None:
+        self._start = datetime.fromtimestamp(start_utc, UTC)
+        super().__init__(file, **kw)
+
+    def _format_header_datetime(self, dt: datetime) -> str:
+        # Both header dates are the session's first frame (the start of the measurement).
+        return super()._format_header_datetime(self._start.replace(tzinfo=None))
+
+
+FORMATS: Final = (".log", ".asc")
+
+
+def check_trace_path(path: Path) -> None:
+    """MapError unless `path` names a trace format (checked before anything is written)."""
+    if path.suffix.lower() not in FORMATS:
+        given = path.suffix or "no extension"
+        raise MapError(f"{path}: a CAN trace is .log (candump) or .asc (Vector), not {given}")
 
 
 def utc_offset(reader: SessionReader) -> float:
@@ -38,30 +61,42 @@ def utc_offset(reader: SessionReader) -> float:
     return 0.0
 
 
-def write_trace(reader: SessionReader, path: Path, channel: str = "can0") -> int:
-    """Every logged CAN frame (both directions) to `path` (.log or .asc); returns the count."""
-    writer_cls = FORMATS.get(path.suffix.lower())
-    if writer_cls is None:
-        raise MapError(f"{path}: a CAN trace is .log (candump) or .asc (Vector)")
-    offset = utc_offset(reader)
-    n = 0
+def write_trace(
+    reader: SessionReader, path: Path, channel: str = "can0", shown: Path | None = None
+) -> int:
+    """Every logged CAN frame (both directions) to `path` (.log or .asc); returns the count.
+    `shown`: the path errors name (the user's, when `path` is a temporary file)."""
+    name = shown if shown is not None else path
+    check_trace_path(name)
+    frames = _frames(reader, utc_offset(reader), channel)
+    first = next(frames, None)
+    writer: can.io.generic.MessageWriter
     try:
-        writer = writer_cls(path, channel=channel)
+        if path.suffix.lower() == ".asc":
+            # no frame: the session's UTC at its clock's zero
+            start = first.timestamp if first is not None else utc_offset(reader)
+            writer = _UtcAscWriter(path, start, channel=channel)
+        else:
+            writer = can.CanutilsLogWriter(path, channel=channel)
     except OSError as exc:
-        raise MapError(f"cannot write {path}: {exc}") from exc
+        raise MapError(f"cannot write {name}: {exc}") from exc
+    n = 0
     with writer:
-        for rec in reader.raw():
-            if rec.can_id is None or rec.data is None:
-                continue
-            writer.on_message_received(
-                can.Message(
-                    timestamp=rec.t + offset,
-                    arbitration_id=rec.can_id,
-                    is_extended_id=True,
-                    data=rec.data,
-                    is_rx=rec.kind == "can_rx",
-                    channel=channel,
-                )
-            )
+        for msg in itertools.chain([first] if first is not None else [], frames):
+            writer.on_message_received(msg)
             n += 1
     return n
+
+
+def _frames(reader: SessionReader, offset: float, channel: str) -> Iterator[can.Message]:
+    for rec in reader.raw():
+        if rec.can_id is None or rec.data is None:
+            continue
+        yield can.Message(
+            timestamp=rec.t + offset,
+            arbitration_id=rec.can_id,
+            is_extended_id=True,
+            data=rec.data,
+            is_rx=rec.kind == "can_rx",
+            channel=channel,
+        )

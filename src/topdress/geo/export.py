@@ -10,10 +10,16 @@ from topdress.log.session import SessionReader
 
 
 def export_maps(
-    reader: SessionReader, out: Path | None, fmt: str, crs: str, can_out: Path | None
+    reader: SessionReader,
+    out: Path | None,
+    fmt: str,
+    crs: str,
+    can_out: Path | None,
+    fmis: bool = False,
 ) -> list[str]:
     """As-applied points and swaths (or ISO 11783-10 task data) to `out`, the CAN traffic to
-    `can_out`; returns one line per file written, and what the session lacked."""
+    `can_out`; returns one line per file written, and what the session lacked. `fmis`: the
+    Shapefile for farm management software (numeric attributes only)."""
     lines: list[str] = []
     if out is not None:
         data = asapplied.build(reader)
@@ -21,7 +27,7 @@ def export_maps(
         if fmt == "isoxml":
             files = isoxml.write_taskdata(data, out, reader.path.stem)
         else:
-            files = vector.write(data, out, fmt, crs)
+            files = vector.write(data, out, fmt, crs, fmis)
         lines += [str(f) for f in files]
         lines.append(
             f"{data.point_geom.size} points, {data.swath_geom.size} swaths, "

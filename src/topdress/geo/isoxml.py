@@ -15,7 +15,8 @@ DDIs, from the ISO 11783-11 data dictionary:
 | 6 | 0006 | Setpoint Mass Per Area Application Rate | mg/m² (1 kg/ha = 100 mg/m²) |
 | 7 | 0007 | Actual Mass Per Area Application Rate | mg/m² |
 | 67 | 0043 | Actual Working Width | mm |
-| 81 | 0051 | Application Total Mass (in the task's TIM) | kg |
+| 81 | 0051 | Application Total Mass in kg (in the task's TIM) | kg, resolution 1 kg |
+| 352 | 0160 | Application Total Mass in gram (in the task's TIM) | g |
 | 141 | 008D | Actual Work State | 1 on, 0 off |
 | 397 | 018D | Actual Speed | mm/s |
 | 400 | 0190 | Speed Source | 1 wheel-based, 3 navigation-based (GNSS), 0 unknown |
@@ -57,7 +58,8 @@ DDI_ACTUAL_MASS_PER_AREA: Final = 7
 DDI_MIN_MASS_PER_AREA: Final = 9
 DDI_MAX_MASS_PER_AREA: Final = 10
 DDI_WORKING_WIDTH: Final = 67
-DDI_TOTAL_MASS: Final = 81
+DDI_TOTAL_MASS: Final = 81  # kg: its resolution is 1 kg
+DDI_TOTAL_MASS_G: Final = 352  # g: a small plot's 3.56 kg stay 3.56 kg, not 4
 DDI_WORK_STATE: Final = 141
 DDI_ACTUAL_SPEED: Final = 397
 DDI_SPEED_SOURCE: Final = 400
@@ -93,7 +95,12 @@ def _device() -> ET.Element:
         ("DET2", "2", "2", "upper layer", "1", "1", ()),
         ("DET3", "3", "2", "lower layer", "2", "1", ()),
     )
-    rate_ddis = (DDI_SETPOINT_MASS_PER_AREA, DDI_ACTUAL_MASS_PER_AREA, DDI_TOTAL_MASS)
+    rate_ddis = (
+        DDI_SETPOINT_MASS_PER_AREA,
+        DDI_ACTUAL_MASS_PER_AREA,
+        DDI_TOTAL_MASS,
+        DDI_TOTAL_MASS_G,
+    )
     dpds: list[tuple[int, int, str, int | None]] = []
     next_id = 10
     for det_id, obj, kind, name, number, parent, extra in dets:
@@ -101,7 +108,7 @@ def _device() -> ET.Element:
         ddis = (*extra, DDI_WORK_STATE, DDI_WORKING_WIDTH) if kind == "1" else rate_ddis
         for ddi in ddis:
             ET.SubElement(det, "DOR", A=str(next_id))
-            dvp = {6: 1, 7: 1, 81: 3, 397: 2, 67: 4}.get(ddi)
+            dvp = {6: 1, 7: 1, 81: 3, 352: 5, 397: 2, 67: 4}.get(ddi)
             dpds.append((next_id, ddi, f"{name} {ddi}", dvp))
             next_id += 1
     for obj_id, ddi, name, dvp in dpds:
@@ -114,6 +121,7 @@ def _device() -> ET.Element:
         (2, "0.0036", "2", "km/h"),
         (3, "1", "2", "kg"),
         (4, "0.001", "2", "m"),
+        (5, "0.001", "3", "kg"),
     ):
         ET.SubElement(dvc, "DVP", A=str(obj_id), B="0", C=scale, D=digits, E=unit)
     return dvc
@@ -171,7 +179,10 @@ def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Pat
             where=both > 0,
         )
         layer_kg = float(np.sum(np.asarray(kg, float) * share))
+        # DDI 81 at its resolution (whole kg) for the software that reads only it; DDI 352
+        # the same total in g
         ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS), B=str(round(layer_kg)), C=det)
+        ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS_G), B=str(round(layer_kg * 1000.0)), C=det)
     ET.SubElement(tsk, "TLG", A=TLG, C="1")  # C 1: binary time log
     files = [directory / "TASKDATA.XML", directory / f"{TLG}.XML", directory / f"{TLG}.BIN"]
     dlvs = _dlvs()

@@ -24,6 +24,7 @@ from topdress.errors import MapError
 from topdress.geo.asapplied import AsApplied, build, require_points
 from topdress.geo.boundary import load_boundary
 from topdress.log.session import SessionReader, session_config
+from topdress.log.summary import summarise
 
 # Colour ramp for the classes (low to high), readable in print and for most colour vision.
 RAMP: Final = ("#ffffcc", "#c2e699", "#78c679", "#31a354", "#006837", "#004529")
@@ -56,7 +57,14 @@ def rate_classes(values: npt.NDArray[np.float64], n: int = 5) -> list[MapClass]:
     edges = [lo + i * step for i in range(n + 1)]
     for i in range(n):
         top = math.inf if i == n - 1 else edges[i + 1]
-        label = f"{edges[i]:g}-{edges[i + 1]:g} kg/ha" if i < n - 1 else f">{edges[i]:g} kg/ha"
+        # the first class takes everything above 0 below its top (the values under the 2nd
+        # percentile too): its label says so
+        if i == 0:
+            label = f"<{edges[1]:g} kg/ha"
+        elif i < n - 1:
+            label = f"{edges[i]:g}-{edges[i + 1]:g} kg/ha"
+        else:
+            label = f">{edges[i]:g} kg/ha"
         classes.append(MapClass(label, RAMP[i], 1e-9 if i == 0 else edges[i], top))
     return classes
 
@@ -71,8 +79,12 @@ def rpm_classes() -> list[MapClass]:
     return out
 
 
-def map_layers(data: AsApplied, classes: str = "rate") -> dict[str, Any]:
-    """swaths (each with its class), track, stops, classes: lon/lat GeoJSON-like dicts."""
+def map_layers(
+    data: AsApplied, classes: str = "rate", stops: list[tuple[float, float]] | None = None
+) -> dict[str, Any]:
+    """swaths (each with its class), track, stops, classes: lon/lat GeoJSON-like dicts.
+    `stops`: (lon, lat) of each stop (`log summary`'s, which `render` passes); None: where the
+    exported speed falls below 0.5 km/h."""
     if classes == "rpm":
         value = np.asarray(data.swaths.get("RpmUp", np.zeros(0)), float)
         cls = rpm_classes()
@@ -86,14 +98,17 @@ def map_layers(data: AsApplied, classes: str = "rate") -> dict[str, Any]:
         k = next((i for i, c in enumerate(cls) if c.lo <= v < c.hi), 0)
         feats.append({"ring": ring, "value": round(float(v), 2), "cls": k, "zone": str(z)})
     pts = shapely.get_coordinates(data.point_geom)
-    speed = np.asarray(data.points.get("SPEED", np.zeros(0)), float)
-    moving_before = np.concatenate([[False], speed[:-1] >= STOP_KMH])
-    stop_idx = np.nonzero((speed < STOP_KMH) & moving_before)[0]
+    if stops is None:
+        speed = np.asarray(data.points.get("SPEED", np.zeros(0)), float)
+        moving_before = np.concatenate([[False], speed[:-1] >= STOP_KMH])
+        where = pts[np.nonzero((speed < STOP_KMH) & moving_before)[0]]
+    else:
+        where = np.array(stops, dtype=float).reshape(-1, 2)
     return {
         "classes": [c.__dict__ | {"lo": _finite(c.lo), "hi": _finite(c.hi)} for c in cls],
         "swaths": feats,
         "track": pts.round(8).tolist(),
-        "stops": pts[stop_idx].round(8).tolist(),
+        "stops": where.round(8).tolist(),
         "unit": "r/min" if classes == "rpm" else "kg/ha",
     }
 
@@ -124,7 +139,13 @@ def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
     """The map of the session to `out` (.png or .html); returns a line saying what was drawn."""
     data = build(reader)
     require_points(data)
-    layers = map_layers(data, classes)
+    # The summary's stops (its speed and threshold): the map shows as many as it counts.
+    stops = [
+        (e.lon, e.lat)
+        for e in summarise(reader).stops
+        if e.kind == "stop" and e.lat is not None and e.lon is not None
+    ]
+    layers = map_layers(data, classes, stops)
     layers["boundary"], why = boundary_rings(reader)
     suffix = out.suffix.lower()
     try:
@@ -182,8 +203,8 @@ def _png(layers: dict[str, Any], out: Path, title: str) -> None:
         loc="upper left",
         bbox_to_anchor=(1.02, 1.0),
     )
-    fig.tight_layout()
-    fig.savefig(out)
+    # the legend sits outside the axes: the saved figure grows to hold it and the labels
+    fig.savefig(out, bbox_inches="tight", pad_inches=0.15)
     plt.close(fig)
 
 

@@ -7,6 +7,10 @@ single-layer formats get one file per layer beside the path given (`NAME_points.
 by itself). Shapefile (dBASE) names are cut to 10 characters: the one longer name is
 written as SHAPEFILE_NAMES says, and a `NAME_fields.csv` sidecar gives every field's full name
 and unit (dBASE has no place for units).
+
+`fmis=True` (Shapefile only) writes what farm management software imports without mapping:
+numeric attributes only, at most 20, names of at most 10 characters; the time as UTC seconds,
+the speed source and the zone as codes, and the units in `NAME_units.txt` beside the files.
 """
 
 from __future__ import annotations
@@ -33,6 +37,40 @@ SUFFIX: Final = {"gpkg": ".gpkg", "shp": ".shp", "geojson": ".geojson", "csv": "
 POINTS_LAYER: Final = "as_applied_points"
 SWATHS_LAYER: Final = "as_applied_swaths"
 SHAPEFILE_NAMES: Final = {"AppliedRate": "AppliedRt"}
+
+#: The FMIS points: at most 20 numeric attributes (LogTime, the target r/min and the fault word
+#: are left out: they are in the full export).
+FMIS_POINTS: Final = (
+    "UnixTime",
+    "Heading",
+    "SPEED",
+    "SpeedSrc",
+    "DISTANCE",
+    "SWATHWIDTH",
+    "NDVI",
+    "TargetRate",
+    "AppliedRate",
+    "TgtRateUp",
+    "TgtRateLo",
+    "AppRateUp",
+    "AppRateLo",
+    "RpmUp",
+    "RpmLo",
+    "AppliedKg",
+    "TargetKg",
+    "WorkState",
+    "Zone",
+    "PrescRate",
+)
+FMIS_MAX_FIELDS: Final = 20
+#: Codes of the text columns (the speed source as ISO 11783-11 DDI 400 has it).
+SPEED_SOURCE_CODES: Final = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
+ZONE_CODES: Final = {"": 0, "field": 1, "headland": 2, "outside": 3}
+FMIS_FIELDS: Final = {
+    "UnixTime": ("s", "UTC, seconds since 1970-01-01 (POSIX)"),
+    "SpeedSrc": ("", "speed source: 1 wheel, 3 GNSS, 4 fused (blended), 0 none (as DDI 400)"),
+    "Zone": ("", "field boundary: 1 field, 2 headland, 3 outside, 0 no boundary"),
+}
 
 # field -> (unit, meaning)
 FIELDS: Final = {
@@ -80,10 +118,17 @@ def output_paths(path: Path, fmt: str) -> dict[str, Path]:
     }
 
 
-def write(data: AsApplied, path: Path, fmt: str, crs: str = "wgs84") -> list[Path]:
-    """Write both layers; returns the files written. `crs` is wgs84 or utm (the field's zone)."""
+def write(
+    data: AsApplied, path: Path, fmt: str, crs: str = "wgs84", fmis: bool = False
+) -> list[Path]:
+    """Write both layers; returns the files written. `crs` is wgs84 or utm (the field's zone);
+    `fmis`: numeric attributes only, for farm management software (Shapefile only)."""
     if fmt not in FORMATS:
         raise MapError(f"{path}: unknown format {fmt!r} (one of {', '.join(FORMATS)})")
+    if fmis:
+        if fmt != "shp":
+            raise MapError(f"{path}: --fmis is a Shapefile option (--format shp)")
+        return _write_fmis(data, path, crs)
     target = WGS84 if crs == "wgs84" or data.utm is None else data.utm
     paths = output_paths(path, fmt)
     for p in set(paths.values()):
@@ -110,6 +155,53 @@ def write(data: AsApplied, path: Path, fmt: str, crs: str = "wgs84") -> list[Pat
         sidecar = sidecar.with_name(f"{sidecar.name}_fields.csv")
         _write_units(sidecar, fmt, [*data.points, *data.swaths])
         written.append(sidecar)
+    return written
+
+
+def fmis_columns(
+    cols: dict[str, npt.NDArray[np.generic]], keep: tuple[str, ...] | None = None
+) -> dict[str, npt.NDArray[np.generic]]:
+    """A layer's columns as numbers only: the time as UTC seconds, the speed source and the
+    zone as codes, other text left out; `keep`: these, in this order."""
+    out: dict[str, npt.NDArray[np.generic]] = {}
+    for name, col in cols.items():
+        if name == "IsoTime":
+            ms = np.array([str(v).rstrip("Z") for v in col], dtype="datetime64[ms]")
+            out["UnixTime"] = ms.astype(np.int64).astype(float) / 1000.0
+        elif name == "SpeedSrc":
+            out[name] = np.array([SPEED_SOURCE_CODES.get(str(v), 0) for v in col], np.int32)
+        elif name == "Zone":
+            out[name] = np.array([ZONE_CODES.get(str(v or ""), 0) for v in col], np.int32)
+        elif np.asarray(col).dtype.kind in "biuf":
+            out[name] = col
+    if keep is not None:
+        out = {k: out[k] for k in keep if k in out}
+    return out
+
+
+def _write_fmis(data: AsApplied, path: Path, crs: str) -> list[Path]:
+    target = WGS84 if crs == "wgs84" or data.utm is None else data.utm
+    paths = output_paths(path, "shp")
+    written: list[Path] = []
+    used: list[str] = []
+    for layer, cols, geom, gtype in (
+        (POINTS_LAYER, fmis_columns(data.points, FMIS_POINTS), data.point_geom, "Point"),
+        (SWATHS_LAYER, fmis_columns(data.swaths), data.swath_geom, "Polygon"),
+    ):
+        cols = dict(list(cols.items())[:FMIS_MAX_FIELDS])
+        out = paths[layer]
+        _remove(out, "shp")
+        _write_layer(out, layer, "shp", cols, _project(geom, target), gtype, target)
+        written.append(out)
+        used += list(cols)
+    stem = path.with_suffix("") if path.suffix.lower() == ".shp" else path
+    units = stem.with_name(f"{stem.name}_units.txt")
+    lines = ["field\tunit\tmeaning"]
+    for name in dict.fromkeys(used):
+        unit, meaning = FMIS_FIELDS.get(name) or FIELDS[name]
+        lines.append(f"{SHAPEFILE_NAMES.get(name, name)}\t{unit}\t{meaning}")
+    units.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    written.append(units)
     return written
 
 

@@ -213,6 +213,20 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "event.operator": ("operator: {what}", "操作：{what}"),
     "event.calibration": ("calibration: {what}", "标定：{what}"),
     "event.alarm": ("alarm: {alarm}", "报警：{alarm}"),
+    "event.map_inside": (
+        "{map}: {file}: the machine is on it",
+        "{map}：{file}：机具位于图内",
+    ),
+    "event.map_far_m": (
+        "{map}: {file}: {distance_m} m from the machine",
+        "{map}：{file}：距机具 {distance_m} 米",
+    ),
+    "event.map_far_km": (
+        "{map}: {file}: {distance_km:.1f} km from the machine",
+        "{map}：{file}：距机具 {distance_km:.1f} 公里",
+    ),
+    "map.prescription": ("prescription", "处方图"),
+    "map.boundary": ("boundary", "地块边界"),
     "event.settings_refused": (
         "settings [{section}] refused: {error}",
         "设置 [{section}] 被拒绝：{error}",
@@ -317,6 +331,26 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "alarm.gnss_lost": ("GNSS lost: metering on the ground wheel", "GNSS 丢失：按地轮速度排肥"),
     "alarm.crop_lost": ("crop sensors lost: no NDVI", "作物传感器丢失：无 NDVI"),
     "alarm.ecu_lost": ("ECU lost: no status frames", "控制器丢失：无状态帧"),
+    "alarm.wrong_field_prescription": (
+        "far outside the prescription map: wrong field?",
+        "远离处方图：地块错误？",
+    ),
+    "alarm.wrong_field_boundary": (
+        "far outside the field boundary: wrong field?",
+        "远离地块边界：地块错误？",
+    ),
+    "alarm.text.wrong_field_prescription": (
+        "metering {distance_m} m outside the prescription map {file} (limit {limit_m:g} m): "
+        "wrong field or wrong map? The rate outside the map is applied",
+        "排肥位置在处方图 {file} 之外 {distance_m} 米（限值 {limit_m:g} 米）："
+        "地块或处方图是否选错？当前按图外施肥量排肥",
+    ),
+    "alarm.text.wrong_field_boundary": (
+        "metering {distance_m} m outside the field boundary {file} (limit {limit_m:g} m): "
+        "wrong field or wrong boundary? The meters are off outside it",
+        "排肥位置在地块边界 {file} 之外 {distance_m} 米（限值 {limit_m:g} 米）："
+        "地块或边界文件是否选错？边界外排肥器已关闭",
+    ),
     "alarm.log_low_space": ("log disk almost full", "记录磁盘将满"),
     "alarm.log_disk_full": ("log disk full", "记录磁盘已满"),
     "alarm.log_write_failing": ("session log not written", "作业记录无法写入"),

@@ -84,6 +84,7 @@ EVENT_KINDS: Final = (
     "gnss_lag.receiver",
     "gnss_lag.changed",
     "gnss_lag.kept",
+    "map.distance",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

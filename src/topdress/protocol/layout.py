@@ -163,6 +163,13 @@ def _raw_bounds(sig: Any, accepts: Callable[[int], bool]) -> tuple[int, int]:
     return lo, a
 
 
+def is_enumeration(sig: Any) -> bool:
+    """A signal whose value table lists every value it takes (RunState, SpeedMode). A quantity
+    (a signal with a unit) may name special values in its table, such as 0xFFFF "not
+    available" of a speed: its other values are numbers within its range."""
+    return sig.choices is not None and not sig.unit
+
+
 def signal_check(frame: str, sig: Any) -> SignalCheck:
     """The compiled check of one cantools signal."""
     dec = decimals(sig.scale)
@@ -175,7 +182,7 @@ def signal_check(frame: str, sig: Any) -> SignalCheck:
     if sig.scale <= 0:
         raise ProtocolError(f"{frame}.{sig.name}: scale {sig.scale} is not positive")
     lo, hi = _raw_bounds(sig, accepts)
-    choices = None if sig.choices is None else frozenset(int(k) for k in sig.choices)
+    choices = None if not is_enumeration(sig) else frozenset(int(k) for k in sig.choices)
     return SignalCheck(
         frame,
         sig.name,

@@ -1,4 +1,5 @@
-"""Alarms the operator acknowledges: off-rate, blocked meter, fan low, an input lost.
+"""Alarms the operator acknowledges: off-rate, blocked meter, fan low, an input lost, a
+map the machine is far outside of (the wrong field).
 
 Each alarm follows the usual annunciator sequence: it comes `active` (unacknowledged); the
 operator acknowledges it (`acked`, still active); when its condition ends it leaves the list if
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 
 from topdress.i18n import Text, text
 from topdress.protocol import Fault
+from topdress.terminal.site import OffMap
 from topdress.view.links import link_state
 from topdress.view.snapshot import AlarmView
 
@@ -38,6 +40,8 @@ class AlarmInputs:
     log_free_mb: float = 0.0
     log_min_free_mb: float = 0.0
     log_error: str = ""
+    # The maps the outlet is farther outside of than their limit (topdress.terminal.site)
+    off_map: tuple[OffMap, ...] = ()
 
 
 @dataclass
@@ -105,6 +109,17 @@ class AlarmBook:
             yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
         if x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
+        if x.metering:  # the wrong field matters only while product goes out
+            for o in x.off_map:
+                yield (
+                    f"wrong_field_{o.which}",
+                    text(
+                        f"alarm.text.wrong_field_{o.which}",
+                        file=o.name,
+                        distance_m=round(o.distance_m),
+                        limit_m=o.limit_m,
+                    ),
+                )
         if x.log_health == "low_space":
             free, margin = x.log_free_mb, x.log_min_free_mb
             yield "log_low_space", text("alarm.text.log_low_space", free_mb=free, min_mb=margin)

@@ -57,7 +57,7 @@ from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.receiver import ReceiverWatch, input_key
-from topdress.terminal.site import Maps, build_site_rate
+from topdress.terminal.site import Maps, build_map_guard, build_site_rate
 from topdress.view.commands import RUNNING, CommandResult
 from topdress.view.links import link_state
 from topdress.view.snapshot import TICK_S, LagView, Snapshot, ecu_values
@@ -109,6 +109,9 @@ class Terminal:
         self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
         # The prescription map and boundary files (`run` reads them before any device opens).
         self.site = build_site_rate(cfg, build_rate_model(cfg.rate), maps)
+        # How far the machine is from each map: said at the first fix, an alarm when too far.
+        self.guard = build_map_guard(cfg, Maps(self.site.prescription, self.site.boundary))
+        self._map_distance_said = False
         self.utc = UtcClock()
         self.outlet = OutletTracker(cfg.machine.outlet_along_m, cfg.machine.outlet_across_m)
         self.counters: Counter[str] = Counter()
@@ -308,6 +311,9 @@ class Terminal:
             self.outlet.on_fix(
                 fix.lat, fix.lon, fix.course_deg, fix.speed_kmh, self.ndvi.odometer.distance_m
             )
+            if not self._map_distance_said and fix.lat is not None and fix.lon is not None:
+                self._map_distance_said = True
+                self._say_map_distances(t, fix.lat, fix.lon)
         if self.tracker.update(t, fix) is not None:
             self._gnss_seen = True
             self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
@@ -374,9 +380,27 @@ class Terminal:
         self._track_links(now)
         self._track_faults(now)
         self._track_lag(now)
-        self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap)))
+        if outlet is not None:
+            off_map = self.guard.outside(outlet.lat, outlet.lon)
+        else:
+            off_map = ()
+            self.guard.forget()
+        self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap, off_map)))
         if self.session is not None:
             self.session.state(state_row(now, self.snapshot))
+
+    def _say_map_distances(self, t: float, lat: float, lon: float) -> None:
+        """Once, at the first fix: how far each map is from the machine (a map of another field
+        shows before the meters start)."""
+        for which, name, d in self.guard.distances(lat, lon):
+            self.log_event(t, "map.distance", map=which, file=name, distance_m=round(d, 1))
+            what = text(f"map.{which}")
+            if d <= 0.0:
+                self.event(text("event.map_inside", map=what, file=name))
+            elif d < 1000.0:
+                self.event(text("event.map_far_m", map=what, file=name, distance_m=round(d)))
+            else:
+                self.event(text("event.map_far_km", map=what, file=name, distance_km=d / 1000))
 
     def _track_links(self, now: float) -> None:
         states = {"ecu": self.link.state, "gnss": self._gnss_state, "crop": self._crop_reported}

@@ -51,6 +51,7 @@ from topdress.terminal.canlink import CanLink
 from topdress.terminal.counters import WorkCounters
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.leadcal import LeadCal
+from topdress.terminal.site import OffMap
 from topdress.view import commands as op
 from topdress.view.links import link_state
 from topdress.view.snapshot import AlarmView, CalibrationView, CounterView, DeviceLine, Snapshot
@@ -372,7 +373,8 @@ class OperatorDesk:
             "log_error": log.last_error or "",
         }
 
-    def after_tick(self, now: float, snap: Snapshot) -> DeskView:
+    def after_tick(self, now: float, snap: Snapshot, off_map: tuple[OffMap, ...] = ()) -> DeskView:
+        """`off_map`: the maps the outlet is too far outside of (the wrong-field alarm)."""
         dt_s = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
         self._last_t = now
         self._wizard_tick(now, dt_s)
@@ -387,6 +389,7 @@ class OperatorDesk:
             gnss_link=snap.gnss_link,
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
+            off_map=off_map,
             **self._log_health(),
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):

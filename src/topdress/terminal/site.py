@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from topdress.config import RateConfig, TerminalConfig
 from topdress.crop.rate import RateModel, build_rate_model
@@ -103,6 +103,63 @@ class Maps:
         return out
 
 
+@dataclass(frozen=True)
+class OffMap:
+    """The machine outside a map by more than the map's `outside_alarm_m`."""
+
+    which: str  # "prescription" or "boundary"
+    name: str  # the file's name
+    distance_m: float  # from the outlet to the map
+    limit_m: float
+
+
+#: Back inside a map's limit only below this share of it: a position wandering about the
+#: limit raises the alarm once, not at every crossing.
+BACK_INSIDE: Final = 0.8
+
+
+class MapGuard:
+    """Where the machine is against the maps: how far it is from each (said at the first fix)
+    and whether it is outside one by more than its limit (the wrong-field alarm).
+
+    The prescription's distance is to its extent (the box around its zones: a map for another
+    field is far from it; gaps between zones are not), the boundary's to its polygon."""
+
+    def __init__(self, maps: Maps, prescription_m: float = 0.0, boundary_m: float = 0.0) -> None:
+        self._parts: list[tuple[str, str, Callable[[float, float], float], float]] = []
+        if maps.prescription is not None:
+            info = maps.prescription.describe()  # once: a large map's extent costs a pass
+            name = maps.prescription.source.name
+            self._parts.append(("prescription", name, info.distance_m, prescription_m))
+        if maps.boundary is not None:
+            b = maps.boundary
+            self._parts.append(("boundary", b.source.name, b.distance_m, boundary_m))
+        self._outside: set[str] = set()
+
+    def distances(self, lat: float, lon: float) -> list[tuple[str, str, float]]:
+        """(which, file name, metres from (lat, lon); 0 inside) for each map."""
+        return [(which, name, dist(lat, lon)) for which, name, dist, _ in self._parts]
+
+    def outside(self, lat: float, lon: float) -> tuple[OffMap, ...]:
+        """The maps (lat, lon) is outside of by more than their limit (a limit of 0: never)."""
+        out = []
+        for which, name, dist, limit in self._parts:
+            if limit <= 0.0:
+                continue
+            d = dist(lat, lon)
+            was = which in self._outside
+            if d > limit or (was and d > limit * BACK_INSIDE):
+                self._outside.add(which)
+                out.append(OffMap(which, name, d, limit))
+            else:
+                self._outside.discard(which)
+        return tuple(out)
+
+    def forget(self) -> None:
+        """The position is not known: nothing is judged (and the hysteresis starts afresh)."""
+        self._outside.clear()
+
+
 def load_maps(cfg: TerminalConfig, progress: Callable[[str], None] | None = None) -> Maps:
     """Loads the configured prescription and boundary files (MapError naming the key, the
     file and the feature). `run` and `config check` call it before anything is opened."""
@@ -123,6 +180,10 @@ def load_maps(cfg: TerminalConfig, progress: Callable[[str], None] | None = None
         except MapError as exc:
             raise MapError(f"boundary.path: {exc}") from exc
     return Maps(presc, boundary)
+
+
+def build_map_guard(cfg: TerminalConfig, maps: Maps) -> MapGuard:
+    return MapGuard(maps, cfg.prescription.outside_alarm_m, cfg.boundary.outside_alarm_m)
 
 
 def build_site_rate(cfg: TerminalConfig, model: RateModel, maps: Maps | None = None) -> SiteRate:
