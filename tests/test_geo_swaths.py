@@ -5,6 +5,7 @@ them as clean polygons."""
 from __future__ import annotations
 
 import json
+import math
 import struct
 from pathlib import Path
 
@@ -12,11 +13,13 @@ import numpy as np
 import pyogrio.raw
 import pytest
 import shapely
+import shapely.affinity
 from pyproj import Transformer
 
 from geo_rig import record
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML
+from topdress.geo import asapplied
 from topdress.geo.asapplied import smooth_path
 from topdress.log.session import SessionReader
 from topdress.log.summary import summarise
@@ -176,3 +179,27 @@ def test_smoothed_path_takes_the_jitter_out_of_the_distance() -> None:
     assert raw > 1.15 * driven
     assert smooth == pytest.approx(driven, rel=0.01)
     assert float(np.max(np.abs(sy - true_y))) < 0.15  # not dragged off the positions
+
+
+def test_overlap_from_tiles_equals_the_union_of_every_earlier_swath() -> None:
+    # Swaths 1 m x 3.6 m at random places and angles over 50 m (across several cover tiles),
+    # some driven again; the reference is the plain formulation: each swath against the union
+    # of every earlier one.
+    rng = np.random.default_rng(3)
+    geoms = []
+    for _ in range(150):
+        x, y, a = rng.uniform(0.0, 50.0), rng.uniform(0.0, 50.0), rng.uniform(0.0, math.pi)
+        rect = shapely.box(-0.5, -1.8, 0.5, 1.8)
+        geoms.append(
+            shapely.affinity.translate(shapely.affinity.rotate(rect, a, use_radians=True), x, y)
+        )
+    geoms += geoms[:50]  # the same ground again: fully covered
+    g = np.array(geoms, dtype=object)
+    got = asapplied._overlap_pct(g)
+    want = np.zeros(g.size)
+    for k in range(1, g.size):
+        earlier = shapely.union_all(g[:k])
+        want[k] = 100.0 * shapely.area(shapely.intersection(g[k], earlier)) / shapely.area(g[k])
+    assert got[150:] == pytest.approx(np.full(50, 100.0), abs=1e-9)
+    assert got == pytest.approx(want, abs=1e-9)
+    assert (got[:150] > 1.0).sum() > 20  # the random swaths do overlap

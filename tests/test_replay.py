@@ -322,3 +322,14 @@ def test_the_gnss_lag_is_learned_and_a_recorded_one_starts_the_learning() -> Non
     assert (fixed.gnss_lag_ms, fixed.gnss_lag_auto) == (1300, 0)
     with pytest.raises(ConfigError, match=r"ecu\.gnss_lag_ms"):
         loads_config('[ecu]\ngnss_lag_ms = "soon"\n')
+
+
+def test_the_step_loops_wheel_walker_gives_what_the_search_gives() -> None:
+    # repeated times, a count that goes back, steps before the first and after the last event
+    from topdress.log.replay import _WheelInput
+
+    w = _WheelInput([30_000, 50_000, 50_000, 90_000, 200_000], [7, 9, 20, 15, 400])
+    walk = w.walker()
+    times = range(0, 260_000, 10_000)
+    assert [walk(t) for t in times] == [w.at(t) for t in times]
+    assert [walk(t) for t in (0, 60_000, 250_000)] != [7, 7, 7]

@@ -187,6 +187,11 @@ class Ecu:
         buf = ffi.unpack(self._tx_buf, 8 * n)
         return [(int(ids[i]), buf[8 * i : 8 * i + lens[i]]) for i in range(n)]
 
+    def tx_discard(self) -> int:
+        """Empty the transmit queue without reading it (a replay needs none of the frames);
+        returns how many frames were dropped."""
+        return int(self._drain_fn(self._app, self._tx_ids, self._tx_lens, self._tx_buf))
+
     def tx(self) -> list[can.Message]:
         """Drain the transmit queue as python-can messages (29-bit ids), oldest first."""
         return [

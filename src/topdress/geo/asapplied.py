@@ -356,6 +356,7 @@ POS_SD_M: Final = 0.3  # position noise the smoother takes off (a fix's jitter, 
 STEP_SD_M: Final = 0.01  # dead-reckoning error per row: this plus STEP_SD_FRAC of the step
 STEP_SD_FRAC: Final = 0.05  # (speed and heading errors of a few percent and degrees)
 TANGENT_M: Final = 0.25  # the path's direction is taken over this much path either side
+COVER_TILE_M: Final = 20.0  # the ground covered so far is kept in tiles of this side
 
 
 @dataclass(frozen=True)
@@ -615,23 +616,31 @@ def _attach(sid: npt.NDArray[np.intp], metered: npt.NDArray[np.bool_]) -> None:
 
 
 def _overlap_pct(geoms: npt.NDArray[np.object_]) -> FloatArray:
-    """Per swath, the % of its area that earlier swaths had covered already."""
+    """Per swath, the % of its area that earlier swaths had covered already.
+
+    The ground covered so far is kept as one union per COVER_TILE_M square tile: a swath's
+    overlap is its intersection with the tiles it touches, then it is added to them. The cost
+    and memory grow with the ground covered, not with the time spent on it (comparing each
+    swath with every earlier one it touches made a day driven over the same passes quadratic:
+    1,000 earlier swaths each by the evening)."""
     out = np.zeros(geoms.size)
     if geoms.size < 2:
         return out
-    tree = shapely.STRtree(geoms)
-    k, j = tree.query(geoms, predicate="intersects")
-    keep = j < k
-    k, j = k[keep], j[keep]
-    area = shapely.area(shapely.intersection(geoms[k], geoms[j]))
-    real = area > 1e-4  # neighbours along a pass share an edge, not area
-    k, j, area = k[real], j[real], area[real]
-    if k.size == 0:
-        return out
-    counts = np.bincount(k, minlength=geoms.size)
-    single = counts[k] == 1
-    out[k[single]] = area[single]
-    for kk in np.unique(k[~single]):  # several earlier swaths: their union, not the sum
-        earlier = shapely.union_all(geoms[j[k == kk]])
-        out[kk] = shapely.area(shapely.intersection(geoms[kk], earlier))
+    cover: dict[tuple[int, int], Any] = {}
+    tile = COVER_TILE_M
+    bounds = np.floor(shapely.bounds(geoms) / tile).astype(np.int64).tolist()
+    for k, (g, (i0, j0, i1, j1)) in enumerate(zip(geoms, bounds, strict=True)):
+        keys = [(i, j) for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)]
+        earlier = [cover[key] for key in keys if key in cover]
+        if earlier:
+            covered = float(np.sum(shapely.area(shapely.intersection(g, earlier))))
+            out[k] = covered if covered > 1e-4 else 0.0  # neighbours share an edge, not area
+        for i, j in keys:
+            piece = shapely.intersection(
+                g, shapely.box(i * tile, j * tile, (i + 1) * tile, (j + 1) * tile)
+            )
+            if shapely.is_empty(piece):
+                continue
+            old = cover.get((i, j))
+            cover[(i, j)] = piece if old is None else shapely.union(old, piece)
     return np.asarray(100.0 * out / shapely.area(geoms), dtype=float)

@@ -17,9 +17,10 @@ from __future__ import annotations
 import datetime as dt
 import math
 import re
+import sys
 from collections import Counter
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Final
 
 from pynmeagps import NMEAReader
 
@@ -198,6 +199,9 @@ def _parse(sentence: bytes, body: bytes, talker: str, kind: str) -> GnssFix:
     if len(fields) < _MIN_FIELDS[kind]:
         msg = f"{kind} has {len(fields)} fields, needs {_MIN_FIELDS[kind]}"
         return _bad("truncated", msg, talker, kind)
+    fast = _FAST[kind](fields, talker)
+    if fast is not None:
+        return fast
     dropped = _drop_optional(fields, kind)
     if dropped:
         # parsed without them: the field parser would refuse the sentence for any one
@@ -321,3 +325,164 @@ def _gga(msg: Any, talker: str) -> GnssFix:
 
 
 _FIELD_PARSERS = {"RMC": _rmc, "VTG": _vtg, "GGA": _gga}
+
+
+# ---- the fast path: clean RMC, VTG and GGA without the field parser -----------------------
+#
+# A replay decodes every sentence of a day (54,000 an hour); through pynmeagps that was most of
+# its time. A sentence whose every field the fix reads or checks has the plain form a receiver
+# writes is decoded here with pynmeagps's own conversions (dmm2ddd's rounding, strptime's
+# ranges, the hemisphere's sign); anything else (an empty or odd field, a value out of range,
+# a field to drop) returns None and takes the full path, which says what is wrong.
+# tests/test_gnss_fast.py holds the two equal on every sentence of the recorded logs and on
+# mutants of them.
+
+_F_TIME = re.compile(rb"^([01][0-9]|2[0-3])([0-5][0-9])([0-5][0-9])(?:\.([0-9]{1,6}))?$")
+_F_DMM = re.compile(rb"^[0-9]{4,}\.[0-9]*$")
+_F_NUM = _NUMBER
+
+
+def _f_time(text: bytes) -> dt.time | None:
+    m = _F_TIME.match(text)
+    if m is None:
+        return None
+    frac = m.group(4) or b"0"
+    us = int(frac.decode().ljust(6, "0"))
+    return dt.time(int(m.group(1)), int(m.group(2)), int(m.group(3)), us)
+
+
+def _f_date(text: bytes) -> dt.date | None:
+    if len(text) != 6 or not text.isdigit():
+        return None
+    yy = int(text[4:6])
+    try:  # strptime's %y: 69-99 are 19yy
+        return dt.date((1900 if yy >= 69 else 2000) + yy, int(text[2:4]), int(text[0:2]))
+    except ValueError:
+        return None
+
+
+def _f_pos(value: bytes, hemi: bytes, letters: bytes, limit: float) -> float | bool | None:
+    """Signed degrees; None for an empty field; False when the full path must judge it."""
+    if not value and not hemi:
+        return None
+    if len(hemi) != 1 or hemi not in letters or _F_DMM.match(value) is None:
+        return False
+    text = value.decode()
+    dp = text.find(".")
+    deg = round(abs(float(text[0 : dp - 2])) + float(text[dp - 2 :]) / 60, 10)
+    if not deg <= limit:
+        return False
+    return -deg if hemi in b"SW" else deg
+
+
+def _f_num(text: bytes, hi: float) -> float | bool | None:
+    """A plain number within 0..hi (None: empty; False: for the full path)."""
+    if not text:
+        return None
+    if _F_NUM.match(text) is None:
+        return False
+    value = float(text)
+    return value if value <= hi else False
+
+
+def _f_mode(fields: list[bytes], index: int) -> str:
+    return fields[index].decode() if len(fields) > index else ""
+
+
+def _fast_rmc(f: list[bytes], talker: str) -> GnssFix | None:
+    time = _f_time(f[0]) if f[0] else ""
+    lat = _f_pos(f[2], f[3], b"NS", 90.0)
+    lon = _f_pos(f[4], f[5], b"EW", 180.0)
+    knots = _f_num(f[6], _MAX_FINITE_KNOTS)
+    course = _f_num(f[7], 360.0)
+    date = _f_date(f[8]) if f[8] else ""
+    magvar = _f_num(f[9], 180.0)
+    if (
+        time is None
+        or date is None
+        or lat is False
+        or lon is False
+        or knots is False
+        or course is False
+        or magvar is False
+        or f[10] not in (b"", b"E", b"W")
+    ):
+        return None
+    valid = f[1] == b"A" and _f_mode(f, 11) != "N"
+    return GnssFix(
+        talker=talker,
+        type="RMC",
+        ok=True,
+        fix_valid=valid and knots is not None,
+        speed_kmh=None if knots is None else knots * KNOT_KMH,
+        course_deg=course,
+        lat=lat,
+        lon=lon,
+        utc=_utc(time, date),
+    )
+
+
+def _fast_vtg(f: list[bytes], talker: str) -> GnssFix | None:
+    course = _f_num(f[0], 360.0)
+    knots = _f_num(f[4], _MAX_FINITE_KNOTS)
+    kmh = _f_num(f[6], _MAX_FINITE_KMH)
+    if (
+        course is False
+        or knots is False
+        or kmh is False
+        or f[1] not in (b"", b"T")
+        or _f_num(f[2], 360.0) is False
+        or f[3] not in (b"", b"M")
+    ):
+        return None
+    if kmh is None and knots is not None:
+        kmh = knots * KNOT_KMH
+    return GnssFix(
+        talker=talker,
+        type="VTG",
+        ok=True,
+        fix_valid=kmh is not None and _f_mode(f, 8) != "N",
+        speed_kmh=kmh,
+        course_deg=course,
+    )
+
+
+def _f_signed(text: bytes) -> bool:
+    return not text or (_SIGNED.match(text) is not None and math.isfinite(float(text)))
+
+
+def _fast_gga(f: list[bytes], talker: str) -> GnssFix | None:
+    time = _f_time(f[0]) if f[0] else ""
+    lat = _f_pos(f[1], f[2], b"NS", 90.0)
+    lon = _f_pos(f[3], f[4], b"EW", 180.0)
+    if (
+        time is None
+        or lat is False
+        or lon is False
+        or not (f[5] == b"" or f[5].isdigit())
+        or not (f[6] == b"" or f[6].isdigit())
+        or _f_num(f[7], math.inf) is False
+        or not _f_signed(f[8])
+        or f[9] not in (b"", b"M")
+        or not _f_signed(f[10])
+        or f[11] not in (b"", b"M")
+        or _f_num(f[12], math.inf) is False
+        or not (f[13] == b"" or f[13].isdigit())
+    ):
+        return None
+    quality = int(f[5]) if f[5] else 0
+    return GnssFix(
+        talker=talker,
+        type="GGA",
+        ok=True,
+        fix_valid=quality > 0,
+        lat=lat,
+        lon=lon,
+        utc=_utc(time),
+    )
+
+
+# Beyond these a speed is not finite once converted: left to the full path, which refuses it.
+_MAX_FINITE_KNOTS: Final = sys.float_info.max / KNOT_KMH
+_MAX_FINITE_KMH: Final = sys.float_info.max
+_FAST = {"RMC": _fast_rmc, "VTG": _fast_vtg, "GGA": _fast_gga}

@@ -30,7 +30,7 @@ from __future__ import annotations
 import bisect
 import csv
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final, TextIO
 
@@ -100,6 +100,28 @@ class _WheelInput:
         t0, t1 = self.times_us[i - 1], self.times_us[i]
         c0, c1 = self.counts[i - 1], self.counts[i]
         return c0 + (c1 - c0) * (t_us - t0) // (t1 - t0)
+
+    def walker(self) -> Callable[[int], int]:
+        """`at` for times that never go back (the step loop): the segment is followed along
+        instead of searched for at every step. Same values as `at`."""
+        times, counts = self.times_us, self.counts
+        if len(counts) < 2:
+            return self.at
+        last = len(counts) - 1
+        i = 0  # times[i] <= t < times[i + 1] once t reaches times[0]
+
+        def at(t_us: int) -> int:
+            nonlocal i
+            if t_us < times[0]:
+                return counts[0]
+            while i < last and times[i + 1] <= t_us:
+                i += 1
+            if i == last:
+                return counts[-1]
+            t0 = times[i]
+            return counts[i] + (counts[i + 1] - counts[i]) * (t_us - t0) // (times[i + 1] - t0)
+
+        return at
 
 
 def ecu_params(cfg: TerminalConfig, speed_mode: str, lag_start_ms: int | None = None) -> EcuParams:
@@ -225,31 +247,39 @@ class _Replayer:
         # its next step (the order of a port's main loop and of the simulator).
         rows: list[ReplayRow] = []
         ecu = self.ecu
+        step, discard = ecu.step_raw, ecu.tx_discard
         updates = ecu.wheel_updates
         end_us = _us(self.times[-1], self.t0)
+        due_us = [_us(t, self.t0) for t in self.times]
+        wheel = self.wheel.walker()
+        events, n_events = self.events, len(self.events)
         next_event = 0
+        next_due = due_us[0]
         now_us = 0
+        steps = 0
         while now_us <= end_us:
-            ecu.step_raw(now_us, self.wheel.at(now_us), 0, 0, 0, 0)
-            ecu.tx_raw()  # the ECU's frames are not needed here; keep its queue free
-            self.stats.steps += 1
+            step(now_us, wheel(now_us), 0, 0, 0, 0)
+            discard()  # the ECU's frames are not needed here; keep its queue free
+            steps += 1
             # The whole state (a dataclass of 30 fields) only at a speed update, every 50 steps
             if ecu.wheel_updates != updates:
                 state = ecu.state
                 updates = state.wheel_updates
                 rows.append(_row(self._event_t(now_us), state))
             new_fix = False
-            while next_event < len(self.events) and _us(self.times[next_event], self.t0) <= now_us:
-                if self._take(self.events[next_event]):
+            while next_due <= now_us:
+                if self._take(events[next_event]):
                     new_fix = True
-                    self.fix_us = _us(self.times[next_event], self.t0)
+                    self.fix_us = next_due
                 next_event += 1
+                next_due = due_us[next_event] if next_event < n_events else end_us + 1
             if new_fix:
                 self._send_gnss_time(now_us)
             due = self.last_cmd_us is None or now_us - self.last_cmd_us >= self.period_us
             if due or (new_fix and self.cfg.can.send_on_gnss):
                 self._send_command(now_us)
             now_us += STEP_US
+        self.stats.steps += steps
         self.stats.lag_learned_ms = self.ecu.state.lag_learned_ms
         return rows
 
