@@ -19,14 +19,16 @@ from topdress.i18n import render, tr
 from topdress.view.commands import CommandResult
 
 COMMAND_TIMEOUT_S = 15.0  # settings for the ECU wait for every acknowledgement
+WRONG_PIN_DELAY_S = 1.0
 
 
 class Actions:
     """One browser tab's command path."""
 
-    def __init__(self, hub: DisplayHub, remote: bool) -> None:
+    def __init__(self, hub: DisplayHub, remote: bool, address: str = "") -> None:
         self.hub = hub
-        self.remote = remote  # the browser is not on this machine
+        self.remote = remote  # not the cab's own browser (topdress.display.guard)
+        self.address = address  # the client's, for counting wrong PINs
         self.unlocked = False
 
     async def unlock(self) -> bool:
@@ -38,16 +40,30 @@ class Actions:
             pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
             wrong = ui.label("").classes("text-red-700")
 
-            def submit() -> None:
-                if self.hub.pin_ok(pin.value or ""):
+            busy = [False]
+
+            async def submit() -> None:
+                if busy[0]:  # a try a second at most from a tab (keys, clicks, a script)
+                    return
+                wait_s = self.hub.try_pin(self.address, pin.value or "")
+                if wait_s is None:
                     dialog.submit(True)
-                else:
-                    pin.value = ""
-                    wrong.set_text(tr("pin.wrong"))
+                    return
+                pin.value = ""
+                if wait_s > 0:
+                    wrong.set_text(tr("pin.locked", s=wait_s))
+                    return
+                # Guessing stays slow even before a lockout.
+                busy[0] = True
+                ok_button.disable()
+                await asyncio.sleep(WRONG_PIN_DELAY_S)
+                busy[0] = False
+                ok_button.enable()
+                wrong.set_text(tr("pin.wrong"))
 
             pin.on("keydown.enter", submit)
             with ui.row():
-                ui.button(tr("pin.ok"), on_click=submit).mark("pin_ok")
+                ok_button = ui.button(tr("pin.ok"), on_click=submit).mark("pin_ok")
                 ui.button(tr("action.cancel"), on_click=lambda: dialog.submit(False)).props("flat")
         ok = bool(await dialog)
         dialog.delete()

@@ -80,6 +80,11 @@ EVENT_KINDS: Final = (
     "calibration.wheel",
     "calibration.fan",
     "calibration.lead",
+    "display.restarted",
+    "display.lost",
+    "display.back",
+    "display.pin_failed",
+    "display.pin_lockout",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

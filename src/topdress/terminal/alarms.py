@@ -32,6 +32,8 @@ class AlarmInputs:
     gnss_link: str
     crop_link: str
     ecu_link: str
+    display_down: bool = False  # the display process is not serving (terminal/surface.py)
+    display_lost: bool = False  # the operator has had no display for display.lost_pause_s
 
 
 @dataclass
@@ -99,6 +101,10 @@ class AlarmBook:
             yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
         if x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
+        if x.display_down:
+            yield "display_down", text("alarm.display_down")
+        if x.display_lost:
+            yield "display_lost", text("alarm.display_lost")
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]
