@@ -256,14 +256,14 @@ class DisplayLink:
                     child.conn.send(self._out.popleft())
                 while self._snaps:
                     child.conn.send(("snap", self._snaps.popleft()))
-            except (OSError, ValueError):  # that process is gone: the watch starts another
+            except (OSError, ValueError, TypeError):  # gone: the watch starts another
                 child.ended.set()
 
     def _receive(self, child: _Child) -> None:
         while not self._stop.is_set():
             try:
                 msg = child.conn.recv()
-            except (EOFError, OSError, ValueError):
+            except (EOFError, OSError, ValueError, TypeError):  # TypeError: closed under it
                 child.ended.set()
                 return
             kind = msg[0]
