@@ -10,6 +10,7 @@ client). The PIN typed is compared in constant time and never logged or echoed.
 from __future__ import annotations
 
 import asyncio
+import time
 from typing import Any
 
 from nicegui import ui
@@ -40,30 +41,25 @@ class Actions:
             pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
             wrong = ui.label("").classes("text-red-700")
 
-            busy = [False]
+            lock = asyncio.Lock()
+            next_try = [0.0]
 
             async def submit() -> None:
-                if busy[0]:  # a try a second at most from a tab (keys, clicks, a script)
-                    return
-                wait_s = self.hub.try_pin(self.address, pin.value or "")
-                if wait_s is None:
-                    dialog.submit(True)
-                    return
+                # One try a second from a tab, however fast keys, clicks or a script come:
+                # guessing stays slow even before a lockout.
+                async with lock:
+                    await asyncio.sleep(max(0.0, next_try[0] - time.monotonic()))
+                    wait_s = self.hub.try_pin(self.address, pin.value or "")
+                    if wait_s is None:
+                        dialog.submit(True)
+                        return
+                    next_try[0] = time.monotonic() + WRONG_PIN_DELAY_S
                 pin.value = ""
-                if wait_s > 0:
-                    wrong.set_text(tr("pin.locked", s=wait_s))
-                    return
-                # Guessing stays slow even before a lockout.
-                busy[0] = True
-                ok_button.disable()
-                await asyncio.sleep(WRONG_PIN_DELAY_S)
-                busy[0] = False
-                ok_button.enable()
-                wrong.set_text(tr("pin.wrong"))
+                wrong.set_text(tr("pin.locked", s=wait_s) if wait_s > 0 else tr("pin.wrong"))
 
             pin.on("keydown.enter", submit)
             with ui.row():
-                ok_button = ui.button(tr("pin.ok"), on_click=submit).mark("pin_ok")
+                ui.button(tr("pin.ok"), on_click=submit).mark("pin_ok")
                 ui.button(tr("action.cancel"), on_click=lambda: dialog.submit(False)).props("flat")
         ok = bool(await dialog)
         dialog.delete()
