@@ -74,6 +74,3 @@ class DisplayWatch:
             self.lost = True
             return DisplayChange(lost=True, lost_s=now - since)
         return DisplayChange()
-
-    def without_s(self, now: float) -> float:
-        return 0.0 if self._without_since is None else now - self._without_since
