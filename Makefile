@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml setup.py $(CSRC)
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/topdress demo --duration $(DURATION)
+	$(BIN)/topdress demo --start --duration $(DURATION)
 
 sysdeps:
 	bash scripts/sysdeps.sh ctest

@@ -18,7 +18,10 @@ user may set one (`--no-realtime`: the normal policy); the figures' last line sa
   page shows it (a MutationObserver in the page timestamps each new snapshot's publication
   mark; both clocks are this machine's wall clock);
 - `display_rss_mb`: peak resident memory (VmHWM) of the whole terminal: its process and the
-  display process it starts.
+  display process it starts;
+- `display_stale_after_kill_s`: at the end, `kill -9` of the display process until the page
+  shows its full-screen stale state; `display_live_after_kill_s`: until the display the
+  terminal started again serves the page and it is live again.
 """
 
 from __future__ import annotations
@@ -27,12 +30,14 @@ import argparse
 import json
 import os
 import random
+import signal
 import subprocess
 import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,9 +45,10 @@ from terminal_bench import WARMUP_S, Machine, terminal_toml
 
 # The browser driver is test code (tests/browser.py), shared with the end-to-end test.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from browser import answers, chromium, free_port, missing_browser
+from browser import STALE_JS, answers, chromium, display_pid, free_port, missing_browser
 
 BROWSER_NICENESS = 10
+RESTART_MARGIN_S = 20.0  # the terminal runs this much longer: the display killed and back
 TERMINAL_RT_PRIORITY = 10  # `chrt -r 10`, systemd's CPUSchedulingPolicy=rr + Priority=10
 
 #: In the page: every new snapshot drawn -> (now - its publication time) in ms.
@@ -141,7 +147,8 @@ def parent(duration_s: float, realtime: bool) -> int:
         for target in (m.run_ecu, m.run_spy):
             threading.Thread(target=target, daemon=True).start()
         proc = subprocess.Popen(
-            [sys.executable, __file__, "--child", str(cfg), "--duration", str(duration_s),
+            [sys.executable, __file__, "--child", str(cfg), "--duration",
+             str(duration_s + RESTART_MARGIN_S),
              "--port", str(port), *([] if realtime else ["--no-realtime"])],
             stdout=subprocess.PIPE,
             text=True,
@@ -171,9 +178,12 @@ def parent(duration_s: float, realtime: bool) -> int:
                 th.start()
             time.sleep(max(1.0, duration_s - 6.0))
             updates_ms = list(driver.execute_script("return window.tdLatencies"))
+            for th in feeders:  # the latencies measured: the display killed after them
+                th.join()
+            stale_s, live_s = _kill_the_display(driver, proc.pid)
         finally:
             driver.quit()
-        out, _ = proc.communicate(timeout=duration_s + 60)
+        out, _ = proc.communicate(timeout=duration_s + RESTART_MARGIN_S + 60)
         m.close()
     if proc.returncode != 0:
         print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
@@ -189,6 +199,8 @@ def parent(duration_s: float, realtime: bool) -> int:
     print(f"nmea_to_command_p99_ms_with_display: {np.percentile(lat_ms, 99):.2f}")
     print(f"display_update_p95_ms: {np.percentile(upd_ms, 95):.1f}")
     print(f"display_rss_mb: {result['rss_mb']:.1f}")
+    print(f"display_stale_after_kill_s: {stale_s:.2f}")
+    print(f"display_live_after_kill_s: {live_s:.2f}")
     print(
         f"# {late_ms.size} ticks (p50 late {np.percentile(late_ms, 50):.2f} ms), "
         f"{lat_ms.size} NMEA latencies (p50 {np.percentile(lat_ms, 50):.2f} ms), "
@@ -197,6 +209,33 @@ def parent(duration_s: float, realtime: bool) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _kill_the_display(driver: Any, terminal_pid: int) -> tuple[float, float]:
+    """`kill -9` of the display process: (seconds until the page is stale, until it is live
+    again from the display the terminal started again)."""
+    first = display_pid(terminal_pid)
+    if first is None:
+        raise RuntimeError("no display process found")
+    os.kill(first, signal.SIGKILL)
+    killed = time.monotonic()
+    while not driver.execute_script(STALE_JS):
+        if time.monotonic() - killed > 30.0:
+            raise RuntimeError("the page never showed its stale state")
+        time.sleep(0.02)
+    stale_s = time.monotonic() - killed
+    while True:
+        try:
+            live = not driver.execute_script(STALE_JS) and driver.execute_script(
+                "return document.querySelector('[data-testid=\"clock\"]') !== null"
+            )
+        except Exception:  # the page reloading from the new process
+            live = False
+        if live:
+            return stale_s, time.monotonic() - killed
+        if time.monotonic() - killed > RESTART_MARGIN_S - 2.0:
+            raise RuntimeError("the page did not come back from a new display process")
+        time.sleep(0.02)
 
 
 def main() -> int:

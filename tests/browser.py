@@ -139,3 +139,23 @@ class DemoProcess:
                 self.proc.wait()
         self._log.close()
         return int(self.proc.returncode)
+
+
+def display_pid(terminal_pid: int) -> int | None:
+    """The display process a terminal started (its child running topdress.display)."""
+    for task in Path(f"/proc/{terminal_pid}/task").iterdir():
+        for pid in (task / "children").read_text().split():
+            try:
+                cmdline = Path(f"/proc/{pid}/cmdline").read_bytes()
+            except OSError:
+                continue
+            if b"topdress.display" in cmdline:
+                return int(pid)
+    return None
+
+
+#: In the page: whether it shows its full-screen stale state (topdress.display.liveness).
+STALE_JS = (
+    "return document.documentElement.classList.contains('td-stale')"
+    " && document.getElementById('td-stale').offsetHeight > 0"
+)

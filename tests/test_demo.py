@@ -360,3 +360,39 @@ def test_the_simulated_machine_takes_the_configurations_geometry() -> None:
     along = north_m * math.cos(heading) + east_m * math.sin(heading)
     right = east_m * math.cos(heading) - north_m * math.sin(heading)
     assert (along, right) == pytest.approx((2.5, -0.5), abs=0.01)
+
+
+def _make_demo_argv(duration_s: int) -> list[str]:
+    """The command `make demo` runs (from `make -n`), without the program's path."""
+    root = Path(__file__).resolve().parents[1]
+    dry = subprocess.run(
+        ["make", "-n", "-W", ".venv/.installed-stamp", "-o", ".venv/.installed-stamp", "demo",
+         f"DURATION={duration_s}"],
+        cwd=root, capture_output=True, text=True, check=True,
+    ).stdout  # fmt: skip
+    (line,) = [ln for ln in dry.splitlines() if "topdress demo" in ln]
+    words = line.split()
+    return words[words.index("demo") :]
+
+
+def _kg_applied(text: str) -> float:
+    (line,) = [ln for ln in text.splitlines() if ln.startswith("simulated machine:")]
+    return float(line.split(" kg applied")[0].rsplit(" ", 1)[1])
+
+
+def test_make_demo_starts_the_meters_and_reports_the_kg_applied(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """The README's main command shows the main job: the meters run without anybody pressing
+    Start, and the end says how much was applied; `topdress demo` alone still waits."""
+    argv = _make_demo_argv(10)
+    assert "--start" in argv
+    assert main([*argv, "--out", str(tmp_path / "made"), "--no-display"]) == 0
+    made = capfd.readouterr().out
+    assert _kg_applied(made) > 0.05  # 3 s of headland, then 8 km/h at ~140 kg/ha on 3.6 m
+    assert "meters stopped until the operator starts them" not in made
+
+    assert main(["demo", "--duration", "4", "--out", str(tmp_path / "plain"), "--no-display"]) == 0
+    plain = capfd.readouterr().out
+    assert "meters stopped until the operator starts them" in plain
+    assert _kg_applied(plain) == 0.0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import hmac
+import ipaddress
 import math
 import re
 import stat
@@ -260,6 +261,16 @@ class DisplayConfig:
     port: int = _num(8080, 1, 65535)
     pin: str = ""  # 4..12 digits; required to operate from another address; never logged
     language: str = _choice("en", "en", "zh")
+    # Host names the display answers to besides IP addresses and localhost (DNS rebinding).
+    allowed_hosts: tuple[str, ...] = ()
+    # Reverse proxies (addresses or networks) whose X-Forwarded-For is believed.
+    trusted_proxies: tuple[str, ...] = ()
+    # A file holding the token the cab's kiosk browser opens the display with (created, mode
+    # 0600, when missing); set: only that browser operates without the PIN.
+    kiosk_token_file: str = ""
+    # Metering with no operator display (its process down, or no page since one was open) for
+    # longer than this pauses the meters; 0: never (the alarm only).
+    lost_pause_s: float = _num(10.0, 0.0, 600.0)
 
 
 #: Addresses that only the cab PC itself reaches: the display needs no PIN there.
@@ -448,6 +459,10 @@ def _value(f: dataclasses.Field[Any], raw: Any, key: str) -> Any:
     if f.name == "options":
         return _can_options(raw, key)
     default = f.default
+    if isinstance(default, tuple):
+        if not isinstance(raw, list) or not all(isinstance(x, str) for x in raw):
+            raise ConfigError(key, f"must be a list of strings, not {raw!r}")
+        return tuple(raw)
     if isinstance(default, bool):
         if not isinstance(raw, bool):
             raise ConfigError(key, f"must be true or false, not {raw!r}")
@@ -643,6 +658,22 @@ def _check_display(d: DisplayConfig) -> None:
     if d.host not in LOCAL_HOSTS and not d.pin:
         # Anyone on the network could start the meters or change a setting.
         raise ConfigError("display.pin", f"is required when display.host is {d.host!r}")
+    for name in d.allowed_hosts:
+        if not _HOST_NAME.fullmatch(name):
+            raise ConfigError("display.allowed_hosts", f"{name!r} is not a host name")
+    for proxy in d.trusted_proxies:
+        try:
+            ipaddress.ip_network(proxy, strict=False)
+        except ValueError:
+            raise ConfigError(
+                "display.trusted_proxies", f"{proxy!r} is not an address or network"
+            ) from None
+
+
+_HOST_NAME = re.compile(
+    r"(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]{0,62}[A-Za-z0-9])?"
+    r"(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}[A-Za-z0-9])?)*\.?"
+)
 
 
 def _check_timing(cfg: TerminalConfig) -> None:
@@ -797,6 +828,10 @@ host = "127.0.0.1"         # only this PC; any other address (0.0.0.0) needs a p
 port = 8080
 pin = ""                   # 4..12 digits: needed to operate (start, stop, settings) from afar
 language = "en"            # en | zh
+allowed_hosts = []         # names it answers to besides IP addresses and localhost
+trusted_proxies = []       # proxies whose X-Forwarded-For is believed, e.g. ["127.0.0.1"]
+kiosk_token_file = ""      # the cab's browser opens /?kiosk=<the file's token>: no PIN for it only
+lost_pause_s = 10.0        # no operator display this long while metering: pause (0: alarm only)
 
 [operator]
 autostart = false          # true: the meters start at once, without the operator (headless)

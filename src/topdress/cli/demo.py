@@ -236,7 +236,7 @@ def run_demo(
     duration_s: float | None,
     out_dir: Path,
     seed: int = 1,
-    out: TextIO = sys.stdout,
+    out: TextIO | None = None,
     start: bool = True,
     keyboard: TextIO | None = None,
     display: DisplayOptions | None = None,
@@ -249,6 +249,7 @@ def run_demo(
     with it, and the simulated machine has its geometry (crop sensors, working width, outlet
     offsets). The demo's configuration is written to `out_dir/topdress-demo.toml`, where
     settings changed while it runs are saved (never into the user's file)."""
+    out = out if out is not None else sys.stdout  # the stdout of the call, not of the import
     _check_out_dir(out_dir)
     machine_cfg = loads_config(user_text, "--config") if user_text else default_config()
     drive = Drive.field_passes(passes, DEMO_PASS_M, DEMO_SPEED_KMH)

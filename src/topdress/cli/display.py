@@ -4,17 +4,28 @@
 starts the process, feeds it and carries its commands to the terminal. `publish` only appends to
 a bounded deque and sets an event (the control loop never waits on the display); a sender
 thread pickles and writes. A display that dies, or hangs with the socket full, costs the
-terminal nothing: snapshots are dropped (oldest first) and the terminal says once that the
-display stopped.
+terminal nothing: snapshots are dropped (oldest first).
+
+The link also keeps the display alive: the display process says every 0.5 s that it serves
+and how many pages are connected; one that ended, stopped saying so, or never started serving
+is started again (after 0.5 s, then with a doubling wait up to 30 s; counted, each start an
+event in the session log), and the terminal's desk hears each change (`DisplayState`: the
+display's alarms, and the meters paused when the operator has lost it, terminal/surface.py).
+Everything the display process writes reaches the console escaped and prefixed `display: `.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import secrets
+import signal
 import socket
+import stat
 import subprocess
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -23,14 +34,22 @@ from typing import Any
 
 from topdress import i18n
 from topdress.config import TerminalConfig
+from topdress.display.guard import printable
 from topdress.display.options import DisplayError, DisplayOptions, check_security, port_free
 from topdress.display.process import Hello
 from topdress.terminal.app import Terminal
-from topdress.view.commands import CommandResult
+from topdress.view.commands import CommandResult, DisplayEvent, DisplayState
 from topdress.view.snapshot import Snapshot
 
 STOP_WAIT_S = 2.0  # for the display process to end with its socket before it is terminated
 SNAPSHOT_BACKLOG = 600  # a minute of snapshots held while the display catches up
+RESTART_BACKOFF_S = (0.5, 1.0, 2.0, 4.0, 8.0, 15.0, 30.0)  # waits before each next start
+STABLE_S = 60.0  # a display that served this long starts its waits over
+START_TIMEOUT_S = 30.0  # from its start to its first "alive" (importing NiceGUI takes seconds)
+ALIVE_TIMEOUT_S = 3.0  # then: silent this long, it hangs; it is killed and started again
+WATCH_PERIOD_S = 0.1
+#: The events a display process may put into the session log.
+DISPLAY_EVENTS = ("display.pin_failed", "display.pin_lockout")
 
 
 def display_options(
@@ -77,8 +96,59 @@ def serve_display(
     return AttachedDisplay(link)
 
 
+def kiosk_token(path: str) -> str:
+    """The cab's kiosk token from `path` ("" when none is configured); a missing file is
+    created with a new random token, readable by its owner only. DisplayError when the file
+    can be read by others or cannot be made."""
+    if not path:
+        return ""
+    p = os.path.expanduser(path)
+    try:
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        raise DisplayError(f"display.kiosk_token_file {path}: {exc.strerror}") from None
+    else:
+        with os.fdopen(fd, "w") as f:
+            f.write(secrets.token_urlsafe(24) + "\n")
+    try:
+        mode = os.stat(p).st_mode
+        token = open(p, encoding="utf-8").read().strip()  # noqa: SIM115 (closed at once)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DisplayError(f"display.kiosk_token_file {path}: {exc}") from None
+    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        raise DisplayError(f"display.kiosk_token_file {path} can be read by others: chmod 600 it")
+    if len(token) < 16 or not token.isascii() or not token.isprintable() or " " in token:
+        raise DisplayError(
+            f"display.kiosk_token_file {path}: the token must be 16 or more printable "
+            "characters without spaces (delete the file: a new one is made)"
+        )
+    return token
+
+
+class _Child:
+    """One display process and its socket."""
+
+    def __init__(self, proc: subprocess.Popen[bytes], conn: Connection) -> None:
+        self.proc = proc
+        self.conn = conn
+        self.started = time.monotonic()
+        self.alive_at: float | None = None
+        self.pages = 0
+        self.error: str | None = None
+        self.ended = threading.Event()
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):  # its group: nothing of it lives on
+                os.killpg(self.proc.pid, signal.SIGKILL)
+        self.proc.wait()
+
+
 class DisplayLink:
-    """The terminal's end: starts the display process, feeds it, carries its commands."""
+    """The terminal's end: starts the display process, feeds it, carries its commands, and
+    starts it again when it ends or hangs."""
 
     def __init__(
         self, term: Terminal, opts: DisplayOptions, message: Callable[[str], None]
@@ -90,11 +160,15 @@ class DisplayLink:
         self._out: deque[tuple[Any, ...]] = deque()  # results, config: never dropped
         self._wake = threading.Event()
         self._stop = threading.Event()
+        self._lock = threading.Lock()
         self._cfg: TerminalConfig | None = None
-        self._proc: subprocess.Popen[bytes] | None = None
-        self._conn: Connection | None = None
-        self._error: str | None = None
-        self._gone_told = False
+        self._child: _Child | None = None
+        self._kiosk = ""
+        self.restarts = 0  # starts after the first
+        self._failures = 0  # in a row: the index into RESTART_BACKOFF_S
+        self._next_start = 0.0
+        self._down_since: float | None = None
+        self._told: DisplayState | None = None
 
     # ---- life cycle ----------------------------------------------------------------------
     def start(self) -> str:
@@ -106,43 +180,58 @@ class DisplayLink:
                 f"{self.opts.host}:{self.opts.port} is in use "
                 "(another topdress? choose another with --port or display.port)"
             )
+        self._kiosk = kiosk_token(self.term.cfg.display.kiosk_token_file)
+        self._cfg = self.term.cfg
+        self._spawn()
+        for target, name in ((self._send, "display-tx"), (self._watch, "display-watch")):
+            threading.Thread(target=target, name=name, daemon=True).start()
+        return self.opts.url
+
+    def _spawn(self) -> None:
         ours, theirs = socket.socketpair()
         env = dict(os.environ)
         env.pop("PYTEST_CURRENT_TEST", None)  # NiceGUI would take a test port
-        self._proc = subprocess.Popen(
+        proc = subprocess.Popen(
             [sys.executable, "-m", "topdress.display", "--fd", str(theirs.fileno())],
             pass_fds=(theirs.fileno(),),
             stdin=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,  # read, escaped, by the terminal (_relay)
             env=env,
             # Its own process group: Ctrl-C on the terminal's console stops the terminal, which
             # then closes the socket, and the display ends with it.
             start_new_session=True,
         )
         theirs.close()
-        self._conn = Connection(ours.detach())
-        # The options (the PIN with them) go over the socket, never on a command line.
-        self._conn.send(Hello(self.opts, self.term.cfg, i18n.language()))
-        self._cfg = self.term.cfg
-        for target, name in ((self._receive, "display-rx"), (self._send, "display-tx")):
-            threading.Thread(target=target, name=name, daemon=True).start()
-        return self.opts.url
+        child = _Child(proc, Connection(ours.detach()))
+        # The options (the PIN and the kiosk token with them) go over the socket, never on a
+        # command line. A started-again display takes the configuration in force now.
+        cfg = self.term.cfg
+        child.conn.send(Hello(self.opts, cfg, i18n.language(), self._kiosk))
+        with self._lock:
+            self._cfg = cfg
+            self._child = child
+        for target, name in ((self._receive, "display-rx"), (self._relay, "display-err")):
+            threading.Thread(target=target, args=(child,), name=name, daemon=True).start()
+        self._tell(DisplayState("starting", 0, "", self.restarts))
 
     def stop(self) -> None:
         """Close the socket (the display process ends with it) and wait for the process."""
         self._stop.set()
         self._wake.set()
-        if self._conn is not None:
-            self._conn.close()
-        if self._proc is not None:
-            try:
-                self._proc.wait(timeout=STOP_WAIT_S)
-            except subprocess.TimeoutExpired:  # still importing NiceGUI, say
-                self._proc.terminate()
-                self._proc.wait()
+        with self._lock:
+            child = self._child
+        if child is None:
+            return
+        child.conn.close()
+        try:
+            child.proc.wait(timeout=STOP_WAIT_S)
+        except subprocess.TimeoutExpired:  # still importing NiceGUI, say
+            child.kill()
 
     @property
     def pid(self) -> int | None:
-        return self._proc.pid if self._proc is not None else None
+        with self._lock:
+            return self._child.proc.pid if self._child is not None else None
 
     # ---- the control loop's side -----------------------------------------------------------
     def publish(self, snapshot: Snapshot) -> None:
@@ -155,35 +244,54 @@ class DisplayLink:
 
     # ---- threads -----------------------------------------------------------------------------
     def _send(self) -> None:
-        assert self._conn is not None
         while not self._stop.is_set():
             self._wake.wait()
             self._wake.clear()
+            with self._lock:
+                child = self._child
+            if child is None:  # down: the newest snapshots wait (bounded) for the next one
+                continue
             try:
                 while self._out:
-                    self._conn.send(self._out.popleft())
+                    child.conn.send(self._out.popleft())
                 while self._snaps:
-                    self._conn.send(("snap", self._snaps.popleft()))
-            except (OSError, ValueError):  # the display process is gone
-                self._gone("the display process closed its end")
-                return
+                    child.conn.send(("snap", self._snaps.popleft()))
+            except (OSError, ValueError, TypeError):  # gone: the watch starts another
+                child.ended.set()
 
-    def _receive(self) -> None:
-        assert self._conn is not None
+    def _receive(self, child: _Child) -> None:
         while not self._stop.is_set():
             try:
-                msg = self._conn.recv()
-            except (EOFError, OSError, ValueError):
-                self._gone("the display process ended")
+                msg = child.conn.recv()
+            except (EOFError, OSError, ValueError, TypeError):  # TypeError: closed under it
+                child.ended.set()
                 return
             kind = msg[0]
-            if kind == "error":
-                self._error = str(msg[1])
-                self.message(f"display not served: {self._error}")
+            if kind == "alive":
+                child.alive_at = time.monotonic()
+                child.pages = int(msg[1])
+            elif kind == "error":
+                child.error = printable(str(msg[1]))
             elif kind == "cmd":
                 self._command(int(msg[1]), msg[2])
             elif kind == "lang":
                 i18n.set_language(str(msg[1]))  # the console follows
+            elif kind == "event" and msg[1] in DISPLAY_EVENTS:
+                detail = {
+                    str(k): printable(v, 64) if isinstance(v, str) else v
+                    for k, v in dict(msg[2]).items()
+                    if isinstance(v, str | int | float)
+                }
+                self.term.post(DisplayEvent(str(msg[1]), detail))
+
+    def _relay(self, child: _Child) -> None:
+        """What the display process writes (its log, a traceback): to the console, each line
+        escaped (a request's path may hold escape codes or line breaks) and marked as its."""
+        assert child.proc.stderr is not None
+        for raw in child.proc.stderr:
+            line = raw.decode("utf-8", "replace").rstrip("\r\n")
+            if line and not self._stop.is_set():
+                self.message(f"display: {printable(line)}")
 
     def _command(self, cid: int, command: Any) -> None:
         def done(fut: Future[CommandResult]) -> None:
@@ -193,7 +301,86 @@ class DisplayLink:
 
         self.term.post(command).add_done_callback(done)
 
-    def _gone(self, why: str) -> None:
-        if not self._stop.is_set() and not self._gone_told and self._error is None:
-            self._gone_told = True
-            self.message(f"display stopped ({why}); the terminal works on")
+    # ---- keeping it alive ------------------------------------------------------------------
+    def _watch(self) -> None:
+        while not self._stop.wait(WATCH_PERIOD_S):
+            with self._lock:
+                child = self._child
+            now = time.monotonic()
+            if child is None:
+                if now >= self._next_start:
+                    self._start_again()
+                continue
+            why = self._why_down(child, now)
+            if why is not None:
+                self._down(child, why, now)
+            elif child.alive_at is not None:
+                if self._down_since is not None:
+                    self._down_since = None
+                if now - child.started >= STABLE_S:
+                    self._failures = 0
+                self._tell(DisplayState("ok", child.pages, "", self.restarts))
+
+    def _why_down(self, child: _Child, now: float) -> str | None:
+        code = child.proc.poll()
+        if code is not None or child.ended.is_set():
+            if code is None:
+                try:
+                    code = child.proc.wait(timeout=0.5)
+                except subprocess.TimeoutExpired:
+                    return "its socket closed"
+            if child.error is not None:
+                return child.error
+            return f"killed by signal {-code}" if code < 0 else f"exit code {code}"
+        if child.alive_at is None and now - child.started > START_TIMEOUT_S:
+            return f"not serving {START_TIMEOUT_S:g} s after its start"
+        if child.alive_at is not None and now - child.alive_at > ALIVE_TIMEOUT_S:
+            return f"no answer for {ALIVE_TIMEOUT_S:g} s"
+        return None
+
+    def _down(self, child: _Child, why: str, now: float) -> None:
+        with self._lock:
+            self._child = None
+        child.conn.close()
+        child.kill()
+        if child.alive_at is not None and now - child.started >= STABLE_S:
+            self._failures = 0
+        wait_s = RESTART_BACKOFF_S[min(self._failures, len(RESTART_BACKOFF_S) - 1)]
+        self._failures += 1
+        self._next_start = now + wait_s
+        if self._down_since is None:
+            self._down_since = now
+        self._tell(DisplayState("down", 0, why, self.restarts))
+        self.message(f"display down ({why}); starting it again in {wait_s:g} s")
+
+    def _start_again(self) -> None:
+        why = self._told.why if self._told is not None else ""
+        if not port_free(self.opts.host, self.opts.port):
+            self._down_since = self._down_since or time.monotonic()
+            wait_s = RESTART_BACKOFF_S[min(self._failures, len(RESTART_BACKOFF_S) - 1)]
+            self._failures += 1
+            self._next_start = time.monotonic() + wait_s
+            busy = f"{self.opts.host}:{self.opts.port} is in use"
+            self._tell(DisplayState("down", 0, busy, self.restarts))
+            self.message(f"display down ({busy}); trying again in {wait_s:g} s")
+            return
+        self.restarts += 1
+        down_s = time.monotonic() - self._down_since if self._down_since is not None else 0.0
+        self.term.post(
+            DisplayEvent(
+                "display.restarted", {"n": self.restarts, "why": why, "down_s": round(down_s, 2)}
+            )
+        )
+        try:
+            self._spawn()
+        except OSError as exc:  # no process could be made (memory, file descriptors)
+            self._next_start = time.monotonic() + RESTART_BACKOFF_S[-1]
+            self._tell(DisplayState("down", 0, f"cannot start: {exc}", self.restarts))
+            return
+        self.message(f"display started again ({self.restarts} restarts)")
+
+    def _tell(self, state: DisplayState) -> None:
+        """The terminal's desk hears each change of the display's state (alarms, pause)."""
+        if state != self._told:
+            self._told = state
+            self.term.post(state)

@@ -10,6 +10,7 @@ client). The PIN typed is compared in constant time and never logged or echoed.
 from __future__ import annotations
 
 import asyncio
+import time
 from typing import Any
 
 from nicegui import ui
@@ -19,14 +20,16 @@ from topdress.i18n import render, tr
 from topdress.view.commands import CommandResult
 
 COMMAND_TIMEOUT_S = 15.0  # settings for the ECU wait for every acknowledgement
+WRONG_PIN_DELAY_S = 1.0
 
 
 class Actions:
     """One browser tab's command path."""
 
-    def __init__(self, hub: DisplayHub, remote: bool) -> None:
+    def __init__(self, hub: DisplayHub, remote: bool, address: str = "") -> None:
         self.hub = hub
-        self.remote = remote  # the browser is not on this machine
+        self.remote = remote  # not the cab's own browser (topdress.display.guard)
+        self.address = address  # the client's, for counting wrong PINs
         self.unlocked = False
 
     async def unlock(self) -> bool:
@@ -38,12 +41,21 @@ class Actions:
             pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
             wrong = ui.label("").classes("text-red-700")
 
-            def submit() -> None:
-                if self.hub.pin_ok(pin.value or ""):
-                    dialog.submit(True)
-                else:
-                    pin.value = ""
-                    wrong.set_text(tr("pin.wrong"))
+            lock = asyncio.Lock()
+            next_try = [0.0]
+
+            async def submit() -> None:
+                # One try a second from a tab, however fast keys, clicks or a script come:
+                # guessing stays slow even before a lockout.
+                async with lock:
+                    await asyncio.sleep(max(0.0, next_try[0] - time.monotonic()))
+                    wait_s = self.hub.try_pin(self.address, pin.value or "")
+                    if wait_s is None:
+                        dialog.submit(True)
+                        return
+                    next_try[0] = time.monotonic() + WRONG_PIN_DELAY_S
+                pin.value = ""
+                wrong.set_text(tr("pin.locked", s=wait_s) if wait_s > 0 else tr("pin.wrong"))
 
             pin.on("keydown.enter", submit)
             with ui.row():

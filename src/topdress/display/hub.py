@@ -18,11 +18,14 @@ from typing import Any
 
 from topdress import i18n
 from topdress.config import TerminalConfig, check_pin
+from topdress.display.guard import PinGate
 from topdress.view.commands import CommandResult
 from topdress.view.snapshot import TICK_S, Snapshot
 
 #: Posts an operator command into the terminal's inbox (thread-safe; `Terminal.post`).
 Post = Callable[[Any], "Future[CommandResult]"]
+#: An event for the terminal's session log: (kind, detail).
+Report = Callable[[str, dict[str, Any]], None]
 
 HISTORY_S = 60.0  # what the live charts show
 TRACK_STEP_M = 1.0  # a new track point every metre driven
@@ -54,10 +57,16 @@ class DisplayHub:
         post: Post | None = None,
         history_s: float = HISTORY_S,
         on_language: Callable[[str], None] | None = None,
+        report: Report | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.config = config
         self.post = post
         self._on_language = on_language
+        self._report = report
+        self._clock = clock
+        self._pins = PinGate()
+        self._pins_lock = threading.Lock()
         self._lock = threading.Lock()
         self._latest = Snapshot()
         self._published_wall_s = 0.0
@@ -107,9 +116,38 @@ class DisplayHub:
         """Operating (start/stop, manual rate, settings) asks for the PIN when one is set."""
         return bool(self.config().display.pin)
 
-    def pin_ok(self, given: str) -> bool:
-        """The PIN check (constant time, topdress.config.check_pin); the PIN is never logged."""
-        return check_pin(self.config().display, given)
+    def try_pin(self, address: str, given: str) -> float | None:
+        """A PIN typed at `address`: None when right; else the seconds that address must wait
+        before its next try (0: it may try again at once). Wrong PINs are counted per address
+        and in total (topdress.display.guard.PinGate), each one reported to the session log,
+        and a lockout too; the PIN is compared in constant time and never logged."""
+        locked = self.locked_for(address)
+        if locked > 0:
+            return locked
+        if check_pin(self.config().display, given):
+            with self._pins_lock:
+                self._pins.succeeded(address)
+            return None
+        self.failed(address, "pin")
+        return self.locked_for(address)
+
+    def locked_for(self, address: str) -> float:
+        with self._pins_lock:
+            return self._pins.locked_for(address, self._clock())
+
+    def failed(self, address: str, what: str) -> None:
+        """A wrong guess of a secret (`pin`, `kiosk` token) from `address`."""
+        with self._pins_lock:
+            failures, lockout_s = self._pins.failed(address, self._clock())
+        self.report("display.pin_failed", address=address, what=what, failures=failures)
+        if lockout_s:
+            self.report(
+                "display.pin_lockout", address=address, failures=failures, lockout_s=lockout_s
+            )
+
+    def report(self, kind: str, **detail: Any) -> None:
+        if self._report is not None:
+            self._report(kind, detail)
 
     def latest(self) -> tuple[int, float, Snapshot]:
         """(serial, wall-clock time it was published, snapshot); the serial grows by one each

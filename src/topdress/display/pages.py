@@ -16,7 +16,9 @@ from nicegui import Client, ui
 from topdress import i18n
 from topdress.display.actions import Actions
 from topdress.display.calibration import CalibrationScreen
+from topdress.display.guard import SCOPE_KEY, ClientInfo
 from topdress.display.hub import DisplayHub
+from topdress.display.liveness import watch_liveness
 from topdress.display.main_screen import MainScreen
 from topdress.display.options import is_loopback
 from topdress.display.settings_screens import CommunicationScreen, ControlScreen
@@ -46,17 +48,36 @@ class PageState:
     lang_version: int = -1
 
 
-def client_is_remote() -> bool:
-    """Whether the browser of the page being built is on another machine."""
+# ---- who the page is for, and whether it is live (issue 21: liveness, security) ----------------
+def client_info() -> ClientInfo:
+    """The client of the page being built, as topdress.display.guard judged its request."""
     request = ui.context.client.request
+    info = request.scope.get(SCOPE_KEY) if request is not None else None
+    if isinstance(info, ClientInfo):
+        return info
+    # Not behind the guard (NiceGUI's simulated browser): the peer's address alone.
     host = request.client.host if request is not None and request.client is not None else ""
-    return not is_loopback(host)
+    return ClientInfo(host, is_loopback(host))
+
+
+def client_is_remote() -> bool:
+    """Whether the page being built is for anyone but the cab's own browser (the PIN rule)."""
+    return not client_info().cab
+
+
+def operator_surface(hub: DisplayHub) -> Actions:
+    """The page's command path (the PIN asked of all but the cab's browser), its stale state,
+    and whom the page takes it for (`data-operator`: cab or remote, for the tests)."""
+    remote = client_is_remote()
+    ui.element("span").props(f'data-operator="{"remote" if remote else "cab"}" hidden')
+    watch_liveness(hub)
+    return Actions(hub, remote, client_info().address)
 
 
 def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> None:
     """The header (screens, language, time) and the screen's content, kept up to date."""
     state = PageState()
-    actions = Actions(hub, client_is_remote())
+    actions = operator_surface(hub)
     client = ui.context.client
     screen: list[Screen] = []
     ui.page_title("topdress")

@@ -30,6 +30,7 @@ from typing import Any
 from topdress import i18n
 from topdress.config import TerminalConfig
 from topdress.display.cpu import yield_to_the_terminal
+from topdress.display.guard import printable
 from topdress.display.options import DisplayOptions
 from topdress.view.commands import CommandResult
 
@@ -45,6 +46,7 @@ class Hello:
     opts: DisplayOptions
     cfg: TerminalConfig
     language: str
+    kiosk_token: str = ""  # the cab's browser's (display.kiosk_token_file); never on a command line
 
 
 # ---- the display process ---------------------------------------------------------------------
@@ -69,6 +71,10 @@ class RemoteTerminal:
         self.send("cmd", cid, command)
         return fut
 
+    def report(self, kind: str, detail: dict[str, Any]) -> None:
+        """An event for the terminal's session log (a wrong PIN, a lockout)."""
+        self.send("event", kind, detail)
+
     def config(self) -> TerminalConfig:
         assert self.cfg is not None
         return self.cfg
@@ -81,6 +87,7 @@ class RemoteTerminal:
 
 def _serve(conn: Connection) -> int:
 
+    from topdress.display.guard import Guard
     from topdress.display.hub import DisplayHub
     from topdress.display.server import run_server
 
@@ -92,7 +99,14 @@ def _serve(conn: Connection) -> int:
     remote = RemoteTerminal(conn)
     remote.cfg = hello.cfg
     i18n.set_language(hello.language)
-    hub = DisplayHub(remote.config, remote.post, on_language=lambda code: remote.send("lang", code))
+    hub = DisplayHub(
+        remote.config,
+        remote.post,
+        on_language=lambda code: remote.send("lang", code),
+        report=remote.report,
+    )
+    dc = hello.cfg.display
+    guard = Guard.of(dc.allowed_hosts, dc.trusted_proxies, hello.kiosk_token)
 
     def read() -> None:
         try:
@@ -110,11 +124,19 @@ def _serve(conn: Connection) -> int:
 
     threading.Thread(target=read, name="display-rx", daemon=True).start()
     try:
-        run_server(hub, hello.opts)
+        run_server(hub, hello.opts, guard, lambda pages: remote.send("alive", pages))
     except BaseException as exc:  # uvicorn's SystemExit on a port it cannot bind, too
         remote.send("error", f"{type(exc).__name__}: {exc}")
         return 1
     return 0
+
+
+class _SafeFormatter(logging.Formatter):
+    """A request's path or header in a log message (NiceGUI's "... not found") is written with
+    its control characters escaped: no escape sequence or line of its own on the console."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        return printable(super().formatMessage(record), limit=2000)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -122,5 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fd", type=int, required=True, help="the socket to the terminal")
     args = ap.parse_args(argv)
     yield_to_the_terminal(DISPLAY_NICENESS)
-    logging.basicConfig(level=logging.WARNING, format="display %(levelname)s %(name)s: %(message)s")
+    handler = logging.StreamHandler()
+    handler.setFormatter(_SafeFormatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=logging.WARNING, handlers=[handler])
     return _serve(Connection(args.fd))

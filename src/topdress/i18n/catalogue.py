@@ -227,6 +227,18 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     ),
     "map.prescription": ("prescription", "处方图"),
     "map.boundary": ("boundary", "地块边界"),
+    "event.display_lost": (
+        "no operator display for {s:.0f} s",
+        "已 {s:.0f} 秒无操作显示",
+    ),
+    "event.display_lost_paused": (
+        "no operator display for {s:.0f} s: meters paused (start resumes)",
+        "已 {s:.0f} 秒无操作显示：排肥已暂停（启动可恢复）",
+    ),
+    "event.pin_lockout": (
+        "display: {failures} wrong PINs from {address}: locked out for {lockout_s:.0f} s",
+        "显示：来自 {address} 的 PIN 码错误 {failures} 次：锁定 {lockout_s:.0f} 秒",
+    ),
     "event.settings_refused": (
         "settings [{section}] refused: {error}",
         "设置 [{section}] 被拒绝：{error}",
@@ -366,6 +378,14 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "session log cannot be written: {error} (metering goes on)",
         "作业记录无法写入：{error}（排肥继续）",
     ),
+    "alarm.display_down": (
+        "operator display down: restarting it",
+        "操作显示已停止：正在重新启动",
+    ),
+    "alarm.display_lost": (
+        "no operator display: Stop only on the console",
+        "无操作显示：只能在控制台停止",
+    ),
     "alarm.text.off_rate_upper": (
         "upper meter off rate: {rpm:.1f} r/min for {target:.1f} (more than {pct:g} % for {s:g} s)",
         "上层排肥转速偏离：{rpm:.1f} r/min，目标 {target:.1f}（偏差超过 {pct:g} % 达 {s:g} 秒）",
@@ -413,6 +433,19 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "pin.label": ("PIN", "PIN 码"),
     "pin.ok": ("Unlock", "解锁"),
     "pin.wrong": ("wrong PIN", "PIN 码错误"),
+    "pin.locked": (
+        "too many wrong PINs: try again in {s:.0f} s",
+        "PIN 码错误次数过多：请 {s:.0f} 秒后再试",
+    ),
+    "stale.title": (
+        "No connection to the terminal — the values are stale",
+        "与终端的连接已断开 — 显示的数值已过时",
+    ),
+    "stale.body": (
+        "Nothing on this page is live. Stop the meters at the terminal's console or with the "
+        "machine's stop switch. The page reconnects by itself.",
+        "本页数值均非实时。请在终端控制台或用机器的停止开关停止排肥。页面会自动重新连接。",
+    ),
     # ---- settings
     "settings.refused_here": ("refused: see the field marked", "被拒绝：见标红的字段"),
     "settings.sending": ("applying …", "正在应用 …"),

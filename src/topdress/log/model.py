@@ -85,6 +85,11 @@ EVENT_KINDS: Final = (
     "gnss_lag.changed",
     "gnss_lag.kept",
     "map.distance",
+    "display.restarted",
+    "display.lost",
+    "display.back",
+    "display.pin_failed",
+    "display.pin_lockout",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

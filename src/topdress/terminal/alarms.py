@@ -42,6 +42,8 @@ class AlarmInputs:
     log_error: str = ""
     # The maps the outlet is farther outside of than their limit (topdress.terminal.site)
     off_map: tuple[OffMap, ...] = ()
+    display_down: bool = False  # the display process is not serving (terminal/surface.py)
+    display_lost: bool = False  # the operator has had no display for display.lost_pause_s
 
 
 @dataclass
@@ -127,6 +129,10 @@ class AlarmBook:
             yield "log_disk_full", text("alarm.text.log_disk_full")
         elif x.log_health == "write_failing":
             yield "log_write_failing", text("alarm.text.log_write_failing", error=x.log_error)
+        if x.display_down:
+            yield "display_down", text("alarm.display_down")
+        if x.display_lost:
+            yield "display_lost", text("alarm.display_lost")
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]

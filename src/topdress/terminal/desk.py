@@ -52,6 +52,7 @@ from topdress.terminal.counters import WorkCounters
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.leadcal import LeadCal
 from topdress.terminal.site import OffMap
+from topdress.terminal.surface import DisplayWatch
 from topdress.view import commands as op
 from topdress.view.links import link_state
 from topdress.view.snapshot import AlarmView, CalibrationView, CounterView, DeviceLine, Snapshot
@@ -113,6 +114,7 @@ class OperatorDesk:
         cfg = loop.cfg
         self.op = op.Operator(autostart)
         self.alarms = AlarmBook(cfg.operator.off_rate_pct, cfg.operator.off_rate_s)
+        self.display = DisplayWatch(cfg.display.lost_pause_s)
         # Beside the session logs; a terminal without a session log (tests, a log that could
         # not be created) keeps them in memory only.
         session = loop.session
@@ -197,11 +199,43 @@ class OperatorDesk:
             return self._done(text("op.done.reset", which=text(f"count.{c.which}")))
         if isinstance(c, op.Help):
             return op.CommandResult(False, c.text)
+        if isinstance(c, op.DisplayState | op.DisplayEvent):
+            return self._display_report(now, c)
         if isinstance(c, op.TestDevice):
             return self._device_test(c.device)
         if isinstance(c, op.ApplySettings):
             return self._apply(now, c, fut)
         return self._calibration(now, c, fut)
+
+    # ---- the operator's display (terminal/surface.py) -------------------------------------------
+    def _display_report(self, now: float, c: op.DisplayState | op.DisplayEvent) -> op.CommandResult:
+        if isinstance(c, op.DisplayState):
+            self.display.take(c, now)
+        else:
+            self.loop.log_event(now, c.kind, **c.detail)
+            if c.kind == "display.pin_lockout":
+                self.loop.event(text("event.pin_lockout", **c.detail))
+        return op.CommandResult(True)
+
+    def _display_tick(self, now: float) -> None:
+        change = self.display.tick(now)
+        if change.back:
+            self.loop.log_event(now, "display.back", lost_s=round(change.lost_s, 1))
+            return
+        if not change.lost:
+            return
+        paused = self.op.state == op.RUNNING and self.display.pauses
+        if paused:
+            self.op.pause()
+            self.loop.log_event(now, "operator.pause", was=op.RUNNING, auto=True)
+        state = self.display.state
+        why = state.why if state is not None and state.state == "down" else "no page"
+        self.loop.log_event(
+            now, "display.lost", lost_s=round(change.lost_s, 1), why=why, paused=paused
+        )
+        self.loop.event(
+            text("event.display_lost_paused" if paused else "event.display_lost", s=change.lost_s)
+        )
 
     def _manual_event(self, now: float) -> None:
         m = self.op.manual
@@ -378,6 +412,7 @@ class OperatorDesk:
         dt_s = 0.0 if self._last_t is None else max(0.0, now - self._last_t)
         self._last_t = now
         self._wizard_tick(now, dt_s)
+        self._display_tick(now)
         self._count(snap, dt_s)
         self.counters.maybe_save(now)
         metering = self.op.state == op.RUNNING and snap.ecu_live and snap.running
@@ -391,6 +426,8 @@ class OperatorDesk:
             ecu_link=snap.ecu_link,
             off_map=off_map,
             **self._log_health(),
+            display_down=self.display.down,
+            display_lost=self.display.lost,
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
             figures = {k: v for k, v in alarm.values if isinstance(v, int | float)}

@@ -139,6 +139,27 @@ class TestDevice:
 
 
 @dataclass(frozen=True)
+class DisplayState:
+    """The operator display as the terminal's end sees it (posted on each change, never by a
+    page): `state` starting | ok | down, `pages` the browser pages connected, `why` the reason
+    it is down, `restarts` how often its process was started again."""
+
+    state: str
+    pages: int = 0
+    why: str = ""
+    restarts: int = 0
+
+
+@dataclass(frozen=True)
+class DisplayEvent:
+    """Something the display reports for the session log (a wrong PIN, a lockout, a restart):
+    `kind` one of the log's `display.*` kinds, `detail` plain values."""
+
+    kind: str
+    detail: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Help:
     """A typed line that is no command: answered with `text` (printed by the loop's thread)."""
 

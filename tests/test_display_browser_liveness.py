@@ -1,0 +1,97 @@
+"""A dead display never looks alive, in a real browser at a cab screen's 800×480.
+
+`topdress demo` with its display in headless Chromium: Start, then `kill -9` of the display
+process: the page goes to its full-screen stale state (no green RUNNING, the values greyed under
+it); the terminal starts a new display process and the page comes back by itself, live. Then
+SIGTERM of the terminal: the stale state again. The times are printed (bench/display_bench.py
+measures them against their targets); the test checks what is shown.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from browser import STALE_JS, DemoProcess, chromium, display_pid, missing_browser
+
+pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
+
+
+def until(what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
+    deadline = time.monotonic() + timeout_s
+    last: Any = None
+    while time.monotonic() < deadline:
+        try:
+            last = check()
+        except Exception as exc:  # an element not drawn yet, a stale one, a reload
+            last = exc
+        else:
+            if last:
+                return last
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what} (last: {last!r})")
+
+
+def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:
+    from selenium.webdriver.common.by import By
+
+    demo = DemoProcess(tmp_path / "demo", passes=30, duration_s=180.0)
+    driver = None
+    try:
+        demo.wait_served()
+        driver = chromium(tmp_path / "profile", 800, 480)
+
+        def text(tid: str) -> str:
+            return str(driver.find_element(By.CSS_SELECTOR, f'[data-testid="{tid}"]').text)
+
+        def stale() -> bool:
+            return bool(driver.execute_script(STALE_JS))
+
+        driver.get(demo.url)
+        until("the ECU acknowledging its parameters", lambda: text("link_ecu") == "ECU: ok")
+        driver.find_element(By.CSS_SELECTOR, '[data-testid="start"]').click()
+        until("RUNNING", lambda: text("op_state") == "RUNNING")
+        assert not stale()
+        first = display_pid(demo.proc.pid)
+        assert first is not None
+
+        os.kill(first, signal.SIGKILL)
+        killed = time.monotonic()
+        until("the stale state", stale, timeout_s=10.0)
+        shown_s = time.monotonic() - killed
+        cover = driver.find_element(By.CSS_SELECTOR, '[data-testid="stale"]')
+        assert "No connection to the terminal" in cover.text
+        size = cover.size  # the whole viewport
+        viewport = driver.execute_script("const e = document.documentElement;"
+                                         "return [e.clientWidth, window.innerHeight]")  # fmt: skip
+        assert [size["width"], size["height"]] == viewport
+        # The page under it is greyed: nothing green reads RUNNING.
+        assert "grayscale" in driver.execute_script(
+            "return getComputedStyle(document.getElementById('app')).filter"
+        )
+        time.sleep(0.5)
+        assert stale()  # and it stays until a server answers
+
+        until("a new display process", lambda: display_pid(demo.proc.pid) not in (None, first))
+        until("the page live again", lambda: not stale() and text("op_state") != "", 30.0)
+        back_s = time.monotonic() - killed
+        clock = text("clock")
+        until("the values moving", lambda: text("clock") != clock)
+        print(f"\nstale shown {shown_s:.2f} s after kill -9; live again after {back_s:.2f} s")
+        assert "display down (killed by signal 9)" in demo.output()
+        assert "display started again (1 restarts)" in demo.output()
+
+        demo.proc.send_signal(signal.SIGTERM)  # the terminal itself ends
+        stopped = time.monotonic()
+        until("the stale state after SIGTERM", stale, timeout_s=10.0)
+        print(f"stale shown {time.monotonic() - stopped:.2f} s after SIGTERM of the terminal")
+    finally:
+        if driver is not None:
+            driver.quit()
+        assert demo.stop() == 0, demo.output()
