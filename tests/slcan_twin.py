@@ -11,6 +11,7 @@ number, the same by-id path). On the CAN side the adapter is a python-can `virtu
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import threading
@@ -126,10 +127,8 @@ class SlcanAdapter:
                     self._open = True
                 elif cmd == "C":
                     self._open = False
-        try:
+        with contextlib.suppress(OSError):  # pulled meanwhile
             os.write(master, reply)
-        except OSError:
-            pass  # pulled meanwhile
 
     def _from_can(self) -> None:
         while not self._stop.is_set():
@@ -144,10 +143,8 @@ class SlcanAdapter:
                 line = f"T{msg.arbitration_id:08X}{msg.dlc}{bytes(msg.data).hex().upper()}\r"
             else:
                 line = f"t{msg.arbitration_id:03X}{msg.dlc}{bytes(msg.data).hex().upper()}\r"
-            try:
+            with contextlib.suppress(OSError):  # pulled meanwhile
                 os.write(fds[0], line.encode())
-            except OSError:
-                pass
 
 
 class EcuOnChannel:

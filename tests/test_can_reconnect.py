@@ -44,9 +44,7 @@ def _config(channel: str) -> TerminalConfig:
 
 
 def _slcan(cfg: TerminalConfig, path: Path, **options: object) -> TerminalConfig:
-    return replace(
-        cfg, can=replace(cfg.can, interface="slcan", channel=str(path), options=options)
-    )
+    return replace(cfg, can=replace(cfg.can, interface="slcan", channel=str(path), options=options))
 
 
 class LiveTerminal:

@@ -16,6 +16,10 @@ calibration results) also goes to the session log as events (`log_event`), on th
 
 GNSS lost (port vanished, no valid fix, stale speed) is forwarded as "not available", so the
 ECU falls back to the wheel.
+
+No device is opened on the loop's thread: the CAN adapter (`devices.can.CanPort`) and the serial
+ports open, and reopen after a loss, in their own threads; a changed `[can]` section opens its bus
+there too while the old one keeps working, and the link moves to it once it is open.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import can
 from topdress.config import TerminalConfig
 from topdress.crop.rate import RateModel, build_rate_model, split_layers
 from topdress.crop.sensors import CompensatedNdvi
+from topdress.devices.can import CanPort
 from topdress.devices.lines import LineSource, open_line_source
 from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
@@ -61,7 +66,6 @@ CROP_HOLD_S = 0.5  # a crop sensor state must hold this long to be an event
 #: The states of each link that are a loss (an event when entered, another when left).
 LOST_STATES = {"ecu": ("lost",), "gnss": ("lost", "no fix"), "crop": ("lost", "silent")}
 HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
-_CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
 
 
 class Terminal:
@@ -72,14 +76,16 @@ class Terminal:
         cfg: TerminalConfig,
         gnss: LineSource,
         crop: LineSource,
-        bus: can.BusABC,
+        bus: can.BusABC | CanPort,
         session: SessionLog | None = None,
         clock: Callable[[], float] = time.monotonic,
         start: bool = True,
         on_event: Callable[[Text], None] | None = None,
         config_path: Path | None = None,
     ) -> None:
-        """`start`: the meters start at once (headless); else at the operator's Start.
+        """`bus`: the `[can]` interface, open (kept open and reopened by a CanPort, which the
+        terminal owns from now on: `close` shuts it down).
+        `start`: the meters start at once (headless); else at the operator's Start.
         `config_path`: where settings changed while running are saved (None: not saved)."""
         self.cfg = cfg
         self.gnss = gnss
@@ -88,8 +94,12 @@ class Terminal:
         self.clock = clock
         self._on_event = on_event
         self.inbox = Inbox()
+        self.port = bus if isinstance(bus, CanPort) else CanPort(cfg.can, bus, clock=clock)
+        # A changed [can] section's bus while it opens: (port, configuration, when done).
+        self._opening: tuple[CanPort, TerminalConfig, Callable[[str | None], None]] | None = None
+        self._port_down_since: float | None = None
         self.link = CanLink(
-            bus,
+            self.port,
             cfg.can,
             fan_rpm=cfg.machine.fan_rpm,
             on_tx=self._log_tx,
@@ -115,14 +125,18 @@ class Terminal:
         self._last_event: Text | None = None
         self._lost_since: dict[str, float] = {}  # link -> when it was lost
         self._faults = 0  # the ECU's fault word as last heard
-        self._stop = threading.Event()
-        self._can_thread: threading.Thread | None = None
         self.desk = OperatorDesk(self, start, config_path)
 
     @property
-    def bus(self) -> can.BusABC:
-        """The CAN bus in use (a changed [can] section moves the link to another)."""
-        return self.link.bus
+    def bus(self) -> can.BusABC | None:
+        """The python-can bus in use (a changed [can] section moves the link to another; None
+        while the adapter is being opened again)."""
+        return self.port.bus
+
+    @property
+    def ecu_state(self) -> str:
+        """The ECU link's state: the CAN link's, and `lost` while no adapter is open."""
+        return self.link.state if self.port.connected else "lost"
 
     @property
     def model(self) -> RateModel:
@@ -140,20 +154,26 @@ class Terminal:
 
     # ---- settings changed while running: the desk decides, the parts take them ---------------
     def reopen(self, section: str, new: TerminalConfig, now: float) -> None:
-        """Open the device of a changed [gnss], [crop] or [can] section in place of the one in
-        use; DeviceError when it cannot be opened (the old one stays)."""
-        if section == "can":
-            self.link.reopen(new.can, new.ecu_params(), now)
-            return
+        """Open the line source of a changed [gnss] or [crop] section in place of the one in
+        use; DeviceError when it cannot be made (the old one stays). A serial port opens in
+        its reader thread; the old reader is stopped in a thread of its own."""
         kind = "nmea" if section == "gnss" else "crop"
         source = open_line_source(new.gnss if section == "gnss" else new.crop)
         if section == "gnss":
-            self.gnss.stop()
-            self.gnss = source
+            old, self.gnss = self.gnss, source
         else:
-            self.crop.stop()
-            self.crop = source
+            old, self.crop = self.crop, source
+        _in_background(old.stop, f"stop-{old.name}")
         source.start(lambda t, line: self.inbox.put((kind, t, line)))
+
+    def open_can(self, new: TerminalConfig, done: Callable[[str | None], None]) -> None:
+        """Open the bus of a changed [can] section in its own thread (slcan's open alone
+        sleeps 2 s); the bus in use keeps working meanwhile. Once it is open the link moves to
+        it and `done(None)` is called; if it cannot be opened, `done(reason)` and the old one
+        stays. Both in the loop."""
+        port = CanPort(new.can, clock=self.clock)
+        self._opening = (port, new, done)
+        port.start(self._port_sink(port))
 
     def take(self, section: str, new: TerminalConfig) -> None:
         """The configuration with `section` changed, taken by the parts that read it."""
@@ -167,8 +187,9 @@ class Terminal:
 
     # ---- life cycle ---------------------------------------------------------------------------
     def open(self) -> None:
-        """Start the line sources and the parameter push. `run` also starts the CAN reader;
-        a caller driving `handle`/`tick` itself (virtual time) hands CAN frames in directly."""
+        """Start the line sources and the parameter push. `run` also starts the CAN port's
+        reader; a caller driving `handle`/`tick` itself (virtual time) hands CAN frames in
+        directly."""
         now = self.clock()
         self._t0 = now
         self.gnss.start(lambda t, line: self.inbox.put(("nmea", t, line)))
@@ -187,24 +208,70 @@ class Terminal:
         self.desk.close()
         self.link.set_command(False, 0.0, 0.0, 0.0)
         self.link.send_now()
-        self._stop.set()
         self.gnss.stop()
         self.crop.stop()
-        if self._can_thread is not None:
-            self._can_thread.join(timeout=2.0)
+        if self._opening is not None:
+            port, _, done = self._opening
+            self._opening = None
+            port.stop()
+            done("the terminal closed before the new CAN bus opened")
+        self.port.stop()
         if self.session is not None:
             self.session.close()
 
-    def _can_reader(self) -> None:
-        while not self._stop.is_set():
-            try:
-                msg = self.link.bus.recv(timeout=_CAN_POLL_S)
-            except (can.CanError, OSError) as exc:
-                self.inbox.put(("can_error", self.clock(), str(exc)))
-                self._stop.wait(0.5)
-                continue
-            if msg is not None:
-                self.inbox.put(("can", self.clock(), msg))
+    def _port_sink(self, port: CanPort) -> Callable[[float, str, Any], None]:
+        """What a CAN port's thread hands the loop: the frames of the port in use, and what
+        happens to any port (opened, lost, an error), for the loop to act on in turn."""
+
+        def sink(t: float, what: str, payload: Any) -> None:
+            if what == "frame":
+                if port is self.port:  # frames of a bus being left or still opening: not ours
+                    self.inbox.put(("can", t, payload))
+            elif what == "rx_error":
+                if port is self.port:
+                    self.inbox.put(("can_error", t, payload))
+            else:
+                self.inbox.put(("can_port", t, (port, what, payload)))
+
+        return sink
+
+    def _on_port(self, t: float, port: CanPort, what: str, detail: Any) -> None:
+        if port is self.port:
+            self._on_adapter(t, what, detail)
+            return
+        if self._opening is None or port is not self._opening[0]:
+            return  # a port left behind
+        _, new, done = self._opening
+        if what == "open":  # the new bus is open: the link goes on there
+            self._opening = None
+            old, self.port = self.port, port
+            self.link.move_to(port, new.can, new.ecu_params(), t)
+            self._can_failing = False
+            self._port_down_since = None
+            _in_background(old.stop, "can-retire")
+            done(None)
+        elif what == "open_failed":
+            self._opening = None
+            _in_background(port.stop, "can-retire")
+            done(str(detail))
+
+    def _on_adapter(self, t: float, what: str, detail: Any) -> None:
+        """The adapter in use was lost, opened again, or cannot be opened yet."""
+        where = self.port.name
+        if what == "lost":
+            self.counters["can_lost"] += 1
+            self._port_down_since = t
+            self.event(text("event.can_adapter_lost", why=f"{where}: {detail}"))
+            self.log_event(t, "link.lost", link="can", state="lost", where=where, why=str(detail))
+        elif what == "open" and self._port_down_since is not None:
+            lost_s = round(t - self._port_down_since, 3)
+            self._port_down_since = None
+            self._can_failing = False
+            self.event(text("event.can_adapter_back", where=where, s=lost_s))
+            self.log_event(t, "link.restored", link="can", state="ok", lost_s=lost_s)
+        elif what == "open_failed":
+            # Said in the program log only: the operator was told it is lost and reopened.
+            log.info("CAN %s cannot be opened yet: %s", where, detail)
 
     def run(
         self,
@@ -218,8 +285,7 @@ class Terminal:
             # the collector's full passes, which otherwise scan it all (~20 ms) in some tick.
             gc.collect()
             gc.freeze()
-            self._can_thread = threading.Thread(target=self._can_reader, name="can-rx", daemon=True)
-            self._can_thread.start()
+            self.port.start(self._port_sink(self.port))
             assert self._t0 is not None
             self._loop(self._t0, duration_s, on_tick)
         finally:
@@ -263,9 +329,11 @@ class Terminal:
             self.link.on_frame(payload, t)
         elif kind == "can_error":
             self.counters["can_rx_errors"] += 1
-            if not self._can_failing:  # once per failure spell (the reader retries every 0.5 s)
+            if not self._can_failing:  # once per failure spell (the reader retries)
                 self._can_failing = True
                 self.event(text("event.can_rx_error", error=str(payload)))
+        elif kind == "can_port":
+            self._on_port(t, *payload)
         self.link.poll(t)
 
     def _on_nmea(self, t: float, line: bytes) -> None:
@@ -341,7 +409,7 @@ class Terminal:
             self.session.state(state_row(now, self.snapshot))
 
     def _track_links(self, now: float) -> None:
-        states = {"ecu": self.link.state, "gnss": self._gnss_state, "crop": self._crop_reported}
+        states = {"ecu": self.ecu_state, "gnss": self._gnss_state, "crop": self._crop_reported}
         for link, state in states.items():
             lost = state in LOST_STATES[link]
             since = self._lost_since.get(link)
@@ -460,7 +528,7 @@ class Terminal:
             ndvi=ndvi,
             rate_kg_ha=rates,
             ecu_live=live,
-            ecu_link=self.link.state,
+            ecu_link=self.ecu_state,
             ecu_where=self.link.where,
             gnss_link=self._gnss_state,
             crop_link=self._crop_state,
@@ -516,3 +584,9 @@ class Terminal:
 
 def _why(source: LineSource) -> str:
     return f"{source.name}: {source.last_error or 'disconnected'}"
+
+
+def _in_background(stop: Callable[[], None], name: str) -> None:
+    """Stop a device the loop no longer uses without waiting for it (a reader thread leaving
+    a blocking read, a bus shutting down)."""
+    threading.Thread(target=stop, name=name, daemon=True).start()
