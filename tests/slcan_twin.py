@@ -22,7 +22,14 @@ from pathlib import Path
 import can
 
 from ecu_twin import SimulatedEcu
+from topdress import protocol
+from topdress.config import TerminalConfig
+from topdress.devices.can import open_bus
+from topdress.devices.lines import FakeLineSource
+from topdress.log.model import LogEvent
+from topdress.log.session import SessionLog, SessionReader
 from topdress.protocol import Fault
+from topdress.terminal.app import Terminal
 
 
 class SlcanAdapter:
@@ -175,3 +182,44 @@ class EcuOnChannel:
         self._stop.set()
         self._thread.join(timeout=2.0)
         self.bus.shutdown()
+
+
+class LiveTerminal:
+    """The terminal's own loop (`Terminal.run`) in a thread, on the wall clock, logging to a
+    session; the GNSS and crop inputs stay quiet (the CAN link is under test)."""
+
+    def __init__(self, cfg: TerminalConfig, log_dir: Path, duration_s: float) -> None:
+        self.events: list[tuple[float, str]] = []
+        self.session = SessionLog.create(log_dir, "")
+        self.term = Terminal(
+            cfg,
+            FakeLineSource(),
+            FakeLineSource(),
+            open_bus(cfg.can),
+            self.session,
+            start=True,
+            on_event=lambda e: self.events.append((time.monotonic(), str(e))),
+        )
+        self._thread = threading.Thread(
+            target=self.term.run, kwargs={"duration_s": duration_s}, daemon=True
+        )
+        self._thread.start()
+
+    def join(self) -> None:
+        self._thread.join(timeout=30.0)
+        assert not self._thread.is_alive()
+
+    def commands(self) -> list[float]:
+        """When each PcCommand went out (the loop's clock), from the session's tx log."""
+        with SessionReader(self.session.path) as reader:
+            ids = protocol.DEFAULT_IDS.command
+            return [r.t for r in reader.raw() if r.kind == "can_tx" and r.can_id == ids]
+
+    def state_times(self) -> list[float]:
+        """When each state row was written: the loop's ticks."""
+        with SessionReader(self.session.path) as reader:
+            return [row.t for row in reader.states()]
+
+    def log_events(self) -> list[LogEvent]:
+        with SessionReader(self.session.path) as reader:
+            return list(reader.events())

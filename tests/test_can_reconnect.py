@@ -9,20 +9,20 @@ went out, and when the adapter came back."""
 from __future__ import annotations
 
 import itertools
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
-from slcan_twin import EcuOnChannel, SlcanAdapter
+import can
+import pytest
+import serial
+
+from slcan_twin import EcuOnChannel, LiveTerminal, SlcanAdapter
 from topdress import protocol
-from topdress.config import TerminalConfig, default_config
-from topdress.devices.can import open_bus
-from topdress.devices.lines import FakeLineSource
-from topdress.log.model import LogEvent
-from topdress.log.session import SessionLog, SessionReader
-from topdress.terminal.app import Terminal
+from topdress.config import CanConfig, TerminalConfig, default_config
+from topdress.devices.can import CanPort
+from topdress.errors import DeviceError
 from topdress.view import commands as op
 
 _channels = itertools.count()
@@ -45,42 +45,6 @@ def _config(channel: str) -> TerminalConfig:
 
 def _slcan(cfg: TerminalConfig, path: Path, **options: object) -> TerminalConfig:
     return replace(cfg, can=replace(cfg.can, interface="slcan", channel=str(path), options=options))
-
-
-class LiveTerminal:
-    """The terminal's own loop (`Terminal.run`) in a thread, on the wall clock, logging to a
-    session; the GNSS and crop inputs stay quiet (the CAN link is under test)."""
-
-    def __init__(self, cfg: TerminalConfig, log_dir: Path, duration_s: float) -> None:
-        self.events: list[tuple[float, str]] = []
-        self.session = SessionLog.create(log_dir, "")
-        self.term = Terminal(
-            cfg,
-            FakeLineSource(),
-            FakeLineSource(),
-            open_bus(cfg.can),
-            self.session,
-            start=True,
-            on_event=lambda e: self.events.append((time.monotonic(), str(e))),
-        )
-        self._thread = threading.Thread(
-            target=self.term.run, kwargs={"duration_s": duration_s}, daemon=True
-        )
-        self._thread.start()
-
-    def join(self) -> None:
-        self._thread.join(timeout=30.0)
-        assert not self._thread.is_alive()
-
-    def commands(self) -> list[float]:
-        """When each PcCommand went out (the loop's clock), from the session's tx log."""
-        with SessionReader(self.session.path) as reader:
-            ids = protocol.DEFAULT_IDS.command
-            return [r.t for r in reader.raw() if r.kind == "can_tx" and r.can_id == ids]
-
-    def log_events(self) -> list[LogEvent]:
-        with SessionReader(self.session.path) as reader:
-            return list(reader.events())
 
 
 def _periods(times: list[float]) -> list[float]:
@@ -161,3 +125,159 @@ def test_applying_can_settings_keeps_every_command_period(tmp_path: Path) -> Non
     assert len(through) >= 2
     # so the ECU never stopped the meters for want of a command
     assert ecu.ran and ecu.timeouts == 0
+
+
+# ---- buses that raise: the port's own rules, on virtual time ---------------------------------
+
+
+class ScriptedBus(can.BusABC):  # type: ignore[misc]
+    """A bus whose receives and sends raise what it is told (None: work)."""
+
+    def __init__(self, rx_error: BaseException | None = None) -> None:
+        super().__init__(channel="scripted")
+        self.rx_error = rx_error
+        self.tx_error: BaseException | None = None
+        self.sent: list[can.Message] = []
+        self.closed = False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self.tx_error is not None:
+            raise self.tx_error
+        self.sent.append(msg)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[None, bool]:
+        time.sleep(0.001)  # the wall clock: only so the reader thread does not spin
+        if self.rx_error is not None:
+            raise self.rx_error
+        return None, False
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.closed = True
+
+
+class VirtualWaits:
+    """The port's pauses on a virtual clock: each is recorded and passes at once."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+        self.waits: list[float] = []
+        self.stop = False
+
+    def clock(self) -> float:
+        return self.t
+
+    def wait(self, seconds: float) -> bool:
+        self.waits.append(seconds)
+        self.t += seconds
+        time.sleep(0.001)
+        return self.stop
+
+
+def _serial_gone() -> can.CanOperationError:
+    # what python-can's slcan raises when the USB adapter is pulled out
+    try:
+        try:
+            raise serial.SerialException("read failed: [Errno 5] Input/output error")
+        except serial.SerialException as exc:
+            raise can.CanOperationError("Could not read from serial device") from exc
+    except can.CanOperationError as exc:
+        return exc
+
+
+class PortRig:
+    def __init__(self, first: ScriptedBus, opens: list[ScriptedBus | Exception]) -> None:
+        self.v = VirtualWaits()
+        self.opens = list(opens)
+        self.told: list[tuple[float, str, object]] = []
+        self.port = CanPort(
+            _config("scripted").can,
+            first,
+            opener=self._open,
+            clock=self.v.clock,
+            wait=self.v.wait,
+        )
+        self.port.start(lambda t, what, payload: self.told.append((t, what, payload)))
+
+    def _open(self, cfg: CanConfig) -> can.BusABC:
+        item = self.opens.pop(0) if self.opens else DeviceError("no adapter")
+        if isinstance(item, Exception):
+            raise item
+        return item
+
+    def what(self) -> list[str]:
+        return [w for _, w, _ in self.told if w != "rx_error"]
+
+    def close(self) -> None:
+        self.v.stop = True
+        self.port.stop()
+
+
+def test_a_vanished_adapter_is_given_up_at_once_and_reopened_with_backoff() -> None:
+    dead, fresh = ScriptedBus(rx_error=_serial_gone()), ScriptedBus()
+    absent = [DeviceError("cannot open CAN interface 'slcan': no such file")] * 7
+    rig = PortRig(dead, [*absent, fresh])
+    try:
+        assert _wait_for(lambda: rig.port.bus is fresh, 5.0)
+        # lost at its first error; tries 0.1 s after, then 0.1, 0.2, ... doubling up to 1 s
+        assert rig.what() == ["lost", "open_failed", "open"]
+        assert rig.v.waits[:8] == pytest.approx([0.1, 0.1, 0.2, 0.4, 0.8, 1.0, 1.0, 1.0])
+        (lost,) = [p for _, w, p in rig.told if w == "lost"]
+        assert lost == "Could not read from serial device"
+        (back,) = [(t, p) for t, w, p in rig.told if w == "open"]
+        assert back[1] == pytest.approx(4.6)  # seconds without an adapter, virtual
+        assert dead.closed and rig.port.connected
+        assert rig.port.counters["open_failures"] == 7 and rig.port.counters["lost"] == 1
+    finally:
+        rig.close()
+    assert fresh.closed
+
+
+def test_a_send_that_says_the_adapter_is_gone_gives_it_up_and_the_loop_is_told() -> None:
+    first, fresh = ScriptedBus(), ScriptedBus()
+    rig = PortRig(first, [fresh])
+    msg = can.Message(arbitration_id=0x0A5C6465, data=bytes(8))
+    try:
+        rig.port.send(msg)
+        first.tx_error = serial.SerialException("write failed: [Errno 5] Input/output error")
+        with pytest.raises(serial.SerialException):
+            rig.port.send(msg)
+        assert not rig.port.connected  # at once: the loop sends nothing more to it
+        with pytest.raises(DeviceError, match="CAN virtual:scripted is not open"):
+            rig.port.send(msg)
+        assert _wait_for(lambda: rig.port.bus is fresh, 5.0)
+        rig.port.send(msg)
+        assert fresh.sent == [msg] and rig.what() == ["lost", "open"]
+    finally:
+        rig.close()
+
+
+def test_a_full_transmit_queue_is_the_bus_not_the_adapter() -> None:
+    # the ECU's cable pulled on socketcan: nobody acknowledges, the queue fills (ENOBUFS)
+    bus = ScriptedBus()
+    rig = PortRig(bus, [])
+    msg = can.Message(arbitration_id=0x0A5C6465, data=bytes(8))
+    try:
+        bus.tx_error = can.CanOperationError("Failed to transmit: No buffer space", 105)
+        for _ in range(20):
+            rig.v.t += 0.5  # every command period for 10 s
+            with pytest.raises(can.CanOperationError):
+                rig.port.send(msg)
+        assert rig.port.connected and rig.port.bus is bus and rig.what() == []
+    finally:
+        rig.close()
+
+
+def test_an_error_that_names_no_cause_gives_the_bus_up_once_it_lasts() -> None:
+    # python-can's own error without a cause: a hiccup is kept, a bus that keeps failing is not
+    bus, fresh = ScriptedBus(rx_error=can.CanOperationError("bus error")), ScriptedBus()
+    rig = PortRig(bus, [fresh])
+    try:
+        assert _wait_for(lambda: rig.port.bus is fresh, 5.0)
+        told = [(t, w) for t, w, _ in rig.told]
+        errors = [t for t, w in told if w == "rx_error"]
+        (lost,) = [t for t, w in told if w == "lost"]
+        assert errors and errors[0] == 0.0  # told, and read again 0.1 s later
+        assert lost == pytest.approx(0.3)  # failing for dead_s (0.3 s) without a receive
+    finally:
+        rig.close()

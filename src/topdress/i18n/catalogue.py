@@ -216,6 +216,11 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "CAN adapter lost ({why}): opening it again",
         "CAN 适配器丢失（{why}）：正在重新打开",
     ),
+    "event.can_new_bus_silent": (
+        "no ECU took its parameters on {where} within {s:.0f} s: the bus in use stays "
+        "(check the bitrate and the wiring)",
+        "{where} 上 {s:.0f} 秒内没有控制器接受参数：继续使用当前总线（请检查波特率和接线）",
+    ),
     "event.can_adapter_back": (
         "CAN adapter {where} open again after {s:.1f} s",
         "CAN 适配器 {where} 已重新打开（中断 {s:.1f} 秒）",

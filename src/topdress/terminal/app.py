@@ -31,17 +31,18 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import can
 
-from topdress.config import TerminalConfig
+from topdress.config import CanConfig, TerminalConfig
 from topdress.crop.rate import RateModel, build_rate_model, split_layers
 from topdress.crop.sensors import CompensatedNdvi
 from topdress.devices.can import CanPort
 from topdress.devices.lines import LineSource, open_line_source
+from topdress.errors import EcuParamError
 from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
@@ -66,6 +67,9 @@ CROP_HOLD_S = 0.5  # a crop sensor state must hold this long to be an event
 #: The states of each link that are a loss (an event when entered, another when left).
 LOST_STATES = {"ecu": ("lost",), "gnss": ("lost", "no fix"), "crop": ("lost", "silent")}
 HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
+#: How long the ECU has to take its parameters on a changed [can] bus while the old one works
+#: (it answers within milliseconds; the fast retries take 0.8 s).
+NEW_BUS_WAIT_S = 3.0
 
 
 class Terminal:
@@ -95,16 +99,9 @@ class Terminal:
         self._on_event = on_event
         self.inbox = Inbox()
         self.port = bus if isinstance(bus, CanPort) else CanPort(cfg.can, bus, clock=clock)
-        # A changed [can] section's bus while it opens: (port, configuration, when done).
-        self._opening: tuple[CanPort, TerminalConfig, Callable[[str | None], None]] | None = None
+        self._opening: _Opening | None = None  # a changed [can] section's bus
         self._port_down_since: float | None = None
-        self.link = CanLink(
-            self.port,
-            cfg.can,
-            fan_rpm=cfg.machine.fan_rpm,
-            on_tx=self._log_tx,
-            on_event=self.event,
-        )
+        self.link = self._new_link(self.port, cfg.can, cfg.machine.fan_rpm)
         self.nmea = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
@@ -172,8 +169,11 @@ class Terminal:
         it and `done(None)` is called; if it cannot be opened, `done(reason)` and the old one
         stays. Both in the loop."""
         port = CanPort(new.can, clock=self.clock)
-        self._opening = (port, new, done)
+        self._opening = _Opening(port, new, done)
         port.start(self._port_sink(port))
+
+    def _new_link(self, port: CanPort, cfg: CanConfig, fan_rpm: float) -> CanLink:
+        return CanLink(port, cfg, fan_rpm=fan_rpm, on_tx=self._log_tx, on_event=self.event)
 
     def take(self, section: str, new: TerminalConfig) -> None:
         """The configuration with `section` changed, taken by the parts that read it."""
@@ -211,10 +211,7 @@ class Terminal:
         self.gnss.stop()
         self.crop.stop()
         if self._opening is not None:
-            port, _, done = self._opening
-            self._opening = None
-            port.stop()
-            done("the terminal closed before the new CAN bus opened")
+            self._give_up_opening("the terminal closed before the new CAN bus was in use")
         self.port.stop()
         if self.session is not None:
             self.session.close()
@@ -225,8 +222,11 @@ class Terminal:
 
         def sink(t: float, what: str, payload: Any) -> None:
             if what == "frame":
-                if port is self.port:  # frames of a bus being left or still opening: not ours
+                if port is self.port:
                     self.inbox.put(("can", t, payload))
+                elif self._opening is not None and port is self._opening.port:
+                    self.inbox.put(("can_next", t, payload))  # the ECU readied on a new bus
+                # else a bus being left: not ours any more
             elif what == "rx_error":
                 if port is self.port:
                     self.inbox.put(("can_error", t, payload))
@@ -239,21 +239,63 @@ class Terminal:
         if port is self.port:
             self._on_adapter(t, what, detail)
             return
-        if self._opening is None or port is not self._opening[0]:
+        opening = self._opening
+        if opening is None or port is not opening.port:
             return  # a port left behind
-        _, new, done = self._opening
-        if what == "open":  # the new bus is open: the link goes on there
-            self._opening = None
-            old, self.port = self.port, port
-            self.link.move_to(port, new.can, new.ecu_params(), t)
-            self._can_failing = False
-            self._port_down_since = None
-            _in_background(old.stop, "can-retire")
-            done(None)
-        elif what == "open_failed":
-            self._opening = None
-            _in_background(port.stop, "can-retire")
-            done(str(detail))
+        if what == "open_failed":
+            self._give_up_opening(str(detail))
+        elif what == "open" and opening.next is None:
+            if self.port.connected and self.link.ready and self.link.ecu_alive:
+                # The ECU works on the old bus: commanded there until it has its parameters
+                # on the new one, so the change never leaves it without a command.
+                opening.next = self._new_link(port, opening.cfg.can, self.link.command.fan_rpm)
+                opening.since = t
+                opening.next.begin(opening.cfg.ecu_params(), t)
+            else:  # nothing works on the old one: on at once
+                self._use_new_bus(t)
+
+    def _poll_new_bus(self, t: float, frame: Any = None) -> None:
+        """The link readied on a changed [can] bus: a frame for it, its retries; it is used
+        once the ECU there has every parameter, given up when the ECU refuses one or is not
+        heard there within NEW_BUS_WAIT_S (the old bus stays)."""
+        opening = self._opening
+        if opening is None or opening.next is None:
+            return
+        try:
+            if frame is not None:
+                opening.next.on_frame(frame, t)
+            opening.next.poll(t)
+        except EcuParamError as exc:
+            self._give_up_opening(f"on {opening.port.name}: {exc}")
+            return
+        if opening.next.params_done:
+            self._use_new_bus(t)
+        elif t - opening.since > NEW_BUS_WAIT_S:
+            self._give_up_opening(
+                str(text("event.can_new_bus_silent", where=opening.port.name, s=NEW_BUS_WAIT_S))
+            )
+
+    def _use_new_bus(self, t: float) -> None:
+        opening = self._opening
+        assert opening is not None
+        self._opening = None
+        old, self.port = self.port, opening.port
+        if opening.next is not None:
+            opening.next.command = self.link.command  # what the ECU is doing carries on
+            self.link = opening.next
+        else:
+            self.link.move_to(opening.port, opening.cfg.can, opening.cfg.ecu_params(), t)
+        self._can_failing = False
+        self._port_down_since = None
+        _in_background(old.stop, "can-retire")
+        opening.done(None)
+
+    def _give_up_opening(self, why: str) -> None:
+        opening = self._opening
+        assert opening is not None
+        self._opening = None
+        _in_background(opening.port.stop, "can-retire")
+        opening.done(why)
 
     def _on_adapter(self, t: float, what: str, detail: Any) -> None:
         """The adapter in use was lost, opened again, or cannot be opened yet."""
@@ -334,6 +376,8 @@ class Terminal:
                 self.event(text("event.can_rx_error", error=str(payload)))
         elif kind == "can_port":
             self._on_port(t, *payload)
+        elif kind == "can_next":
+            self._poll_new_bus(t, payload)
         self.link.poll(t)
 
     def _on_nmea(self, t: float, line: bytes) -> None:
@@ -388,6 +432,7 @@ class Terminal:
         # The operator's state (stopped, paused, manual, a calibration) decides what goes out.
         start, fan, upper, lower = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
         self.link.set_command(start, fan, upper, lower)
+        self._poll_new_bus(now)
         self.link.poll(now)
         snap = self._snapshot(
             now,
@@ -580,6 +625,17 @@ class Terminal:
         log.info("%s", message)  # English in the program log
         if self._on_event is not None:
             self._on_event(message)
+
+
+@dataclass
+class _Opening:
+    """The bus of a changed [can] section, from the moment it starts opening until in use."""
+
+    port: CanPort
+    cfg: TerminalConfig
+    done: Callable[[str | None], None]
+    next: CanLink | None = None  # the link given the parameters there while the old one works
+    since: float = 0.0
 
 
 def _why(source: LineSource) -> str:
