@@ -528,6 +528,27 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         rig.close()
 
 
+def test_a_can_change_where_no_ecu_answers_keeps_the_bus_in_use() -> None:
+    # The new bus opens (here a virtual channel with nobody on it) while the ECU keeps being
+    # commanded on the old one; nobody takes the parameters there: the change is refused.
+    rig = make_rig(drive(straight(8.0, 200.0)), autostart=True)
+    try:
+        rig.run(4.0)
+        assert rig.term.snapshot.ecu_link == "ok" and rig.world.ecu.state.running
+        bus, t_change = rig.term.bus, rig.world.t_s
+        res = post_opening(rig, op.ApplySettings("can", {"channel": "test-operator-nobody"}))
+        assert not res.ok and list(res.errors) == ["can.channel"]
+        assert res.message.startswith(
+            "no ECU took its parameters on virtual:test-operator-nobody within 3 s"
+        )
+        assert rig.term.bus is bus and rig.term.cfg.can.channel != "test-operator-nobody"
+        during = [s for t, s in rig.snapshots if t >= t_change]
+        assert during and all(s.ecu_link == "ok" and s.running for s in during)
+        assert rig.world.ecu.state.running  # never stopped for want of a command
+    finally:
+        rig.close()
+
+
 def test_gnss_port_changed_while_running_is_reopened_on_the_new_device() -> None:
     import time as wall
 
