@@ -3,10 +3,10 @@ interface opens its tty with pyserial exactly as it opens a real adapter's. Test
 the package.
 
 The adapter's tty is reached through a symbolic link (`path`), as udev's /dev/serial/by-id link
-reaches a real one. `pull()` closes the pty (the tty vanishes, the link dangles: the adapter is
-unplugged); `plug()` makes a new pty and points the link at it (plugged back: a new /dev/pts
-number, the same by-id path). On the CAN side the adapter is a python-can `virtual` bus on
-`channel`, where the ECU's twin (`EcuOnChannel`) or a terminal's own virtual bus sits.
+reaches a real one. `pull()` removes the link and closes the pty (the adapter is unplugged);
+`plug()` makes a new pty and points the link at it (plugged back: a new /dev/pts number, the
+same by-id path). On the CAN side the adapter is a python-can `virtual` bus on `channel`, where
+the ECU's twin (`EcuOnChannel`) or a terminal's own virtual bus sits.
 """
 
 from __future__ import annotations
@@ -70,7 +70,9 @@ class SlcanAdapter:
         self.plugged_at = time.monotonic()
 
     def pull(self) -> None:
-        """The adapter unplugged: the pty closed, the link dangling."""
+        """The adapter unplugged: the link removed (as udev does) and the pty closed. A link
+        left dangling could soon name another program's pty: /dev/pts numbers are reused."""
+        self.path.unlink(missing_ok=True)
         with self._lock:
             fds, self._fds = self._fds, None
             self._open = False

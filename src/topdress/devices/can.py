@@ -75,12 +75,23 @@ def _errnos(exc: BaseException) -> list[int]:
     return found
 
 
+def reason(exc: BaseException) -> str:
+    """An error in words, with its cause: python-can's own message ("Could not read from
+    serial device") says what failed, the cause why."""
+    cause = exc.__cause__
+    return f"{exc}: {cause}" if cause is not None and str(cause) else str(exc)
+
+
 def adapter_gone(exc: BaseException) -> bool:
-    """The error says the adapter is gone: pyserial's errors (slcan and other serial adapters),
+    """The error says the adapter is gone: pyserial's errors but a write timeout (slcan and
+    other serial adapters),
     or an OS error such as EIO, ENODEV, ENETDOWN, anywhere along its causes."""
     seen: BaseException | None = exc
     while seen is not None:
-        if isinstance(seen, serial.SerialException):
+        # A write timeout is an adapter not draining, maybe for a moment: the dead_s rule
+        if isinstance(seen, serial.SerialException) and not isinstance(
+            seen, serial.SerialTimeoutException
+        ):
             return True
         seen = seen.__cause__ or seen.__context__
     return any(n in _GONE_ERRNOS for n in _errnos(exc))
@@ -184,7 +195,7 @@ class CanPort:
                 if self._tx_failing_since is None:
                     self._tx_failing_since = now
                 if self._dead(exc, self._tx_failing_since, now):
-                    self._gone = str(exc)
+                    self._gone = reason(exc)
                 raise
         self._tx_failing_since = None
 
@@ -255,8 +266,8 @@ class CanPort:
                 self.counters["rx_errors"] += 1
                 failing_since = now if failing_since is None else failing_since
                 if self._dead(exc, failing_since, now):
-                    return str(exc)
-                self._tell("rx_error", str(exc))
+                    return reason(exc)
+                self._tell("rx_error", reason(exc))
                 if self._wait(min(self.recv_timeout_s, self.dead_s / 2)):
                     return None
                 continue
