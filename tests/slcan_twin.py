@@ -12,6 +12,7 @@ the ECU's twin (`EcuOnChannel`) or a terminal's own virtual bus sits.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import select
 import threading
@@ -186,12 +187,23 @@ class EcuOnChannel:
         self.bus.shutdown()
 
 
+class _Enough(Exception):
+    """Ends a LiveTerminal's run from its tick."""
+
+
 class LiveTerminal:
     """The terminal's own loop (`Terminal.run`) in a thread, on the wall clock, logging to a
-    session; the GNSS and crop inputs stay quiet (the CAN link is under test)."""
+    session, until `join()`; the GNSS and crop inputs stay quiet (the CAN link is under test).
 
-    def __init__(self, cfg: TerminalConfig, log_dir: Path, duration_s: float) -> None:
+    A watch thread records when this process could not run for a while (`stalls`: a shared
+    machine under load): a command period is the loop's fault only beyond such a stall."""
+
+    WATCH_S = 0.005
+    STALL_S = 0.05
+
+    def __init__(self, cfg: TerminalConfig, log_dir: Path) -> None:
         self.events: list[tuple[float, str]] = []
+        self.stalls: list[tuple[float, float]] = []
         self.session = SessionLog.create(log_dir, "")
         self.term = Terminal(
             cfg,
@@ -202,14 +214,44 @@ class LiveTerminal:
             start=True,
             on_event=lambda e: self.events.append((time.monotonic(), str(e))),
         )
-        self._thread = threading.Thread(
-            target=self.term.run, kwargs={"duration_s": duration_s}, daemon=True
-        )
-        self._thread.start()
+        self._stop = threading.Event()
+        self._threads = [
+            threading.Thread(target=self._run, name="live-terminal", daemon=True),
+            threading.Thread(target=self._watch, name="stall-watch", daemon=True),
+        ]
+        for thread in self._threads:
+            thread.start()
+
+    def _run(self) -> None:
+        def on_tick(snapshot: object, now: float) -> None:
+            if self._stop.is_set():
+                raise _Enough
+
+        with contextlib.suppress(_Enough):
+            self.term.run(on_tick=on_tick)
+
+    def _watch(self) -> None:
+        while not self._stop.is_set():
+            t = time.monotonic()
+            time.sleep(self.WATCH_S)
+            if time.monotonic() - t > self.STALL_S:
+                self.stalls.append((t, time.monotonic()))
 
     def join(self) -> None:
-        self._thread.join(timeout=30.0)
-        assert not self._thread.is_alive()
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(timeout=30.0)
+            assert not thread.is_alive()
+
+    def long_periods(self, times: list[float], bound_s: float) -> list[tuple[float, float]]:
+        """The periods between `times` longer than `bound_s` once the process's own stalls
+        within them are taken off: (start, length)."""
+        out = []
+        for a, b in itertools.pairwise(times):
+            stalled = sum(max(0.0, min(b, s1) - max(a, s0)) for s0, s1 in self.stalls)
+            if b - a - stalled > bound_s:
+                out.append((a, b - a))
+        return out
 
     def commands(self) -> list[float]:
         """When each PcCommand went out (the loop's clock), from the session's tx log."""

@@ -62,7 +62,7 @@ def test_usb_can_adapter_pulled_for_5_s_is_back_within_2_s_of_returning(
     ecu = EcuOnChannel(channel)
     # This adapter resets nothing on open: python-can's 2 s wait after opening is not needed.
     cfg = _slcan(_config(channel), link, sleep_after_open=0.05)
-    live = LiveTerminal(cfg, tmp_path / "logs", duration_s=12.0)
+    live = LiveTerminal(cfg, tmp_path / "logs")
     term = live.term
     try:
         assert _wait_for(lambda: term.snapshot.ecu_link == "ok", 5.0), term.snapshot.ecu_link
@@ -74,6 +74,7 @@ def test_usb_can_adapter_pulled_for_5_s_is_back_within_2_s_of_returning(
         adapter.plug()
         t_plug = time.monotonic()
         assert _wait_for(lambda: term.snapshot.ecu_link == "ok", 4.0), live.events
+        time.sleep(2.0)
     finally:
         live.join()
         adapter.close()
@@ -83,7 +84,7 @@ def test_usb_can_adapter_pulled_for_5_s_is_back_within_2_s_of_returning(
     assert back, "no command went out after the adapter came back"
     assert back[0] - t_plug <= 2.0, back[0] - t_plug
     # from then on, on the period again
-    assert max(_periods(back)) <= PERIOD_MAX_S
+    assert len(back) >= 4 and live.long_periods(back, PERIOD_MAX_S) == []
     # while it was out, nothing went out
     assert not [t for t in sent if t_pull + 0.1 < t < t_plug]
     words = [e for _, e in live.events]
@@ -101,24 +102,26 @@ def test_applying_can_settings_keeps_every_command_period(tmp_path: Path) -> Non
     link = tmp_path / "usb-CANable_slcan-if00"
     adapter = SlcanAdapter(link, channel)
     ecu = EcuOnChannel(channel)
-    live = LiveTerminal(_config(channel), tmp_path / "logs", duration_s=7.0)
+    live = LiveTerminal(_config(channel), tmp_path / "logs")
     term = live.term
     try:
         assert _wait_for(lambda: term.snapshot.ecu_link == "ok", 5.0), term.snapshot.ecu_link
         time.sleep(1.0)
         # python-can's default wait after opening the port (2 s), as the issue measured
         fut = term.post(op.ApplySettings("can", {"interface": "slcan", "channel": str(link)}))
-        result = fut.result(timeout=6.0)
+        result = fut.result(timeout=20.0)  # a deadlock guard: it takes 2 s and a little
         assert result.ok, result.message
         t_applied = time.monotonic()
         assert term.link.where == f"slcan:{link}"
         assert _wait_for(lambda: term.snapshot.ecu_link == "ok", 2.0), term.snapshot.ecu_link
+        time.sleep(1.5)
     finally:
         live.join()
         adapter.close()
         ecu.close()
     sent = live.commands()
-    assert max(_periods(sent)) <= PERIOD_MAX_S, max(_periods(sent))
+    assert live.long_periods(sent, PERIOD_MAX_S) == [], (_periods(sent), live.stalls)
+    assert len(sent) >= 6
     # the commands after the change went through the adapter
     command_id = protocol.DEFAULT_IDS.command
     through = [t for t, m in adapter.frames if m.arbitration_id == command_id and t > t_applied]
