@@ -51,6 +51,7 @@ bench: $(STAMP) browser
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
+	$(BIN)/python bench/can_bench.py
 	$(BIN)/python bench/maps_bench.py
 	$(BIN)/python bench/display_bench.py
 
