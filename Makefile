@@ -63,6 +63,7 @@ bench: $(STAMP) browser
 	$(BIN)/python bench/fw_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
+	$(BIN)/python bench/can_bench.py
 	$(BIN)/python bench/maps_bench.py
 	$(BIN)/python bench/display_bench.py
 	$(BIN)/python bench/longday_bench.py

@@ -57,6 +57,21 @@ def post(rig: VirtualRig, command: Any, settle_s: float = 0.2) -> CommandResult:
     return replace(result, message=str(result.message))
 
 
+def post_opening(rig: VirtualRig, command: Any, timeout_s: float = 10.0) -> CommandResult:
+    """The answer to a command that opens a CAN bus: the bus opens in a thread of its own, on
+    the wall clock, while the loop goes on (virtual time runs on meanwhile)."""
+    import time as wall
+
+    fut = rig.term.post(command)
+    deadline = wall.monotonic() + timeout_s
+    while not fut.done() and wall.monotonic() < deadline:
+        rig.run(rig.world.t_s + 0.1)
+        wall.sleep(0.005)
+    assert fut.done()
+    result = fut.result()
+    return replace(result, message=str(result.message))
+
+
 def snap_at(rig: VirtualRig, t: float) -> Any:
     return min(rig.snapshots, key=lambda ts: abs(ts[0] - t))[1]
 
@@ -487,14 +502,15 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         assert rig.term.snapshot.counters["crop_bad"] > bad_before  # sensors 3 and 4 refused
         assert post(rig, op.ApplySettings("gnss", {"stale_s": 5.0})).ok
         assert rig.term.tracker.stale_s == 5.0 and rig.term.gnss is rig.gnss
-        res = post(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
+        res = post_opening(rig, op.ApplySettings("can", {"interface": "no_such_interface"}))
         assert not res.ok and list(res.errors) == ["can.interface"]
         assert "no_such_interface" in res.errors["can.interface"]
         assert rig.term.cfg.can.interface == "virtual"
         # an slcan adapter that is not plugged in: said at every key changed, the old bus kept
         bus = rig.term.bus
         slcan = {"interface": "slcan", "channel": str(tmp_path / "ttyACM9")}
-        res = post(rig, op.ApplySettings("can", {**slcan, "options": {"tty_baudrate": 115200}}))
+        slcan_options = {**slcan, "options": {"tty_baudrate": 115200}}
+        res = post_opening(rig, op.ApplySettings("can", slcan_options))
         assert not res.ok
         assert list(res.errors) == ["can.interface", "can.channel", "can.options"]
         assert rig.term.bus is bus and rig.term.cfg.can.options == {}
@@ -509,6 +525,27 @@ def test_live_settings_device_test_and_a_bus_that_cannot_be_opened(tmp_path: Pat
         # with crop.sensors = 2 now: sensors 1 and 2 read, 3 and 4 refused, each line said why
         assert {"sensor 1", "sensor 2", "not usable: sensor_id: '3' is not 1..2"} <= decoded
         assert not post(rig, op.TestDevice("radar")).ok
+    finally:
+        rig.close()
+
+
+def test_a_can_change_where_no_ecu_answers_keeps_the_bus_in_use() -> None:
+    # The new bus opens (here a virtual channel with nobody on it) while the ECU keeps being
+    # commanded on the old one; nobody takes the parameters there: the change is refused.
+    rig = make_rig(drive(straight(8.0, 200.0)), autostart=True)
+    try:
+        rig.run(4.0)
+        assert rig.term.snapshot.ecu_link == "ok" and rig.world.ecu.state.running
+        bus, t_change = rig.term.bus, rig.world.t_s
+        res = post_opening(rig, op.ApplySettings("can", {"channel": "test-operator-nobody"}))
+        assert not res.ok and list(res.errors) == ["can.channel"]
+        assert res.message.startswith(
+            "no ECU took its parameters on virtual:test-operator-nobody within 3 s"
+        )
+        assert rig.term.bus is bus and rig.term.cfg.can.channel != "test-operator-nobody"
+        during = [s for t, s in rig.snapshots if t >= t_change]
+        assert during and all(s.ecu_link == "ok" and s.running for s in during)
+        assert rig.world.ecu.state.running  # never stopped for want of a command
     finally:
         rig.close()
 

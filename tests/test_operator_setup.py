@@ -424,7 +424,6 @@ def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
         assert 2.0 <= cal.result["revolutions"] < 2.15  # with the coast after the stop
     finally:
         runner.join()
-        term.bus.shutdown()
         child.wait(timeout=30)
     assert child.returncode == 0
 

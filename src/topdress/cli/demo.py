@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
-import can
 import tomlkit
 
 from topdress import i18n
@@ -199,7 +198,7 @@ def run_terminal(
         # Also after an error: the operator needs to know where the data went.
         if shown is not None:
             shown.stop()
-        _shutdown(bus)
+        term.port.stop()  # the bus in use (after a [can] change, not the one opened here)
         console.draw(term.snapshot)
         if not term.link.ready:
             out.write(
@@ -208,13 +207,6 @@ def run_terminal(
             )
         _report(out, path, session.errors + session.dropped + session.lost)
     return RunResult(path, rows, term.snapshot, term.link.ready)
-
-
-def _shutdown(bus: can.BusABC) -> None:
-    try:
-        bus.shutdown()
-    except (can.CanError, OSError) as exc:  # the adapter is gone already
-        log.warning("CAN interface did not shut down cleanly: %s", exc)
 
 
 def _report(out: TextIO, path: Path | None, errors: int) -> None:

@@ -193,8 +193,8 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "没有设备 {device!r}（gnss、crop、can）",
     ),
     "op.error.settings_busy": (
-        "settings are being applied: wait for the ECU's answer",
-        "正在应用设置：请等待控制器应答",
+        "settings are being applied: wait for the ECU's answer or the new CAN bus",
+        "正在应用设置：请等待控制器应答或新的 CAN 总线",
     ),
     "op.error.save": ("cannot save {path}: {error}", "无法保存 {path}：{error}"),
     "op.error.not_saved": (
@@ -246,6 +246,19 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "event.can_rx_error": ("CAN receive error: {error}", "CAN 接收错误：{error}"),
     "event.can_tx_failed": ("CAN send failed: {error}", "CAN 发送失败：{error}"),
     "event.can_tx_again": ("CAN send works again", "CAN 发送已恢复"),
+    "event.can_adapter_lost": (
+        "CAN adapter lost ({why}): opening it again",
+        "CAN 适配器丢失（{why}）：正在重新打开",
+    ),
+    "event.can_new_bus_silent": (
+        "no ECU took its parameters on {where} within {s:.0f} s: the bus in use stays "
+        "(check the bitrate and the wiring)",
+        "{where} 上 {s:.0f} 秒内没有控制器接受参数：继续使用当前总线（请检查波特率和接线）",
+    ),
+    "event.can_adapter_back": (
+        "CAN adapter {where} open again after {s:.1f} s",
+        "CAN 适配器 {where} 已重新打开（中断 {s:.1f} 秒）",
+    ),
     "event.ecu_ready": (
         "ECU ready: every parameter acknowledged, {s:.1f} s after start",
         "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",

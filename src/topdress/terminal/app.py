@@ -21,6 +21,10 @@ the next session.
 
 GNSS lost (port vanished, no valid fix, stale speed) is forwarded as "not available", so the
 ECU falls back to the wheel.
+
+No device is opened on the loop's thread: the CAN adapter (`devices.can.CanPort`) and the serial
+ports open, and reopen after a loss, in their own threads; a changed `[can]` section opens its bus
+there too while the old one keeps working, and the link moves to it once it is open.
 """
 
 from __future__ import annotations
@@ -32,16 +36,18 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import can
 
-from topdress.config import TerminalConfig
+from topdress.config import CanConfig, TerminalConfig
 from topdress.crop.rate import RateModel, build_rate_model, split_layers
 from topdress.crop.sensors import CompensatedNdvi
+from topdress.devices.can import CanPort
 from topdress.devices.lines import LineSource, open_line_source
+from topdress.errors import EcuParamError
 from topdress.geo.outlet import OutletTracker
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
@@ -68,7 +74,9 @@ CROP_HOLD_S = 0.5  # a crop sensor state must hold this long to be an event
 #: The states of each link that are a loss (an event when entered, another when left).
 LOST_STATES = {"ecu": ("lost",), "gnss": ("lost", "no fix"), "crop": ("lost", "silent")}
 HINT_LINES = 20  # unusable lines in a row from one input before the operator is told why
-_CAN_POLL_S = 0.1  # how long the CAN reader blocks in recv() before checking for stop
+#: How long the ECU has to take its parameters on a changed [can] bus while the old one works
+#: (it answers within milliseconds; the fast retries take 0.8 s).
+NEW_BUS_WAIT_S = 3.0
 
 
 class Terminal:
@@ -79,7 +87,7 @@ class Terminal:
         cfg: TerminalConfig,
         gnss: LineSource,
         crop: LineSource,
-        bus: can.BusABC,
+        bus: can.BusABC | CanPort,
         session: SessionLog | None = None,
         clock: Callable[[], float] = time.monotonic,
         start: bool = True,
@@ -87,7 +95,9 @@ class Terminal:
         config_path: Path | None = None,
         maps: Maps | None = None,
     ) -> None:
-        """`start`: the meters start at once (headless); else at the operator's Start.
+        """`bus`: the `[can]` interface, open (kept open and reopened by a CanPort, which the
+        terminal owns from now on: `close` shuts it down).
+        `start`: the meters start at once (headless); else at the operator's Start.
         `config_path`: where settings changed while running are saved (None: not saved).
         `maps`: the prescription and boundary loaded already (None: loaded here)."""
         self.cfg = cfg
@@ -97,13 +107,10 @@ class Terminal:
         self.clock = clock
         self._on_event = on_event
         self.inbox = Inbox()
-        self.link = CanLink(
-            bus,
-            cfg.can,
-            fan_rpm=cfg.machine.fan_rpm,
-            on_tx=self._log_tx,
-            on_event=self.event,
-        )
+        self.port = bus if isinstance(bus, CanPort) else CanPort(cfg.can, bus, clock=clock)
+        self._opening: _Opening | None = None  # a changed [can] section's bus
+        self._port_down_since: float | None = None
+        self.link = self._new_link(self.port, cfg.can, cfg.machine.fan_rpm)
         self.nmea = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.ndvi = CompensatedNdvi(cfg.crop, cfg.lookahead.total_s)
@@ -127,8 +134,6 @@ class Terminal:
         self._last_event: Text | None = None
         self._lost_since: dict[str, float] = {}  # link -> when it was lost
         self._faults = 0  # the ECU's fault word as last heard
-        self._stop = threading.Event()
-        self._can_thread: threading.Thread | None = None
         self.desk = OperatorDesk(self, start, config_path)
         # The GNSS lag: kept per receiver beside the session logs (in memory without a log).
         self.receiver = ReceiverWatch(input_key(cfg.gnss))
@@ -140,9 +145,15 @@ class Terminal:
             self.event(text("event.gnss_lag_store", error=self.lags.error))
 
     @property
-    def bus(self) -> can.BusABC:
-        """The CAN bus in use (a changed [can] section moves the link to another)."""
-        return self.link.bus
+    def bus(self) -> can.BusABC | None:
+        """The python-can bus in use (a changed [can] section moves the link to another; None
+        while the adapter is being opened again)."""
+        return self.port.bus
+
+    @property
+    def ecu_state(self) -> str:
+        """The ECU link's state: the CAN link's, and `lost` while no adapter is open."""
+        return self.link.state if self.port.connected else "lost"
 
     @property
     def model(self) -> RateModel:
@@ -160,20 +171,29 @@ class Terminal:
 
     # ---- settings changed while running: the desk decides, the parts take them ---------------
     def reopen(self, section: str, new: TerminalConfig, now: float) -> None:
-        """Open the device of a changed [gnss], [crop] or [can] section in place of the one in
-        use; DeviceError when it cannot be opened (the old one stays)."""
-        if section == "can":
-            self.link.reopen(new.can, new.ecu_params(self._lag_start_ms()), now)
-            return
+        """Open the line source of a changed [gnss] or [crop] section in place of the one in
+        use; DeviceError when it cannot be made (the old one stays). A serial port opens in
+        its reader thread; the old reader is stopped in a thread of its own."""
         kind = "nmea" if section == "gnss" else "crop"
         source = open_line_source(new.gnss if section == "gnss" else new.crop)
         if section == "gnss":
-            self.gnss.stop()
-            self.gnss = source
+            old, self.gnss = self.gnss, source
         else:
-            self.crop.stop()
-            self.crop = source
+            old, self.crop = self.crop, source
+        _in_background(old.stop, f"stop-{old.name}")
         source.start(lambda t, line: self.inbox.put((kind, t, line)))
+
+    def open_can(self, new: TerminalConfig, done: Callable[[str | None], None]) -> None:
+        """Open the bus of a changed [can] section in its own thread (slcan's open alone
+        sleeps 2 s); the bus in use keeps working meanwhile. Once it is open the link moves to
+        it and `done(None)` is called; if it cannot be opened, `done(reason)` and the old one
+        stays. Both in the loop."""
+        port = CanPort(new.can, clock=self.clock)
+        self._opening = _Opening(port, new, done)
+        port.start(self._port_sink(port))
+
+    def _new_link(self, port: CanPort, cfg: CanConfig, fan_rpm: float) -> CanLink:
+        return CanLink(port, cfg, fan_rpm=fan_rpm, on_tx=self._log_tx, on_event=self.event)
 
     def take(self, section: str, new: TerminalConfig) -> None:
         """The configuration with `section` changed, taken by the parts that read it."""
@@ -187,8 +207,9 @@ class Terminal:
 
     # ---- life cycle ---------------------------------------------------------------------------
     def open(self) -> None:
-        """Start the line sources and the parameter push. `run` also starts the CAN reader;
-        a caller driving `handle`/`tick` itself (virtual time) hands CAN frames in directly."""
+        """Start the line sources and the parameter push. `run` also starts the CAN port's
+        reader; a caller driving `handle`/`tick` itself (virtual time) hands CAN frames in
+        directly."""
         now = self.clock()
         self._t0 = now
         self.gnss.start(lambda t, line: self.inbox.put(("nmea", t, line)))
@@ -216,25 +237,115 @@ class Terminal:
         self.desk.close()
         self.link.set_command(False, 0.0, 0.0, 0.0)
         self.link.send_now()
-        self._stop.set()
         self.gnss.stop()
         self.crop.stop()
-        if self._can_thread is not None:
-            self._can_thread.join(timeout=2.0)
+        if self._opening is not None:
+            self._give_up_opening("the terminal closed before the new CAN bus was in use")
+        self.port.stop()
         self._keep_lag(self.clock(), final=True)
         if self.session is not None:
             self.session.close()
 
-    def _can_reader(self) -> None:
-        while not self._stop.is_set():
-            try:
-                msg = self.link.bus.recv(timeout=_CAN_POLL_S)
-            except (can.CanError, OSError) as exc:
-                self.inbox.put(("can_error", self.clock(), str(exc)))
-                self._stop.wait(0.5)
-                continue
-            if msg is not None:
-                self.inbox.put(("can", self.clock(), msg))
+    def _port_sink(self, port: CanPort) -> Callable[[float, str, Any], None]:
+        """What a CAN port's thread hands the loop: the frames of the port in use, and what
+        happens to any port (opened, lost, an error), for the loop to act on in turn."""
+
+        def sink(t: float, what: str, payload: Any) -> None:
+            if what == "frame":
+                if port is self.port:
+                    self.inbox.put(("can", t, payload))
+                elif self._opening is not None and port is self._opening.port:
+                    self.inbox.put(("can_next", t, payload))  # the ECU readied on a new bus
+                # else a bus being left: not ours any more
+            elif what == "rx_error":
+                if port is self.port:
+                    self.inbox.put(("can_error", t, payload))
+            else:
+                self.inbox.put(("can_port", t, (port, what, payload)))
+
+        return sink
+
+    def _on_port(self, t: float, port: CanPort, what: str, detail: Any) -> None:
+        if port is self.port:
+            self._on_adapter(t, what, detail)
+            return
+        opening = self._opening
+        if opening is None or port is not opening.port:
+            return  # a port left behind
+        if what == "open_failed":
+            self._give_up_opening(str(detail))
+        elif what == "open" and opening.next is None:
+            if self.port.connected and self.link.ready and self.link.ecu_alive:
+                # The ECU works on the old bus: commanded there until it has its parameters
+                # on the new one, so the change never leaves it without a command.
+                opening.next = self._new_link(port, opening.cfg.can, self.link.command.fan_rpm)
+                opening.since = t
+                opening.next.begin(opening.cfg.ecu_params(self._lag_start_ms()), t)
+            else:  # nothing works on the old one: on at once
+                self._use_new_bus(t)
+
+    def _poll_new_bus(self, t: float, frame: Any = None) -> None:
+        """The link readied on a changed [can] bus: a frame for it, its retries; it is used
+        once the ECU there has every parameter, given up when the ECU refuses one or is not
+        heard there within NEW_BUS_WAIT_S (the old bus stays)."""
+        opening = self._opening
+        if opening is None or opening.next is None:
+            return
+        try:
+            if frame is not None:
+                opening.next.on_frame(frame, t)
+            opening.next.poll(t)
+        except EcuParamError as exc:
+            self._give_up_opening(f"on {opening.port.name}: {exc}")
+            return
+        if opening.next.params_done:
+            self._use_new_bus(t)
+        elif t - opening.since > NEW_BUS_WAIT_S:
+            self._give_up_opening(
+                str(text("event.can_new_bus_silent", where=opening.port.name, s=NEW_BUS_WAIT_S))
+            )
+
+    def _use_new_bus(self, t: float) -> None:
+        opening = self._opening
+        assert opening is not None
+        self._opening = None
+        old, self.port = self.port, opening.port
+        if opening.next is not None:
+            opening.next.command = self.link.command  # what the ECU is doing carries on
+            self.link = opening.next
+        else:
+            self.link.move_to(
+                opening.port, opening.cfg.can, opening.cfg.ecu_params(self._lag_start_ms()), t
+            )
+        self._can_failing = False
+        self._port_down_since = None
+        _in_background(old.stop, "can-retire")
+        opening.done(None)
+
+    def _give_up_opening(self, why: str) -> None:
+        opening = self._opening
+        assert opening is not None
+        self._opening = None
+        _in_background(opening.port.stop, "can-retire")
+        opening.done(why)
+
+    def _on_adapter(self, t: float, what: str, detail: Any) -> None:
+        """The adapter in use was lost, opened again, or cannot be opened yet."""
+        where = self.port.name
+        if what == "lost":
+            self.counters["can_lost"] += 1
+            self._port_down_since = t
+            self.event(text("event.can_adapter_lost", why=f"{where}: {detail}"))
+            self.log_event(t, "link.lost", link="can", state="lost", where=where, why=str(detail))
+        elif what == "open" and self._port_down_since is not None:
+            lost_s = round(t - self._port_down_since, 3)
+            self._port_down_since = None
+            self._can_failing = False
+            self.event(text("event.can_adapter_back", where=where, s=lost_s))
+            self.log_event(t, "link.restored", link="can", state="ok", lost_s=lost_s)
+        elif what == "open_failed":
+            # Said in the program log only: the operator was told it is lost and reopened.
+            log.info("CAN %s cannot be opened yet: %s", where, detail)
 
     def run(
         self,
@@ -248,8 +359,7 @@ class Terminal:
             # the collector's full passes, which otherwise scan it all (~20 ms) in some tick.
             gc.collect()
             gc.freeze()
-            self._can_thread = threading.Thread(target=self._can_reader, name="can-rx", daemon=True)
-            self._can_thread.start()
+            self.port.start(self._port_sink(self.port))
             assert self._t0 is not None
             self._loop(self._t0, duration_s, on_tick)
         finally:
@@ -293,9 +403,13 @@ class Terminal:
             self.link.on_frame(payload, t)
         elif kind == "can_error":
             self.counters["can_rx_errors"] += 1
-            if not self._can_failing:  # once per failure spell (the reader retries every 0.5 s)
+            if not self._can_failing:  # once per failure spell (the reader retries)
                 self._can_failing = True
                 self.event(text("event.can_rx_error", error=str(payload)))
+        elif kind == "can_port":
+            self._on_port(t, *payload)
+        elif kind == "can_next":
+            self._poll_new_bus(t, payload)
         self.link.poll(t)
 
     def _on_nmea(self, t: float, line: bytes) -> None:
@@ -363,6 +477,7 @@ class Terminal:
         # The operator's state (stopped, paused, manual, a calibration) decides what goes out.
         start, fan, upper, lower = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
         self.link.set_command(start, fan, upper, lower)
+        self._poll_new_bus(now)
         self.link.poll(now)
         snap = self._snapshot(
             now,
@@ -403,7 +518,7 @@ class Terminal:
                 self.event(text("event.map_far_km", map=what, file=name, distance_km=d / 1000))
 
     def _track_links(self, now: float) -> None:
-        states = {"ecu": self.link.state, "gnss": self._gnss_state, "crop": self._crop_reported}
+        states = {"ecu": self.ecu_state, "gnss": self._gnss_state, "crop": self._crop_reported}
         for link, state in states.items():
             lost = state in LOST_STATES[link]
             since = self._lost_since.get(link)
@@ -594,7 +709,7 @@ class Terminal:
             ndvi=ndvi,
             rate_kg_ha=rates,
             ecu_live=live,
-            ecu_link=self.link.state,
+            ecu_link=self.ecu_state,
             ecu_where=self.link.where,
             gnss_link=self._gnss_state,
             crop_link=self._crop_state,
@@ -653,5 +768,22 @@ class Terminal:
             self._on_event(message)
 
 
+@dataclass
+class _Opening:
+    """The bus of a changed [can] section, from the moment it starts opening until in use."""
+
+    port: CanPort
+    cfg: TerminalConfig
+    done: Callable[[str | None], None]
+    next: CanLink | None = None  # the link given the parameters there while the old one works
+    since: float = 0.0
+
+
 def _why(source: LineSource) -> str:
     return f"{source.name}: {source.last_error or 'disconnected'}"
+
+
+def _in_background(stop: Callable[[], None], name: str) -> None:
+    """Stop a device the loop no longer uses without waiting for it (a reader thread leaving
+    a blocking read, a bus shutting down)."""
+    threading.Thread(target=stop, name=name, daemon=True).start()

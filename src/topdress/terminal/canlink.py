@@ -17,6 +17,9 @@ seconds on any monotonic clock (virtual in tests). It
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
   and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
   An ECU never heard is waited for ("wait"), not lost.
+
+It sends on anything with python-can's `send`: the terminal's `devices.can.CanPort`, which
+keeps the adapter open (and reopens it) in its own thread, or a bus itself in tests.
 """
 
 from __future__ import annotations
@@ -24,13 +27,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import can
 
 from topdress import protocol
 from topdress.config import CanConfig
-from topdress.devices.can import open_bus
-from topdress.errors import EcuParamError, ProtocolError
+from topdress.errors import DeviceError, EcuParamError, ProtocolError
 from topdress.i18n import Text, text
 from topdress.protocol import AckResult, FrameIds
 
@@ -43,9 +46,14 @@ MAX_FAN_RPM = 6000.0
 #: Waits between parameter tries once the fast retries went unanswered (the ECU is not on the
 #: bus yet): every 1 s for 5 s, then every 2 s; the last repeats.
 PARAM_BACKOFF_S = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
-RETIRE_S = 0.3  # a bus left by reopen is shut down this long after (see CanLink.reopen)
 # Tolerance of time comparisons: a deadline met to the microsecond counts as met.
 _EPS_S = 1e-6
+
+
+class Sender(Protocol):
+    """What the link sends on: python-can's `send` (a bus, or devices.can.CanPort)."""
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
 
 
 def frame_ids(cfg: CanConfig) -> FrameIds:
@@ -134,7 +142,7 @@ class CanLink:
 
     def __init__(
         self,
-        bus: can.BusABC,
+        bus: Sender,
         cfg: CanConfig,
         fan_rpm: float = 0.0,
         param_ack_timeout_s: float = 0.2,
@@ -148,10 +156,9 @@ class CanLink:
         self._backoff_s = param_backoff_s
         self._on_tx = on_tx
         self._on_event = on_event
-        self._retired: list[tuple[float, can.BusABC]] = []  # buses left by reopen, to close
         self._start(bus, cfg, Command(fan_rpm=_clamp(fan_rpm, MAX_FAN_RPM)))
 
-    def _start(self, bus: can.BusABC, cfg: CanConfig, command: Command) -> None:
+    def _start(self, bus: Sender, cfg: CanConfig, command: Command) -> None:
         """The state of a link fresh on `bus`."""
         self._bus = bus
         self.cfg = cfg
@@ -174,27 +181,15 @@ class CanLink:
         self._sent: tuple[bool, float, float, float] | None = None
 
     @property
-    def bus(self) -> can.BusABC:
+    def bus(self) -> Sender:
         return self._bus
 
-    def reopen(self, cfg: CanConfig, params: Mapping[int, float], now: float) -> None:
-        """Move to the bus of a changed `[can]` section, as a link fresh on it (counters, the
-        ECU's frames and the parameter push start over; the command carries on).
-
-        DeviceError when the new bus cannot be opened: the old one stays. The old bus is shut
-        down `RETIRE_S` later (a reader thread leaves it within one receive timeout)."""
-        bus = open_bus(cfg)
-        self._retired.append((now, self._bus))
+    def move_to(self, bus: Sender, cfg: CanConfig, params: Mapping[int, float], now: float) -> None:
+        """Go on on the bus of a changed `[can]` section, already open, as a link fresh on it
+        (counters, the ECU's frames and the parameter push start over; the command carries
+        on). Closing the old bus is the caller's."""
         self._start(bus, cfg, self.command)
         self.begin(params, now)
-
-    def _close_retired(self, now: float) -> None:
-        while self._retired and now - self._retired[0][0] >= RETIRE_S:
-            _, bus = self._retired.pop(0)
-            try:
-                bus.shutdown()
-            except (can.CanError, OSError) as exc:
-                log.warning("old CAN interface did not shut down cleanly: %s", exc)
 
     # ---- start-up: parameters -------------------------------------------------------------
     def begin(self, params: Mapping[int, float], now: float) -> None:
@@ -413,7 +408,6 @@ class CanLink:
         """Periodic work: parameter retries, the command period, ECU liveness.
 
         Raises EcuParamError when a parameter is refused."""
-        self._close_retired(now)
         self._poll_params(now)
         if self.params_done and (self._next_cmd_t is None or now >= self._next_cmd_t - _EPS_S):
             # On a fixed grid, so send-on-GNSS frames in between do not shift the period;
@@ -439,6 +433,10 @@ class CanLink:
     def _send(self, msg: can.Message) -> bool:
         try:
             self._bus.send(msg, timeout=0.01)
+        except DeviceError:
+            # No adapter open (it is being opened again): its loss is an event of its own.
+            self.counters.tx_errors += 1
+            return False
         # OSError too: a serial adapter (slcan) pulled out raises pyserial's errors as they are.
         except (can.CanError, OSError) as exc:
             self.counters.tx_errors += 1

@@ -104,6 +104,8 @@ class Loop(Protocol):
 
     def reopen(self, section: str, new: TerminalConfig, now: float) -> None: ...
 
+    def open_can(self, new: TerminalConfig, done: Callable[[str | None], None]) -> None: ...
+
     def take(self, section: str, new: TerminalConfig) -> None: ...
 
 
@@ -503,16 +505,48 @@ class OperatorDesk:
                 return self._push(now, c, new, changed, fut)
         elif c.section in DEVICE_KEYS:
             keys = changed_device_keys(loop.cfg, new, c.section)
+            if c.section == "can":  # the CAN link starts over on any change of [can]
+                self._open_can(c, new, keys, fut)
+                return None  # answered once the new bus is open
             try:
-                # The CAN link starts over on any change of [can]; a line source is opened
-                # again only when the keys it is opened with changed.
-                if c.section == "can" or keys:
+                # A line source is opened again only when the keys it is opened with changed.
+                if keys:
                     loop.reopen(c.section, new, now)
             except DeviceError as exc:  # the old device stays; the keys that made it fail said
                 return op.CommandResult(
                     False, str(exc), dict.fromkeys(keys or [c.section], str(exc))
                 )
         return self._commit(now, c, new)
+
+    def _open_can(
+        self,
+        c: op.ApplySettings,
+        new: TerminalConfig,
+        keys: list[str],
+        fut: Future[op.CommandResult] | None,
+    ) -> None:
+        """The new bus opens in its own thread (the loop goes on, on the old one); the answer
+        comes once it is open, or names why it cannot be (the old one stays)."""
+        pending: Future[op.CommandResult] = fut if fut is not None else Future()
+        self._pending = pending
+
+        def done(error: str | None) -> None:
+            self._pending = None
+            if error is None:
+                pending.set_result(self._commit_later(c, new))
+            else:  # the keys that made it fail said
+                errors = dict.fromkeys(keys or [c.section], error)
+                pending.set_result(op.CommandResult(False, error, errors))
+
+        self.loop.open_can(new, done)
+
+    def _commit_later(self, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
+        """`_commit` once a device or the ECU has taken the change; a failure is the answer."""
+        try:
+            return self._commit(self.loop.clock(), c, new)
+        except (op.OperatorError, ConfigError) as exc:
+            why = exc.text if isinstance(exc, op.OperatorError) else str(exc)
+            return op.CommandResult(False, text("op.error.not_saved", error=why))
 
     def _commit(self, now: float, c: op.ApplySettings, new: TerminalConfig) -> op.CommandResult:
         """Save the section to the file, then take the new configuration."""
@@ -569,12 +603,7 @@ class OperatorDesk:
             self._pending = None
             if error is None:
                 self._settings_state = dict.fromkeys(keys.values(), "ok")
-                try:
-                    result = self._commit(loop.clock(), c, new)
-                except (op.OperatorError, ConfigError) as exc:
-                    why = exc.text if isinstance(exc, op.OperatorError) else str(exc)
-                    result = op.CommandResult(False, text("op.error.not_saved", error=why))
-                pending.set_result(result)
+                pending.set_result(self._commit_later(c, new))
                 return
             # Nothing half-applied: what the ECU took of this change goes back.
             back = {pid: old[pid] for pid in accepted if pid in old}
