@@ -94,6 +94,12 @@ def text_of(user: User, marker: str) -> str:
     return str(element.text)  # type: ignore[attr-defined]
 
 
+def panel(user: User, name: str) -> None:
+    """One touch on the main screen's panel row (map, charts, crop, counters, manual)."""
+    (toggle,) = user.find(marker="panels").elements
+    toggle.value = name  # type: ignore[attr-defined]
+
+
 async def shows(user: User, marker: str, expected: str, timeout_s: float = 3.0) -> None:
     """Wait until the page's timer has drawn `expected` at `marker` (virtual clocks aside,
     the page pulls the snapshot every 0.2 s)."""
@@ -117,10 +123,11 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
     assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 > 6 km/h"
     assert text_of(user, "op_state") == "RUNNING"
     assert text_of(user, "manual_state") == ""
-    assert text_of(user, "ndvi_sensors") == "0.612"
-    assert text_of(user, "ndvi_meters") == "0.587"
     assert text_of(user, "rate_upper") == "138.9"
     assert text_of(user, "applied_lower") == "141.2"
+    panel(user, "crop")
+    assert text_of(user, "ndvi_sensors") == "0.612"
+    assert text_of(user, "ndvi_meters") == "0.587"
     assert text_of(user, "ndvi_per_sensor") == "1: 0.605  2: 0.621  3: --  4: 0.610"
     assert text_of(user, "target_lower") == "22.1"
     assert text_of(user, "meter_upper") == "22.7"
@@ -156,6 +163,7 @@ async def test_ecu_values_are_dashes_while_the_ecu_is_not_heard(user: User) -> N
     hub.publish(working(ecu_live=False, ecu_link="lost", gnss_link="ok"))
     register_pages(hub)
     await user.open("/")
+    panel(user, "crop")
     for marker in (
         "v_selected",
         "v_wheel",
@@ -178,9 +186,11 @@ async def test_faults_in_plain_words_and_waiting_ecu_named(user: User) -> None:
     hub.publish(working(faults=(1 << 1) | (1 << 3) | (1 << 12)))
     register_pages(hub)
     await user.open("/")
+    panel(user, "crop")
     assert text_of(user, "faults") == "GNSS speed lost; upper meter blocked; BIT12"
     hub.publish(working(ecu_live=False, ecu_link="wait", ecu_where="socketcan:can0"))
     await user.open("/")
+    panel(user, "crop")
     assert text_of(user, "link_ecu") == "ECU: waiting (socketcan:can0)"
 
 
@@ -189,13 +199,15 @@ async def test_language_switches_at_run_time(user: User) -> None:
     hub.publish(working(faults=1 << 3, last_event=text("event.ecu_lost", s=1.0)))
     register_pages(hub)
     await user.open("/")
-    await user.should_see("Speed")
+    await user.should_see("applied")
+    panel(user, "crop")
     assert text_of(user, "last_event") == "ECU lost: no status for 1.0 s"
     user.find(marker="language").click()
     user.find("简体中文").click()
     assert i18n.language() == "zh"
-    await user.should_see("作业速度", retries=20)
-    await user.should_not_see("Speed, last minute")
+    await user.should_see("实际施肥量", retries=20)
+    await user.should_not_see("applied")
+    panel(user, "crop")  # the content is built anew in the language
     await shows(user, "faults", "上层排肥器堵转")
     assert text_of(user, "source") == "GNSS"
     # the terminal's messages too: why this source, the last event
@@ -390,6 +402,7 @@ async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
     hub.publish(working())
     register_pages(hub)
     await user.open("/")
+    panel(user, "manual")
     user.find(marker="manual_mode").click()  # the radio: pick "fixed"
     (radio,) = user.find(marker="manual_mode").elements
     radio.value = "fixed"  # type: ignore[attr-defined]
@@ -405,46 +418,69 @@ async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
     await shows(user, "manual_state", "MANUAL model -20 %")
 
 
-async def test_alarms_are_acknowledged(user: User) -> None:
+async def test_alarms_show_as_a_banner_on_every_screen_and_are_acknowledged(user: User) -> None:
     term = Terminal()
     hub = DisplayHub(default_config, term.post)
     alarms = (
-        AlarmView("blocked_upper", text("alarm.text.blocked_upper"), "active", 3.0),
         AlarmView("gnss_lost", text("alarm.gnss_lost"), "acked", 1.0),
+        AlarmView("blocked_upper", text("alarm.text.blocked_upper"), "active", 3.0),
     )
     hub.publish(working(alarms=alarms))
     register_pages(hub)
+    for path in ("/", "/communication", "/control", "/calibration"):
+        await user.open(path)
+        # the unacknowledged one first, whatever came before it
+        assert text_of(user, "alarm_banner") == (
+            "upper meter blocked (stopped by the ECU) · active (+1 more)"
+        ), path
+    user.find(marker="banner_ack").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.AckAlarm("blocked_upper")]
+    hub.publish(working(t_s=12.1, alarms=(alarms[0],)))
+    await shows(user, "alarm_banner", "GNSS lost: metering on the ground wheel · acknowledged")
+    await user.should_not_see(marker="banner_ack")  # acknowledged already
     await user.open("/")
-    assert (
-        text_of(user, "alarm_blocked_upper") == "upper meter blocked (stopped by the ECU) · active"
-    )
-    assert (
-        text_of(user, "alarm_gnss_lost") == "GNSS lost: metering on the ground wheel · acknowledged"
-    )
-    await user.should_not_see(marker="ack_gnss_lost")  # acknowledged already
-    user.find(marker="ack_blocked_upper").click()
+    panel(user, "crop")
     user.find(marker="ack_all").click()
     await settle(user, term, 2)
-    assert term.sent == [op.AckAlarm("blocked_upper"), op.AckAlarm(None)]
+    assert term.sent[1] == op.AckAlarm(None)
     hub.publish(working(t_s=13.0, alarms=()))
-    await user.should_see(marker="alarm_none", retries=20)
+    await shows(user, "alarm_banner", "no alarm")
 
 
-async def test_counters_shown_and_reset_apart(user: User) -> None:
+async def test_counters_reset_only_once_confirmed_and_can_be_undone(user: User) -> None:
     term = Terminal()
     hub = DisplayHub(default_config, term.post)
     field = CounterView(area_ha=1.2345, kg=(170.2, 168.9), work_s=3725.0, distance_m=3429.0)
     hub.publish(working(count_field=field, count_season=CounterView(area_ha=12.5)))
     register_pages(hub)
     await user.open("/")
+    panel(user, "counters")
     assert text_of(user, "count_field_area") == "1.234 ha"  # 1.2345 rounds half to even
     assert text_of(user, "count_field_kg_upper") == "170.2 kg"
     assert text_of(user, "count_field_time") == "1:02:05"
     assert text_of(user, "count_field_distance") == "3429 m"
     assert text_of(user, "count_season_area") == "12.500 ha"
+    await user.should_not_see(marker="undo_field")
+    # one tap only asks, naming what would go
+    user.find(marker="reset_field").click()
+    await user.should_see(marker="reset_ask")
+    assert text_of(user, "reset_ask").startswith("Reset the field counter? 1.23 ha and 339 kg")
+    user.find(marker="reset_no").click()
+    await asyncio.sleep(0.2)
+    assert term.sent == []
     user.find(marker="reset_season").click()
+    await user.should_see(marker="reset_ask")
+    user.find(marker="reset_yes").click()
     await settle(user, term, 1)
     assert term.sent == [op.ResetCounter("season")]
+    # the terminal offers the undo while it runs
+    hub.publish(working(t_s=12.1, count_field=field, count_undo=("season",)))
+    await user.should_see(marker="undo_season", retries=20)
+    await user.should_not_see(marker="undo_field")
+    user.find(marker="undo_season").click()
+    await settle(user, term, 2)
+    assert term.sent[1] == op.UndoReset("season")
 
 
 async def test_a_remote_browser_needs_the_pin_to_operate(
@@ -515,7 +551,9 @@ async def test_a_pid_gain_goes_to_the_ecu_and_its_answer_is_shown(user: User) ->
     kp.value = 0.02  # type: ignore[attr-defined]
     user.find(marker="apply_ecu").click()
     await settle(user, term, 1)
-    assert term.sent == [op.ApplySettings("ecu", {"pid_kp": 0.02})]  # the changed gain only
+    (sent,) = term.sent
+    assert isinstance(sent, op.ApplySettings)
+    assert (sent.section, sent.values) == ("ecu", {"pid_kp": 0.02})  # the changed gain only
     await shows(user, "answer_ecu", "settings [ecu] applied, saved to demo-config.toml")
     kp.value = 9.0  # type: ignore[attr-defined]
     user.find(marker="apply_ecu").click()
@@ -637,7 +675,7 @@ async def test_can_adapter_options_are_edited_as_name_value_lines(user: User) ->
 
     term = Terminal(answer)
     hub = DisplayHub(slcan_config, term.post)
-    hub.publish(working())
+    hub.publish(working(operator="stopped"))
     register_pages(hub)
     await user.open("/communication")
     (options,) = user.find(marker="field_can.options").elements

@@ -32,6 +32,10 @@ class AlarmInputs:
     gnss_link: str
     crop_link: str
     ecu_link: str
+    # The operator has the meters on (running or paused), whatever the ECU answers: a link
+    # that is not ok then is an alarm, not only a lost one.
+    operating: bool = False
+    tank_low: Text | None = None  # the tank below its alarm level (the text with its figures)
 
 
 @dataclass
@@ -99,6 +103,24 @@ class AlarmBook:
             yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
         if x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
+        if x.operating:
+            # waiting (a CAN channel changed), no fix, sensors partly fresh: never silent
+            for kind, state, lost in (
+                ("ecu", x.ecu_link, ("lost",)),
+                ("gnss", x.gnss_link, ("lost",)),
+                ("crop", x.crop_link, ("lost", "silent")),
+            ):
+                if state != "ok" and state not in lost:
+                    yield (
+                        f"{kind}_link",
+                        text(
+                            "alarm.text.link",
+                            link=text(f"link_name.{kind}"),
+                            state=link_state(state),
+                        ),
+                    )
+        if x.tank_low is not None:
+            yield "tank_low", x.tank_low
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]
