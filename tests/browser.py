@@ -77,6 +77,15 @@ def chromium(
     return webdriver.Chrome(options=opts, service=service)
 
 
+def viewport(driver: WebDriver, width: int, height: int) -> None:
+    """The page's own size, exactly (a cab terminal's screen: 800×480, 1024×600), whatever the
+    headless window's frame takes."""
+    driver.execute_cdp_cmd(  # type: ignore[attr-defined]
+        "Emulation.setDeviceMetricsOverride",
+        {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False},
+    )
+
+
 def answers(url: str) -> bool:
     """Whether a page is served at `url`."""
     try:

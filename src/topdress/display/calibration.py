@@ -35,8 +35,9 @@ class CalibrationScreen:
                     .mark("cal_layer")
                 )
                 revs = ui.number(tr("cal.revolutions"), value=20, min=1, max=200).mark("cal_revs")
+                revs.classes("w-44")
                 rpm = ui.number(f"{tr('cal.meter_speed')} ({tr('unit.rpm')})", value=20, min=1)
-                rpm.mark("cal_rpm")
+                rpm.classes("w-44").mark("cal_rpm")
                 ui.button(
                     tr("cal.start"),
                     on_click=lambda: send(
@@ -49,7 +50,7 @@ class CalibrationScreen:
                 ui.label(tr("cal.wheel")).classes("text-base font-bold")
                 ui.label(tr("cal.wheel_how")).classes("text-xs text-gray-600")
                 dist = ui.number(f"{tr('cal.distance')} ({tr('unit.m')})", value=40.0, min=1)
-                dist.mark("cal_distance")
+                dist.classes("w-44").mark("cal_distance")
                 ui.button(
                     tr("cal.start"),
                     on_click=lambda: send(op.StartWheelCal(float(dist.value or 0))),
@@ -69,6 +70,7 @@ class CalibrationScreen:
                     .mark("lead_layer")
                 )
                 trials = ui.number(tr("cal.trials"), value=3, min=1, max=10).mark("lead_trials")
+                trials.classes("w-44")
                 ui.button(
                     tr("cal.start"),
                     on_click=lambda: send(

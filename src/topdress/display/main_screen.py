@@ -100,32 +100,37 @@ class MainScreen:
     def _build_rates(self) -> None:
         u = self.units
         with ui.card().tight().classes("w-full td-card p-1 gap-0"):
-            with ui.grid(columns="auto 1fr 1fr").classes("w-full gap-x-2 gap-y-0 items-baseline"):
-                ui.label(u.rate_unit).classes("text-sm td-muted")
-                ui.label(tr("main.rate_target")).classes("text-sm td-muted text-right")
-                ui.label(tr("main.rate_applied")).classes("text-sm td-muted text-right")
-                self.rate: dict[str, ui.label] = {}
-                self.applied: dict[str, ui.label] = {}
-                for layer in op.LAYERS:
-                    ui.label(tr(f"main.{layer}")).classes("text-base")
-                    self.rate[layer] = (
-                        ui.label("--").classes("text-2xl font-mono text-right").mark(f"rate_{layer}")
-                    )
-                    self.applied[layer] = (
-                        ui.label("--")
-                        .classes("text-2xl font-mono font-bold text-right")
-                        .mark(f"applied_{layer}")
-                    )
-            with ui.row().classes("w-full items-center no-wrap gap-1"):
-                ui.button(
-                    f"−{RATE_STEP_PCT:g} %", on_click=lambda: self._step(False)
-                ).props("outline no-caps").classes("text-base").mark("rate_minus")
-                ui.button(f"+{RATE_STEP_PCT:g} %", on_click=lambda: self._step(True)).props(
-                    "outline no-caps"
-                ).classes("text-base").mark("rate_plus")
-                self.manual_state = (
-                    ui.label("").classes("text-sm font-bold px-1 rounded").mark("manual_state")
-                )
+            with ui.row().classes("w-full no-wrap items-center gap-1"):
+                with ui.grid(columns="auto 1fr 1fr").classes(
+                    "flex-1 gap-x-2 gap-y-0 items-baseline"
+                ):
+                    ui.label(u.rate_unit).classes("text-sm td-muted")
+                    ui.label(tr("main.rate_target")).classes("text-sm td-muted text-right")
+                    ui.label(tr("main.rate_applied")).classes("text-sm td-muted text-right")
+                    self.rate: dict[str, ui.label] = {}
+                    self.applied: dict[str, ui.label] = {}
+                    for layer in op.LAYERS:
+                        ui.label(tr(f"main.{layer}")).classes("text-base")
+                        self.rate[layer] = (
+                            ui.label("--")
+                            .classes("text-2xl font-mono text-right")
+                            .mark(f"rate_{layer}")
+                        )
+                        self.applied[layer] = (
+                            ui.label("--")
+                            .classes("text-2xl font-mono font-bold text-right")
+                            .mark(f"applied_{layer}")
+                        )
+                with ui.column().classes("gap-1"):
+                    ui.button(
+                        f"+{RATE_STEP_PCT:g} %", on_click=lambda: self._step(True)
+                    ).props("outline no-caps").classes("text-base").mark("rate_plus")
+                    ui.button(
+                        f"−{RATE_STEP_PCT:g} %", on_click=lambda: self._step(False)
+                    ).props("outline no-caps").classes("text-base").mark("rate_minus")
+            self.manual_state = (
+                ui.label("").classes("text-sm font-bold px-1 rounded").mark("manual_state")
+            )
             self.rx = ui.label("").classes("text-sm td-muted").mark("prescription")
 
     async def _step(self, up: bool) -> None:

@@ -73,6 +73,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
     ui.add_css(style.CSS)
     ui.add_head_html(style.JS)
     dark = ui.dark_mode(hub.prefs.night)
+    ui.colors(primary=style.PRIMARY)  # NiceGUI's own blue gives white text 3.1:1
     header = Header(hub, actions, path)
 
     @ui.refreshable
@@ -113,7 +114,7 @@ class Header:
         self._tone: bool | None = None
         self._shown_alarm = ""
         self.nav: dict[str, ui.button] = {}
-        with ui.header().classes("td-bar q-pa-xs gap-1 column no-wrap"):
+        with ui.header().classes("td-bar p-1"), ui.column().classes("w-full gap-1"):
             with ui.row().classes("w-full items-center no-wrap gap-1"):
                 for target, key in SCREENS:
                     button = ui.button(tr(key), on_click=lambda t=target: ui.navigate.to(t))
@@ -154,7 +155,7 @@ class Header:
                     ui.label("--").classes("text-xl font-bold px-2 rounded").mark("op_state")
                 )
                 with ui.row().classes(
-                    "flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-none"
+                    "nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-none"
                 ) as self.banner:
                     self.banner_icon = ui.icon("notifications_none").classes("text-2xl")
                     self.banner_text = (
@@ -218,7 +219,7 @@ class Header:
             self.banner_text.set_text(tr("alarm.none"))
             self.banner_icon.name = "notifications_none"
             fmt.restyle(
-                self.banner, "flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-none"
+                self.banner, "nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-none"
             )
             self.banner_ack.set_visibility(False)
         else:
@@ -231,7 +232,7 @@ class Header:
             self.banner_icon.name = "warning" if shown.state == "active" else "notifications"
             fmt.restyle(
                 self.banner,
-                f"flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-{shown.state}",
+                f"nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-{shown.state}",
             )
             self.banner_ack.set_visibility(shown.state != "acked")
         self.banner_icon.update()

@@ -14,6 +14,7 @@ docs/display.md).
 
 from __future__ import annotations
 
+PRIMARY = "#1565c0"  # white text on it 5.8:1; against the page 5.8:1 (day), 3.3:1 (night)
 TOUCH_PX = 48  # the smallest control
 STOP_PX = 64  # Stop, on every screen
 
@@ -47,8 +48,8 @@ body.body--dark .td-card {{ background: #1d1d1d; }}
 .td-alarm-none {{ background: transparent; color: #e8f5e9; }}
 .td-manual {{ background: #bf360c; color: #fff; }}
 .nicegui-content {{ padding: 6px; gap: 6px; }}
-.leaflet-container {{ background: #fff; }}
-body.body--dark .leaflet-container {{ background: #2b2b2b; }}
+.leaflet-container {{ background: #fff !important; }}
+body.body--dark .leaflet-container {{ background: #2b2b2b !important; }}
 """
 
 #: The alarm tone (Web Audio) and what the page calls: tdAlarm(on).

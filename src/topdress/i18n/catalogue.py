@@ -285,6 +285,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "alarm.gnss_lost": ("GNSS lost: metering on the ground wheel", "GNSS 丢失：按地轮速度排肥"),
     "alarm.crop_lost": ("crop sensors lost: no NDVI", "作物传感器丢失：无 NDVI"),
     "alarm.ecu_lost": ("ECU lost: no status frames", "控制器丢失：无状态帧"),
+    "alarm.ecu_link": ("ECU not ok, meters on", "排肥时控制器异常"),
+    "alarm.gnss_link": ("GNSS not ok, meters on", "排肥时 GNSS 异常"),
+    "alarm.crop_link": ("crop sensors not ok, meters on", "排肥时作物传感器异常"),
+    "alarm.tank_low": ("tank low", "料箱肥量低"),
     "alarm.text.off_rate_upper": (
         "upper meter off rate: {rpm:.1f} r/min for {target:.1f} (more than {pct:g} % for {s:g} s)",
         "上层排肥转速偏离：{rpm:.1f} r/min，目标 {target:.1f}（偏差超过 {pct:g} % 达 {s:g} 秒）",

@@ -19,6 +19,9 @@ from topdress.view.snapshot import AlarmView
 ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
 #: Metering speed targets below this are not judged off-rate (a meter just starting or stopping).
 MIN_TARGET_RPM = 1.0
+#: A link not ok with the meters on is an alarm once it lasts this long (one starting up, or
+#: a sensor missing one line, gets this long first).
+LINK_GRACE_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,7 @@ class AlarmBook:
         self.off_rate_s = off_rate_s
         self._alarms: dict[str, _Alarm] = {}
         self._off_since: list[float | None] = [None, None]
+        self._link_since: dict[str, float] = {}
 
     def retune(self, off_rate_pct: float, off_rate_s: float) -> None:
         """A changed [operator] section: the off-rate limits taken at the next tick."""
@@ -103,22 +107,28 @@ class AlarmBook:
             yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
         if x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
-        if x.operating:
-            # waiting (a CAN channel changed), no fix, sensors partly fresh: never silent
-            for kind, state, lost in (
-                ("ecu", x.ecu_link, ("lost",)),
-                ("gnss", x.gnss_link, ("lost",)),
-                ("crop", x.crop_link, ("lost", "silent")),
-            ):
-                if state != "ok" and state not in lost:
-                    yield (
-                        f"{kind}_link",
-                        text(
-                            "alarm.text.link",
-                            link=text(f"link_name.{kind}"),
-                            state=link_state(state),
-                        ),
-                    )
+        # Waiting (a CAN channel changed), no fix, sensors partly fresh: with the meters on,
+        # never silent once it lasts LINK_GRACE_S (a link starting up gets that long).
+        for kind, state, lost in (
+            ("ecu", x.ecu_link, ("lost",)),
+            ("gnss", x.gnss_link, ("lost",)),
+            ("crop", x.crop_link, ("lost", "silent")),
+        ):
+            bad = x.operating and state != "ok" and state not in lost
+            since = self._link_since.get(kind)
+            if not bad:
+                self._link_since.pop(kind, None)
+            elif since is None:
+                self._link_since[kind] = t_s
+            elif t_s - since >= LINK_GRACE_S - 1e-9:
+                yield (
+                    f"{kind}_link",
+                    text(
+                        "alarm.text.link",
+                        link=text(f"link_name.{kind}"),
+                        state=link_state(state),
+                    ),
+                )
         if x.tank_low is not None:
             yield "tank_low", x.tank_low
 
