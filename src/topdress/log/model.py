@@ -80,6 +80,9 @@ EVENT_KINDS: Final = (
     "calibration.wheel",
     "calibration.fan",
     "calibration.lead",
+    "counter.reset",
+    "counter.undo",
+    "tank.filled",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (
