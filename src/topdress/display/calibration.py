@@ -93,21 +93,25 @@ class CalibrationScreen:
         for key in CATALOGUE:
             if key.startswith("cal.result."):
                 name = key.removeprefix("cal.result.")
-                self.results[name] = (
-                    ui.label("").classes("font-mono").mark(f"cal_result_{name}")
-                )
+                self.results[name] = ui.label("").classes("font-mono").mark(f"cal_result_{name}")
         self.others = ui.label("").classes("font-mono").mark("cal_result_other")
         self.last = ui.label("").classes("text-sm td-muted").mark("cal_last")
         with ui.row().classes("items-center gap-2"):
             self.kg = ui.number(f"{tr('cal.weighed')} ({tr('unit.kg')})", min=0).mark("cal_kg")
             self.kg.classes("w-40")
-            self.finish_catch = ui.button(
-                tr("cal.finish"),
-                on_click=lambda: self._send(op.FinishCatchTest(float(self.kg.value or 0.0))),
-            ).props("no-caps").mark("finish_catch")
-            self.finish_wheel = ui.button(
-                tr("cal.finish_drive"), on_click=lambda: self._send(op.FinishWheelCal())
-            ).props("no-caps").mark("finish_wheel")
+            self.finish_catch = (
+                ui.button(
+                    tr("cal.finish"),
+                    on_click=lambda: self._send(op.FinishCatchTest(float(self.kg.value or 0.0))),
+                )
+                .props("no-caps")
+                .mark("finish_catch")
+            )
+            self.finish_wheel = (
+                ui.button(tr("cal.finish_drive"), on_click=lambda: self._send(op.FinishWheelCal()))
+                .props("no-caps")
+                .mark("finish_wheel")
+            )
             self.seen = (
                 ui.button(tr("cal.seen"), on_click=lambda: send(op.LeadSeen()))
                 .props("color=orange-10 size=lg no-caps")

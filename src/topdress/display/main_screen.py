@@ -122,12 +122,12 @@ class MainScreen:
                             .mark(f"applied_{layer}")
                         )
                 with ui.column().classes("gap-1"):
-                    ui.button(
-                        f"+{RATE_STEP_PCT:g} %", on_click=lambda: self._step(True)
-                    ).props("outline no-caps").classes("text-base").mark("rate_plus")
-                    ui.button(
-                        f"−{RATE_STEP_PCT:g} %", on_click=lambda: self._step(False)
-                    ).props("outline no-caps").classes("text-base").mark("rate_minus")
+                    ui.button(f"+{RATE_STEP_PCT:g} %", on_click=lambda: self._step(True)).props(
+                        "outline no-caps"
+                    ).classes("text-base").mark("rate_plus")
+                    ui.button(f"−{RATE_STEP_PCT:g} %", on_click=lambda: self._step(False)).props(
+                        "outline no-caps"
+                    ).classes("text-base").mark("rate_minus")
             self.manual_state = (
                 ui.label("").classes("text-sm font-bold px-1 rounded").mark("manual_state")
             )
@@ -223,7 +223,9 @@ class MainScreen:
                     ui.label(tr("main.upper")).classes("text-sm td-muted")
                     ui.label(tr("main.lower")).classes("text-sm td-muted")
                     u = self.units
-                    self.model = self._pair(f"{tr('main.rate_model')} ({u.rate_unit})", "rate_model")
+                    self.model = self._pair(
+                        f"{tr('main.rate_model')} ({u.rate_unit})", "rate_model"
+                    )
                     self.target = self._pair(f"{tr('main.target')} ({rpm})", "target")
                     self.meter = self._pair(f"{tr('main.measured')} ({rpm})", "meter")
                     self.fan = self._pair(f"{tr('main.fans')} ({rpm})", "fan")
@@ -313,9 +315,9 @@ class MainScreen:
         with ui.dialog() as dialog, ui.card():
             ui.label(what).classes("text-lg").mark("reset_ask")
             with ui.row():
-                ui.button(
-                    tr("count.reset"), on_click=lambda: dialog.submit(True)
-                ).props("color=red-9 no-caps").mark("reset_yes")
+                ui.button(tr("count.reset"), on_click=lambda: dialog.submit(True)).props(
+                    "color=red-9 no-caps"
+                ).mark("reset_yes")
                 ui.button(tr("action.cancel"), on_click=lambda: dialog.submit(False)).props(
                     "outline no-caps"
                 ).mark("reset_no")
@@ -353,10 +355,10 @@ class MainScreen:
                 float(self.pct.value or 0.0),
             )
         )
-        refused = result is not None and not result.ok
+        why = render(result.message) if result is not None and not result.ok else None
         for field in (self.upper, self.lower, self.pct):
-            field.props.set_bool("error", refused)
-            field.props.set_optional("error-message", render(result.message) if refused else None)
+            field.props.set_bool("error", why is not None)
+            field.props.set_optional("error-message", why)
 
     # ---- update ----------------------------------------------------------------------------
     v_wheel: ui.label
@@ -412,7 +414,9 @@ class MainScreen:
         if clipped(s):
             text += " · " + tr("manual.clipped", max=f"{u.rate(op.MAX_RATE_KG_HA):.0f}")
         self.manual_state.set_text(text)
-        fmt.restyle(self.manual_state, "text-sm font-bold px-1 rounded" + (" td-manual" if text else ""))
+        fmt.restyle(
+            self.manual_state, "text-sm font-bold px-1 rounded" + (" td-manual" if text else "")
+        )
         self.in_force.set_text(tr("manual.in_force", what=text or tr("manual.off")))
         if m != self._manual:
             # What is in force, also when another screen or the console changed it.
@@ -425,7 +429,13 @@ class MainScreen:
                 self.pct.set_value(m.percent)
         rx = []
         if s.prescription_kg_ha is not None:
-            rx.append(tr("main.prescription", rate=f"{u.rate(s.prescription_kg_ha):.0f}", unit=u.rate_unit))
+            rx.append(
+                tr(
+                    "main.prescription",
+                    rate=f"{u.rate(s.prescription_kg_ha):.0f}",
+                    unit=u.rate_unit,
+                )
+            )
         if s.zone is not None:
             rx.append(tr(f"zone.{s.zone}"))
         self.rx.set_text(" · ".join(rx))

@@ -26,6 +26,7 @@ from topdress.i18n import render, tr
 from topdress.view import commands as op
 from topdress.view.snapshot import AlarmView, Snapshot
 
+BANNER = "nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded"
 UPDATE_PERIOD_S = 0.2  # how often a page looks for a new snapshot (5 Hz of the loop's 10)
 
 #: path, catalogue key of the screen's name
@@ -133,16 +134,16 @@ class Header:
                     .classes("w-28")
                     .mark("language")
                 )
-                with ui.button(icon="tune").props("flat").classes("text-white").mark("view_menu"):
-                    with ui.menu():
-                        with ui.menu_item(
-                            on_click=lambda: hub.set_prefs(night=not hub.prefs.night)
-                        ).mark("night"):
-                            self.night_item = ui.label("")
-                        with ui.menu_item(
-                            on_click=lambda: hub.set_prefs(units=_other_units(hub))
-                        ).mark("units"):
-                            self.units_item = ui.label("")
+                menu_button = ui.button(icon="tune").props("flat").classes("text-white")
+                with menu_button.mark("view_menu"), ui.menu():
+                    with ui.menu_item(
+                        on_click=lambda: hub.set_prefs(night=not hub.prefs.night)
+                    ).mark("night"):
+                        self.night_item = ui.label("")
+                    with ui.menu_item(on_click=lambda: hub.set_prefs(units=_other_units(hub))).mark(
+                        "units"
+                    ):
+                        self.units_item = ui.label("")
                 # Stop: one touch on every screen, in every state (it also ends a calibration).
                 self.stop = (
                     ui.button(tr("op.stop"), icon="stop", on_click=self._stop)
@@ -154,9 +155,7 @@ class Header:
                 self.state = (
                     ui.label("--").classes("text-xl font-bold px-2 rounded").mark("op_state")
                 )
-                with ui.row().classes(
-                    "nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-none"
-                ) as self.banner:
+                with ui.row().classes(f"{BANNER} td-alarm-none") as self.banner:
                     self.banner_icon = ui.icon("notifications_none").classes("text-2xl")
                     self.banner_text = (
                         ui.label(tr("alarm.none")).classes("flex-1 text-lg").mark("alarm_banner")
@@ -219,7 +218,8 @@ class Header:
             self.banner_text.set_text(tr("alarm.none"))
             self.banner_icon.name = "notifications_none"
             fmt.restyle(
-                self.banner, "nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-none"
+                self.banner,
+                f"{BANNER} td-alarm-none",
             )
             self.banner_ack.set_visibility(False)
         else:
@@ -232,7 +232,7 @@ class Header:
             self.banner_icon.name = "warning" if shown.state == "active" else "notifications"
             fmt.restyle(
                 self.banner,
-                f"nicegui-row flex-1 items-center no-wrap gap-2 px-2 rounded td-alarm-{shown.state}",
+                f"{BANNER} td-alarm-{shown.state}",
             )
             self.banner_ack.set_visibility(shown.state != "acked")
         self.banner_icon.update()

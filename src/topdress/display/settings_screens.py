@@ -102,9 +102,7 @@ class SectionCard:
             await self.actions.send(op.Stop())
         self.answer.set_text(tr("settings.sending"))
         self.answer.classes(replace="text-sm")
-        result = await self.actions.send(
-            op.ApplySettings(self.section, self.values(), self.base)
-        )
+        result = await self.actions.send(op.ApplySettings(self.section, self.values(), self.base))
         if result is None:
             self.answer.set_text("")
             return
@@ -346,7 +344,7 @@ def ecu_tuning_values(cfg: TerminalConfig) -> dict[str, float | int]:
     for key in ECU_TUNING:
         spec = ECU_KEYS[key]
         value = cfg.ecu.overrides.get(key, spec.default)
-        out[key] = int(round(value)) if spec.integer else _round(value)
+        out[key] = round(value) if spec.integer else _round(value)
     return out
 
 

@@ -639,7 +639,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "{alarm:g})",
         "料箱：装料量必须 > 0 kg 且报警下限低于装料量（装料 {fill:g}，下限 {alarm:g}）",
     ),
-    "op.done.tank": ("tank: {kg:g} kg, alarm below {alarm:g} kg", "料箱：{kg:g} kg，低于 {alarm:g} kg 报警"),
+    "op.done.tank": (
+        "tank: {kg:g} kg, alarm below {alarm:g} kg",
+        "料箱：{kg:g} kg，低于 {alarm:g} kg 报警",
+    ),
     "op.error.stale": (
         "[{section}] was changed from another screen meanwhile: reload to see the values in "
         "force, then change them again",

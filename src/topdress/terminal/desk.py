@@ -408,9 +408,7 @@ class OperatorDesk:
             ecu_link=snap.ecu_link,
             operating=self.op.state in (op.RUNNING, op.PAUSED),
             tank_low=(
-                text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0))
-                if low
-                else None
+                text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0)) if low else None
             ),
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
