@@ -98,7 +98,13 @@ def answers(url: str) -> bool:
 class DemoProcess:
     """`topdress demo` with its display on a free port, its output in a file."""
 
-    def __init__(self, out_dir: Path, passes: int = 30, duration_s: float = 300.0) -> None:
+    def __init__(
+        self,
+        out_dir: Path,
+        passes: int = 30,
+        duration_s: float = 300.0,
+        extra: tuple[str, ...] = (),
+    ) -> None:
         self.out_dir = out_dir
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
@@ -115,6 +121,7 @@ class DemoProcess:
                 "--out", str(out_dir / "sessions"),
                 "--passes", str(passes),
                 "--duration", str(duration_s),
+                *extra,
             ],
             stdout=self._log,
             stderr=subprocess.STDOUT,

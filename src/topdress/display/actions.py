@@ -36,7 +36,7 @@ class Actions:
         with ui.dialog() as dialog, ui.card():
             ui.label(tr("pin.title")).classes("text-lg")
             pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
-            wrong = ui.label("").classes("text-red-700")
+            wrong = ui.label("").classes("td-bad")
 
             def submit() -> None:
                 if self.hub.pin_ok(pin.value or ""):

@@ -28,7 +28,7 @@ class CalibrationScreen:
         with ui.row().classes("w-full items-start gap-3"):
             with ui.card().classes("w-80 gap-2"):
                 ui.label(tr("cal.catch")).classes("text-base font-bold")
-                ui.label(tr("cal.catch_how")).classes("text-xs text-gray-600")
+                ui.label(tr("cal.catch_how")).classes("text-sm td-muted")
                 layer = (
                     ui.radio({"upper": tr("main.upper"), "lower": tr("main.lower")}, value="upper")
                     .props("inline")
@@ -48,7 +48,7 @@ class CalibrationScreen:
                 ).mark("start_catch")
             with ui.card().classes("w-80 gap-2"):
                 ui.label(tr("cal.wheel")).classes("text-base font-bold")
-                ui.label(tr("cal.wheel_how")).classes("text-xs text-gray-600")
+                ui.label(tr("cal.wheel_how")).classes("text-sm td-muted")
                 dist = ui.number(f"{tr('cal.distance')} ({tr('unit.m')})", value=40.0, min=1)
                 dist.classes("w-44").mark("cal_distance")
                 ui.button(
@@ -57,13 +57,13 @@ class CalibrationScreen:
                 ).mark("start_wheel")
             with ui.card().classes("w-80 gap-2"):
                 ui.label(tr("cal.fan")).classes("text-base font-bold")
-                ui.label(tr("cal.fan_how")).classes("text-xs text-gray-600")
+                ui.label(tr("cal.fan_how")).classes("text-sm td-muted")
                 ui.button(tr("cal.start"), on_click=lambda: send(op.StartFanCheck())).mark(
                     "start_fan"
                 )
             with ui.card().classes("w-80 gap-2"):
                 ui.label(tr("cal.lead")).classes("text-base font-bold")
-                ui.label(tr("cal.lead_how")).classes("text-xs text-gray-600")
+                ui.label(tr("cal.lead_how")).classes("text-sm td-muted")
                 lead_layer = (
                     ui.radio({"upper": tr("main.upper"), "lower": tr("main.lower")}, value="upper")
                     .props("inline")

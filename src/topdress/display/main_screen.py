@@ -95,7 +95,7 @@ class MainScreen:
             ).classes("flex-1 h-16 text-lg").mark("start")
             ui.button(tr("op.pause"), icon="pause", on_click=lambda: send(op.Pause())).props(
                 "color=amber-8 text-color=black size=lg no-caps"
-            ).classes("flex-1 h-16 text-lg").mark("pause")
+            ).classes("flex-1 h-16 text-lg td-edge").mark("pause")
 
     def _build_rates(self) -> None:
         u = self.units

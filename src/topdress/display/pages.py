@@ -74,7 +74,8 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
     ui.add_css(style.CSS)
     ui.add_head_html(style.JS)
     dark = ui.dark_mode(hub.prefs.night)
-    ui.colors(primary=style.PRIMARY)  # NiceGUI's own blue gives white text 3.1:1
+    # NiceGUI's own blue gives white text 3.1:1; by night a lighter one stands out of the dark
+    ui.colors(primary=style.PRIMARY_NIGHT if hub.prefs.night else style.PRIMARY)
     header = Header(hub, actions, path)
 
     @ui.refreshable
@@ -89,6 +90,7 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
     def update() -> None:
         if state.lang_version != i18n.version() or state.prefs_version != hub.prefs_version:
             dark.set_value(hub.prefs.night)
+            ui.colors(primary=style.PRIMARY_NIGHT if hub.prefs.night else style.PRIMARY)
             header.relabel()
             content.refresh()
         expose_markers(client)
@@ -120,7 +122,7 @@ class Header:
                 for target, key in SCREENS:
                     button = ui.button(tr(key), on_click=lambda t=target: ui.navigate.to(t))
                     button.props(
-                        "flat no-caps padding='xs sm'" + (" outline" if target == path else "")
+                        "flat no-caps" + (" outline" if target == path else "")
                     ).classes("text-white text-base").mark(f"nav_{key.removeprefix('screen.')}")
                     self.nav[key] = button
                 ui.space()
@@ -131,7 +133,7 @@ class Header:
                         on_change=lambda e: hub.set_language(str(e.value)),
                     )
                     .props("dark options-dark standout hide-bottom-space")
-                    .classes("w-28")
+                    .classes("w-36")
                     .mark("language")
                 )
                 menu_button = ui.button(icon="tune").props("flat").classes("text-white")

@@ -93,7 +93,7 @@ class SectionCard:
     async def apply(self) -> None:
         if not self.check():
             self.answer.set_text(tr("settings.refused_here"))
-            self.answer.classes(replace="text-sm text-red-700")
+            self.answer.classes(replace="text-sm td-bad")
             return
         if self.section == "can" and self.hub.latest()[2].operator != op.STOPPED:
             # Reopening the bus leaves the ECU unheard for a moment: not under running meters.
@@ -115,7 +115,7 @@ class SectionCard:
         self.form.show_errors(result.errors)
         self.answer.set_text(render(result.message))
         self.answer.classes(
-            replace="text-sm " + ("text-green-700" if result.ok else "text-red-700")
+            replace="text-sm " + ("td-ok" if result.ok else "td-bad")
         )
         if result.ok:
             self._initial = self.form.values()
@@ -262,11 +262,11 @@ class ControlScreen:
                 SectionCard(hub, actions, "speed", speed)
             with ui.card().classes("w-80 gap-2"):
                 _title("control.ecu")
-                ui.label(tr("control.ecu_note")).classes("text-xs text-gray-600")
+                ui.label(tr("control.ecu_note")).classes("text-sm td-muted")
                 values = ecu_tuning_values(cfg)
                 ecu = SectionForm("ecu", values)
                 self.ecu_card = SectionCard(hub, actions, "ecu", ecu, only_changed=True)
-                self.pending = ui.label("").classes("text-sm text-amber-800").mark("pending")
+                self.pending = ui.label("").classes("text-sm td-warn").mark("pending")
         self._curve: list[tuple[float, float]] = []
         self._drawn_t = -1e9
         self._replot()

@@ -14,7 +14,8 @@ docs/display.md).
 
 from __future__ import annotations
 
-PRIMARY = "#1565c0"  # white text on it 5.8:1; against the page 5.8:1 (day), 3.3:1 (night)
+PRIMARY = "#1565c0"  # white text on it 5.8:1, against the day page 5.8:1
+PRIMARY_NIGHT = "#1976d2"  # white text on it 4.6:1, against the night page and cards 3.7:1
 TOUCH_PX = 48  # the smallest control
 STOP_PX = 64  # Stop, on every screen
 
@@ -22,14 +23,21 @@ STOP_PX = 64  # Stop, on every screen
 BAR_DAY = "#1b4332"
 BAR_NIGHT = "#0d1f17"
 
+# In NiceGUI's `overrides` layer: after Quasar's and Tailwind's for plain rules, and ahead of
+# Quasar's `!important` colour classes (layered importants win in the reverse order).
 CSS = f"""
+@layer overrides {{
 .q-btn {{ min-height: {TOUCH_PX}px; min-width: {TOUCH_PX}px; }}
 .q-field__control, .q-field--dense .q-field__control,
 .q-field__marginal, .q-field--dense .q-field__marginal {{ min-height: {TOUCH_PX}px; }}
 .q-radio, .q-toggle, .q-checkbox {{ min-height: {TOUCH_PX}px; }}
 .q-item {{ min-height: {TOUCH_PX}px; }}
 .q-tab {{ min-height: {TOUCH_PX}px; }}
-.td-stop {{ min-height: {STOP_PX}px !important; min-width: {STOP_PX * 2}px !important; }}
+.td-stop {{ min-height: {STOP_PX}px !important; min-width: {STOP_PX * 2}px !important;
+  border: 3px solid #fff; }}
+/* a light fill (amber) on a light page: its edge carries the 3:1 */
+.td-edge {{ border: 2px solid #000; }}
+body.body--dark .td-edge {{ border-color: #fff; }}
 .td-bar {{ background: {BAR_DAY}; color: #fff; }}
 body.body--dark .td-bar {{ background: {BAR_NIGHT}; }}
 .td-muted {{ color: #4b5563; }}
@@ -40,6 +48,9 @@ body.body--dark .td-ok {{ color: #81c784; }}
 body.body--dark .td-bad {{ color: #ff8a80; }}
 .td-warn {{ color: #7a4100; }}
 body.body--dark .td-warn {{ color: #ffcc80; }}
+/* coloured text (outline and unselected toggle buttons) lightened on a dark page */
+body.body--dark .text-primary {{ color: #90caf9 !important; }}
+body.body--dark .text-green-10 {{ color: #a5d6a7 !important; }}
 .td-card {{ background: #fff; }}
 body.body--dark .td-card {{ background: #1d1d1d; }}
 .td-alarm-active {{ background: #b71c1c; color: #fff; }}
@@ -50,6 +61,7 @@ body.body--dark .td-card {{ background: #1d1d1d; }}
 .nicegui-content {{ padding: 6px; gap: 6px; }}
 .leaflet-container {{ background: #fff !important; }}
 body.body--dark .leaflet-container {{ background: #2b2b2b !important; }}
+}}
 """
 
 #: The alarm tone (Web Audio) and what the page calls: tdAlarm(on).
