@@ -131,8 +131,8 @@ def field_files(where: Path) -> Path:
     demo's configuration naming them."""
     where.mkdir(parents=True, exist_ok=True)
     outline = {"type": "Polygon", "coordinates": [rect(-8, -6, 16, 48)]}
-    boundary = {"type": "FeatureCollection",
-                "features": [{"type": "Feature", "properties": {}, "geometry": outline}]}  # fmt: skip
+    feature = {"type": "Feature", "properties": {}, "geometry": outline}
+    boundary = {"type": "FeatureCollection", "features": [feature]}
     zones = {"type": "FeatureCollection", "features": [
         {"type": "Feature", "properties": {"rate": rate},
          "geometry": {"type": "Polygon", "coordinates": [rect(-8, y0, 16, y1)]}}

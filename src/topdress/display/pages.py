@@ -121,9 +121,9 @@ class Header:
             with ui.row().classes("w-full items-center no-wrap gap-1"):
                 for target, key in SCREENS:
                     button = ui.button(tr(key), on_click=lambda t=target: ui.navigate.to(t))
-                    button.props(
-                        "flat no-caps" + (" outline" if target == path else "")
-                    ).classes("text-white text-base").mark(f"nav_{key.removeprefix('screen.')}")
+                    button.props("flat no-caps" + (" outline" if target == path else "")).classes(
+                        "text-white text-base"
+                    ).mark(f"nav_{key.removeprefix('screen.')}")
                     self.nav[key] = button
                 ui.space()
                 self.language = (

@@ -114,9 +114,7 @@ class SectionCard:
             return
         self.form.show_errors(result.errors)
         self.answer.set_text(render(result.message))
-        self.answer.classes(
-            replace="text-sm " + ("td-ok" if result.ok else "td-bad")
-        )
+        self.answer.classes(replace="text-sm " + ("td-ok" if result.ok else "td-bad"))
         if result.ok:
             self._initial = self.form.values()
             if isinstance(result.data, str):
