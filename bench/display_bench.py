@@ -18,7 +18,10 @@ user may set one (`--no-realtime`: the normal policy); the figures' last line sa
   page shows it (a MutationObserver in the page timestamps each new snapshot's publication
   mark; both clocks are this machine's wall clock);
 - `display_rss_mb`: peak resident memory (VmHWM) of the whole terminal: its process and the
-  display process it starts.
+  display process it starts;
+- `display_stop_to_command_max_ms`: the header's Stop pressed in the browser (a pointer
+  event) until the PcCommand with its start bit off is on the bus, worst of three (the ECU's
+  core sets the meters' duty to zero at its next 10 ms step).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -44,6 +48,7 @@ from browser import answers, chromium, free_port, missing_browser
 
 BROWSER_NICENESS = 10
 TERMINAL_RT_PRIORITY = 10  # `chrt -r 10`, systemd's CPUSchedulingPolicy=rr + Priority=10
+STOP_TRIES = 3  # Stop pressed in the browser, at the end of the run
 
 #: In the page: every new snapshot drawn -> (now - its publication time) in ms.
 OBSERVER_JS = """
@@ -55,6 +60,42 @@ new MutationObserver(() => {
 }).observe(clock, {attributes: true, attributeFilter: ['data-published']});
 return clock !== null;
 """
+
+
+def _stop_times(driver: Any, m: Machine) -> list[float]:
+    """Stop (the header's, pressed with a pointer as a finger does) with the meters on,
+    STOP_TRIES times (Start pressed again in between): from the press until the first PcCommand with its start bit off is on the bus
+    (the ECU's core takes the meters to zero at its next 10 ms step), in ms."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    def press(tid: str) -> float:
+        button = driver.find_element(By.CSS_SELECTOR, f'[data-testid="{tid}"]')
+        ActionChains(driver).move_to_element(button).perform()  # the finger over it
+        t = time.perf_counter()
+        ActionChains(driver, duration=0).click().perform()
+        return t
+
+    def until(start: bool, after: float) -> float | None:
+        deadline = time.perf_counter() + 2.0
+        while time.perf_counter() < deadline:
+            seen = [t for t, s in list(m.start_changes) if s == start and t >= after]
+            if seen:
+                return seen[0]
+            time.sleep(0.005)
+        return None
+
+    out: list[float] = []
+    for _ in range(STOP_TRIES):
+        running = bool(m.start_changes) and m.start_changes[-1][1]
+        if not running and until(True, press("start")) is None:
+            continue  # the meters did not start: nothing to stop
+        time.sleep(1.0)
+        pressed = press("stop")
+        seen = until(False, pressed)
+        if seen is not None:
+            out.append((seen - pressed) * 1e3)
+    return out
 
 
 def _scheduling(realtime: bool) -> str:
@@ -169,8 +210,9 @@ def parent(duration_s: float, realtime: bool) -> int:
             ]
             for th in feeders:
                 th.start()
-            time.sleep(max(1.0, duration_s - 6.0))
+            time.sleep(max(1.0, duration_s - 6.0 - STOP_TRIES * 3.0))
             updates_ms = list(driver.execute_script("return window.tdLatencies"))
+            stops_ms = _stop_times(driver, m)
         finally:
             driver.quit()
         out, _ = proc.communicate(timeout=duration_s + 60)
@@ -189,10 +231,13 @@ def parent(duration_s: float, realtime: bool) -> int:
     print(f"nmea_to_command_p99_ms_with_display: {np.percentile(lat_ms, 99):.2f}")
     print(f"display_update_p95_ms: {np.percentile(upd_ms, 95):.1f}")
     print(f"display_rss_mb: {result['rss_mb']:.1f}")
+    if stops_ms:
+        print(f"display_stop_to_command_max_ms: {max(stops_ms):.1f}")
     print(
         f"# {late_ms.size} ticks (p50 late {np.percentile(late_ms, 50):.2f} ms), "
         f"{lat_ms.size} NMEA latencies (p50 {np.percentile(lat_ms, 50):.2f} ms), "
         f"{upd_ms.size} page updates (p50 {np.percentile(upd_ms, 50):.1f} ms); "
+        f"Stop pressed to PcCommand start off: {[round(x, 1) for x in stops_ms]} ms; "
         f"terminal counters {result['counters']}; terminal scheduling: {result['sched']}",
         file=sys.stderr,
     )
