@@ -64,8 +64,9 @@ return clock !== null;
 
 def _stop_times(driver: Any, m: Machine) -> list[float]:
     """Stop (the header's, pressed with a pointer as a finger does) with the meters on,
-    STOP_TRIES times (Start pressed again in between): from the press until the first PcCommand with its start bit off is on the bus
-    (the ECU's core takes the meters to zero at its next 10 ms step), in ms."""
+    STOP_TRIES times (Start pressed again in between): from the press until the first
+    PcCommand with its start bit off is on the bus (the ECU's core takes the meters to zero
+    at its next 10 ms step), in ms."""
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
