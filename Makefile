@@ -53,7 +53,7 @@ pytest: $(STAMP) browser qemu
 
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
 screenshots: $(STAMP) browser
-	TOPDRESS_SCREENSHOTS=docs $(BIN)/python -m pytest -q tests/test_display_browser.py
+	TOPDRESS_SCREENSHOTS=docs $(BIN)/python -m pytest -q tests/test_display_browser.py tests/test_display_cab.py
 
 test: ctest lint pytest
 

@@ -22,6 +22,9 @@ user may set one (`--no-realtime`: the normal policy); the figures' last line sa
 - `display_stale_after_kill_s`: at the end, `kill -9` of the display process until the page
   shows its full-screen stale state; `display_live_after_kill_s`: until the display the
   terminal started again serves the page and it is live again.
+- `display_stop_to_command_max_ms`: the header's Stop pressed in the browser (a pointer
+  event) until the PcCommand with its start bit off is on the bus, worst of three (the ECU's
+  core sets the meters' duty to zero at its next 10 ms step).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from browser import STALE_JS, answers, chromium, display_pid, free_port, missing
 BROWSER_NICENESS = 10
 RESTART_MARGIN_S = 20.0  # the terminal runs this much longer: the display killed and back
 TERMINAL_RT_PRIORITY = 10  # `chrt -r 10`, systemd's CPUSchedulingPolicy=rr + Priority=10
+STOP_TRIES = 3  # Stop pressed in the browser, at the end of the run
 
 #: In the page: every new snapshot drawn -> (now - its publication time) in ms.
 OBSERVER_JS = """
@@ -61,6 +65,43 @@ new MutationObserver(() => {
 }).observe(clock, {attributes: true, attributeFilter: ['data-published']});
 return clock !== null;
 """
+
+
+def _stop_times(driver: Any, m: Machine) -> list[float]:
+    """Stop (the header's, pressed with a pointer as a finger does) with the meters on,
+    STOP_TRIES times (Start pressed again in between): from the press until the first
+    PcCommand with its start bit off is on the bus (the ECU's core takes the meters to zero
+    at its next 10 ms step), in ms."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    def press(tid: str) -> float:
+        button = driver.find_element(By.CSS_SELECTOR, f'[data-testid="{tid}"]')
+        ActionChains(driver).move_to_element(button).perform()  # the finger over it
+        t = time.perf_counter()
+        ActionChains(driver, duration=0).click().perform()
+        return t
+
+    def until(start: bool, after: float) -> float | None:
+        deadline = time.perf_counter() + 2.0
+        while time.perf_counter() < deadline:
+            seen = [t for t, s in list(m.start_changes) if s == start and t >= after]
+            if seen:
+                return seen[0]
+            time.sleep(0.005)
+        return None
+
+    out: list[float] = []
+    for _ in range(STOP_TRIES):
+        running = bool(m.start_changes) and m.start_changes[-1][1]
+        if not running and until(True, press("start")) is None:
+            continue  # the meters did not start: nothing to stop
+        time.sleep(1.0)
+        pressed = press("stop")
+        seen = until(False, pressed)
+        if seen is not None:
+            out.append((seen - pressed) * 1e3)
+    return out
 
 
 def _scheduling(realtime: bool) -> str:
@@ -176,8 +217,9 @@ def parent(duration_s: float, realtime: bool) -> int:
             ]
             for th in feeders:
                 th.start()
-            time.sleep(max(1.0, duration_s - 6.0))
+            time.sleep(max(1.0, duration_s - 6.0 - STOP_TRIES * 3.0))
             updates_ms = list(driver.execute_script("return window.tdLatencies"))
+            stops_ms = _stop_times(driver, m)
             for th in feeders:  # the latencies measured: the display killed after them
                 th.join()
             stale_s, live_s = _kill_the_display(driver, proc.pid)
@@ -201,10 +243,13 @@ def parent(duration_s: float, realtime: bool) -> int:
     print(f"display_rss_mb: {result['rss_mb']:.1f}")
     print(f"display_stale_after_kill_s: {stale_s:.2f}")
     print(f"display_live_after_kill_s: {live_s:.2f}")
+    if stops_ms:
+        print(f"display_stop_to_command_max_ms: {max(stops_ms):.1f}")
     print(
         f"# {late_ms.size} ticks (p50 late {np.percentile(late_ms, 50):.2f} ms), "
         f"{lat_ms.size} NMEA latencies (p50 {np.percentile(lat_ms, 50):.2f} ms), "
         f"{upd_ms.size} page updates (p50 {np.percentile(upd_ms, 50):.1f} ms); "
+        f"Stop pressed to PcCommand start off: {[round(x, 1) for x in stops_ms]} ms; "
         f"terminal counters {result['counters']}; terminal scheduling: {result['sched']}",
         file=sys.stderr,
     )

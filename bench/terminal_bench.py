@@ -88,6 +88,8 @@ class Machine:
         self.flood_lines = 0
         self.ecu_idle = threading.Event()  # the twin is not pumping: its bus may be shut
         self.ecu_idle.set()
+        # (arrival time, start bit) of each PcCommand whose start bit changed: Stop's path
+        self.start_changes: list[tuple[float, bool]] = []
 
     def run_ecu(self) -> None:
         self.ecu_idle.clear()
@@ -109,6 +111,8 @@ class Machine:
                 continue
             cmd = protocol.decode(msg)
             assert isinstance(cmd, protocol.PcCommand)
+            if not self.start_changes or self.start_changes[-1][1] != cmd.start:
+                self.start_changes.append((t, cmd.start))
             if cmd.gnss_kmh is None:
                 continue
             with self.lock:

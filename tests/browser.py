@@ -77,6 +77,15 @@ def chromium(
     return webdriver.Chrome(options=opts, service=service)
 
 
+def viewport(driver: WebDriver, width: int, height: int) -> None:
+    """The page's own size, exactly (a cab terminal's screen: 800×480, 1024×600), whatever the
+    headless window's frame takes."""
+    driver.execute_cdp_cmd(  # type: ignore[attr-defined]
+        "Emulation.setDeviceMetricsOverride",
+        {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False},
+    )
+
+
 def answers(url: str) -> bool:
     """Whether a page is served at `url`."""
     try:
@@ -89,7 +98,13 @@ def answers(url: str) -> bool:
 class DemoProcess:
     """`topdress demo` with its display on a free port, its output in a file."""
 
-    def __init__(self, out_dir: Path, passes: int = 30, duration_s: float = 300.0) -> None:
+    def __init__(
+        self,
+        out_dir: Path,
+        passes: int = 30,
+        duration_s: float = 300.0,
+        extra: tuple[str, ...] = (),
+    ) -> None:
         self.out_dir = out_dir
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
@@ -106,6 +121,7 @@ class DemoProcess:
                 "--out", str(out_dir / "sessions"),
                 "--passes", str(passes),
                 "--duration", str(duration_s),
+                *extra,
             ],
             stdout=self._log,
             stderr=subprocess.STDOUT,

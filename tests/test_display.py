@@ -8,6 +8,7 @@ import math
 import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
+from dataclasses import replace
 from itertools import pairwise
 
 import pytest
@@ -101,6 +102,12 @@ def text_of(user: User, marker: str) -> str:
     return str(element.text)  # type: ignore[attr-defined]
 
 
+def panel(user: User, name: str) -> None:
+    """One touch on the main screen's panel row (map, charts, crop, counters, manual)."""
+    (toggle,) = user.find(marker="panels").elements
+    toggle.value = name  # type: ignore[attr-defined]
+
+
 async def shows(user: User, marker: str, expected: str, timeout_s: float = 3.0) -> None:
     """Wait until the page's timer has drawn `expected` at `marker` (virtual clocks aside,
     the page pulls the snapshot every 0.2 s)."""
@@ -124,10 +131,11 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
     assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 > 6 km/h"
     assert text_of(user, "op_state") == "RUNNING"
     assert text_of(user, "manual_state") == ""
-    assert text_of(user, "ndvi_sensors") == "0.612"
-    assert text_of(user, "ndvi_meters") == "0.587"
     assert text_of(user, "rate_upper") == "138.9"
     assert text_of(user, "applied_lower") == "141.2"
+    panel(user, "crop")
+    assert text_of(user, "ndvi_sensors") == "0.612"
+    assert text_of(user, "ndvi_meters") == "0.587"
     assert text_of(user, "ndvi_per_sensor") == "1: 0.605  2: 0.621  3: --  4: 0.610"
     assert text_of(user, "target_lower") == "22.1"
     assert text_of(user, "meter_upper") == "22.7"
@@ -163,6 +171,7 @@ async def test_ecu_values_are_dashes_while_the_ecu_is_not_heard(user: User) -> N
     hub.publish(working(ecu_live=False, ecu_link="lost", gnss_link="ok"))
     register_pages(hub)
     await user.open("/")
+    panel(user, "crop")
     for marker in (
         "v_selected",
         "v_wheel",
@@ -185,9 +194,11 @@ async def test_faults_in_plain_words_and_waiting_ecu_named(user: User) -> None:
     hub.publish(working(faults=(1 << 1) | (1 << 3) | (1 << 12)))
     register_pages(hub)
     await user.open("/")
+    panel(user, "crop")
     assert text_of(user, "faults") == "GNSS speed lost; upper meter blocked; BIT12"
     hub.publish(working(ecu_live=False, ecu_link="wait", ecu_where="socketcan:can0"))
     await user.open("/")
+    panel(user, "crop")
     assert text_of(user, "link_ecu") == "ECU: waiting (socketcan:can0)"
 
 
@@ -196,13 +207,15 @@ async def test_language_switches_at_run_time(user: User) -> None:
     hub.publish(working(faults=1 << 3, last_event=text("event.ecu_lost", s=1.0)))
     register_pages(hub)
     await user.open("/")
-    await user.should_see("Speed")
+    await user.should_see("applied")
+    panel(user, "crop")
     assert text_of(user, "last_event") == "ECU lost: no status for 1.0 s"
     user.find(marker="language").click()
     user.find("简体中文").click()
     assert i18n.language() == "zh"
-    await user.should_see("作业速度", retries=20)
-    await user.should_not_see("Speed, last minute")
+    await user.should_see("实际施肥量", retries=20)
+    await user.should_not_see("applied")
+    panel(user, "crop")  # the content is built anew in the language
     await shows(user, "faults", "上层排肥器堵转")
     assert text_of(user, "source") == "GNSS"
     # the terminal's messages too: why this source, the last event
@@ -397,6 +410,7 @@ async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
     hub.publish(working())
     register_pages(hub)
     await user.open("/")
+    panel(user, "manual")
     user.find(marker="manual_mode").click()  # the radio: pick "fixed"
     (radio,) = user.find(marker="manual_mode").elements
     radio.value = "fixed"  # type: ignore[attr-defined]
@@ -412,46 +426,69 @@ async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
     await shows(user, "manual_state", "MANUAL model -20 %")
 
 
-async def test_alarms_are_acknowledged(user: User) -> None:
+async def test_alarms_show_as_a_banner_on_every_screen_and_are_acknowledged(user: User) -> None:
     term = Terminal()
     hub = DisplayHub(default_config, term.post)
     alarms = (
-        AlarmView("blocked_upper", text("alarm.text.blocked_upper"), "active", 3.0),
         AlarmView("gnss_lost", text("alarm.gnss_lost"), "acked", 1.0),
+        AlarmView("blocked_upper", text("alarm.text.blocked_upper"), "active", 3.0),
     )
     hub.publish(working(alarms=alarms))
     register_pages(hub)
+    for path in ("/", "/communication", "/control", "/calibration"):
+        await user.open(path)
+        # the unacknowledged one first, whatever came before it
+        assert text_of(user, "alarm_banner") == (
+            "upper meter blocked (stopped by the ECU) · active (+1 more)"
+        ), path
+    user.find(marker="banner_ack").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.AckAlarm("blocked_upper")]
+    hub.publish(working(t_s=12.1, alarms=(alarms[0],)))
+    await shows(user, "alarm_banner", "GNSS lost: metering on the ground wheel · acknowledged")
+    await user.should_not_see(marker="banner_ack")  # acknowledged already
     await user.open("/")
-    assert (
-        text_of(user, "alarm_blocked_upper") == "upper meter blocked (stopped by the ECU) · active"
-    )
-    assert (
-        text_of(user, "alarm_gnss_lost") == "GNSS lost: metering on the ground wheel · acknowledged"
-    )
-    await user.should_not_see(marker="ack_gnss_lost")  # acknowledged already
-    user.find(marker="ack_blocked_upper").click()
+    panel(user, "crop")
     user.find(marker="ack_all").click()
     await settle(user, term, 2)
-    assert term.sent == [op.AckAlarm("blocked_upper"), op.AckAlarm(None)]
+    assert term.sent[1] == op.AckAlarm(None)
     hub.publish(working(t_s=13.0, alarms=()))
-    await user.should_see(marker="alarm_none", retries=20)
+    await shows(user, "alarm_banner", "no alarm")
 
 
-async def test_counters_shown_and_reset_apart(user: User) -> None:
+async def test_counters_reset_only_once_confirmed_and_can_be_undone(user: User) -> None:
     term = Terminal()
     hub = DisplayHub(default_config, term.post)
     field = CounterView(area_ha=1.2345, kg=(170.2, 168.9), work_s=3725.0, distance_m=3429.0)
     hub.publish(working(count_field=field, count_season=CounterView(area_ha=12.5)))
     register_pages(hub)
     await user.open("/")
+    panel(user, "counters")
     assert text_of(user, "count_field_area") == "1.234 ha"  # 1.2345 rounds half to even
     assert text_of(user, "count_field_kg_upper") == "170.2 kg"
     assert text_of(user, "count_field_time") == "1:02:05"
     assert text_of(user, "count_field_distance") == "3429 m"
     assert text_of(user, "count_season_area") == "12.500 ha"
+    await user.should_not_see(marker="undo_field")
+    # one tap only asks, naming what would go
+    user.find(marker="reset_field").click()
+    await user.should_see(marker="reset_ask")
+    assert text_of(user, "reset_ask").startswith("Reset the field counter? 1.23 ha and 339 kg")
+    user.find(marker="reset_no").click()
+    await asyncio.sleep(0.2)
+    assert term.sent == []
     user.find(marker="reset_season").click()
+    await user.should_see(marker="reset_ask")
+    user.find(marker="reset_yes").click()
     await settle(user, term, 1)
     assert term.sent == [op.ResetCounter("season")]
+    # the terminal offers the undo while it runs
+    hub.publish(working(t_s=12.1, count_field=field, count_undo=("season",)))
+    await user.should_see(marker="undo_season", retries=20)
+    await user.should_not_see(marker="undo_field")
+    user.find(marker="undo_season").click()
+    await settle(user, term, 2)
+    assert term.sent[1] == op.UndoReset("season")
 
 
 async def test_a_remote_browser_needs_the_pin_to_operate(
@@ -522,7 +559,9 @@ async def test_a_pid_gain_goes_to_the_ecu_and_its_answer_is_shown(user: User) ->
     kp.value = 0.02  # type: ignore[attr-defined]
     user.find(marker="apply_ecu").click()
     await settle(user, term, 1)
-    assert term.sent == [op.ApplySettings("ecu", {"pid_kp": 0.02})]  # the changed gain only
+    (sent,) = term.sent
+    assert isinstance(sent, op.ApplySettings)
+    assert (sent.section, sent.values) == ("ecu", {"pid_kp": 0.02})  # the changed gain only
     await shows(user, "answer_ecu", "settings [ecu] applied, saved to demo-config.toml")
     kp.value = 9.0  # type: ignore[attr-defined]
     user.find(marker="apply_ecu").click()
@@ -644,7 +683,7 @@ async def test_can_adapter_options_are_edited_as_name_value_lines(user: User) ->
 
     term = Terminal(answer)
     hub = DisplayHub(slcan_config, term.post)
-    hub.publish(working())
+    hub.publish(working(operator="stopped"))
     register_pages(hub)
     await user.open("/communication")
     (options,) = user.find(marker="field_can.options").elements
@@ -710,3 +749,232 @@ async def test_main_screen_shows_the_gnss_lag_by_the_speed_source(user: User) ->
     hub.publish(working(t_s=12.3, gnss_lag=LagView(1300, None, "start")))
     await user.open("/")
     assert text_of(user, "gnss_lag") == "GNSS 滞后 1.30 秒（学习中）"
+
+
+# ---- the cab: Stop on every screen, never redrawn; states never silent ----------------------
+async def test_stop_is_on_every_screen_and_works_in_every_state(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    running = CalibrationView("catch", "running", "upper meter: 20 revolutions", 0.1)
+    hub.publish(working(operator="calibrating", calibration=running))
+    register_pages(hub)
+    for n, path in enumerate(("/", "/communication", "/control", "/calibration"), 1):
+        await user.open(path)
+        assert text_of(user, "op_state") == "CALIBRATING"
+        user.find(marker="stop").click()
+        await settle(user, term, n)
+    assert term.sent == [op.Stop()] * 4
+
+
+async def test_the_calibration_panel_is_updated_in_place_never_rebuilt(user: User) -> None:
+    """The wizard's panel follows the progress 5 times a second: its buttons must stay the
+    same elements, or a press lands on one that is being replaced and is lost."""
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    lead = CalibrationView("lead", "running", "trial 1 of 3", 0.0, {}, "lookahead")
+    hub.publish(working(operator="calibrating", calibration=lead))
+    register_pages(hub)
+    await user.open("/calibration")
+    (seen,) = user.find(marker="lead_seen").elements
+    (close,) = user.find(marker="cal_close").elements
+    (stop,) = user.find(marker="stop").elements
+    for i in range(1, 6):
+        hub.publish(
+            working(
+                t_s=12 + i / 10, operator="calibrating", calibration=replace(lead, progress=i / 10)
+            )
+        )
+        await asyncio.sleep(0.25)
+        assert user.find(marker="lead_seen").elements == {seen}
+        assert user.find(marker="cal_close").elements == {close}
+        assert user.find(marker="stop").elements == {stop}
+    user.find(marker="lead_seen").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.LeadSeen()]
+    # done: Seen goes (hidden, not replaced), the result shows, Apply appears
+    done = CalibrationView("lead", "done", "meter 60 ms", 1.0, {"meter_ms": 60.0}, "lookahead")
+    hub.publish(working(t_s=20.0, operator="calibrating", calibration=done))
+    await shows(user, "cal_result_meter_ms", "meter time ms: 60")
+    await user.should_not_see(marker="lead_seen")
+    assert user.find(marker="cal_close").elements == {close}
+
+
+async def test_the_catch_tests_result_stays_on_screen_after_it_is_applied(user: User) -> None:
+    term = Terminal(lambda c: CommandResult(True, "settings [machine] applied, saved to t.toml"))
+    hub = DisplayHub(default_config, term.post)
+    done = CalibrationView(
+        "catch",
+        "done",
+        text(
+            "cal.text.catch_done", layer=text("main.upper"), kg_per_rev=0.3012, kg=6.02, rev=19.987
+        ),
+        1.0,
+        {"kg_per_rev": 0.3012},
+        "machine.kg_per_rev_upper",
+    )
+    hub.publish(working(operator="calibrating", calibration=done))
+    register_pages(hub)
+    await user.open("/calibration")
+    user.find(marker="cal_apply").click()
+    await settle(user, term, 1)
+    await user.should_see("settings [machine] applied")  # the answer, said
+    hub.publish(working(t_s=13.0, operator="stopped", calibration=None))
+    await shows(
+        user,
+        "cal_last",
+        "last result: upper: 0.3012 kg/rev (6.02 kg over 19.987 rev) · "
+        "settings [machine] applied, saved to t.toml",
+    )
+
+
+async def test_ecu_integer_settings_are_sent_as_integers(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/control")
+    (fan,) = user.find(marker="field_ecu.fan_min_rpm").elements
+    fan.value = 2500.0  # type: ignore[attr-defined]  # what a number field gives
+    user.find(marker="apply_ecu").click()
+    await settle(user, term, 1)
+    (sent,) = term.sent
+    assert isinstance(sent, op.ApplySettings) and sent.values == {"fan_min_rpm": 2500}
+    assert isinstance(sent.values["fan_min_rpm"], int)
+    assert not fan.props.get("error")
+
+
+async def test_a_section_changed_meanwhile_asks_for_a_reload(user: User) -> None:
+    from topdress.config_edit import section_version
+
+    def answer(c: object) -> CommandResult:
+        assert isinstance(c, op.ApplySettings)
+        if c.base != "newer":  # another tab applied since this one was filled
+            return CommandResult(
+                False, text("op.error.stale", section="speed"), {"speed": "stale"}, "stale"
+            )
+        return CommandResult(True, "ok")
+
+    term = Terminal(answer)
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/control")
+    user.find(marker="apply_speed").click()
+    await settle(user, term, 1)
+    (sent,) = term.sent
+    assert isinstance(sent, op.ApplySettings)
+    assert sent.base == section_version(default_config(), "speed")
+    await user.should_see(marker="ask_speed")
+    assert "changed from another screen meanwhile" in text_of(user, "ask_speed")
+    await user.should_see(marker="ask_speed_yes")  # Reload
+
+
+async def test_can_settings_with_the_meters_on_ask_to_stop_first(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(operator="running"))
+    register_pages(hub)
+    await user.open("/communication")
+    user.find(marker="apply_can").click()
+    await user.should_see(marker="ask_can")
+    user.find(marker="ask_can_yes").click()
+    await settle(user, term, 2)
+    assert term.sent[0] == op.Stop()
+    assert isinstance(term.sent[1], op.ApplySettings) and term.sent[1].section == "can"
+
+
+async def test_the_manual_panel_shows_what_is_in_force_and_a_refused_rate_says_why(
+    user: User,
+) -> None:
+    term = Terminal(
+        lambda c: CommandResult(
+            False, text("op.error.rate_range", name="upper_kg_ha", value=9999.0, max=600.0)
+        )
+    )
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(manual=ManualView("fixed", 120.0, 80.0)))
+    register_pages(hub)
+    await user.open("/")
+    panel(user, "manual")
+    (mode,) = user.find(marker="manual_mode").elements
+    (upper,) = user.find(marker="manual_upper").elements
+    (lower,) = user.find(marker="manual_lower").elements
+    assert (mode.value, upper.value, lower.value) == ("fixed", 120.0, 80.0)  # type: ignore[attr-defined]
+    assert text_of(user, "manual_in_force") == "in force: MANUAL 120.0 / 80.0 kg/ha"
+    upper.value = 9999.0  # type: ignore[attr-defined]
+    user.find(marker="manual_apply").click()
+    await settle(user, term, 1)
+    assert term.sent == [op.SetManual("fixed", 9999.0, 80.0, 0.0)]  # not cut to 600 unsaid
+    for _ in range(40):
+        if upper.props.get("error"):
+            break
+        await asyncio.sleep(0.05)
+    assert upper.props["error-message"] == "upper_kg_ha: 9999 is outside 0..600 kg/ha"
+    # a percent that asks more than PcCommand carries: the rate is cut, and it says so
+    hub.publish(
+        working(
+            t_s=13.0,
+            manual=ManualView("percent", percent=200.0),
+            rate_model_kg_ha=(250.0, 250.0),
+            rate_kg_ha=(600.0, 600.0),
+        )
+    )
+    await shows(user, "manual_state", "MANUAL model +200 % · limited to 600")
+
+
+async def test_rate_steps_are_one_touch(user: User) -> None:
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/")
+    user.find(marker="rate_plus").click()
+    await settle(user, term, 1)
+    hub.publish(working(t_s=12.1, manual=ManualView("percent", percent=10.0)))
+    await shows(user, "manual_state", "MANUAL model +10 %")
+    user.find(marker="rate_plus").click()
+    await settle(user, term, 2)
+    hub.publish(working(t_s=12.2, manual=ManualView("fixed", 120.0, 80.0)))
+    await shows(user, "manual_state", "MANUAL 120.0 / 80.0 kg/ha")
+    user.find(marker="rate_minus").click()
+    await settle(user, term, 3)
+    assert term.sent == [
+        op.SetManual("percent", percent=10.0),
+        op.SetManual("percent", percent=20.0),
+        op.SetManual("fixed", 108.0, 72.0),
+    ]
+
+
+async def test_units_tank_and_area_left(user: User) -> None:
+    from topdress.display.map_view import FieldMaps
+    from topdress.view.snapshot import TankView
+
+    term = Terminal()
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working(tank=TankView(500.0, 120.0, 100.0), count_field=CounterView(area_ha=0.5)))
+    monkey_maps = FieldMaps(field_ha=2.0)
+    pages_load = pages.load_field_maps
+    pages.load_field_maps = lambda cfg: monkey_maps  # type: ignore[assignment]
+    try:
+        register_pages(hub)
+        await user.open("/")
+    finally:
+        pages.load_field_maps = pages_load  # type: ignore[assignment]
+    # 120 kg left at 283.1 kg/ha applied: 0.42 ha
+    assert text_of(user, "tank") == "tank 120 kg left · enough for 0.42 ha"
+    assert text_of(user, "area") == "done 0.50 ha · left 1.50 ha"
+    assert text_of(user, "v_selected") == "8.0"
+    hub.set_prefs(units="imperial")  # display only: lb/ac, mph, ac, lb
+    await shows(user, "v_selected", "5.0")
+    assert text_of(user, "applied_upper") == "126.6"  # 141.9 kg/ha
+    assert text_of(user, "tank") == "tank 265 lb left · enough for 1.05 ac"
+    assert text_of(user, "area") == "done 1.24 ac · left 3.71 ac"
+    panel(user, "counters")
+    (fill,) = user.find(marker="tank_fill").elements
+    (alarm,) = user.find(marker="tank_alarm").elements
+    fill.value, alarm.value = 1000.0, 200.0  # type: ignore[attr-defined]  # lb
+    user.find(marker="tank_set").click()
+    await settle(user, term, 1)
+    (sent,) = term.sent
+    assert isinstance(sent, op.FillTank)
+    assert (sent.fill_kg, sent.alarm_kg) == pytest.approx((453.59237, 90.718474))

@@ -81,8 +81,13 @@ def test_the_operator_works_the_demo_in_a_browser(demo: DemoProcess, tmp_path: P
     def shoot(name: str, lang: str) -> None:
         driver.save_screenshot(str(shots / f"display-{name}-{lang}.png"))
 
+    def details() -> None:
+        """The main screen's panel of NDVI, meters and links (one touch from the map)."""
+        driver.find_element(By.XPATH, "//button[.//span[text()='NDVI, links']]").click()
+
     try:
         open_screen("main")
+        details()
         until("the ECU acknowledging its parameters", lambda: text("link_ecu") == "ECU: ok")
         assert text("op_state") == "STOPPED"  # the meters wait for the operator
         el("start").click()

@@ -14,6 +14,7 @@ import pytest
 from test_terminal import VirtualRig
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, loads_config
+from topdress.config_edit import section_version
 from topdress.crop.rate import build_rate_model
 from topdress.ecu import meter_target_rpm
 from topdress.gnss.nmea import make_sentence
@@ -340,10 +341,16 @@ def test_catch_test_standing_gives_kg_per_rev_and_applies_it(tmp_path: Path) -> 
         assert 10.0 <= revs < 10.3 and rig.world.meters[0].revolutions == 0.0
         assert rig.world.tractor.odometer == 0.0
         weighed = revs * true_kg_rev  # what the scale says
+        weigh_text = str(cal.text)
         res = post(rig, op.FinishCatchTest(weighed))
         assert res.ok
         cal = rig.term.snapshot.calibration
         assert cal is not None and cal.result["kg_per_rev"] == pytest.approx(true_kg_rev, rel=2e-3)
+        # the weigh step showed the revolutions the result divides by (the meter coasts after
+        # the ECU's "done"), and the result is said: on the screen's answer and in the events
+        assert f"{cal.result['revolutions']:.3f} revolutions" in weigh_text
+        assert f"over {cal.result['revolutions']:.3f} rev" in str(res.message)
+        assert any(e.startswith("operator: lower: 0.30") for _, e in rig.events)
         assert cal.key == "machine.kg_per_rev_lower"
         fut = rig.term.post(op.CloseCalibration(apply=True))
         rig.run(rig.world.t_s + 0.5)
@@ -731,5 +738,93 @@ def test_a_rate_model_changed_while_running_sets_the_rate_at_once() -> None:
         assert s.rate_model_kg_ha == pytest.approx((want, want), abs=0.01)
         old = build_rate_model(CFG.rate).rate_kg_ha(s.ndvi) / 2
         assert abs(want - old) > 5.0  # the new curve, not the old one
+    finally:
+        rig.close()
+
+
+def test_a_waiting_ecu_with_the_meters_on_is_an_alarm() -> None:
+    # A [can] change while running never leaves the ECU unheard: the new bus is readied while
+    # the old one commands (test_a_can_change_where_no_ecu_answers_keeps_the_bus_in_use).
+    # An ECU that does not answer (a channel nobody is on): waiting, values unknown
+    rig = make_rig(drive(stand(60.0)))
+    rig.ecu_off = True
+    try:
+        rig.run(5.0)
+        assert rig.term.snapshot.ecu_link == "wait"
+        assert rig.term.snapshot.alarms == ()  # stopped: waiting is no alarm
+        start = rig.world.t_s - rig.term._t0
+        assert post(rig, op.Start()).ok
+        rig.run(rig.world.t_s + 2.0)
+        assert "ecu_link" not in {a.name for a in rig.term.snapshot.alarms}  # its grace
+        rig.run(rig.world.t_s + 2.0)
+        (alarm,) = [a for a in rig.term.snapshot.alarms if a.name == "ecu_link"]
+        assert str(alarm.text) == "ECU waiting while the meters are on"
+        assert alarm.state == "active" and 3.0 <= alarm.since_s - start <= 3.3
+    finally:
+        rig.close()
+
+
+def test_a_section_changed_from_another_screen_meanwhile_is_refused_not_undone() -> None:
+    rig = make_rig(drive(stand(30.0)))
+    try:
+        rig.run(2.0)
+        base = section_version(rig.term.cfg, "rate")  # both screens filled from this
+        first = post(rig, op.ApplySettings("rate", {"model": "table"}, base))
+        assert first.ok and first.data == section_version(rig.term.cfg, "rate") != base
+        # the second screen still holds model = linear: applying its split would undo it
+        stale = post(rig, op.ApplySettings("rate", {"model": "linear", "split_upper": 0.6}, base))
+        assert not stale.ok and stale.data == "stale"
+        assert "changed from another screen meanwhile" in stale.message
+        assert (rig.term.cfg.rate.model, rig.term.cfg.rate.split_upper) == ("table", 0.5)
+        # the first screen goes on from the version its answer gave
+        again = post(rig, op.ApplySettings("rate", {"split_upper": 0.6}, first.data))
+        assert again.ok and rig.term.cfg.rate.split_upper == 0.6
+    finally:
+        rig.close()
+
+
+def test_a_counter_reset_is_undone_and_keeps_what_was_counted_since(tmp_path: Path) -> None:
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = make_rig(drive(stand(2.0), straight(8.0, 80.0), stand(5.0)), True, session=session)
+    try:
+        rig.run(14.0)
+        before = rig.term.snapshot.count_field
+        assert before.area_ha > 0.005
+        assert not post(rig, op.UndoReset("field")).ok  # nothing reset yet
+        assert post(rig, op.ResetCounter("field")).ok
+        assert rig.term.snapshot.count_undo == ("field",)
+        rig.run(20.0)
+        since = rig.term.snapshot.count_field
+        assert 0.0 < since.area_ha < before.area_ha
+        assert post(rig, op.UndoReset("field")).ok
+        back, season = rig.term.snapshot.count_field, rig.term.snapshot.count_season
+        assert back.since == before.since
+        # as if never reset: what the season (never reset) counted
+        assert back.area_ha == pytest.approx(season.area_ha, rel=1e-9)
+        assert back.kg == pytest.approx(season.kg, rel=1e-9)
+        assert rig.term.snapshot.count_undo == ()
+    finally:
+        rig.close()
+    with SessionReader(session.path) as reader:
+        kinds = [e.kind for e in reader.events() if e.kind.startswith("counter.")]
+    assert kinds == ["counter.reset", "counter.undo"]
+
+
+def test_the_tank_counts_down_what_was_applied_and_alarms_at_its_level() -> None:
+    rig = make_rig(drive(stand(2.0), straight(8.0, 200.0)), autostart=True)
+    try:
+        assert not post(rig, op.FillTank(5.0, 6.0)).ok  # the alarm level above the fill
+        assert post(rig, op.FillTank(5.0, 2.0)).ok
+        assert rig.term.snapshot.tank.remaining_kg == 5.0
+        rig.run(12.0)
+        s = rig.term.snapshot
+        applied = sum(s.count_field.kg)
+        assert s.tank.remaining_kg == pytest.approx(5.0 - applied, abs=1e-6)
+        assert "tank_low" not in {a.name for a in s.alarms}
+        rig.run(40.0)
+        s = rig.term.snapshot
+        assert s.tank.remaining_kg is not None and s.tank.remaining_kg < 2.0
+        (low,) = [a for a in s.alarms if a.name == "tank_low"]
+        assert str(low.text).startswith("tank low: 2 kg left")
     finally:
         rig.close()

@@ -217,7 +217,7 @@ def test_the_block_follows_the_language_and_fits_80_columns_in_chinese() -> None
     assert f"{tr('link_name.ecu')} {tr('link.wait')} (socketcan:can0)" in text
     assert tr("op.state.running") == "作业中" and tr("op.state.running") in text
     assert tr("alarm.blocked_lower") in text and tr("alarm.state.acked") in text
-    assert tr("manual.shown_fixed", upper="200.0", lower="100.0") in text
+    assert tr("manual.shown_fixed", upper="200.0", lower="100.0", unit="kg/ha") in text
     assert tr("cal.catch") in text and tr("cal.step.weigh") in text
     # the terminal's own messages in the language: why the source, the wizard, the last event
     assert "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 > 6 km/h" in text

@@ -12,6 +12,8 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import shutil
 from collections.abc import Mapping
 from pathlib import Path
@@ -90,6 +92,13 @@ def _flat(values: Mapping[str, Any], prefix: str) -> dict[str, Any]:
         else:
             out[f"{prefix}.{key}"] = value
     return out
+
+
+def section_version(cfg: TerminalConfig, section: str) -> str:
+    """A short digest of one section's values: a form remembers the one it was filled from,
+    and a change applied meanwhile (from another screen) makes it differ."""
+    values = json.dumps(_plain(section_values(cfg, section)), sort_keys=True, default=str)
+    return hashlib.sha256(values.encode()).hexdigest()[:12]
 
 
 def changed_keys(

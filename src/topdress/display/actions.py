@@ -39,7 +39,7 @@ class Actions:
         with ui.dialog() as dialog, ui.card():
             ui.label(tr("pin.title")).classes("text-lg")
             pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
-            wrong = ui.label("").classes("text-red-700")
+            wrong = ui.label("").classes("td-bad")
 
             lock = asyncio.Lock()
             next_try = [0.0]

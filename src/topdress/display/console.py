@@ -98,7 +98,12 @@ def _hm(seconds: float) -> str:
 
 def _manual(m: ManualView) -> str:
     if m.mode == "fixed":
-        return tr("manual.shown_fixed", upper=f"{m.upper_kg_ha:.1f}", lower=f"{m.lower_kg_ha:.1f}")
+        return tr(
+            "manual.shown_fixed",
+            upper=f"{m.upper_kg_ha:.1f}",
+            lower=f"{m.lower_kg_ha:.1f}",
+            unit=tr("unit.kgha"),
+        )
     if m.mode == "percent":
         return tr("manual.shown_percent", percent=f"{m.percent:+.0f}")
     return tr("manual.off")

@@ -47,6 +47,13 @@ def label_of(key: str) -> str:
     return f"{words} ({unit})" if unit else words
 
 
+def value_name(value: Any) -> str:
+    """A setting's value in words where the catalogue names it (`linear`, `paper`), else as
+    the file writes it (a port, a number)."""
+    key = f"value.{value}"
+    return tr(key) if isinstance(value, str) and key in CATALOGUE else str(value)
+
+
 class SectionForm:
     """Inputs for `values` (a section as `settings.section_values` gives it)."""
 
@@ -89,6 +96,8 @@ class SectionForm:
             options = self._choices[key]
             if isinstance(options, list) and value not in options:
                 options = [value, *options]
+            if isinstance(options, list) and key not in self._free:
+                options = {v: value_name(v) for v in options}  # the value by name
             widget = ui.select(
                 options,
                 value=value,

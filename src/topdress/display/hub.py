@@ -13,7 +13,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from topdress import i18n
@@ -42,6 +42,14 @@ class TrackPoint:
     heading_deg: float  # clockwise from north: the receiver's course, else from the last point
     rate_kg_ha: float  # total rate applied (both layers, measured) while metering, else 0
     metering: bool
+
+
+@dataclass(frozen=True)
+class ViewPrefs:
+    """How the cab's screen shows things (every open page at once, as the language)."""
+
+    night: bool = False
+    units: str = "metric"  # metric | imperial (topdress.display.units)
 
 
 class DisplayHub:
@@ -74,6 +82,8 @@ class DisplayHub:
         self._history: deque[Snapshot] = deque(maxlen=max(1, round(history_s / TICK_S)))
         self._track: deque[TrackPoint] = deque(maxlen=TRACK_MAX_POINTS)
         self._track_serial = 0
+        self._prefs = ViewPrefs()
+        self._prefs_version = 0
 
     # ---- the control loop's side ---------------------------------------------------------
     def publish(self, snapshot: Snapshot) -> None:
@@ -110,6 +120,25 @@ class DisplayHub:
         lang = i18n.set_language(code)
         if self._on_language is not None:
             self._on_language(lang)
+
+    @property
+    def prefs(self) -> ViewPrefs:
+        return self._prefs
+
+    @property
+    def prefs_version(self) -> int:
+        """Grows by one at each change: pages redraw their content as for a language."""
+        return self._prefs_version
+
+    def set_prefs(self, night: bool | None = None, units: str | None = None) -> None:
+        new = replace(
+            self._prefs,
+            night=self._prefs.night if night is None else night,
+            units=self._prefs.units if units is None else units,
+        )
+        if new != self._prefs:
+            self._prefs = new
+            self._prefs_version += 1
 
     @property
     def pin_required(self) -> bool:

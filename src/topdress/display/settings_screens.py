@@ -12,8 +12,8 @@ from typing import Any
 
 from nicegui import ui
 
-from topdress.config import ECU_KEYS, SPEED_MODE_IDS, SWITCH_COMPARE_IDS
-from topdress.config_edit import section_values, validate_section
+from topdress.config import ECU_KEYS, SPEED_MODE_IDS, SWITCH_COMPARE_IDS, TerminalConfig
+from topdress.config_edit import section_values, section_version, validate_section
 from topdress.crop.rate import rate_curve
 from topdress.devices.ports import list_serial_ports
 from topdress.display import fmt
@@ -62,6 +62,8 @@ class SectionCard:
         self.form = form
         self._initial = form.values()
         self._only_changed = only_changed
+        # What the form was filled from: applied from another screen since, it is refused.
+        self.base = section_version(hub.config(), section)
         with ui.row().classes("items-center gap-2"):
             self.button = ui.button(tr("action.save_apply"), on_click=self.apply).mark(
                 f"apply_{section}"
@@ -91,21 +93,46 @@ class SectionCard:
     async def apply(self) -> None:
         if not self.check():
             self.answer.set_text(tr("settings.refused_here"))
-            self.answer.classes(replace="text-sm text-red-700")
+            self.answer.classes(replace="text-sm td-bad")
             return
+        if self.section == "can" and self.hub.latest()[2].operator != op.STOPPED:
+            # Reopening the bus leaves the ECU unheard for a moment: not under running meters.
+            if not await self._ask(tr("settings.link_cut_ask"), tr("settings.stop_apply")):
+                return
+            await self.actions.send(op.Stop())
         self.answer.set_text(tr("settings.sending"))
         self.answer.classes(replace="text-sm")
-        result = await self.actions.send(op.ApplySettings(self.section, self.values()))
+        result = await self.actions.send(op.ApplySettings(self.section, self.values(), self.base))
         if result is None:
             self.answer.set_text("")
             return
+        if result.data == "stale":
+            self.answer.set_text(render(result.message))
+            self.answer.classes(replace="text-sm td-bad")
+            if await self._ask(render(result.message), tr("settings.reload")):
+                ui.navigate.reload()
+            return
         self.form.show_errors(result.errors)
         self.answer.set_text(render(result.message))
-        self.answer.classes(
-            replace="text-sm " + ("text-green-700" if result.ok else "text-red-700")
-        )
+        self.answer.classes(replace="text-sm " + ("td-ok" if result.ok else "td-bad"))
         if result.ok:
             self._initial = self.form.values()
+            if isinstance(result.data, str):
+                self.base = result.data  # this screen's own change is the new base
+
+    async def _ask(self, question: str, yes: str) -> bool:
+        with ui.dialog() as dialog, ui.card():
+            ui.label(question).classes("text-lg").mark(f"ask_{self.section}")
+            with ui.row():
+                ui.button(yes, on_click=lambda: dialog.submit(True)).props(
+                    "color=red-9 no-caps"
+                ).mark(f"ask_{self.section}_yes")
+                ui.button(tr("action.cancel"), on_click=lambda: dialog.submit(False)).props(
+                    "outline no-caps"
+                )
+        ok = bool(await dialog)
+        dialog.delete()
+        return ok
 
 
 def _title(key: str) -> None:
@@ -233,12 +260,11 @@ class ControlScreen:
                 SectionCard(hub, actions, "speed", speed)
             with ui.card().classes("w-80 gap-2"):
                 _title("control.ecu")
-                ui.label(tr("control.ecu_note")).classes("text-xs text-gray-600")
-                overrides = cfg.ecu.overrides
-                values = {k: overrides.get(k, _round(ECU_KEYS[k].default)) for k in ECU_TUNING}
+                ui.label(tr("control.ecu_note")).classes("text-sm td-muted")
+                values = ecu_tuning_values(cfg)
                 ecu = SectionForm("ecu", values)
                 self.ecu_card = SectionCard(hub, actions, "ecu", ecu, only_changed=True)
-                self.pending = ui.label("").classes("text-sm text-amber-800").mark("pending")
+                self.pending = ui.label("").classes("text-sm td-warn").mark("pending")
         self._curve: list[tuple[float, float]] = []
         self._drawn_t = -1e9
         self._replot()
@@ -307,6 +333,17 @@ class ControlScreen:
             self._drawn_t = s.t_s
             self._draw(s)
         self.pending.set_text(tr("control.pending") if s.settings_pending else "")
+
+
+def ecu_tuning_values(cfg: TerminalConfig) -> dict[str, float | int]:
+    """The ECU's tuning keys as in force, in their own type: an integer parameter as an int
+    (a float would be refused on saving: "must be an integer, not 2500.0")."""
+    out: dict[str, float | int] = {}
+    for key in ECU_TUNING:
+        spec = ECU_KEYS[key]
+        value = cfg.ecu.overrides.get(key, spec.default)
+        out[key] = round(value) if spec.integer else _round(value)
+    return out
 
 
 def _round(value: float) -> float:

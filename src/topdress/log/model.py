@@ -90,6 +90,9 @@ EVENT_KINDS: Final = (
     "display.back",
     "display.pin_failed",
     "display.pin_lockout",
+    "counter.reset",
+    "counter.undo",
+    "tank.filled",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

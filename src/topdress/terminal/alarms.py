@@ -21,6 +21,9 @@ from topdress.view.snapshot import AlarmView
 ACTIVE, ACKED, CLEARED = "active", "acked", "cleared"
 #: Metering speed targets below this are not judged off-rate (a meter just starting or stopping).
 MIN_TARGET_RPM = 1.0
+#: A link not ok with the meters on is an alarm once it lasts this long (one starting up, or
+#: a sensor missing one line, gets this long first).
+LINK_GRACE_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,10 @@ class AlarmInputs:
     off_map: tuple[OffMap, ...] = ()
     display_down: bool = False  # the display process is not serving (terminal/surface.py)
     display_lost: bool = False  # the operator has had no display for display.lost_pause_s
+    # The operator has the meters on (running or paused), whatever the ECU answers: a link
+    # that is not ok then is an alarm, not only a lost one.
+    operating: bool = False
+    tank_low: Text | None = None  # the tank below its alarm level (the text with its figures)
 
 
 @dataclass
@@ -67,6 +74,7 @@ class AlarmBook:
         self.off_rate_s = off_rate_s
         self._alarms: dict[str, _Alarm] = {}
         self._off_since: list[float | None] = [None, None]
+        self._link_since: dict[str, float] = {}
 
     def retune(self, off_rate_pct: float, off_rate_s: float) -> None:
         """A changed [operator] section: the off-rate limits taken at the next tick."""
@@ -133,6 +141,30 @@ class AlarmBook:
             yield "display_down", text("alarm.display_down")
         if x.display_lost:
             yield "display_lost", text("alarm.display_lost")
+        # Waiting (a CAN channel changed), no fix, sensors partly fresh: with the meters on,
+        # never silent once it lasts LINK_GRACE_S (a link starting up gets that long).
+        for kind, state, lost in (
+            ("ecu", x.ecu_link, ("lost",)),
+            ("gnss", x.gnss_link, ("lost",)),
+            ("crop", x.crop_link, ("lost", "silent")),
+        ):
+            bad = x.operating and state != "ok" and state not in lost
+            since = self._link_since.get(kind)
+            if not bad:
+                self._link_since.pop(kind, None)
+            elif since is None:
+                self._link_since[kind] = t_s
+            elif t_s - since >= LINK_GRACE_S - 1e-9:
+                yield (
+                    f"{kind}_link",
+                    text(
+                        "alarm.text.link",
+                        link=text(f"link_name.{kind}"),
+                        state=link_state(state),
+                    ),
+                )
+        if x.tank_low is not None:
+            yield "tank_low", x.tank_low
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]

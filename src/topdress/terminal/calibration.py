@@ -158,6 +158,12 @@ class CatchTest:
                 elif st.state == "aborted":
                     self.step = "aborted"
                     self.text = text("cal.text.catch_aborted", reason=st.reason)
+            elif self.step == "weigh":
+                # The meter coasts a little after its stop: the revolutions shown while
+                # weighing are the ones the result will divide by.
+                self.text = text(
+                    "cal.text.catch_weigh", layer=_layer(self.layer), rev=self.revolutions
+                )
         if self._answered or self.step != "running":
             return []
         if self._sent_t is None or now - self._sent_t >= CAL_ANSWER_S - 1e-9:

@@ -94,6 +94,9 @@ class WorkCounters:
         self.counters = {name: CounterView(since=_now_iso()) for name in COUNTERS}
         self._last_save_t: float | None = None
         self._dirty = False
+        # Each counter as it was before its last reset, while the terminal runs: the reset can
+        # be undone (a tap on the wrong counter) without losing what was counted since.
+        self._before: dict[str, CounterView] = {}
         self._saver = _Saver(self._write)
         if path is not None:
             self._load(path)
@@ -125,8 +128,21 @@ class WorkCounters:
     def reset(self, which: str) -> None:
         if which not in COUNTERS:
             raise ValueError(f"no counter {which!r} (known: {', '.join(COUNTERS)})")
+        self._before[which] = self.counters[which]
         self.counters[which] = CounterView(since=_now_iso())
         self._dirty = True
+
+    def undo(self, which: str) -> None:
+        """The counter as before its last reset, plus what was counted since."""
+        before = self._before.pop(which, None)
+        if before is None:
+            raise ValueError(f"no reset of {which!r} to undo")
+        now = self.counters[which]
+        self.counters[which] = before.add(now.area_ha, now.kg, now.work_s, now.distance_m)
+        self._dirty = True
+
+    def undoable(self) -> tuple[str, ...]:
+        return tuple(name for name in COUNTERS if name in self._before)
 
     def view(self, which: str) -> CounterView:
         return self.counters[which]

@@ -27,6 +27,7 @@ from topdress.config_edit import (
     changed_ecu_params,
     changed_keys,
     save_section,
+    section_version,
     validate_section,
 )
 from topdress.crop.sensors import CompensatedNdvi, parse_crop_line
@@ -55,7 +56,14 @@ from topdress.terminal.site import OffMap
 from topdress.terminal.surface import DisplayWatch
 from topdress.view import commands as op
 from topdress.view.links import link_state
-from topdress.view.snapshot import AlarmView, CalibrationView, CounterView, DeviceLine, Snapshot
+from topdress.view.snapshot import (
+    AlarmView,
+    CalibrationView,
+    CounterView,
+    DeviceLine,
+    Snapshot,
+    TankView,
+)
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +81,8 @@ class DeskView:
     alarms: tuple[AlarmView, ...]
     count_field: CounterView
     count_season: CounterView
+    count_undo: tuple[str, ...]
+    tank: TankView
     calibration: CalibrationView | None
     settings_pending: bool
     settings_state: dict[str, str]
@@ -134,6 +144,7 @@ class OperatorDesk:
         self._lines: dict[str, deque[tuple[float, Any]]] = {
             k: deque(maxlen=DEVICE_LINES) for k in ("gnss", "crop", "can")
         }
+        self.tank = TankView()  # no fill entered yet
 
     # ---- posting (any thread) ----------------------------------------------------------------
     def post(self, command: Any) -> Future[op.CommandResult]:
@@ -198,7 +209,24 @@ class OperatorDesk:
             except ValueError as exc:
                 return op.CommandResult(False, str(exc))
             self.counters.save(wait=False)  # the loop does not wait on the disk
+            loop.log_event(now, "counter.reset", which=c.which)
             return self._done(text("op.done.reset", which=text(f"count.{c.which}")))
+        if isinstance(c, op.UndoReset):
+            try:
+                self.counters.undo(c.which)
+            except ValueError:
+                return op.CommandResult(False, text("op.error.no_undo", which=c.which))
+            self.counters.save(wait=False)
+            loop.log_event(now, "counter.undo", which=c.which)
+            return self._done(text("op.done.undo", which=text(f"count.{c.which}")))
+        if isinstance(c, op.FillTank):
+            if not (0.0 < c.fill_kg < 1e6 and 0.0 <= c.alarm_kg < c.fill_kg):
+                return op.CommandResult(
+                    False, text("op.error.tank", fill=c.fill_kg, alarm=c.alarm_kg)
+                )
+            self.tank = TankView(c.fill_kg, c.fill_kg, c.alarm_kg)
+            loop.log_event(now, "tank.filled", fill_kg=c.fill_kg, alarm_kg=c.alarm_kg)
+            return self._done(text("op.done.tank", kg=c.fill_kg, alarm=c.alarm_kg))
         if isinstance(c, op.Help):
             return op.CommandResult(False, c.text)
         if isinstance(c, op.DisplayState | op.DisplayEvent):
@@ -418,6 +446,8 @@ class OperatorDesk:
         self._count(snap, dt_s)
         self.counters.maybe_save(now)
         metering = self.op.state == op.RUNNING and snap.ecu_live and snap.running
+        tank = self.tank
+        low = tank.remaining_kg is not None and tank.remaining_kg <= tank.alarm_kg
         inputs = AlarmInputs(
             metering=metering,
             target_rpm=snap.target_rpm,
@@ -430,6 +460,10 @@ class OperatorDesk:
             **self._log_health(),
             display_down=self.display.down,
             display_lost=self.display.lost,
+            operating=self.op.state in (op.RUNNING, op.PAUSED),
+            tank_low=(
+                text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0)) if low else None
+            ),
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
             figures = {k: v for k, v in alarm.values if isinstance(v, int | float)}
@@ -445,6 +479,8 @@ class OperatorDesk:
             alarms=self.alarms.views(),
             count_field=self.counters.view("field"),
             count_season=self.counters.view("season"),
+            count_undo=self.counters.undoable(),
+            tank=self.tank,
             calibration=self.wizard.view() if self.wizard is not None else None,
             settings_pending=self._pending is not None,
             settings_state=dict(self._settings_state),
@@ -466,6 +502,9 @@ class OperatorDesk:
             return
         d_m = snap.v_kmh / 3.6 * dt_s
         self.counters.add(d_m * m.width_m / 10_000.0, kg, dt_s, d_m)
+        left = self.tank.remaining_kg
+        if left is not None:
+            self.tank = replace(self.tank, remaining_kg=left - kg[0] - kg[1])
 
     def close(self) -> None:
         self.counters.save()
@@ -498,6 +537,11 @@ class OperatorDesk:
         loop = self.loop
         if self._pending is not None:
             raise op.OperatorError(text("op.error.settings_busy"))
+        if c.base is not None and c.base != section_version(loop.cfg, c.section):
+            # Applied from another screen since this one was filled: its values would undo it.
+            return op.CommandResult(
+                False, text("op.error.stale", section=c.section), {c.section: "stale"}, "stale"
+            )
         new = validate_section(loop.cfg, c.section, c.values)
         if c.section in ECU_SECTIONS:
             changed = changed_ecu_params(loop.cfg, new)
@@ -571,7 +615,8 @@ class OperatorDesk:
         if c.section == "operator":
             self.alarms.retune(new.operator.off_rate_pct, new.operator.off_rate_s)
         later = text("op.done.later") if c.section in RESTART_SECTIONS else ""
-        return self._done(text("op.done.settings", section=c.section, saved=saved, later=later))
+        done = self._done(text("op.done.settings", section=c.section, saved=saved, later=later))
+        return replace(done, data=section_version(loop.cfg, c.section))
 
     def _push(
         self,

@@ -72,6 +72,21 @@ class ResetCounter:
 
 
 @dataclass(frozen=True)
+class UndoReset:
+    """Put back the counter as it was before its last reset (what was counted since is kept)."""
+
+    which: str  # field | season
+
+
+@dataclass(frozen=True)
+class FillTank:
+    """The product now in the tank (kg) and the level (kg) below which it is an alarm."""
+
+    fill_kg: float
+    alarm_kg: float = 0.0
+
+
+@dataclass(frozen=True)
 class StartCatchTest:
     layer: str  # upper | lower
     revolutions: float = 20.0
@@ -131,6 +146,9 @@ class ApplySettings:
 
     section: str
     values: Mapping[str, Any]
+    # The section's version (topdress.config_edit.section_version) the values were edited
+    # from; another has been applied since: refused, nothing lost. None: not checked.
+    base: str | None = None
 
 
 @dataclass(frozen=True)
@@ -257,7 +275,8 @@ class Operator:
 # ---- typed commands (the console) -------------------------------------------------------------
 CONSOLE_HELP = (
     "commands: start | stop | pause | manual off | manual fixed UPPER LOWER\n"
-    "          manual percent P | ack [NAME] | reset field|season | test gnss|crop|can\n"
+    "          manual percent P | ack [NAME] | reset field|season | undo field|season\n"
+    "          tank KG [ALARM_KG] | test gnss|crop|can\n"
     "          catch upper|lower [REV [RPM]] | weigh KG | wheel [M] | finish [M]\n"
     "          fan [S] | lead upper|lower [TRIALS [RPM]] | seen | close [apply]"
 )
@@ -294,6 +313,10 @@ def parse_command(text: str) -> Any:
         return AckAlarm(args[0] if args else None)
     if verb == "reset" and len(args) == 1:
         return ResetCounter(args[0])
+    if verb == "undo" and len(args) == 1:
+        return UndoReset(args[0])
+    if verb == "tank":
+        return FillTank(*_floats(args, 1, 2))
     if verb == "catch" and args and args[0] in LAYERS:
         nums = _floats(args[1:], 0, 2)
         return StartCatchTest(args[0], *nums)

@@ -44,6 +44,17 @@ class CounterView:
 
 
 @dataclass(frozen=True)
+class TankView:
+    """The product in the tank: the fill the operator entered, what is left of it after what
+    the meters applied since (both layers draw on it), and the level that raises an alarm.
+    None: no fill entered since the terminal started."""
+
+    fill_kg: float | None = None
+    remaining_kg: float | None = None
+    alarm_kg: float = 0.0
+
+
+@dataclass(frozen=True)
 class CalibrationView:
     kind: str  # catch | wheel | fan
     step: str  # running | weigh | drive | done | aborted
@@ -134,6 +145,8 @@ class Snapshot:
     alarms: tuple[AlarmView, ...] = ()
     count_field: CounterView = field(default_factory=CounterView)  # this field's counter
     count_season: CounterView = field(default_factory=CounterView)
+    count_undo: tuple[str, ...] = ()  # counters reset since the start that can be put back
+    tank: TankView = field(default_factory=TankView)
     calibration: CalibrationView | None = None
     settings_pending: bool = False
     settings_state: dict[str, str] = field(default_factory=dict)  # key -> pending/ok/refused..
