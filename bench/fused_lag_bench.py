@@ -34,9 +34,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from topdress.config import EcuConfig, TerminalConfig, default_config
+from topdress.gnss import sentences as nmea
 from topdress.log.events import Event, NmeaEvent, WheelEvent
 from topdress.log.replay import ReplayRow, ReplayStats, replay
-from topdress.sim import nmea
 
 DT = 0.001  # the model's own step, s
 WHEEL_EVENT_S = 0.01
