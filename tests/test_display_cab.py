@@ -181,13 +181,13 @@ def test_the_cab_screen_at_800x480(demo: DemoProcess, tmp_path: Path) -> None:
         """A finger: pointer down and up on the element's centre (no scrolling, no script)."""
         ActionChains(driver).move_to_element(el(tid)).click().perform()
 
-    def in_view(tid: str) -> bool:
+    def in_view(tid: str, w: int = W, h: int = H) -> bool:
         r = driver.execute_script(
             "const r = arguments[0].getBoundingClientRect();"
             "return [r.left, r.top, r.right, r.bottom];",
             el(tid),
         )
-        return bool(r[0] >= 0 and r[1] >= 0 and r[2] <= W + 0.5 and r[3] <= H + 0.5)
+        return bool(r[0] >= 0 and r[1] >= 0 and r[2] <= w + 0.5 and r[3] <= h + 0.5)
 
     def live() -> None:
         """The page connected: its clock moves (the first view is drawn before that, and a
@@ -326,6 +326,14 @@ def test_the_cab_screen_at_800x480(demo: DemoProcess, tmp_path: Path) -> None:
         for name in SCREENS:
             open_screen(name)
             check_page(f"{name} (zh)")
+
+        # a 1024×600 screen: the main screen's working set, again without scrolling
+        viewport(driver, 1024, 600)
+        open_screen("main")
+        time.sleep(1.0)
+        assert driver.execute_script("return document.documentElement.scrollHeight") <= 600
+        for tid in MAIN_IN_VIEW:
+            assert in_view(tid, 1024, 600), (tid, "1024x600")
     except Exception:
         driver.save_screenshot(str(tmp_path / "failed.png"))
         print("screenshot of the failure:", tmp_path / "failed.png")
