@@ -73,7 +73,9 @@ def test_terminal_keeps_the_ecu_link_while_gnss_floods() -> None:
     # A receiver flooding the terminal (a file replayed as fast as read) grew the one shared
     # queue without bound; CAN frames waited behind the lines and the ECU was declared lost.
     cfg = default_config()
-    cfg = replace(cfg, can=replace(cfg.can, channel="test-inbox-flood"))
+    # ECU lost after 1 s without status (0.5 s by default): the machine running this test is
+    # shared, and a thread of this process may wait that long for the CPU whatever the queues do
+    cfg = replace(cfg, can=replace(cfg.can, channel="test-inbox-flood", ecu_timeout_s=1.0))
     gnss = FakeLineSource()
     pc_bus, ecu_bus = open_bus(cfg.can), open_bus(cfg.can)
     ecu = SimulatedEcu(ecu_bus, now=time.monotonic())

@@ -153,7 +153,6 @@ class MainScreen:
                         setattr(self, attr, ui.label("--").classes("font-mono").mark(attr))
                         ui.label(u.speed_unit).classes("td-muted")
             self.why = ui.label("").classes("text-xs").mark("source_why")
-            self.lag = ui.label("").classes("text-xs").mark("gnss_lag")
 
     def _build_left(self) -> None:
         with ui.card().tight().classes("w-full td-card p-1 gap-0"):
@@ -236,6 +235,9 @@ class MainScreen:
                     k: ui.label("--").classes("text-base").mark(f"link_{k}")
                     for k in ("ecu", "gnss", "crop")
                 }
+                # the GNSS lag the ECU uses (learned or set): one touch away, the main
+                # screen's speed card keeps its height at 800x480
+                self.lag = ui.label("").classes("text-sm").mark("gnss_lag")
                 ui.label(tr("main.faults")).classes("text-sm td-muted")
                 self.faults = ui.label("--").classes("text-base").mark("faults")
                 self.event = ui.label("").classes("text-sm td-muted").mark("last_event")
@@ -382,7 +384,6 @@ class MainScreen:
             self.source.props["color"] = colour
             self.source.update()
         self.why.set_text(render(s.speed_why) if live else "")
-        self.lag.set_text(render(s.gnss_lag.text()) if live and s.gnss_lag else "")
         for i, layer in enumerate(op.LAYERS):
             self.rate[layer].set_text(fmt.num(u.rate(s.rate_kg_ha[i]), ".1f"))
             self.applied[layer].set_text(fmt.ecu(s, u.rate(s.applied_kg_ha[i]), ".1f"))
@@ -465,6 +466,8 @@ class MainScreen:
         self.area_line.set_text(area)
 
     def _update_details(self, s: Snapshot) -> None:
+        live = s.ecu_live
+        self.lag.set_text(render(s.gnss_lag.text()) if live and s.gnss_lag else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
         self.per_sensor.set_text(
