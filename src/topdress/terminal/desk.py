@@ -387,6 +387,7 @@ class OperatorDesk:
             gnss_link=snap.gnss_link,
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
+            ecu_protocol=snap.ecu_protocol,
             **self._log_health(),
         )
         for name, alarm in self.alarms.update(snap.t_s, inputs):
