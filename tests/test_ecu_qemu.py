@@ -12,6 +12,7 @@ what the HIL link's duty resolution (0.0001) changes in the plant.
 
 from __future__ import annotations
 
+import io
 import math
 import shutil
 import subprocess
@@ -21,10 +22,21 @@ from pathlib import Path
 import pytest
 
 from topdress import protocol
+from topdress.cli.demo import run_demo
 from topdress.ecu import EcuParams
+from topdress.errors import ConfigError, DeviceError
+from topdress.log.session import SessionReader
+from topdress.log.summary import format_text, summarise
 from topdress.protocol import Fault
 from topdress.sim.actuators import MeterParams
-from topdress.sim.qemu_ecu import QemuEcu, QemuOptions, QemuSil, QemuWorld, qemu_missing
+from topdress.sim.qemu_ecu import (
+    QemuEcu,
+    QemuOptions,
+    QemuSil,
+    QemuWorld,
+    ensure_image,
+    qemu_missing,
+)
 from topdress.sim.sil import PcParams, Sil
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.wheel import WheelParams
@@ -246,3 +258,29 @@ def test_command_loss_stops_the_meters_within_the_timeout(rec: Rec, ref: Rec) ->
         assert r.meter_rpm[r.t.index(t_stop) + 100][1] < 0.5  # the plant's meter has run down
         # the PC back: metering again (the fault clears with the first command)
         assert max(d[1] for d in r.duties[r.t.index(t_stop) : r.t.index(JAM_S)]) > 0.1
+
+
+def test_the_demo_runs_the_terminal_against_the_firmware(image: Path, tmp_path: Path) -> None:
+    out = io.StringIO()
+    assert run_demo(10.0, tmp_path, out=out, ecu="qemu") == 0
+    text = out.getvalue()
+    # the terminal says who answers on its bus, as it would of a real ECU
+    assert "ECU: stm32f4 firmware 0.1.0, protocol 1.1 (slcan-hil)" in text.splitlines()
+    (session,) = tmp_path.glob("*.sqlite")
+    with SessionReader(session) as reader:
+        s = summarise(reader)
+    assert s.ecu is not None and s.ecu["target"] == "stm32f4"
+    assert (
+        "ECU              stm32f4 firmware 0.1.0, protocol 1.1 (slcan-hil, last reset: unknown)"
+        in (format_text(s).splitlines())
+    )
+    # the drive leaves the headland after 3 s: the firmware meters what the terminal asks
+    assert s.layers["upper"].applied_kg > 0.1
+    assert abs(s.layers["upper"].rate_error_pct or 100.0) < 15.0
+
+
+def test_no_image_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(DeviceError, match=r"no firmware image at .*: set TOPDRESS_ECU_IMAGE"):
+        ensure_image(tmp_path / "topdress-ecu-stm32f4.elf")
+    with pytest.raises(ConfigError, match="--ecu: 'stm32': one of host, qemu"):
+        run_demo(1.0, tmp_path, ecu="stm32")

@@ -48,13 +48,43 @@ from topdress.sim.world import SimConfig, World
 _U32 = 0xFFFFFFFF
 IMAGE_NAME = "topdress-ecu-stm32f4.elf"
 # the repository's build output (make firmware); an installed package names it by TOPDRESS_ECU_IMAGE
-_REPO_IMAGE = Path(__file__).resolve().parents[3] / "build" / "fw" / IMAGE_NAME
+_REPO = Path(__file__).resolve().parents[3]
+_REPO_IMAGE = _REPO / "build" / "fw" / IMAGE_NAME
 
 
 def default_image() -> Path:
     """The firmware image: $TOPDRESS_ECU_IMAGE, else the repository's build/fw one."""
     env = os.environ.get("TOPDRESS_ECU_IMAGE")
     return Path(env) if env else _REPO_IMAGE
+
+
+_FIRMWARE_MK = _REPO / "ecu" / "ports" / "stm32f4" / "firmware.mk"
+
+
+def ensure_image(image: Path | None = None) -> Path:
+    """The firmware image to boot, built first by the rules of `make firmware` when it is the
+    repository's and the toolchain is here (make rebuilds only what changed). DeviceError, saying
+    what to do, when there is none to boot."""
+    image = image or default_image()
+    repo_build = image == _REPO_IMAGE and _FIRMWARE_MK.is_file()
+    if repo_build and shutil.which("arm-none-eabi-gcc") is not None:
+        done = subprocess.run(
+            ["make", "--no-print-directory", "-s", "-f", str(_FIRMWARE_MK.relative_to(_REPO))],
+            cwd=_REPO,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if done.returncode != 0:
+            raise DeviceError(f"make firmware failed:\n{done.stderr.strip()}")
+    if not image.is_file():
+        how = (
+            "run `make firmware` (it installs arm-none-eabi-gcc as root)"
+            if repo_build
+            else "set TOPDRESS_ECU_IMAGE to a built topdress-ecu-stm32f4.elf"
+        )
+        raise DeviceError(f"no firmware image at {image}: {how}")
+    return image
 
 
 def qemu_missing() -> str | None:
@@ -394,9 +424,11 @@ class QemuWorld(World):
         self.link.send_clock(self.now_us, 0, free_run=not lockstep)
 
     def deliver_can(self, frame: Any, now_us: int | None = None) -> int:
-        """A PC -> ECU frame over the link; the firmware says what it made of it in its own
-        frames (EcuSpeeds.RxRejected), so this always returns 0."""
+        """A PC -> ECU frame over the link (and to the in-process core beside, so that its
+        parameters, `world.ecu.params`, are the firmware's); the firmware says what it made of
+        it in its own frames (EcuSpeeds.RxRejected), so this always returns 0."""
         self.link.send(frame)
+        super().deliver_can(frame, now_us)
         return 0
 
     def step_raw(self) -> tuple[float, list[str], list[str], list[CanFrame]]:
