@@ -23,6 +23,7 @@ import pytest
 
 from topdress import protocol
 from topdress.cli.demo import run_demo
+from topdress.cli.main import main
 from topdress.ecu import EcuParams
 from topdress.errors import ConfigError, DeviceError
 from topdress.log.session import SessionReader
@@ -284,3 +285,6 @@ def test_no_image_is_a_clear_error(tmp_path: Path) -> None:
         ensure_image(tmp_path / "topdress-ecu-stm32f4.elf")
     with pytest.raises(ConfigError, match="--ecu: 'stm32': one of host, qemu"):
         run_demo(1.0, tmp_path, ecu="stm32")
+    # the firmware runs Table 2's experiment only: another is refused before any run
+    assert main(["experiment", "cv", "--ecu", "qemu", "--out", str(tmp_path)]) == 2
+    assert not list(tmp_path.iterdir())
