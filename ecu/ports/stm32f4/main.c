@@ -10,7 +10,8 @@
  *
  * The step's tick: SysTick every 10 ms on CAN. On the HIL link the simulator's first HilClock
  * chooses: lockstep (one step per HilSensors, at the simulator's time: the emulated ECU is then
- * deterministic, however fast the host runs it) or SysTick as on the board.
+ * deterministic, however fast the host runs it; SysTick only wakes the wait to feed the
+ * watchdog) or SysTick as on the board.
  *
  * Safe state: at reset the PWM timer is stopped and its pins are inputs (pull-downs on the
  * driver board); after init the outputs are driven low (MOE = 0) until the first valid
@@ -47,8 +48,7 @@ static td_ident_t ident;
  * clock (nothing has stepped yet; its time base moves from the chip's TIM2 to the simulator's). */
 static void hil_tick_chosen(void) {
     if (hil.tick == (uint8_t)TD_HIL_TICK_OWN) {
-        fw_tick_start(&clk);
-        return;
+        return; /* SysTick runs already */
     }
     (void)td_app_init(&app, &params, hil.clock_us);
     (void)td_app_set_ident(&app, &ident);
@@ -103,7 +103,10 @@ static uint32_t hil_wait_step(void) {
             return hil.clock_us;
         }
         if (hil.tick != (uint8_t)TD_HIL_TICK_OWN) {
-            fw_uart_wait(); /* until more bytes: the simulator drives */
+            /* until more bytes (the simulator drives) or SysTick: waiting for the simulator is
+             * not a loop that hangs, and the outputs are off on this link */
+            fw_watchdog_feed();
+            fw_uart_wait();
         }
     }
 }
@@ -132,9 +135,7 @@ int main(void) {
     ident.clock_fallback = clk.source == (uint8_t)FW_CLOCK_HSI;
     (void)td_app_set_ident(&app, &ident);
     fw_watchdog_start();
-    if (!hil_mode) {
-        fw_tick_start(&clk); /* on the HIL link the first HilClock chooses the tick */
-    }
+    fw_tick_start(&clk); /* on the HIL link in lockstep it only wakes the wait for the watchdog */
     for (;;) {
         uint32_t now;
         td_can_frame_t f;
