@@ -156,8 +156,8 @@ def ecu_from_frames(reader: SessionReader, ids: protocol.FrameIds) -> dict[str, 
     before the terminal took EcuIdent, or one whose event was lost), as an ecu.ident event's
     detail; None when the ECU never sent one."""
     last = None
-    for rec in reader.raw():
-        if rec.kind == "can_rx" and rec.can_id == ids.ident and rec.data is not None:
+    for rec in reader.can_frames("can_rx", ids.ident):
+        if rec.data is not None and rec.can_id is not None:
             try:
                 ident = protocol.decode((rec.can_id, rec.data), ids)
             except ProtocolError:
