@@ -5,12 +5,24 @@ Prints exactly:
     fw_ram_bytes: N            data + bss + the stack reservation (budget 16384)
     fw_stack_worst_bytes: N    deepest thread path + one handler per preemption level with
                                exception frames (scripts/fw_report.py)
-    fw_qemu_step_mean_us: X    the firmware's step interval on its own clock, QEMU netduinoplus2
-    fw_qemu_step_sd_us: X      with the simulated machine in the loop (sim.qemu_ecu), 10 s of
-    fw_qemu_step_p99_us: X     a 6.5 km/h pass, guest on the host clock (TCG)
+  free-running (the firmware on its own SysTick, the guest on the host clock, the plant
+  answering each step), QEMU netduinoplus2 with the simulated machine in the loop
+  (sim.qemu_ecu), 10 s of a 6.5 km/h pass:
+    fw_qemu_step_mean_us: X    the firmware's step interval on its own clock
+    fw_qemu_step_sd_us: X
+    fw_qemu_step_p99_us: X
     fw_qemu_step_max_us: N
     fw_qemu_late_share: X      share of steps that found no fresh counters
     fw_qemu_step_cost_max_us: N  longest step (receive + core) on the emulated chip
+  lockstep (the simulator drives each step at its own time; the step interval on the
+  firmware's clock is the simulator's 10 ms exactly, so the jitter left is the host's time
+  per World step, which sets only how fast the run goes):
+    fw_lockstep_interval_sd_us: X   0 by construction (checked)
+    fw_lockstep_host_mean_us: X     host time per World step (plant + round trip to QEMU)
+    fw_lockstep_host_p99_us: X
+    fw_lockstep_host_max_us: X
+    fw_lockstep_realtime_x: X       simulated seconds per host second
+    fw_lockstep_step_cost_max_us: N longest core step on the emulated chip (host time in QEMU)
 Details go to stderr. Without qemu-system-arm the qemu figures are left out (said on stderr).
 """
 
@@ -43,7 +55,7 @@ def footprint() -> dict[str, int]:
     return {k: int(v) for k, v in figures.items()}
 
 
-def qemu_timing() -> dict[str, float] | None:
+def qemu_timing(lockstep: bool) -> dict[str, float] | None:
     from topdress.sim.qemu_ecu import QemuEcu, QemuSil, QemuWorld, qemu_missing
     from topdress.sim.sil import PcParams
     from topdress.sim.tractor import Drive, Segment
@@ -54,7 +66,7 @@ def qemu_timing() -> dict[str, float] | None:
         return None
     drive = Drive([Segment("stop", duration_s=1.0), Segment("straight", 6.5, length_m=1000.0)])
     with QemuEcu() as ecu:
-        world = QemuWorld(ecu, drive=drive)
+        world = QemuWorld(ecu, drive=drive, lockstep=lockstep)
         with QemuSil(world, PcParams(), record=False) as sil:
             while world.t_s < SECONDS:
                 sil.step()
@@ -66,7 +78,7 @@ def main() -> int:
     print(f"fw_flash_bytes: {f['flash_bytes']}")
     print(f"fw_ram_bytes: {f['ram_bytes']}")
     print(f"fw_stack_worst_bytes: {f['stack_worst_bytes']}")
-    t = qemu_timing()
+    t = qemu_timing(lockstep=False)
     if t is not None:
         print(f"fw_qemu_step_mean_us: {t['mean_us']:.1f}")
         print(f"fw_qemu_step_sd_us: {t['sd_us']:.1f}")
@@ -74,6 +86,14 @@ def main() -> int:
         print(f"fw_qemu_step_max_us: {t['max_us']:.0f}")
         print(f"fw_qemu_late_share: {t['late_inputs'] / t['steps']:.4f}")
         print(f"fw_qemu_step_cost_max_us: {t['max_cost_us']:.0f}")
+    t = qemu_timing(lockstep=True)
+    if t is not None:
+        print(f"fw_lockstep_interval_sd_us: {t['sd_us']:.1f}")
+        print(f"fw_lockstep_host_mean_us: {t['host_mean_us']:.0f}")
+        print(f"fw_lockstep_host_p99_us: {t['host_p99_us']:.0f}")
+        print(f"fw_lockstep_host_max_us: {t['host_max_us']:.0f}")
+        print(f"fw_lockstep_realtime_x: {t['steps'] * 0.01 / t['host_total_s']:.2f}")
+        print(f"fw_lockstep_step_cost_max_us: {t['max_cost_us']:.0f}")
     return 0
 
 

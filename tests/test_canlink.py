@@ -175,8 +175,9 @@ def test_ecu_powered_later_gets_the_parameters_at_once_and_works(rig: Rig) -> No
     assert len(sets) == len(params) and rig.link.ready and rig.link.state == "ok"
     assert rig.twin.ecu.params.working_width_m == pytest.approx(3.6)
     text = [e for _, e in rig.events]
-    assert text[0].startswith("ECU wait: WorkingWidth") and len(text) == 2
-    assert text[1].startswith("ECU ready: every parameter acknowledged, 3.")
+    assert text[0].startswith("ECU wait: WorkingWidth") and len(text) == 3
+    assert text[1] == "ECU: host firmware 0.1.0, protocol 1.1 (in-process)"  # it says who it is
+    assert text[2].startswith("ECU ready: every parameter acknowledged, 3.")
     # then it works: commands flow and the ECU runs them
     assert rig.commands()[0][0] >= max(sets)
     assert rig.twin.ecu.state.running
@@ -188,8 +189,9 @@ def test_ecu_that_talks_but_never_acknowledges_is_named_so(rig: Rig) -> None:
     rig.run(3.0)
     assert rig.link.ecu_alive and rig.link.state == "wait" and not rig.link.params_done
     assert [e for _, e in rig.events] == [
+        "ECU: host firmware 0.1.0, protocol 1.1 (in-process)",  # at its first step
         f"ECU wait: WorkingWidth unacknowledged after 4 tries on CAN virtual:{rig.cfg.channel};"
-        " the ECU sends status but does not answer (check [can.ids]); still trying"
+        " the ECU sends status but does not answer (check [can.ids]); still trying",
     ]
 
 
@@ -373,7 +375,9 @@ def test_ecu_frames_decoded(rig: Rig) -> None:
 def test_ecu_lost_and_back(rig: Rig) -> None:
     rig.link.begin({}, 0.0)
     rig.run(2.0)
-    assert rig.link.ecu_alive and rig.events == []
+    assert rig.link.ecu_alive
+    assert [e for _, e in rig.events] == ["ECU: host firmware 0.1.0, protocol 1.1 (in-process)"]
+    del rig.events[:]
     rig.twin.mute = True
     rig.run(4.0)
     assert not rig.link.ecu_alive and rig.link.state == "lost"

@@ -670,6 +670,21 @@ async def test_device_test_shows_the_last_lines(user: User) -> None:
     assert table.rows == [{"t": "1.5", "raw": "$GNRMC,...*7A", "decoded": "RMC 8.00 km/h"}]  # type: ignore[attr-defined]
 
 
+async def test_communication_screen_names_the_ecu(user: User) -> None:
+    term = Terminal(lambda c: CommandResult(True, ""))
+    hub = DisplayHub(default_config, term.post)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/communication")
+    await shows(user, "state_can", "state: ok")  # not identified yet: the state only
+    ident = text("view.ecu_ident", target="stm32f4", firmware="0.1.0", protocol="1.1")
+    hub.publish(working(ecu_ident=ident))
+    await shows(user, "state_can", "state: ok · ECU: stm32f4 firmware 0.1.0, protocol 1.1")
+    i18n.set_language("zh")
+    await shows(user, "state_can", "状态: 正常 · 控制器：stm32f4 固件 0.1.0，协议 1.1")
+    i18n.set_language("en")
+
+
 def slcan_config() -> TerminalConfig:
     return loads_config(
         '[can]\ninterface = "slcan"\nchannel = "/dev/ttyACM0"\n'

@@ -35,7 +35,7 @@ def test_committed_hil_codec_is_not_stale(tmp_path: Path) -> None:
 
 def test_hil_frames_are_apart_from_the_bus_frames() -> None:
     hil = {m.frame_id for m in hil_database().messages}
-    assert len(hil) == 4
+    assert len(hil) == 5
     assert not hil & {m.frame_id for m in protocol.database().messages}
     assert all(not protocol.is_known_id(i) for i in hil)
     # the firmware's identifiers (td_hil.h) are the DBC's

@@ -41,10 +41,22 @@ static void take_sensors(td_hil_t *h, const struct td_hilcan_hil_sensors_t *m) {
     h->edge_us = h->staged_edge_us;
     h->staged_edge_valid = false;
     h->fresh = true;
+    h->step_due = h->tick == (uint8_t)TD_HIL_TICK_LOCKSTEP;
+}
+
+static void take_clock(td_hil_t *h, const struct td_hilcan_hil_clock_t *c) {
+    if (h->tick == (uint8_t)TD_HIL_TICK_UNSET) {
+        h->tick = (uint8_t)(c->hil_free_run != 0u ? TD_HIL_TICK_OWN : TD_HIL_TICK_LOCKSTEP);
+    }
+    if (h->tick == (uint8_t)TD_HIL_TICK_LOCKSTEP) {
+        h->clock_us = c->hil_clock_time;
+        h->seq = c->hil_seq;
+    }
 }
 
 int td_hil_rx(td_hil_t *h, const td_can_frame_t *f) {
-    if (f->extended == 0u || (f->id != TD_HIL_ID_WHEEL_EDGE && f->id != TD_HIL_ID_SENSORS)) {
+    if (f->extended == 0u ||
+        (f->id != TD_HIL_ID_WHEEL_EDGE && f->id != TD_HIL_ID_SENSORS && f->id != TD_HIL_ID_CLOCK)) {
         return 0;
     }
     if (f->dlc != 8u) {
@@ -58,6 +70,10 @@ int td_hil_rx(td_hil_t *h, const td_can_frame_t *f) {
         h->staged_edge_us = e.hil_edge_time;
         h->staged_edge_count = e.hil_edge_count;
         h->staged_edge_valid = e.hil_edge_valid != 0u;
+    } else if (f->id == TD_HIL_ID_CLOCK) {
+        struct td_hilcan_hil_clock_t c;
+        (void)td_hilcan_hil_clock_unpack(&c, f->data, 8u);
+        take_clock(h, &c);
     } else {
         struct td_hilcan_hil_sensors_t s;
         (void)td_hilcan_hil_sensors_unpack(&s, f->data, 8u);
@@ -71,6 +87,7 @@ void td_hil_inputs(td_hil_t *h, td_io_in_t *in) {
         h->late_steps++;
     }
     h->fresh = false;
+    h->step_due = false;
     in->wheel_count = h->wheel.total;
     in->meter_count[0] = h->meter[0].total;
     in->meter_count[1] = h->meter[1].total;

@@ -65,6 +65,8 @@ void fw_can_stats(fw_can_stats_t *s);
 /* ---- fw_uart.c: the SLCAN serial link on USART1 ------------------------------------------ */
 void fw_uart_init(const fw_clock_t *c, uint32_t baud);
 bool fw_uart_getc(uint8_t *b);
+/** Sleep until a byte has arrived (at once when one is waiting). */
+void fw_uart_wait(void);
 /** Queue bytes for sending, all or none (false: no room, counted). */
 bool fw_uart_write(const uint8_t *b, uint32_t n);
 /** Move queued bytes to the transmitter while it takes them (the interrupt does the rest). */

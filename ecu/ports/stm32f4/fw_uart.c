@@ -46,6 +46,15 @@ bool fw_uart_getc(uint8_t *b) {
     return td_byte_ring_pop(&rx_ring, b);
 }
 
+void fw_uart_wait(void) {
+    /* masked: a byte arriving between the look and the sleep still wakes it (pending) */
+    irq_off();
+    if (td_byte_ring_count(&rx_ring) == 0u) {
+        wait_for_interrupt();
+    }
+    irq_on();
+}
+
 bool fw_uart_write(const uint8_t *b, uint32_t n) {
     return td_byte_ring_write(&tx_ring, b, n);
 }

@@ -8,6 +8,11 @@
  * out as HIL frames, the PWM pins staying off. Everything between (td_app_rx, td_app_step,
  * td_app_tx_pop) is the same code on the same path either way.
  *
+ * The step's tick: SysTick every 10 ms on CAN. On the HIL link the simulator's first HilClock
+ * chooses: lockstep (one step per HilSensors, at the simulator's time: the emulated ECU is then
+ * deterministic, however fast the host runs it; SysTick only wakes the wait to feed the
+ * watchdog) or SysTick as on the board.
+ *
  * Safe state: at reset the PWM timer is stopped and its pins are inputs (pull-downs on the
  * driver board); after init the outputs are driven low (MOE = 0) until the first valid
  * PcCommand; a hard fault turns them off and resets; the independent watchdog resets a loop
@@ -21,6 +26,8 @@
 #include "td_slcan.h"
 
 static td_app_t app; /* the one instance (td_port.h) */
+static td_params_t params;
+static fw_clock_t clk;
 static td_hil_t hil;
 static td_slcan_parser_t slcan;
 static bool slcan_open;
@@ -35,12 +42,23 @@ static void slcan_send(const td_can_frame_t *f) {
     }
 }
 
-/* Serial bytes to SLCAN lines: commands answered, HIL frames to the link, the rest to the core. */
 static td_ident_t ident;
 
+/* The first HilClock chose the step's tick. Lockstep: the core starts again on the simulator's
+ * clock (nothing has stepped yet; its time base moves from the chip's TIM2 to the simulator's). */
+static void hil_tick_chosen(void) {
+    if (hil.tick == (uint8_t)TD_HIL_TICK_OWN) {
+        return; /* SysTick runs already */
+    }
+    (void)td_app_init(&app, &params, hil.clock_us);
+    (void)td_app_set_ident(&app, &ident);
+}
+
+/* Serial bytes to SLCAN lines: commands answered, HIL frames to the link, the rest to the core.
+ * Lockstep stops after the HilSensors that makes a step: what follows belongs to the next. */
 static void slcan_receive(uint32_t now_us) {
     uint8_t b;
-    while (fw_uart_getc(&b)) {
+    while (!hil.step_due && fw_uart_getc(&b)) {
         td_can_frame_t f;
         uint8_t arg;
         const td_slcan_event_t ev = td_slcan_feed(&slcan, b, &f, &arg);
@@ -48,8 +66,11 @@ static void slcan_receive(uint32_t now_us) {
             continue;
         }
         if (ev == TD_SLCAN_FRAME) {
+            const uint8_t tick = hil.tick;
             if (td_hil_rx(&hil, &f) == 0) {
-                (void)td_app_rx(&app, &f, now_us);
+                (void)td_app_rx(&app, &f, tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? hil.clock_us : now_us);
+            } else if (hil.tick != tick) {
+                hil_tick_chosen();
             }
             continue;
         }
@@ -63,26 +84,48 @@ static void slcan_receive(uint32_t now_us) {
         const unsigned n = td_slcan_reply(ev, reply, sizeof reply);
         if (n > 0u) {
             (void)fw_uart_write((const uint8_t *)reply, n);
+            fw_uart_pump(); /* answered now: in lockstep no step may come to send it */
+        }
+    }
+}
+
+/* The next step on the HIL link: its time, its inputs taken from the link. */
+static uint32_t hil_wait_step(void) {
+    for (;;) {
+        if (hil.tick == (uint8_t)TD_HIL_TICK_OWN) {
+            fw_wait_step();
+            const uint32_t now = fw_micros();
+            slcan_receive(now);
+            return now;
+        }
+        slcan_receive(fw_micros());
+        if (hil.step_due) {
+            return hil.clock_us;
+        }
+        if (hil.tick != (uint8_t)TD_HIL_TICK_OWN) {
+            /* until more bytes (the simulator drives) or SysTick: waiting for the simulator is
+             * not a loop that hangs, and the outputs are off on this link */
+            fw_watchdog_feed();
+            fw_uart_wait();
         }
     }
 }
 
 int main(void) {
     const td_reset_cause_t cause = fw_reset_cause();
-    fw_clock_t clk;
     fw_clock_init(&clk);
     fw_time_init(&clk);
     fw_io_init(&clk);
-    td_params_t p;
-    td_params_default(&p); /* the terminal pushes its parameters over CAN at every connection */
-    const uint32_t ids[] = { p.command_id, TD_ID_PC_PARAM_SET, TD_ID_PC_CAL_COMMAND, TD_ID_PC_GNSS_TIME };
+    td_params_t *const p = &params;
+    td_params_default(p); /* the terminal pushes its parameters over CAN at every connection */
+    const uint32_t ids[] = { p->command_id, TD_ID_PC_PARAM_SET, TD_ID_PC_CAL_COMMAND, TD_ID_PC_GNSS_TIME };
     hil_mode = !fw_can_init(&clk, BOARD_CAN_BITRATE, ids, sizeof ids / sizeof ids[0]);
     if (hil_mode) {
         td_hil_init(&hil);
         td_slcan_init(&slcan);
         fw_uart_init(&clk, BOARD_SLCAN_BAUD);
     }
-    if (td_app_init(&app, &p, fw_micros()) != TD_OK) {
+    if (td_app_init(&app, p, fw_micros()) != TD_OK) {
         for (;;) { /* defaults that do not validate: no control, the watchdog is not started */
         }
     }
@@ -92,38 +135,40 @@ int main(void) {
     ident.clock_fallback = clk.source == (uint8_t)FW_CLOCK_HSI;
     (void)td_app_set_ident(&app, &ident);
     fw_watchdog_start();
-    fw_tick_start(&clk);
+    fw_tick_start(&clk); /* on the HIL link in lockstep it only wakes the wait for the watchdog */
     for (;;) {
-        fw_wait_step();
-        const uint32_t now = fw_micros();
+        uint32_t now;
         td_can_frame_t f;
         td_io_in_t in;
         if (hil_mode) {
-            slcan_receive(now);
+            now = hil_wait_step();
             td_hil_inputs(&hil, &in);
         } else {
+            fw_wait_step();
+            now = fw_micros();
             while (fw_can_read(&f)) {
                 (void)td_app_rx(&app, &f, now);
             }
             fw_io_read(&in);
         }
+        /* the step's cost: receive and core on the board, the core alone in lockstep */
+        const uint32_t t_start = hil_mode && hil.tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? fw_micros() : now;
         td_io_out_t out;
         (void)td_app_step(&app, now, &in, &out);
-        if (!hil_mode) {
-            fw_io_write(&out);
-            fw_io_enable(app.have_cmd); /* outputs stay low until the first valid command */
-        }
-        const uint32_t cost_us = fw_micros() - now;
         if (hil_mode) {
+            /* the step's bus frames, then its duties and HilStep: the simulator's end of it */
+            while (td_app_tx_pop(&app, &f)) {
+                slcan_send(&f);
+            }
+            const uint32_t cost_us = fw_micros() - t_start;
             td_can_frame_t step_frames[2];
             td_hil_outputs(&hil, now, &out, cost_us, step_frames);
             slcan_send(&step_frames[0]);
             slcan_send(&step_frames[1]);
-            while (td_app_tx_pop(&app, &f)) {
-                slcan_send(&f);
-            }
             fw_uart_pump();
         } else {
+            fw_io_write(&out);
+            fw_io_enable(app.have_cmd); /* outputs stay low until the first valid command */
             while (td_app_tx_pop(&app, &f)) {
                 (void)fw_can_write(&f);
             }

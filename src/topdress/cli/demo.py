@@ -1,9 +1,11 @@
 """`topdress demo` and `topdress run`: the terminal against the simulated or the real machine.
 
 The demo is the real terminal, unchanged, against the simulated machine of `topdress.sim.live`:
-NMEA and crop sensor lines through pseudo-terminals opened with pyserial, the ECU core on a
-python-can virtual bus, the World paced to the wall clock in another thread. Only the
-configuration is embedded (ports and bus point at the simulation).
+NMEA and crop sensor lines through pseudo-terminals opened with pyserial, the ECU on a
+python-can virtual bus, the World paced to the wall clock in another thread. The ECU is the C
+core in-process (`ecu="host"`) or the STM32F4 firmware image in QEMU (`ecu="qemu"`, stepped in
+lockstep with the World by `topdress.sim.qemu_ecu`): the terminal cannot tell them apart but by
+the ECU's EcuIdent. Only the configuration is embedded (ports and bus point at the simulation).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import json
 import logging
 import os
 import sys
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -27,6 +30,7 @@ from topdress.display.keyboard import KeyboardCommands
 from topdress.errors import ConfigError, DeviceError
 from topdress.log.session import SessionLog
 from topdress.sim.live import LiveMachine
+from topdress.sim.qemu_ecu import QemuEcu, QemuOptions, QemuWorld, ensure_image, qemu_missing
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.app import Terminal
@@ -44,6 +48,8 @@ log = logging.getLogger(__name__)
 DEMO_PASSES = 30
 DEMO_PASS_M = 40.0
 DEMO_SPEED_KMH = 8.0
+#: The ECUs the demo can run: the core in-process, or the firmware image in QEMU.
+ECUS = ("host", "qemu")
 
 
 def demo_config_toml(
@@ -234,18 +240,55 @@ def run_demo(
     display: DisplayOptions | None = None,
     passes: int = DEMO_PASSES,
     user_text: str = "",
+    ecu: str = "host",
 ) -> int:
     """The simulated machine in a thread, the terminal in front of it; returns the exit code.
 
     `user_text`: the user's configuration (`--config FILE`; "" the defaults): the terminal runs
     with it, and the simulated machine has its geometry (crop sensors, working width, outlet
     offsets). The demo's configuration is written to `out_dir/topdress-demo.toml`, where
-    settings changed while it runs are saved (never into the user's file)."""
+    settings changed while it runs are saved (never into the user's file). `ecu`: "host" (the
+    core in-process) or "qemu" (the firmware image in the emulator, built first if need be)."""
     out = out if out is not None else sys.stdout  # the stdout of the call, not of the import
     _check_out_dir(out_dir)
+    if ecu not in ECUS:
+        raise ConfigError("--ecu", f"{ecu!r}: one of {', '.join(ECUS)}")
     machine_cfg = loads_config(user_text, "--config") if user_text else default_config()
     drive = Drive.field_passes(passes, DEMO_PASS_M, DEMO_SPEED_KMH)
-    world = World(SimConfig.of_machine(machine_cfg), seed=seed, drive=drive)
+    sim_cfg = SimConfig.of_machine(machine_cfg)
+    with ExitStack() as stack:
+        if ecu == "qemu":
+            world: World = _qemu_world(stack, out, sim_cfg, seed, drive)
+        else:
+            world = World(sim_cfg, seed=seed, drive=drive)
+        _run_machine(world, duration_s, out_dir, out, start, keyboard, display, user_text)
+    return 0
+
+
+def _qemu_world(
+    stack: ExitStack, out: TextIO, cfg: SimConfig, seed: int, drive: Drive
+) -> QemuWorld:
+    """The firmware image booted in QEMU (closed with `stack`), in lockstep with a World."""
+    why = qemu_missing()
+    if why is not None:
+        raise DeviceError(f"--ecu qemu: {why}")
+    image = ensure_image()
+    qemu = stack.enter_context(QemuEcu(QemuOptions(image=image)))
+    out.write(f"topdress demo: ECU firmware {image} in {' '.join(qemu.command[:3])}\n")
+    return QemuWorld(qemu, cfg, seed=seed, drive=drive)
+
+
+def _run_machine(
+    world: World,
+    duration_s: float | None,
+    out_dir: Path,
+    out: TextIO,
+    start: bool,
+    keyboard: TextIO | None,
+    display: DisplayOptions | None,
+    user_text: str,
+) -> None:
+    """The World live on its ptys and a virtual bus, the terminal in front of it."""
     channel = f"topdress-demo-{os.getpid()}"
     sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
     try:
@@ -277,4 +320,3 @@ def run_demo(
         + "".join(f", {k} {v}" for k, v in sorted(machine.counters.items()) if v)
         + "\n"
     )
-    return 0

@@ -3,16 +3,27 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
 from tqdm import tqdm
 
-from topdress.errors import ConfigError
+from topdress.errors import ConfigError, DeviceError
 from topdress.sim import experiments as ex
 from topdress.sim import fieldexp as fx
 from topdress.sim import report
+from topdress.sim.qemu_ecu import (
+    QemuEcu,
+    QemuOptions,
+    QemuSil,
+    QemuWorld,
+    ensure_image,
+    qemu_missing,
+)
+from topdress.sim.tractor import Drive
+from topdress.sim.world import SimConfig
 
 NAMES = ("cv", "slip", "table2", "table34", "table5", "fig10", "field", "all")
 T = TypeVar("T")
@@ -32,6 +43,13 @@ def register(sub: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="base seed of the runs")
     p.add_argument("--quick", action="store_true", help="reduced run: fewer reps and speeds")
     p.add_argument("--passes", type=int, default=10, help="field: passes of 150 m (default 10)")
+    p.add_argument(
+        "--ecu",
+        choices=("host", "qemu"),
+        default="host",
+        help="the ECU in the loop: host = the C core in-process (default); qemu = the STM32F4 "
+        "firmware image in QEMU, in lockstep (table2 only)",
+    )
     p.set_defaults(func=run)
 
 
@@ -56,6 +74,28 @@ def _field(out: Path, args: argparse.Namespace) -> Path:
     return fx.write_field(out, seeds, fx.FieldPlan(passes=args.passes))
 
 
+def _qemu_machine(image: Path) -> ex.Machine:
+    """Each run on a freshly booted firmware image, in lockstep with its World."""
+
+    @contextmanager
+    def machine(cfg: SimConfig, seed: int, drive: Drive) -> Iterator[QemuWorld]:
+        with QemuEcu(QemuOptions(image=image)) as ecu:
+            yield QemuWorld(ecu, cfg, seed=seed, drive=drive)
+
+    return machine
+
+
+def _lab(args: argparse.Namespace) -> ex.Lab:
+    if args.ecu == "host":
+        return ex.Lab(base_seed=args.seed, progress=_progress)
+    if args.name != "table2":
+        raise ConfigError("--ecu", "qemu runs table2 only (the firmware's start delay)")
+    if (why := qemu_missing()) is not None:
+        raise DeviceError(f"--ecu qemu: {why}")
+    machine = _qemu_machine(ensure_image())
+    return ex.Lab(base_seed=args.seed, progress=_progress, machine=machine, sil=QemuSil)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.reps < 1:
         raise ConfigError("--reps", f"must be at least 1, got {args.reps}")
@@ -67,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     reps = min(args.reps, 2) if args.quick else args.reps
     slip_speeds = ex.SLIP_SPEEDS_KMH[::2] if args.quick else ex.SLIP_SPEEDS_KMH
     jumps = ex.TABLE5_JUMPS_RPM[:2] if args.quick else ex.TABLE5_JUMPS_RPM
-    lab = ex.Lab(base_seed=args.seed, progress=_progress)
+    lab = _lab(args)
     targets = ex.TARGETS_KMH
     jobs: dict[str, Callable[[], Path]] = {
         "cv": lambda: report.write_cv(out, ex.cv_experiment(lab, targets, reps)),

@@ -49,6 +49,13 @@ def register(sub: Any) -> None:
     )
     _display_args(demo)
     demo.add_argument(
+        "--ecu",
+        choices=("host", "qemu"),
+        default="host",
+        help="the ECU: host = the C core in-process (default); qemu = the STM32F4 firmware "
+        "image in QEMU (make firmware; built first when missing)",
+    )
+    demo.add_argument(
         "--start",
         action="store_true",
         help="start the meters at once (default: the operator's start)",
@@ -145,6 +152,7 @@ def _demo(args: argparse.Namespace) -> int:
             display=display,
             passes=args.passes,
             user_text=user_text,
+            ecu=args.ecu,
         )
 
 

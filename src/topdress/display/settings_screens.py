@@ -222,7 +222,10 @@ class CommunicationScreen:
 
     def update(self, s: Snapshot) -> None:
         for section, state in (("gnss", s.gnss_link), ("crop", s.crop_link), ("can", s.ecu_link)):
-            self.links[section].set_text(f"{tr('comm.state')}: {fmt.link_text(state)}")
+            line = f"{tr('comm.state')}: {fmt.link_text(state)}"
+            if section == "can" and s.ecu_ident is not None:  # who the ECU is (EcuIdent)
+                line += " · " + tr("comm.ecu", ecu=render(s.ecu_ident))
+            self.links[section].set_text(line)
 
 
 class ControlScreen:

@@ -264,6 +264,16 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",
     ),
     "event.ecu_back": ("ECU back", "控制器已恢复"),
+    "event.ecu_ident": ("ECU: {ecu} ({transport})", "控制器：{ecu}（{transport}）"),
+    "event.ecu_protocol": (
+        "warning: the ECU speaks protocol {ecu}, this terminal {terminal}: frames may be "
+        "misread; update the ECU's firmware or the terminal",
+        "警告：控制器协议版本 {ecu}，本终端 {terminal}：报文可能被误读；请更新控制器固件或终端",
+    ),
+    "view.ecu_ident": (
+        "{target} firmware {firmware}, protocol {protocol}",
+        "{target} 固件 {firmware}，协议 {protocol}",
+    ),
     "event.ecu_lost": ("ECU lost: no status for {s:.1f} s", "控制器丢失：{s:.1f} 秒无状态帧"),
     "event.ecu_wait_silent": (
         "ECU wait: {name} unacknowledged after {tries} tries on CAN {where}; still trying (is "
@@ -376,6 +386,11 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "排肥位置在地块边界 {file} 之外 {distance_m} 米（限值 {limit_m:g} 米）："
         "地块或边界文件是否选错？边界外排肥器已关闭",
     ),
+    "alarm.ecu_protocol": ("ECU protocol version differs", "控制器协议版本不一致"),
+    "alarm.text.ecu_protocol": (
+        "the ECU speaks protocol {ecu}, this terminal {terminal}",
+        "控制器协议版本 {ecu}，本终端 {terminal}",
+    ),
     "alarm.log_low_space": ("log disk almost full", "记录磁盘将满"),
     "alarm.log_disk_full": ("log disk full", "记录磁盘已满"),
     "alarm.log_write_failing": ("session log not written", "作业记录无法写入"),
@@ -470,6 +485,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "comm.crop": ("Crop sensors (logger)", "作物传感器（数据记录仪）"),
     "comm.can": ("CAN (ECU)", "CAN（控制器）"),
     "comm.state": ("state", "状态"),
+    "comm.ecu": ("ECU: {ecu}", "控制器：{ecu}"),
     "comm.test": ("Test: last lines", "测试：最近数据"),
     "comm.raw": ("received", "原始数据"),
     "comm.decoded": ("decoded", "解析结果"),

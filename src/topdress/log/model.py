@@ -76,6 +76,7 @@ EVENT_KINDS: Final = (
     "link.lost",
     "link.restored",
     "fault.changed",
+    "ecu.ident",
     "calibration.catch",
     "calibration.wheel",
     "calibration.fan",

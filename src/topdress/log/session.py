@@ -706,6 +706,20 @@ class SessionReader:
             else:
                 bad.add(rid)
 
+    def can_frames(self, kind: str, can_id: int) -> Iterator[RawRecord]:
+        """The raw CAN rows of `kind` (can_rx, can_tx) with identifier `can_id`, in time
+        order: one frame looked for without reading every raw input."""
+        bad = self._bad["raw"]
+        for rid, t, k, line, cid, data in self._select(
+            "SELECT id, t, kind, line, can_id, data FROM raw WHERE kind = ? AND can_id = ? "
+            "ORDER BY t, id",
+            (kind, can_id),
+        ):
+            if raw_ok(t, k, line, cid, data):
+                yield RawRecord(float(t), k, line, cid, data)
+            else:
+                bad.add(rid)
+
     def states(self) -> Iterator[StateRow]:
         """State rows in the order they were logged. Columns added since a file was written
         (utc, outlet position, ...) read as None."""
@@ -773,10 +787,10 @@ class SessionReader:
             return 0
         return int(next(self._select(f"SELECT count(*) FROM {table}"))[0])
 
-    def _select(self, sql: str) -> Iterator[tuple[Any, ...]]:
+    def _select(self, sql: str, args: tuple[Any, ...] = ()) -> Iterator[tuple[Any, ...]]:
         # A damaged page (a worn SD card, a stick pulled while writing) shows only when read.
         try:
-            yield from self._conn.execute(sql)
+            yield from self._conn.execute(sql, args)
         except sqlite3.Error as exc:
             raise LogError(
                 f"{self.path}: damaged session log ({exc}); {_SALVAGE.format(path=self.path)}"

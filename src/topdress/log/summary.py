@@ -16,6 +16,7 @@ from typing import Any, Final
 
 from topdress import protocol
 from topdress.config import MachineConfig, SpeedConfig
+from topdress.errors import ProtocolError
 from topdress.log.model import OPERATOR_KINDS, RAW_KINDS, SOURCES, LogEvent, StateRow
 from topdress.log.session import SessionReader, session_config
 
@@ -98,6 +99,8 @@ class Summary:
     events: dict[str, int] = field(default_factory=dict)  # logged events by kind
     actions: list[Action] = field(default_factory=list)  # the operator's, in time order
     gnss_lag: LagSummary | None = None  # None: no lag event (a session from before them)
+    # who the ECU said it was (the last ecu.ident event, else the last EcuIdent in can_rx)
+    ecu: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -145,6 +148,8 @@ def summarise(reader: SessionReader) -> Summary:
     starts = [x.t for x in (first, logged[0] if logged else None) if x is not None]
     s.actions = operator_actions(logged, min(starts) if starts else 0.0)
     s.gnss_lag = lag_summary(logged)
+    idents = [dict(e.detail) for e in logged if e.kind == "ecu.ident"]
+    s.ecu = idents[-1] if idents else ecu_from_frames(reader, protocol.FrameIds(**cfg.can.ids))
     s.area_ha = s.metering_distance_m * machine.width_m / 10_000.0
     for layer in layers:
         if s.area_ha > 0:
@@ -158,6 +163,47 @@ def summarise(reader: SessionReader) -> Summary:
         if events:
             setattr(s, attr, 100.0 * sum(e.reached_zero for e in events) / len(events))
     return s
+
+
+def ecu_from_frames(reader: SessionReader, ids: protocol.FrameIds) -> dict[str, Any] | None:
+    """The ECU's identity from the last EcuIdent among the received frames (a session logged
+    before the terminal took EcuIdent, or one whose event was lost), as an ecu.ident event's
+    detail; None when the ECU never sent one."""
+    last = None
+    for rec in reader.can_frames("can_rx", ids.ident):
+        if rec.data is not None and rec.can_id is not None:
+            try:
+                ident = protocol.decode((rec.can_id, rec.data), ids)
+            except ProtocolError:
+                continue
+            if isinstance(ident, protocol.EcuIdent):
+                last = ident
+    if last is None:
+        return None
+    return {
+        "target": last.target,
+        "firmware": last.firmware_version,
+        "protocol": last.protocol_version,
+        "transport": last.transport,
+        "reset_cause": last.reset_cause,
+        "clock_fallback": last.clock_fallback,
+    }
+
+
+def ecu_text(ecu: dict[str, Any] | None) -> str:
+    """The summary's ECU line: target, firmware, protocol (and the terminal's when it differs),
+    transport, the cause of its last reset."""
+    if ecu is None:
+        return "not identified (no EcuIdent from the ECU in this session)"
+    line = (
+        f"{ecu.get('target', '?')} firmware {ecu.get('firmware', '?')}, "
+        f"protocol {ecu.get('protocol', '?')} ({ecu.get('transport', '?')}, "
+        f"last reset: {ecu.get('reset_cause', '?')})"
+    )
+    ours = ecu.get("terminal_protocol")
+    if ours is not None and ours != ecu.get("protocol"):
+        line += f"; the terminal spoke protocol {ours}"
+    return line
 
 
 def operator_actions(events: Iterable[LogEvent], t0: float) -> list[Action]:
@@ -310,6 +356,7 @@ def format_text(s: Summary) -> str:
             f"{name + ' layer':<16} applied {layer.applied_kg:.2f} kg ({rate}), "
             f"target {layer.target_kg:.2f} kg, rate error {err}"
         )
+    lines.append(f"ECU              {ecu_text(s.ecu)}")
     if s.start_utc is not None and s.end_utc is not None:
         lines.append(f"time (GNSS)      {_utc_text(s.start_utc)} to {_utc_text(s.end_utc)} UTC")
     else:

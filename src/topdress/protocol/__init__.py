@@ -26,7 +26,7 @@ from topdress.protocol.model import (
 from topdress.protocol.params import ParamSpec, param, param_name, params
 
 if TYPE_CHECKING:
-    from topdress.protocol.dbc import database, dbc_text
+    from topdress.protocol.dbc import database, dbc_text, protocol_version
     from topdress.protocol.frames import (
         CAL_REASONS,
         CAL_STATES,
@@ -56,7 +56,8 @@ if TYPE_CHECKING:
         is_known_id,
     )
 
-_FROM_DBC = ("database", "dbc_text")  # the rest of __all__ not imported above: the frames'
+# from dbc.py; the rest of __all__ not imported above is frames.py's
+_FROM_DBC = ("database", "dbc_text", "protocol_version")
 
 
 def __getattr__(name: str) -> Any:
@@ -113,4 +114,5 @@ __all__ = [
     "param",
     "param_name",
     "params",
+    "protocol_version",
 ]

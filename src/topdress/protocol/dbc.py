@@ -28,6 +28,18 @@ def database() -> Any:
     return cantools.database.load_string(dbc_text(), database_format="dbc")
 
 
+@cache
+def protocol_version() -> tuple[int, int]:
+    """The protocol's version (the DBC's VERSION "major.minor"): what this terminal speaks, and
+    what an ECU built from the same DBC reports in EcuIdent."""
+    major, _, minor = str(database().version).partition(".")
+    try:
+        return int(major), int(minor)
+    except ValueError:
+        version = database().version
+        raise ProtocolError(f"the DBC's VERSION {version!r} is not major.minor") from None
+
+
 def message(name: str) -> Any:
     """A cantools message of the protocol by name."""
     try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Iterable
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,6 +105,15 @@ class RunResult:
     stop_m: float = math.nan  # metres of rate in excess over the last STOP_WINDOW_M
 
 
+#: Makes the World of one run: (config, seed, drive) -> a context holding it (closed after).
+Machine = Callable[[SimConfig, int, Drive], AbstractContextManager[World]]
+
+
+def in_process(cfg: SimConfig, seed: int, drive: Drive) -> AbstractContextManager[World]:
+    """The World with the C core in-process (the default machine of the experiments)."""
+    return nullcontext(World(cfg, seed=seed, drive=drive))
+
+
 @dataclass
 class Lab:
     """Runs experiments on one simulated machine; caches runs shared by several analyses."""
@@ -114,6 +124,10 @@ class Lab:
     progress: Callable[[Iterable[tuple[float, int]], str], Iterable[tuple[float, int]]] | None = (
         None
     )
+    # another ECU in the loop: a machine whose World carries it, and the cab PC for it (the
+    # firmware in QEMU: sim.qemu_ecu's QemuWorld and QemuSil, wired by the cli)
+    machine: Machine = in_process
+    sil: type[Sil] = Sil
     _cache: dict[tuple[float, int, SpeedMode, float, EcuSettings], RunResult] = field(
         default_factory=dict
     )
@@ -137,11 +151,12 @@ class Lab:
         seed = self.base_seed * 1000 + rep
         # the clutch goes in at an arbitrary moment of the ECU's 500 ms wheel-update grid
         wait_s = 3.0 + (seed * 0.6180339887 % 1.0)
-        world = World(self.cfg, seed=seed, drive=Drive.paper_run(target_kmh, hold_m, wait_s))
+        drive = Drive.paper_run(target_kmh, hold_m, wait_s)
         params = (*self.pc.ecu_params, *settings)
         if mode is not SpeedMode.PAPER:
             params = (*params, ("SpeedMode", float(mode.code)))
-        with Sil(world, dataclasses.replace(self.pc, ecu_params=params)) as sil:
+        pc = dataclasses.replace(self.pc, ecu_params=params)
+        with self.machine(self.cfg, seed, drive) as world, self.sil(world, pc) as sil:
             sil.run_until_done(max_s=hold_m / (target_kmh / 3.6) + 60.0)
             assert sil.record is not None
             trace = sil.record.arrays()

@@ -8,15 +8,22 @@ frames of protocol/topdress_hil.dbc: the firmware sends the duties of every cont
 simulator answers with the machine's counters at the next step's time.
 
 `QemuWorld` is a drop-in World: the same plant, the same step(), but the control law is the
-firmware's, on its own 10 ms tick in the emulator. The plant advances one World step (dt) per
-firmware step, so the firmware's clock drives the simulation; the World's in-process core
-still runs beside it on the same counters (it gets no commands, its outputs are not used).
+firmware's. In lockstep (the default) the simulator drives the firmware's step: each World step
+sends the step's time (HilClock) and the counters at that time, the firmware makes exactly one
+control step at that time and answers with its bus frames, its duties and HilStep, and only
+then does the World go on. The firmware then steps on the simulator's clock as the in-process
+core does, however fast or loaded the host is: runs are deterministic. Free-running
+(`lockstep=False`) leaves the firmware on its own 10 ms SysTick in the emulator, on the host's
+clock, the plant answering each of its steps (the way to see the emulator's real-time jitter).
+The World's in-process core still runs beside it on the same counters (it gets no commands,
+its outputs are not used).
 """
 
 from __future__ import annotations
 
 import math
 import os
+import select
 import shutil
 import socket
 import subprocess
@@ -41,13 +48,43 @@ from topdress.sim.world import SimConfig, World
 _U32 = 0xFFFFFFFF
 IMAGE_NAME = "topdress-ecu-stm32f4.elf"
 # the repository's build output (make firmware); an installed package names it by TOPDRESS_ECU_IMAGE
-_REPO_IMAGE = Path(__file__).resolve().parents[3] / "build" / "fw" / IMAGE_NAME
+_REPO = Path(__file__).resolve().parents[3]
+_REPO_IMAGE = _REPO / "build" / "fw" / IMAGE_NAME
 
 
 def default_image() -> Path:
     """The firmware image: $TOPDRESS_ECU_IMAGE, else the repository's build/fw one."""
     env = os.environ.get("TOPDRESS_ECU_IMAGE")
     return Path(env) if env else _REPO_IMAGE
+
+
+_FIRMWARE_MK = _REPO / "ecu" / "ports" / "stm32f4" / "firmware.mk"
+
+
+def ensure_image(image: Path | None = None) -> Path:
+    """The firmware image to boot, built first by the rules of `make firmware` when it is the
+    repository's and the toolchain is here (make rebuilds only what changed). DeviceError, saying
+    what to do, when there is none to boot."""
+    image = image or default_image()
+    repo_build = image == _REPO_IMAGE and _FIRMWARE_MK.is_file()
+    if repo_build and shutil.which("arm-none-eabi-gcc") is not None:
+        done = subprocess.run(
+            ["make", "--no-print-directory", "-s", "-f", str(_FIRMWARE_MK.relative_to(_REPO))],
+            cwd=_REPO,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if done.returncode != 0:
+            raise DeviceError(f"make firmware failed:\n{done.stderr.strip()}")
+    if not image.is_file():
+        how = (
+            "run `make firmware` (it installs arm-none-eabi-gcc as root)"
+            if repo_build
+            else "set TOPDRESS_ECU_IMAGE to a built topdress-ecu-stm32f4.elf"
+        )
+        raise DeviceError(f"no firmware image at {image}: {how}")
+    return image
 
 
 def qemu_missing() -> str | None:
@@ -74,6 +111,38 @@ class QemuOptions:
     qemu: str = "qemu-system-arm"
     icount_shift: int | None = None
     connect_timeout_s: float = 5.0
+
+
+def _socket_of(bus: SlcanBus) -> socket.socket:
+    """The TCP socket under pyserial's `socket://` port (private there, ours to tune)."""
+    sock: socket.socket = getattr(bus.serialPortOrig, "_socket")  # noqa: B009
+    return sock
+
+
+class _SocketSlcan(SlcanBus):
+    """python-can's slcan interface on the emulator's TCP socket, reading what has arrived at
+    once instead of a byte per system call (a step's lines are ~300 bytes, every 10 ms of
+    simulated time)."""
+
+    def _read(self, timeout: float | None) -> str | None:
+        sock = _socket_of(self)
+        buf: bytearray = self._buffer
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            ends = [i for i in (buf.find(self._OK), buf.find(self._ERROR)) if i >= 0]
+            if ends:
+                end = min(ends) + 1
+                line = buf[:end].decode()
+                del buf[:end]
+                return line
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            ready, _, _ = select.select([sock], [], [], left)
+            if not ready:
+                return None
+            chunk = sock.recv(65536)
+            if not chunk:
+                raise can.CanOperationError("the emulator closed its serial port")
+            buf.extend(chunk)
 
 
 def _free_port() -> int:
@@ -107,7 +176,8 @@ class QemuEcu:
             str(opts.image),
             # the guest starts when the link connects: nothing it says is lost
             "-serial",
-            f"tcp:127.0.0.1:{self.port},server=on,wait=on",
+            # nodelay: a step's few short lines go at once, not after the peer's delayed ACK
+            f"tcp:127.0.0.1:{self.port},server=on,wait=on,nodelay=on",
         ]
         if opts.icount_shift is not None:
             cmd += ["-icount", f"shift={opts.icount_shift},sleep=on"]
@@ -121,14 +191,14 @@ class QemuEcu:
             self._stop()
             raise
 
-    def _connect(self) -> SlcanBus:
+    def _connect(self) -> _SocketSlcan:
         deadline = time.monotonic() + self.opts.connect_timeout_s
         while True:
             if self._proc.poll() is not None:
                 err = self._proc.stderr.read().decode(errors="replace") if self._proc.stderr else ""
                 raise DeviceError(f"qemu-system-arm exited: {err.strip()}")
             try:
-                bus = SlcanBus(
+                bus = _SocketSlcan(
                     channel=f"socket://127.0.0.1:{self.port}",
                     sleep_after_open=0.0,
                     timeout=0.001,
@@ -140,6 +210,8 @@ class QemuEcu:
                 time.sleep(0.05)
         # the guest starts at the connection and its USART drops what comes before it is set
         # up: ask for its version until it answers, then open the channel again
+        # pyserial's socket leaves Nagle on: the lines of a step would wait ~40 ms for an ACK
+        _socket_of(bus).setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         while bus.get_version(0.05) == (None, None):
             if time.monotonic() > deadline:
                 bus.shutdown()
@@ -182,32 +254,43 @@ class FwStep:
     duties: tuple[float, float, float, float]  # meter upper, lower, fan upper, lower
 
 
+def _stats(values: list[int] | list[float], prefix: str) -> dict[str, float]:
+    v = sorted(values)
+    n = len(v)
+    mean = sum(v) / n
+    sd = math.sqrt(sum((x - mean) ** 2 for x in v) / max(1, n - 1))
+    return {
+        f"{prefix}mean_us": mean,
+        f"{prefix}sd_us": sd,
+        f"{prefix}min_us": float(v[0]),
+        f"{prefix}max_us": float(v[-1]),
+        f"{prefix}p99_us": float(v[min(n - 1, math.ceil(0.99 * n) - 1)]),
+    }
+
+
 @dataclass
 class StepTiming:
-    """The firmware's step intervals (its own clock) and costs, for the jitter figures."""
+    """The firmware's step intervals (its own clock), its step costs, and the host time each
+    World step took (in lockstep: the round trip to the emulator and back), for the figures."""
 
     intervals_us: list[int] = field(default_factory=list)
     costs_us: list[int] = field(default_factory=list)
+    host_us: list[float] = field(default_factory=list)
     late_inputs: int = 0
 
     def summary(self) -> dict[str, float]:
-        """Mean, standard deviation, extremes and 99th percentile of the step interval, us."""
-        iv = sorted(self.intervals_us)
-        if not iv:
+        """Step interval on the firmware's clock (mean_us, sd_us, min_us, max_us, p99_us; in
+        lockstep the simulator's dt by construction), host time per World step (host_*_us),
+        late steps and the longest step cost."""
+        if not self.intervals_us:
             return {}
-        n = len(iv)
-        mean = sum(iv) / n
-        sd = math.sqrt(sum((x - mean) ** 2 for x in iv) / max(1, n - 1))
-        return {
-            "steps": float(n),
-            "mean_us": mean,
-            "sd_us": sd,
-            "min_us": float(iv[0]),
-            "max_us": float(iv[-1]),
-            "p99_us": float(iv[min(n - 1, math.ceil(0.99 * n) - 1)]),
-            "late_inputs": float(self.late_inputs),
-            "max_cost_us": float(max(self.costs_us, default=0)),
-        }
+        out = {"steps": float(len(self.intervals_us)), **_stats(self.intervals_us, "")}
+        if self.host_us:
+            out.update(_stats(self.host_us, "host_"))
+            out["host_total_s"] = sum(self.host_us) / 1e6
+        out["late_inputs"] = float(self.late_inputs)
+        out["max_cost_us"] = float(max(self.costs_us, default=0))
+        return out
 
 
 class HilLink:
@@ -221,13 +304,15 @@ class HilLink:
         self._step = db.get_message_by_name("HilStep")
         self._edge = db.get_message_by_name("HilWheelEdge")
         self._sensors = db.get_message_by_name("HilSensors")
+        self._clock = db.get_message_by_name("HilClock")
         self._duties: tuple[int, tuple[float, float, float, float]] | None = None
         self.frames: list[CanFrame] = []  # bus frames from the firmware, not yet taken
         self.steps_seen = 0
         self._last_late = 0
 
-    def wait_step(self, timeout_s: float) -> FwStep:
-        """The firmware's next step; bus frames arriving meanwhile are kept in `frames`."""
+    def wait_step(self, timeout_s: float, seq: int | None = None) -> FwStep:
+        """The firmware's next step (in lockstep the one numbered `seq`); bus frames arriving
+        meanwhile are kept in `frames`."""
         deadline = time.monotonic() + timeout_s
         while True:
             left = deadline - time.monotonic()
@@ -248,19 +333,30 @@ class HilLink:
                 )
             elif fid == self._step.frame_id:
                 s = self._step.decode(bytes(msg.data))
-                seq = int(s["HilSeq"])
-                if self._duties is None or self._duties[0] != seq:
+                got = int(s["HilSeq"])
+                if self._duties is None or self._duties[0] != got:
                     continue  # its duties were lost (a link opened mid-step): the next one
+                if seq is not None and got != seq:
+                    raise DeviceError(f"the emulated ECU answered step {got}, not step {seq}")
                 self.steps_seen += 1
                 return FwStep(
                     time_us=int(s["HilStepTime"]),
-                    seq=seq,
+                    seq=got,
                     late_inputs=int(s["HilLateInputs"]),
                     cost_us=int(s["HilStepCost"]),
                     duties=self._duties[1],
                 )
             else:
                 self.frames.append((fid, bytes(msg.data)))
+
+    def send_clock(self, time_us: int, seq: int, free_run: bool = False) -> None:
+        """HilClock: the time of the step the counters that follow are for (the first one
+        also chooses the firmware's tick: lockstep, or its own with `free_run`)."""
+        data = self._clock.encode(
+            {"HilClockTime": time_us & _U32, "HilSeq": seq & 0xFF, "HilFreeRun": int(free_run)}
+        )
+        fid = self._clock.frame_id
+        self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=True))
 
     def send_counters(
         self,
@@ -313,25 +409,36 @@ class QemuWorld(World):
         seed: int = 0,
         drive: Drive | None = None,
         step_timeout_s: float = 2.0,
+        lockstep: bool = True,
     ) -> None:
         super().__init__(cfg, seed, drive)
         self.qemu = ecu
         self.link = HilLink(ecu.bus)
         self.step_timeout_s = step_timeout_s
+        self.lockstep = lockstep
         self.timing = StepTiming()
         self.last_step: FwStep | None = None
         self.duties: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+        # the first HIL frame chooses the firmware's tick; in lockstep its core starts again at
+        # the World's time 0, as the in-process core does
+        self.link.send_clock(self.now_us, 0, free_run=not lockstep)
 
     def deliver_can(self, frame: Any, now_us: int | None = None) -> int:
-        """A PC -> ECU frame over the link; the firmware says what it made of it in its own
-        frames (EcuSpeeds.RxRejected), so this always returns 0."""
+        """A PC -> ECU frame over the link (and to the in-process core beside, so that its
+        parameters, `world.ecu.params`, are the firmware's); the firmware says what it made of
+        it in its own frames (EcuSpeeds.RxRejected), so this always returns 0."""
         self.link.send(frame)
+        super().deliver_can(frame, now_us)
         return 0
 
     def step_raw(self) -> tuple[float, list[str], list[str], list[CanFrame]]:
-        """The firmware's next step (its duties), the plant over one dt with them, and the
-        counters for the firmware's step after: (t_s, nmea, crop, ECU frames)."""
-        st = self.link.wait_step(self.step_timeout_s)
+        """One World step with the firmware's control step: (t_s, nmea, crop, ECU frames)."""
+        t0 = time.perf_counter()
+        out = self._lockstep() if self.lockstep else self._free_running()
+        self.timing.host_us.append((time.perf_counter() - t0) * 1e6)
+        return out
+
+    def _take(self, st: FwStep) -> None:
         last = self.last_step
         if last is not None:
             self.timing.intervals_us.append((st.time_us - last.time_us) & _U32)
@@ -340,19 +447,37 @@ class QemuWorld(World):
         self.last_step = st
         self.duties = st.duties
         self._ws.duty = list(st.duties)
-        t, nmea, crop, _ = super().step_raw()  # the in-process core's frames are not the ECU's
-        # the plant is now at the firmware's next step: its time on the firmware's clock
-        fw_next = st.time_us + self._dt_us
+
+    def _counters(self, edge_us: int, seq: int) -> None:
         wheel = int(self.wheel._s.count)
-        edge_fw = (fw_next - ((self.now_us - self._edge_us) & _U32)) & _U32
         self.link.send_counters(
-            edge_fw,
-            self.cfg.wheel_edges and wheel > 0,
+            edge_us,
+            self.cfg.wheel_edges,
             wheel,
             (int(self.meters[0]._s.count), int(self.meters[1]._s.count)),
             (int(self.fans[0]._s.count), int(self.fans[1]._s.count)),
-            st.seq,
+            seq,
         )
+
+    def _lockstep(self) -> tuple[float, list[str], list[str], list[CanFrame]]:
+        """The plant over one dt under the firmware's last duties, then the firmware's step at
+        the World's time on the counters there, as World.step_raw does with its own core."""
+        t, nmea, crop, _ = super().step_raw()  # the in-process core's frames are not the ECU's
+        seq = self._step_n & 0xFF
+        self.link.send_clock(self.now_us, seq)
+        self._counters(self._edge_us, seq)
+        self._take(self.link.wait_step(self.step_timeout_s, seq))
+        return t, nmea, crop, self.link.take_frames()
+
+    def _free_running(self) -> tuple[float, list[str], list[str], list[CanFrame]]:
+        """The firmware's next step on its own tick (its duties), the plant over one dt with
+        them, and the counters for the firmware's step after."""
+        st = self.link.wait_step(self.step_timeout_s)
+        self._take(st)
+        t, nmea, crop, _ = super().step_raw()
+        # the plant is now at the firmware's next step: its time on the firmware's clock
+        fw_next = st.time_us + self._dt_us
+        self._counters((fw_next - ((self.now_us - self._edge_us) & _U32)) & _U32, st.seq)
         return t, nmea, crop, self.link.take_frames()
 
 

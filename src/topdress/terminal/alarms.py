@@ -37,6 +37,7 @@ class AlarmInputs:
     gnss_link: str
     crop_link: str
     ecu_link: str
+    ecu_protocol: tuple[str, str] | None = None  # (the ECU's, the terminal's) when they differ
     # The session log's health (topdress.log.session.LogHealth): a log that cannot be
     # written is an alarm, not only a line on the console
     log_health: str = "ok"
@@ -130,6 +131,9 @@ class AlarmBook:
                         limit_m=o.limit_m,
                     ),
                 )
+        if x.ecu_protocol is not None:
+            ecu, terminal = x.ecu_protocol
+            yield "ecu_protocol", text("alarm.text.ecu_protocol", ecu=ecu, terminal=terminal)
         if x.log_health == "low_space":
             free, margin = x.log_free_mb, x.log_min_free_mb
             yield "log_low_space", text("alarm.text.log_low_space", free_mb=free, min_mb=margin)

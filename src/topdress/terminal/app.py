@@ -56,9 +56,9 @@ from topdress.i18n import Text, text
 from topdress.log.model import LogEvent
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
-from topdress.protocol import fault_names
+from topdress.protocol import EcuIdent, fault_names, protocol_version
 from topdress.terminal import signals
-from topdress.terminal.canlink import CanLink, EcuView
+from topdress.terminal.canlink import CanLink, EcuView, ident_mismatch, ident_text
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
 from topdress.terminal.inbox import Inbox
@@ -193,7 +193,14 @@ class Terminal:
         port.start(self._port_sink(port))
 
     def _new_link(self, port: CanPort, cfg: CanConfig, fan_rpm: float) -> CanLink:
-        return CanLink(port, cfg, fan_rpm=fan_rpm, on_tx=self._log_tx, on_event=self.event)
+        return CanLink(
+            port,
+            cfg,
+            fan_rpm=fan_rpm,
+            on_tx=self._log_tx,
+            on_event=self.event,
+            on_ident=self._log_ident,
+        )
 
     def take(self, section: str, new: TerminalConfig) -> None:
         """The configuration with `section` changed, taken by the parts that read it."""
@@ -701,6 +708,7 @@ class Terminal:
         # The ECU's last frames are history once it is not heard: nothing is shown from them.
         ecu = self.link.ecu if live else EcuView()
         pos = self.tracker.position
+        ident = self.link.ecu.ident  # who the ECU is stays known while it is not heard
         return Snapshot(
             t_s=now - (self._t0 if self._t0 is not None else now),
             **ecu_values(ecu.status, ecu.diag, ecu.speeds, ecu.targets),
@@ -711,6 +719,12 @@ class Terminal:
             ecu_live=live,
             ecu_link=self.ecu_state,
             ecu_where=self.link.where,
+            ecu_ident=None if ident is None else ident_text(ident),
+            ecu_protocol=(
+                (ident.protocol_version, "{}.{}".format(*protocol_version()))
+                if ident is not None and ident_mismatch(ident)
+                else None
+            ),
             gnss_link=self._gnss_state,
             crop_link=self._crop_state,
             lat=pos.lat if pos else None,
@@ -752,6 +766,19 @@ class Terminal:
     def _log_tx(self, msg: can.Message) -> None:
         if self.session is not None:
             self.session.raw("can_tx", self.clock(), (msg.arbitration_id, bytes(msg.data)))
+
+    def _log_ident(self, ident: EcuIdent, t: float) -> None:
+        self.log_event(
+            t,
+            "ecu.ident",
+            target=ident.target,
+            firmware=ident.firmware_version,
+            protocol=ident.protocol_version,
+            terminal_protocol="{}.{}".format(*protocol_version()),
+            transport=ident.transport,
+            reset_cause=ident.reset_cause,
+            clock_fallback=ident.clock_fallback,
+        )
 
     def log_event(self, t: float, kind: str, **detail: Any) -> None:
         """One event to the session log: `kind` of topdress.log.model.EVENT_KINDS, `detail`

@@ -14,6 +14,9 @@ seconds on any monotonic clock (virtual in tests). It
   set (the terminal sets the command once per 100 ms tick, so at most every 100 ms);
 - decodes EcuStatus, EcuDiag, EcuSpeeds, EcuTargets and EcuGnssLag, counting foreign and
   malformed frames;
+- takes the ECU's EcuIdent (target, firmware, protocol version, transport, reset cause): says
+  who the ECU is when that changes, warns when its protocol version is not the terminal's own
+  (the DBC's VERSION), and hands it to `on_ident` (the terminal logs it);
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
   and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
   An ECU never heard is waited for ("wait"), not lost.
@@ -98,6 +101,22 @@ class EcuView:
     cal: protocol.EcuCalStatus | None = None  # the catch test's status (calibration)
     cal_t: float | None = None  # when that status arrived (the terminal's clock)
     lag: protocol.EcuGnssLag | None = None  # the GNSS lag in use and learned
+    ident: protocol.EcuIdent | None = None  # who the ECU says it is (EcuIdent)
+
+
+def ident_mismatch(ident: protocol.EcuIdent) -> bool:
+    """The ECU was built from another version of the protocol than this terminal's."""
+    return ident.protocol != protocol.protocol_version()
+
+
+def ident_text(ident: protocol.EcuIdent) -> Text:
+    """ "stm32f4 firmware 0.1.0, protocol 1.1" (the console, the screens, the event)."""
+    return text(
+        "view.ecu_ident",
+        target=ident.target,
+        firmware=ident.firmware_version,
+        protocol=ident.protocol_version,
+    )
 
 
 @dataclass
@@ -150,8 +169,10 @@ class CanLink:
         param_backoff_s: tuple[float, ...] = PARAM_BACKOFF_S,
         on_tx: Callable[[can.Message], None] | None = None,
         on_event: Callable[[Text], None] | None = None,
+        on_ident: Callable[[protocol.EcuIdent, float], None] | None = None,
     ) -> None:
         self._ack_timeout_s = param_ack_timeout_s
+        self._on_ident = on_ident
         self._retries = param_retries
         self._backoff_s = param_backoff_s
         self._on_tx = on_tx
@@ -483,7 +504,23 @@ class CanLink:
             self.ecu = replace(self.ecu, cal=decoded, cal_t=now)
         elif isinstance(decoded, protocol.EcuGnssLag):
             self.ecu = replace(self.ecu, lag=decoded)
+        elif isinstance(decoded, protocol.EcuIdent):
+            self._take_ident(decoded, now)
         # PC frames (another PC on the bus, or our own echo) are not for us.
+
+    def _take_ident(self, ident: protocol.EcuIdent, now: float) -> None:
+        """The ECU says who it is (at power-up, when a PC starts commanding it, on a new
+        listener): said when it differs from what it said last, warned of when its protocol
+        version is not this terminal's, always handed on (its reset cause is news)."""
+        before = self.ecu.ident
+        self.ecu = replace(self.ecu, ident=ident)
+        if before is None or before.target != ident.target or before.firmware != ident.firmware:
+            self._event(text("event.ecu_ident", ecu=ident_text(ident), transport=ident.transport))
+        if ident_mismatch(ident) and (before is None or before.protocol != ident.protocol):
+            ours = "{}.{}".format(*protocol.protocol_version())
+            self._event(text("event.ecu_protocol", ecu=ident.protocol_version, terminal=ours))
+        if self._on_ident is not None:
+            self._on_ident(ident, now)
 
     def _on_heard(self, now: float, back: bool) -> None:
         """The first status frame, or the first after a loss."""

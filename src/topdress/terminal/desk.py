@@ -457,6 +457,7 @@ class OperatorDesk:
             crop_link=snap.crop_link,
             ecu_link=snap.ecu_link,
             off_map=off_map,
+            ecu_protocol=snap.ecu_protocol,
             **self._log_health(),
             display_down=self.display.down,
             display_lost=self.display.lost,

@@ -129,6 +129,8 @@ class Snapshot:
     gnss_kmh: float | None = None
     ecu_link: str = "wait"  # wait (parameters not all acknowledged yet), ok, lost
     ecu_where: str = ""  # the CAN interface:channel the terminal listens on
+    ecu_ident: Text | None = None  # "stm32f4 firmware 0.1.0, protocol 1.1" (EcuIdent)
+    ecu_protocol: tuple[str, str] | None = None  # (the ECU's, the terminal's) when they differ
     gnss_link: str = "wait"  # wait, ok, no fix, lost
     crop_link: str = "wait"  # wait, ok, "3/4" (fresh of configured), silent, lost
     lat: float | None = None

@@ -18,6 +18,85 @@ static td_can_frame_t edge(uint32_t t_us, uint16_t count, uint8_t seq, bool vali
     return f;
 }
 
+static td_can_frame_t clock(uint32_t t_us, uint8_t seq, bool free_run) {
+    struct td_hilcan_hil_clock_t c = { t_us, seq, free_run ? 1u : 0u };
+    td_can_frame_t f = { TD_HIL_ID_CLOCK, 1u, 8u, { 0 } };
+    (void)td_hilcan_hil_clock_pack(f.data, &c, 8u);
+    return f;
+}
+
+static void test_lockstep_steps_once_per_sensors_at_the_clocks_time(void **state) {
+    (void)state;
+    td_hil_t h;
+    td_hil_init(&h);
+    assert_int_equal(h.tick, TD_HIL_TICK_UNSET);
+    td_can_frame_t f = clock(0u, 0u, false);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_int_equal(h.tick, TD_HIL_TICK_LOCKSTEP);
+    assert_false(h.step_due); /* a clock alone makes no step */
+    f = clock(10000u, 1u, false);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    f = edge(9500u, 3u, 1u, true);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_false(h.step_due);
+    f = sensors(3u, 0u, 0u, 0u, 0u);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_true(h.step_due);
+    assert_int_equal(h.clock_us, 10000u);
+    td_io_in_t in;
+    td_hil_inputs(&h, &in);
+    assert_false(h.step_due);
+    assert_int_equal(in.wheel_edge_us, 9500u);
+    const td_io_out_t out = { { 0.5f, 0.0f }, { 0.0f, 0.0f } };
+    td_can_frame_t fr[2];
+    td_hil_outputs(&h, h.clock_us, &out, 3u, fr);
+    struct td_hilcan_hil_step_t s;
+    (void)td_hilcan_hil_step_unpack(&s, fr[1].data, 8u);
+    assert_int_equal(s.hil_seq, 1u); /* the clock's number echoed */
+    assert_int_equal(s.hil_step_time, 10000u);
+    /* the next clock (wrapping) with a free-running flag: the tick stays, its number is taken */
+    f = clock(0xFFFFFFF0u, 200u, true);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_int_equal(h.tick, TD_HIL_TICK_LOCKSTEP);
+    assert_int_equal(h.clock_us, 0xFFFFFFF0u);
+    f = sensors(4u, 0u, 0u, 0u, 0u);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_true(h.step_due);
+    td_hil_inputs(&h, &in);
+    td_hil_outputs(&h, h.clock_us, &out, 3u, fr);
+    (void)td_hilcan_hil_step_unpack(&s, fr[1].data, 8u);
+    assert_int_equal(s.hil_seq, 200u);
+    assert_int_equal(h.late_steps, 0u);
+    f = clock(0u, 0u, false);
+    f.dlc = 6u;
+    assert_int_equal(td_hil_rx(&h, &f), TD_E_LENGTH);
+}
+
+static void test_free_running_keeps_its_own_tick(void **state) {
+    (void)state;
+    td_hil_t h;
+    td_hil_init(&h);
+    td_can_frame_t f = clock(5000u, 9u, true);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_int_equal(h.tick, TD_HIL_TICK_OWN);
+    f = clock(7000u, 10u, false); /* chosen once: a later lockstep clock changes nothing */
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_int_equal(h.tick, TD_HIL_TICK_OWN);
+    f = sensors(1u, 0u, 0u, 0u, 0u);
+    assert_int_equal(td_hil_rx(&h, &f), 1);
+    assert_false(h.step_due); /* the port's own tick makes the step */
+    td_io_in_t in;
+    td_hil_inputs(&h, &in);
+    const td_io_out_t out = { { 0.0f, 0.0f }, { 0.0f, 0.0f } };
+    td_can_frame_t fr[2];
+    td_hil_outputs(&h, 123u, &out, 1u, fr);
+    td_hil_outputs(&h, 10123u, &out, 1u, fr);
+    struct td_hilcan_hil_step_t s;
+    (void)td_hilcan_hil_step_unpack(&s, fr[1].data, 8u);
+    assert_int_equal(s.hil_seq, 1u); /* its own numbers */
+    assert_int_equal(s.hil_step_time, 10123u);
+}
+
 static void test_counters_extend_across_wraps(void **state) {
     (void)state;
     td_hil_t h;
@@ -110,6 +189,8 @@ int main(void) {
         cmocka_unit_test(test_counters_extend_across_wraps),
         cmocka_unit_test(test_edge_belongs_to_its_count),
         cmocka_unit_test(test_outputs_and_refusals),
+        cmocka_unit_test(test_lockstep_steps_once_per_sensors_at_the_clocks_time),
+        cmocka_unit_test(test_free_running_keeps_its_own_tick),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
