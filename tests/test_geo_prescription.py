@@ -422,11 +422,11 @@ def test_a_loaded_map_says_what_it_holds(tmp_path: Path) -> None:
 def test_a_large_map_says_how_far_loading_is(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import topdress.geo.polygons
-    import topdress.geo.prescription
-
-    for mod in (topdress.geo.polygons, topdress.geo.prescription):
-        monkeypatch.setattr(mod, "PROGRESS_FEATURES", 2)
+    # the modules load_prescription runs in (by its own globals: a NiceGUI test elsewhere may
+    # have left a second copy of the package in sys.modules)
+    here = load_prescription.__globals__
+    for names in (here, here["read_polygons"].__globals__):
+        monkeypatch.setitem(names, "PROGRESS_FEATURES", 2)
     lines: list[str] = []
     load_prescription(PrescriptionConfig(path=str(two_zones(tmp_path / "a.gpkg"))), lines.append)
     assert lines == [
