@@ -16,8 +16,9 @@ import subprocess
 import sys
 import time
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from topdress.display.cpu import yield_to_the_terminal
 
@@ -175,3 +176,19 @@ STALE_JS = (
     "return document.documentElement.classList.contains('td-stale')"
     " && document.getElementById('td-stale').offsetHeight > 0"
 )
+
+
+def until(what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
+    """Poll `check` until it gives something true; its last answer (or error) in the failure."""
+    deadline = time.monotonic() + timeout_s
+    last: Any = None
+    while time.monotonic() < deadline:
+        try:
+            last = check()
+        except Exception as exc:  # an element not drawn yet, a stale one, a reload
+            last = exc
+        else:
+            if last:
+                return last
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what} (last: {last!r})")

@@ -12,30 +12,13 @@ from __future__ import annotations
 import os
 import signal
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from browser import STALE_JS, DemoProcess, chromium, display_pid, missing_browser
+from browser import STALE_JS, DemoProcess, chromium, display_pid, missing_browser, until
 
 pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
-
-
-def until(what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
-    deadline = time.monotonic() + timeout_s
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            last = check()
-        except Exception as exc:  # an element not drawn yet, a stale one, a reload
-            last = exc
-        else:
-            if last:
-                return last
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what} (last: {last!r})")
 
 
 def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:

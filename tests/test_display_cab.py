@@ -21,8 +21,7 @@ from typing import Any
 
 import pytest
 
-from browser import DemoProcess, chromium, missing_browser, viewport
-from test_display_browser import until
+from browser import DemoProcess, chromium, missing_browser, until, viewport
 
 pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
 
