@@ -100,14 +100,16 @@ def _to_json_slow(event: Event) -> str:
 
 
 # The exact forms `to_json` writes (a number as Python or JSON writes it, strings with no
-# escapes but the line ends \r \n, lower-case hex of at most 8 bytes): read without json.loads, which is most of the
-# time a long day's replay spends reading. Anything else, valid or not, takes the full parser.
+# escapes but the line ends \r \n, lower-case hex of at most 8 bytes): read without json.loads,
+# which is most of the time a long day's replay spends reading. Anything else, valid or not,
+# takes the full parser.
 _NUM: Final = r"-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?"
+_TEXT: Final = r'"([^"\\\x00-\x1f]*(?:\\[rn][^"\\\x00-\x1f]*)*)"'
 _FAST: Final = re.compile(
-    r'\{"t":('
-    + _NUM
-    + r'),(?:"(nmea|crop)":"([^"\\\x00-\x1f]*(?:\\[rn][^"\\\x00-\x1f]*)*)"|"wheel_count":(0|[1-9][0-9]{0,30})'
-    r'|"can":\{"id":(0|[1-9][0-9]{0,15}),"data":"((?:[0-9a-f]{2}){0,8})"(?:,"dir":"(rx|tx)")?\})\}\n?\Z'
+    r'\{"t":(' + _NUM + r"),(?:"
+    r'"(nmea|crop)":' + _TEXT + r'|"wheel_count":(0|[1-9][0-9]{0,30})'
+    r'|"can":\{"id":(0|[1-9][0-9]{0,15}),"data":"((?:[0-9a-f]{2}){0,8})"(?:,"dir":"(rx|tx)")?\}'
+    r")\}\n?\Z"
 )
 
 

@@ -296,9 +296,14 @@ class _Replayer:
             if not fix.ok:
                 self.stats.nmea_rejected += 1
             return self.tracker.update(e.t, fix) is not None
-        if isinstance(e, CanEvent) and e.dir != "rx" and e.can_id == self.ids.command:
-            if e.data != self.command_data and _take_command(self.command, e, self.ids, self.stats):
-                self.command_data = e.data
+        if (
+            isinstance(e, CanEvent)
+            and e.dir != "rx"
+            and e.can_id == self.ids.command
+            and e.data != self.command_data
+            and _take_command(self.command, e, self.ids, self.stats)
+        ):
+            self.command_data = e.data
         return False
 
     def _send_gnss_time(self, now_us: int) -> None:
