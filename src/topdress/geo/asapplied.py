@@ -94,8 +94,8 @@ class AsApplied:
 
 Columns = dict[str, list[Any]]
 
-CHUNK_ROWS: Final = 50_000  # state rows read, and points made and written, at a time
-SWATH_BATCH: Final = 20_000  # runs made into swath polygons at a time
+CHUNK_ROWS: Final = 10_000  # state rows read, and points made and written, at a time
+SWATH_BATCH: Final = 5_000  # runs made into swath polygons at a time
 
 
 def _col(rows: Columns, name: str) -> FloatArray:
@@ -183,6 +183,7 @@ class AsAppliedStream:
                 self.notes.append(f"this session log has no {col} column: {what}")
         self._day = _read_day(
             self._chunks(),
+            reader.count("state"),
             cfg.machine,
             cfg.speed,
             reader.meta.get("created_utc"),
@@ -258,6 +259,7 @@ def _join(batches: Iterator[Batch]) -> Batch:
 
 def _read_day(
     chunks: Iterator[Columns],
+    size: int,
     m: MachineConfig,
     speed: SpeedConfig,
     created_utc: str | None,
@@ -270,16 +272,19 @@ def _read_day(
         "meter_rpm_upper", "meter_rpm_lower", "target_rpm_upper", "target_rpm_lower",
         "rate_kg_ha_upper", "rate_kg_ha_lower", "prescription_kg_ha",
     )  # fmt: skip
-    parts: dict[str, list[FloatArray]] = {n: [] for n in names}
+    # filled in place (joining chunks would hold the day twice); `size`: the rows the file
+    # holds, damaged ones included, so a few may be left over
+    col = {n: np.empty(size) for n in names}
+    zone = np.empty(size, np.int32)
     zones: dict[str, int] = {}
-    zone_parts: list[npt.NDArray[np.int32]] = []
+    n_rows = 0
     for rows in chunks:
+        end = n_rows + len(rows["t"])
         for n in names:
-            parts[n].append(_col(rows, n))
-        zone_parts.append(
-            np.array([zones.setdefault(z or "", len(zones)) for z in rows["zone"]], np.int32)
-        )
-    col = {n: np.concatenate(p) if p else np.zeros(0) for n, p in parts.items()}
+            col[n][n_rows:end] = rows[n]  # None -> nan
+        zone[n_rows:end] = [zones.setdefault(z or "", len(zones)) for z in rows["zone"]]
+        n_rows = end
+    col = {n: c[:n_rows] for n, c in col.items()}
     t = col["t"]
     if not t.size:
         notes.append("no state rows")
@@ -334,7 +339,7 @@ def _read_day(
         tkg=tkg[0] + tkg[1],
         cmd=col["rate_kg_ha_upper"] + col["rate_kg_ha_lower"],
         presc=col["prescription_kg_ha"],
-        zone=np.concatenate(zone_parts) if zone_parts else np.zeros(0, np.int32),
+        zone=zone[:n_rows],
         zones=list(zones),
         has=has,
     )
@@ -577,7 +582,7 @@ class _Swaths:
     columns: dict[str, npt.NDArray[np.generic]]
 
 
-_BLOCK: Final = 1 << 16  # rows the smoother holds as Python floats at a time
+_BLOCK: Final = 1 << 13  # rows the smoother holds as Python floats at a time
 
 
 def smooth_path(
@@ -594,22 +599,6 @@ def smooth_path(
     Solved _BLOCK rows at a time as Python floats (faster than numpy element by element),
     the coefficients kept in arrays."""
     n = x.size
-    h0 = np.radians(heading_deg)
-    h1 = np.empty_like(h0)
-    h1[:-1], h1[-1:] = h0[1:], h0[-1:]
-    # the interval's heading: the mean of its two ends (a turn's step is a chord)
-    hx = np.nan_to_num(np.sin(h0)) + np.nan_to_num(np.sin(h1))
-    hy = np.nan_to_num(np.cos(h0)) + np.nan_to_num(np.cos(h1))
-    norm = np.hypot(hx, hy)
-    ok = link & (norm > 1e-9)
-    ux = np.divide(hx, norm, out=np.zeros(n), where=ok)
-    uy = np.divide(hy, norm, out=np.zeros(n), where=ok)
-    lam = np.where(ok, (POS_SD_M / (STEP_SD_M + STEP_SD_FRAC * step_m)) ** 2, 0.0)
-    if n:
-        lam[-1] = 0.0  # the last row links to nothing
-    dx_all, dy_all = ux * step_m, uy * step_m
-    px_all, py_all = np.nan_to_num(x), np.nan_to_num(y)
-    del h0, h1, hx, hy, norm, ux, uy
     # Thomas algorithm; row i: (1 + l[i-1] + l[i]) s[i] - l[i-1] s[i-1] - l[i] s[i+1]
     #                          = p[i] + l[i-1] d[i-1] - l[i] d[i]
     cp_all, qx_all, qy_all = np.empty(n), np.empty(n), np.empty(n)
@@ -617,9 +606,8 @@ def smooth_path(
     dx_prev = dy_prev = 0.0
     for b0 in range(0, n, _BLOCK):
         b1 = min(b0 + _BLOCK, n)
-        lm = lam[b0:b1].tolist()
-        dx, dy = dx_all[b0:b1].tolist(), dy_all[b0:b1].tolist()
-        px, py = px_all[b0:b1].tolist(), py_all[b0:b1].tolist()
+        lm, dx, dy = _smoothing_terms(heading_deg, step_m, link, b0, b1)
+        px, py = np.nan_to_num(x[b0:b1]).tolist(), np.nan_to_num(y[b0:b1]).tolist()
         cp, qx, qy = [0.0] * (b1 - b0), [0.0] * (b1 - b0), [0.0] * (b1 - b0)
         for i in range(b1 - b0):
             hi = lm[i]
@@ -644,6 +632,29 @@ def smooth_path(
     missing = ~(np.isfinite(x) & np.isfinite(y))
     out_x[missing] = out_y[missing] = math.nan
     return out_x, out_y
+
+
+def _smoothing_terms(
+    heading_deg: FloatArray, step_m: FloatArray, link: npt.NDArray[np.bool_], b0: int, b1: int
+) -> tuple[list[float], list[float], list[float]]:
+    """Rows b0..b1 of the smoother's weights and of the machine's steps (east, north)."""
+    n = heading_deg.size
+    h0 = np.radians(heading_deg[b0:b1])
+    h1 = np.radians(heading_deg[b0 + 1 : b1 + 1]) if b1 < n else np.radians(heading_deg[b0 + 1 :])
+    if b1 == n:  # the last row's interval takes its own heading
+        h1 = np.append(h1, h0[-1:])
+    # the interval's heading: the mean of its two ends (a turn's step is a chord)
+    hx = np.nan_to_num(np.sin(h0)) + np.nan_to_num(np.sin(h1))
+    hy = np.nan_to_num(np.cos(h0)) + np.nan_to_num(np.cos(h1))
+    norm = np.hypot(hx, hy)
+    ok = link[b0:b1] & (norm > 1e-9)
+    ux = np.divide(hx, norm, out=np.zeros(b1 - b0), where=ok)
+    uy = np.divide(hy, norm, out=np.zeros(b1 - b0), where=ok)
+    step = step_m[b0:b1]
+    lam = np.where(ok, (POS_SD_M / (STEP_SD_M + STEP_SD_FRAC * step)) ** 2, 0.0)
+    if b1 == n:
+        lam[-1] = 0.0  # the last row links to nothing
+    return lam.tolist(), (ux * step).tolist(), (uy * step).tolist()
 
 
 def _runs(
