@@ -191,11 +191,9 @@ class AsAppliedStream:
             self.notes,
         )
         self.rows = self._day.t.size
-        self._maker: _SwathMaker | None = None
         if self._day.has.any():
             d = self._day
             self.utm = utm_crs(float(np.nanmean(d.lat[d.has])), float(np.nanmean(d.lon[d.has])))
-            self._maker = _SwathMaker(d, self.utm, cfg.machine.width_m)
 
     def _chunks(self) -> Iterator[Columns]:
         return self._reader.state_chunks(STATE_COLUMNS, self._chunk)
@@ -220,20 +218,20 @@ class AsAppliedStream:
 
     def swath_batches(self) -> Iterator[Batch]:
         """The swaths, up to SWATH_BATCH runs at a time."""
-        if self._maker is None:
+        if self.utm is None:
             return
-        assert self.utm is not None
+        maker = _SwathMaker(self._day, self.utm, self.machine.width_m)
         back = Transformer.from_crs(self.utm, WGS84, always_xy=True)
-        for built in self._maker.batches(self._batch):
+        for built in maker.batches(self._batch):
             geoms = shapely.transform(
                 built.geoms, lambda xy: np.column_stack(back.transform(xy[:, 0], xy[:, 1]))
             )
             # RFC 7946: exterior rings counter-clockwise (GDAL writes Shapefiles clockwise)
             self.swaths += built.geoms.size
             yield built.columns, np.asarray(shapely.orient_polygons(geoms, exterior_cw=False))
-        if self._maker.repaired:
+        if maker.repaired:
             self.notes.append(
-                f"{self._maker.repaired} swaths in tight turns were repaired (inner edge folded)"
+                f"{maker.repaired} swaths in tight turns were repaired (inner edge folded)"
             )
 
 

@@ -22,24 +22,21 @@ def export_maps(
     Shapefile for farm management software (numeric attributes only)."""
     lines: list[str] = []
     if out is not None:
+        # written a chunk of the session at a time
+        stream = asapplied.AsAppliedStream(reader)
+        asapplied.require_any_point(stream)
         if fmt == "isoxml":
-            data = asapplied.build(reader)
-            asapplied.require_points(data)
-            files = isoxml.write_taskdata(data, out, reader.path.stem)
-            points, swaths, kg = data.point_geom.size, data.swath_geom.size, data.applied_kg
-            rows, notes = data.rows, data.notes
+            files = isoxml.write_taskdata(stream, out, reader.path.stem)
         else:
-            # the vector formats are written a chunk of the session at a time
-            stream = asapplied.AsAppliedStream(reader)
-            asapplied.require_any_point(stream)
             files = vector.write(stream, out, fmt, crs, fmis)
-            points, swaths, kg = stream.points, stream.swaths, stream.applied_kg
-            rows, notes = stream.rows, stream.notes
         lines += [str(f) for f in files]
         lines.append(
-            f"{points} points, {swaths} swaths, {kg:.2f} kg applied (of {rows} state rows)"
+            f"{stream.points} points, "
+            + ("" if fmt == "isoxml" else f"{stream.swaths} swaths, ")  # a time log: points
+            + f"{stream.applied_kg:.2f} kg "
+            f"applied (of {stream.rows} state rows)"
         )
-        lines += [f"note: {n}" for n in notes]
+        lines += [f"note: {n}" for n in stream.notes]
     if can_out is not None:
         n = cantrace.write_trace(reader, can_out)
         lines.append(f"{can_out}: {n} CAN frames")
