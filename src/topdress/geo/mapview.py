@@ -224,15 +224,15 @@ def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
         if e.kind == "stop" and e.lat is not None and e.lon is not None
     ]
     # Read a chunk at a time: only the track's coordinates and the swaths are kept.
-    track = [shapely.get_coordinates(g) for _, g in stream.point_batches()]
+    track = np.concatenate([shapely.get_coordinates(g) for _, g in stream.point_batches()])
     keep = ("AppliedRate", "RpmUp", "Zone", "AppliedKg", "AREA", "DURATION")
     got = [({n: c[n] for n in keep}, g) for c, g in stream.swath_batches()]
     swaths = {n: np.concatenate([c[n] for c, _ in got]) for n in keep} if got else {}
     geoms = np.concatenate([g for _, g in got]) if got else np.empty(0, object)
-    del got
+    n_swaths, thin = stream.swaths, stream.rows >= THIN_FROM_ROWS
+    del got, stream  # the day's columns: not needed for drawing
     where = np.array(stops, dtype=float).reshape(-1, 2)
-    thin = stream.rows >= THIN_FROM_ROWS
-    layers = _layers(np.concatenate(track), geoms, swaths, classes, where, thin)
+    layers = _layers(track, geoms, swaths, classes, where, thin)
     layers["boundary"], why = boundary_rings(reader)
     suffix = out.suffix.lower()
     try:
@@ -245,7 +245,7 @@ def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
     except OSError as exc:
         raise MapError(f"cannot write {out}: {exc}") from exc
     return (
-        f"{out}: {stream.swaths} swaths"
+        f"{out}: {n_swaths} swaths"
         + (f" (drawn as {len(layers['swaths'])} polygons)" if thin else "")
         + f" in {len(layers['classes'])} classes, "
         f"{len(layers['stops'])} stops" + (f"; {why}" if why else "")
