@@ -216,6 +216,12 @@ class AsAppliedStream:
                 shapely.points(d.lon[sl][has], d.lat[sl][has]),
             )
 
+    def positions(self) -> FloatArray:
+        """The points' coordinates (lon, lat), as `point_batches` gives them, without reading
+        the rows again."""
+        d = self._day
+        return np.column_stack([d.lon[d.has], d.lat[d.has]])
+
     def swath_batches(self) -> Iterator[Batch]:
         """The swaths, up to SWATH_BATCH runs at a time."""
         if self.utm is None:
@@ -487,7 +493,9 @@ class _SwathMaker:
         breaks = np.zeros(n, dtype=bool)  # a swath ends where the zone or prescription changes
         breaks[1:] = (d.zone[1:] != d.zone[:-1]) | (presc[1:] != presc[:-1])
         self.starts, self.ends = _runs(self.moving, breaks, step)
-        self.tangent = _tangents(self.sx, self.sy, step, link, d.path_heading)
+        # for the path's direction, made a batch at a time (`_tangents`)
+        self.s = np.concatenate([[0.0], np.cumsum(step[:-1])])
+        self.comp = np.concatenate([[0], np.cumsum(~link[:-1])])
         self.metered = has & self.work & (d.dt > 0)
         self.cover = _Cover()
         self.repaired = 0
@@ -496,14 +504,13 @@ class _SwathMaker:
     def batches(self, size: int) -> Iterator[_Swaths]:
         pending: list[tuple[int, int, Any]] = []  # (first row, last row, polygon)
         for i0 in range(0, self.starts.size, size):
-            for a, b in zip(
-                self.starts[i0 : i0 + size].tolist(),
-                self.ends[i0 : i0 + size].tolist(),
-                strict=True,
-            ):
-                poly, fixed = _strip(
-                    self.sx, self.sy, np.arange(a, b + 1), self.width_m, self.tangent
-                )
+            starts = self.starts[i0 : i0 + size].tolist()
+            ends = self.ends[i0 : i0 + size].tolist()
+            lo, hi = starts[0], ends[-1] + 2  # a swath's edge runs to the row after its last
+            tangent = _tangents(self.sx, self.sy, self.s, self.comp, self.d.path_heading, lo, hi)
+            for a, b in zip(starts, ends, strict=True):
+                rows = np.arange(a, b + 1)
+                poly, fixed = _strip(self.sx, self.sy, rows, self.width_m, tangent, lo)
                 self.repaired += fixed
                 if poly is not None:
                     pending.append((a, b, poly))
@@ -708,13 +715,14 @@ def _strip(
     rows: npt.NDArray[np.intp],
     width_m: float,
     tangent: tuple[FloatArray, FloatArray],
+    first: int = 0,
 ) -> tuple[Any, int]:
     """The swath over intervals `rows` (consecutive): the working width across the path's
     direction at each of its rows and at the row after the last (so that swaths along a pass
     share their ends). Returns (polygon or None when degenerate, 1 if it was repaired)."""
     v = np.append(rows, rows[-1] + 1)
     x, y = sx[v], sy[v]
-    tx, ty = tangent[0][v], tangent[1][v]
+    tx, ty = tangent[0][v - first], tangent[1][v - first]  # `tangent` from row `first` on
     half = width_m / 2.0
     rx, ry = ty * half, -tx * half  # to the right of the direction of travel
     right = _no_backstep(np.column_stack([x + rx, y + ry]), tx, ty)
@@ -732,24 +740,26 @@ def _strip(
 def _tangents(
     sx: FloatArray,
     sy: FloatArray,
-    step: FloatArray,
-    link: npt.NDArray[np.bool_],
+    s: FloatArray,
+    comp: npt.NDArray[np.intp],
     heading_deg: FloatArray,
+    lo: int,
+    hi: int,
 ) -> tuple[FloatArray, FloatArray]:
-    """The path's direction at each row: the chord from TANGENT_M of path behind to as far
-    ahead (rows a few centimetres apart would turn a centimetre of jitter into degrees),
-    within the stretch of linked rows; the heading where the path has not moved."""
+    """The path's direction at rows lo..hi (`s`: the path length at each row, `comp`: its
+    stretch of linked rows): the chord from TANGENT_M of path behind to as far ahead (rows a
+    few centimetres apart would turn a centimetre of jitter into degrees), within the stretch;
+    the heading where the path has not moved."""
     n = sx.size
-    s = np.concatenate([[0.0], np.cumsum(step[:-1])])
-    comp = np.concatenate([[0], np.cumsum(~link[:-1])])
-    starts = np.searchsorted(comp, comp, side="left")
-    ends = np.searchsorted(comp, comp, side="right") - 1
-    ahead = np.clip(np.searchsorted(s, s + TANGENT_M, side="left"), starts, ends)
-    behind = np.clip(np.searchsorted(s, s - TANGENT_M, side="right") - 1, starts, ends)
+    s_here, comp_here = s[lo:hi], comp[lo:hi]
+    starts = np.searchsorted(comp, comp_here, side="left")
+    ends = np.searchsorted(comp, comp_here, side="right") - 1
+    ahead = np.clip(np.searchsorted(s, s_here + TANGENT_M, side="left"), starts, ends)
+    behind = np.clip(np.searchsorted(s, s_here - TANGENT_M, side="right") - 1, starts, ends)
     ahead = np.minimum(ahead, n - 1)
     tx, ty = sx[ahead] - sx[behind], sy[ahead] - sy[behind]
     norm = np.hypot(tx, ty)
-    h = np.radians(heading_deg)
+    h = np.radians(heading_deg[lo:hi])
     flat = ~(norm > 1e-3)
     tx = np.where(flat, np.nan_to_num(np.sin(h)), tx / np.where(flat, 1.0, norm))
     ty = np.where(flat, np.nan_to_num(np.cos(h)), ty / np.where(flat, 1.0, norm))

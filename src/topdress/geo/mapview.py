@@ -224,7 +224,7 @@ def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
         if e.kind == "stop" and e.lat is not None and e.lon is not None
     ]
     # Read a chunk at a time: only the track's coordinates and the swaths are kept.
-    track = np.concatenate([shapely.get_coordinates(g) for _, g in stream.point_batches()])
+    track = stream.positions()
     keep = ("AppliedRate", "RpmUp", "Zone", "AppliedKg", "AREA", "DURATION")
     got = [({n: c[n] for n in keep}, g) for c, g in stream.swath_batches()]
     swaths = {n: np.concatenate([c[n] for c, _ in got]) for n in keep} if got else {}
