@@ -30,6 +30,8 @@ from __future__ import annotations
 import bisect
 import csv
 import logging
+import math
+from array import array
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final, TextIO
@@ -187,8 +189,19 @@ def replay(
     time order (a stable sort: equal times keep their order)."""
     if not events:
         return []
-    ordered = sorted(events, key=lambda e: e.t)
+    # An exported file is in time order already: no sorted copy of a long day (its keys alone
+    # are 64 MB for 12 h).
+    ordered = events if _in_time_order(events) else sorted(events, key=lambda e: e.t)
     return _Replayer(ordered, cfg, speed_mode, stats or ReplayStats()).run()
+
+
+def _in_time_order(events: Sequence[Event]) -> bool:
+    prev = -math.inf
+    for e in events:
+        if e.t < prev:
+            return False
+        prev = e.t
+    return True
 
 
 class _Replayer:
@@ -229,7 +242,7 @@ class _Replayer:
     def _cut_gaps(self) -> None:
         """`times`: the events' times on the replay clock, each pause cut to MAX_IDLE_S;
         `cuts`: (replay time, offset to the events' clock from there on)."""
-        self.times: list[float] = []
+        self.times = array("d")  # 8 bytes an event: a long day has millions
         self.cuts: list[tuple[float, float]] = [(self.t0, 0.0)]
         offset, prev = 0.0, self.t0
         for e in self.events:
@@ -256,7 +269,10 @@ class _Replayer:
         step, discard = ecu.step_raw, ecu.tx_discard
         updates = ecu.wheel_updates
         end_us = _us(self.times[-1], self.t0)
-        due_us = [_us(t, self.t0) for t in self.times]
+        try:
+            due_us: Sequence[int] = array("q", (_us(t, self.t0) for t in self.times))
+        except OverflowError:  # a bogus time far out: Python integers
+            due_us = [_us(t, self.t0) for t in self.times]
         wheel = self.wheel.walker()
         events, n_events = self.events, len(self.events)
         next_event = 0
