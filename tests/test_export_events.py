@@ -218,3 +218,84 @@ def test_the_fast_json_is_what_json_dumps_gives(event: Event) -> None:
     from topdress.log.events import _to_json_slow
 
     assert to_json(event) == _to_json_slow(event)
+
+
+def _lines_in_every_form() -> list[str]:
+    """Lines in `to_json`'s form and near misses: each must parse as the full parser parses
+    it, or fail with its reason."""
+    written = [
+        to_json(e)
+        for e in (
+            NmeaEvent(1000.25, RMC + "\r\n"),
+            NmeaEvent(-3.5e-7, "$GN\u00e9\u2028"),
+            CropEvent(1e22, CROP + "\r\n"),
+            CropEvent(0.0, ""),
+            WheelEvent(7.0, 0),
+            WheelEvent(7.1, 2**40),
+            CanEvent(1.0, 0x1FFFFFFF, bytes(range(8)), "rx"),
+            CanEvent(2.0, 0, b"", "tx"),
+            CanEvent(3.0, 0x185C6465, b"\x0a", None),
+        )
+    ]
+    near = [
+        '{"t":1e999,"crop":"x"}',  # not finite
+        '{"t":01.5,"crop":"x"}',  # not JSON (leading zero)
+        '{"t":1,"wheel_count":' + "9" * 40 + "}",  # long integers: the full parser's
+        '{"t":1,"can":{"id":536870912,"data":"00","dir":"rx"}}',  # id > 29 bits
+        '{"t":1,"can":{"id":1,"data":"000000000000000000","dir":"rx"}}',  # 9 bytes
+        '{"t":1,"can":{"id":1,"data":"0A","dir":"rx"}}',  # upper case: valid, full parser
+        '{"t":1,"can":{"id":1,"data":"0","dir":"rx"}}',  # odd hex
+        '{"t":1,"nmea":"a\\tb"}',  # another escape: full parser
+        '{"t":1,"nmea":"a\\"b"}',
+        '{"t":1,"nmea":"a\\\\rb"}',  # an escaped backslash before r
+        '{"t":1,"nmea":"a\tb"}',  # a raw control character: not JSON
+        '{"t":1,"crop":"x"} ',
+        '{"t":1,"crop":"x"}\n',
+        '{"t":1,"crop":"x"}\n\n',
+        '{"t":1,"crop":"x","crop":"y"}',
+        '{"t":1,"can":{"id":1,"data":"00","dir":"up"}}',
+        '{"t":-0,"wheel_count":3}',
+        '{"t":2E+3,"wheel_count":3}',
+    ]
+    return written + near
+
+
+def test_the_fast_reading_is_what_the_full_parser_gives() -> None:
+    from topdress.log.events import _FAST, _parse_json
+
+    lines = _lines_in_every_form()
+    assert sum(_FAST.match(line) is not None for line in lines) >= 14  # the fast path is taken
+    for line in lines:
+        try:
+            expected: Event | str = _parse_json(line)
+        except ValueError as exc:
+            expected = f"error: {exc}"
+        try:
+            got: Event | str = parse(line)
+        except ValueError as exc:
+            got = f"error: {exc}"
+        assert got == expected, line
+        assert type(got) is type(expected)
+        if isinstance(got, Event.__args__):  # type: ignore[attr-defined]
+            assert type(got.t) is float
+
+
+def test_lines_dropped_unbuilt_are_those_the_predicate_drops() -> None:
+    from topdress.log.replay import DROP, needed
+
+    lag = protocol.DEFAULT_IDS.gnss_lag
+    events = [
+        NmeaEvent(1.0, RMC + "\r\n"),
+        CropEvent(1.1, CROP),
+        CanEvent(1.2, protocol.DEFAULT_IDS.status, b"\x00" * 8, "rx"),
+        CanEvent(1.3, lag, b"\x01" * 8, "rx"),
+        CanEvent(1.4, protocol.DEFAULT_IDS.command, b"\x02" * 8, "tx"),
+        CanEvent(1.5, protocol.DEFAULT_IDS.status, b"\x03", None),
+        WheelEvent(1.6, 12),
+    ]
+    lines = [to_json(e) for e in events] + ['{"t": 2.0, "crop": "spaced"}', '{"t":1e999,"crop":""}']
+    plain = read_lines(lines, needed)
+    dropped = read_lines(lines, needed, DROP)
+    assert dropped.events == plain.events == [e for e in events if needed(e)]
+    assert dropped.parsed == plain.parsed == len(events) + 1
+    assert dropped.bad == plain.bad and [n for n, _ in plain.bad] == [9]

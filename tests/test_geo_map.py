@@ -90,3 +90,42 @@ def test_the_png_holds_its_legend_and_labels_whole(tmp_path: Path) -> None:
     border = np.concatenate([img[0], img[-1], img[:, 0], img[:, -1]])
     # nothing drawn touches the edge: a cut legend, title or axis label would
     assert np.all(border > 0.99)
+
+
+def test_a_long_sessions_map_is_thinned_and_covers_the_same_ground(
+    session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import shapely
+
+    from topdress.geo import mapview
+
+    def drawn(name: str) -> dict[str, object]:
+        html = tmp_path / name
+        assert main(["log", "map", str(session), "--out", str(html)]) == 0
+        text = html.read_text(encoding="utf-8")
+        data: dict[str, object] = json.loads(text.split("const L_DATA = ", 1)[1].split(";\n")[0])
+        return data
+
+    full = drawn("full.html")
+    monkeypatch.setattr(mapview, "THIN_FROM_ROWS", 100)  # the session has 450 rows
+    thin = drawn("thin.html")
+    assert thin["classes"] == full["classes"] and thin["stops"] == full["stops"]
+    swaths_full, swaths_thin = full["swaths"], thin["swaths"]
+    assert isinstance(swaths_full, list) and isinstance(swaths_thin, list)
+    assert len(swaths_thin) * 4 < len(swaths_full)  # a pass is a few polygons
+
+    def ground(feats: list[dict[str, object]]) -> float:
+        return float(shapely.union_all([shapely.Polygon(f["ring"]) for f in feats]).area)
+
+    assert ground(swaths_thin) == pytest.approx(ground(swaths_full), rel=0.01)
+    classes = thin["classes"]
+    assert isinstance(classes, list)
+    for f in swaths_thin:  # a joined run's dose stays in its class
+        c = classes[f["cls"]]
+        lo = -np.inf if c["lo"] is None else c["lo"]
+        hi = np.inf if c["hi"] is None else c["hi"]
+        assert lo - 0.01 <= f["value"] < hi + 0.01
+    track_full = shapely.LineString(full["track"])
+    track_thin = shapely.LineString(thin["track"])
+    assert len(thin["track"]) * 3 < len(full["track"])  # type: ignore[arg-type]
+    assert shapely.hausdorff_distance(track_full, track_thin) <= mapview.TRACK_TOLERANCE_DEG

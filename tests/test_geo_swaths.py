@@ -203,3 +203,81 @@ def test_overlap_from_tiles_equals_the_union_of_every_earlier_swath() -> None:
     assert got[150:] == pytest.approx(np.full(50, 100.0), abs=1e-9)
     assert got == pytest.approx(want, abs=1e-9)
     assert (got[:150] > 1.0).sum() > 20  # the random swaths do overlap
+
+
+def _same(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> None:
+    assert list(a) == list(b)
+    for name in a:
+        x, y = np.asarray(a[name]), np.asarray(b[name])
+        if x.dtype.kind == "f":
+            assert np.array_equal(x, y, equal_nan=True), name
+        else:
+            assert np.array_equal(x, y), name
+
+
+def test_streamed_in_small_chunks_is_the_whole_session(session: Path) -> None:
+    # Chunks of 37 state rows and batches of 3 runs: swaths cross chunk edges, the path's
+    # smoothing, the runs, the rows metered standing and the covered ground carry over.
+    with SessionReader(session) as r:
+        whole = asapplied.build(r, chunk_rows=10**9, swath_batch=10**9)
+        small = asapplied.build(r, chunk_rows=37, swath_batch=3)
+        stream = asapplied.AsAppliedStream(r, chunk_rows=37, swath_batch=3)
+        points = [g.size for _, g in stream.point_batches()]
+        swaths = [g.size for _, g in stream.swath_batches()]
+    assert whole.swath_geom.size > 60 and whole.notes == small.notes
+    _same(whole.points, small.points)
+    _same(whole.swaths, small.swaths)
+    assert float(np.sum(small.swaths["Overlap"])) > 0  # the turns overlap the passes
+    for a, b in ((whole.point_geom, small.point_geom), (whole.swath_geom, small.swath_geom)):
+        xy_a, xy_b = shapely.get_coordinates(a), shapely.get_coordinates(b)
+        assert xy_a.shape == xy_b.shape and np.max(np.abs(xy_a - xy_b)) <= 1e-9
+    # bounded: no batch holds more than its chunk, and every feature comes once
+    assert max(points) <= 37 and len(points) >= 20 and sum(points) == whole.point_geom.size
+    assert max(swaths) <= 3 and sum(swaths) == whole.swath_geom.size
+    assert stream.points == sum(points) and stream.swaths == sum(swaths)
+    assert stream.applied_kg == pytest.approx(whole.applied_kg, rel=1e-12)
+    with pytest.raises(ValueError, match="at least 1"):
+        asapplied.AsAppliedStream(SessionReader(session), chunk_rows=0)
+
+
+@pytest.mark.parametrize("fmt", ["gpkg", "shp", "geojson"])
+def test_files_appended_batch_by_batch_are_those_written_at_once(
+    session: Path, tmp_path: Path, fmt: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def export(name: str) -> dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]:
+        out = tmp_path / name / f"f.{fmt}"
+        out.parent.mkdir()
+        assert main(["log", "export", str(session), "--out", str(out), "--format", fmt]) == 0
+        layers = {"points": "as_applied_points", "swaths": "as_applied_swaths"}
+        if fmt == "gpkg":
+            return {k: _swaths(out, layer) for k, layer in layers.items()}
+        return {k: _swaths(out.with_name(f"f_{k}.{fmt}")) for k in layers}
+
+    once = export("once")
+    monkeypatch.setattr(asapplied, "CHUNK_ROWS", 50)
+    monkeypatch.setattr(asapplied, "SWATH_BATCH", 4)
+    batched = export("batched")
+    for kind in ("points", "swaths"):
+        (g1, c1), (g2, c2) = once[kind], batched[kind]
+        assert g1.size == g2.size > 60
+        _same(c1, c2)
+        assert np.array_equal(shapely.get_coordinates(g1), shapely.get_coordinates(g2))
+
+
+def test_the_smoother_solved_in_blocks_is_solved_whole(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(5)
+    n = 1000
+    x = np.cumsum(rng.uniform(0.0, 0.3, n)) + rng.normal(0.0, 0.3, n)
+    y = rng.normal(0.0, 0.3, n)
+    x[400:410] = np.nan  # no position
+    heading = np.full(n, 90.0) + rng.normal(0.0, 2.0, n)
+    heading[:5] = np.nan  # not known before the machine moves
+    link = np.ones(n, dtype=bool)
+    link[-1] = link[399:410] = False
+    step = rng.uniform(0.0, 0.3, n)
+    whole = smooth_path(x, y, step, heading, link)
+    monkeypatch.setattr(asapplied, "_BLOCK", 7)
+    blocks = smooth_path(x, y, step, heading, link)
+    for a, b in zip(whole, blocks, strict=True):
+        assert np.array_equal(a, b, equal_nan=True)
+    assert np.isnan(whole[0][400]) and np.isfinite(whole[0]).sum() == n - 10

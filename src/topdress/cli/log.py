@@ -231,10 +231,10 @@ def _salvage(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from topdress.config import default_config, load_config
     from topdress.log.events import read_file
-    from topdress.log.replay import MAX_IDLE_S, ReplayStats, needed, replay, write_csv
+    from topdress.log.replay import DROP, MAX_IDLE_S, ReplayStats, needed, replay, write_csv
 
     cfg = load_config(args.config) if args.config is not None else default_config()
-    read = read_file(args.events, needed)
+    read = read_file(args.events, needed, DROP)
     for number, reason in read.bad:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
     stats = ReplayStats()

@@ -22,18 +22,21 @@ def export_maps(
     Shapefile for farm management software (numeric attributes only)."""
     lines: list[str] = []
     if out is not None:
-        data = asapplied.build(reader)
-        asapplied.require_points(data)
+        # written a chunk of the session at a time
+        stream = asapplied.AsAppliedStream(reader)
+        asapplied.require_any_point(stream)
         if fmt == "isoxml":
-            files = isoxml.write_taskdata(data, out, reader.path.stem)
+            files = isoxml.write_taskdata(stream, out, reader.path.stem)
         else:
-            files = vector.write(data, out, fmt, crs, fmis)
+            files = vector.write(stream, out, fmt, crs, fmis)
         lines += [str(f) for f in files]
         lines.append(
-            f"{data.point_geom.size} points, {data.swath_geom.size} swaths, "
-            f"{data.applied_kg:.2f} kg applied (of {data.rows} state rows)"
+            f"{stream.points} points, "
+            + ("" if fmt == "isoxml" else f"{stream.swaths} swaths, ")  # a time log: points
+            + f"{stream.applied_kg:.2f} kg "
+            f"applied (of {stream.rows} state rows)"
         )
-        lines += [f"note: {n}" for n in data.notes]
+        lines += [f"note: {n}" for n in stream.notes]
     if can_out is not None:
         n = cantrace.write_trace(reader, can_out)
         lines.append(f"{can_out}: {n} CAN frames")

@@ -51,7 +51,7 @@ import shapely
 
 from topdress import __version__
 from topdress.errors import MapError
-from topdress.geo.asapplied import AsApplied
+from topdress.geo.asapplied import AsApplied, AsAppliedStream
 
 DDI_SETPOINT_MASS_PER_AREA: Final = 6
 DDI_ACTUAL_MASS_PER_AREA: Final = 7
@@ -140,16 +140,42 @@ def _iso_time(utc: float) -> str:
     return datetime.fromtimestamp(utc, UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
-def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Path]:
-    """TASKDATA.XML, TLG00001.XML and TLG00001.BIN in `directory` (made if missing)."""
-    p = data.points
-    if not p or data.point_geom.size == 0:
-        raise MapError(f"{data.path}: no state row has a position: no time log to write")
+def write_taskdata(
+    data: AsApplied | AsAppliedStream, directory: Path, task_name: str
+) -> list[Path]:
+    """TASKDATA.XML, TLG00001.XML and TLG00001.BIN in `directory` (made if missing); the time
+    log is written a batch of points at a time."""
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise MapError(f"cannot make {directory}: {exc}") from exc
-    utc = _utc_seconds(p["IsoTime"])
+    files = [directory / "TASKDATA.XML", directory / f"{TLG}.XML", directory / f"{TLG}.BIN"]
+    dlvs = _dlvs()
+    m = data.machine
+    layer_kg = [0.0, 0.0]
+    first_utc: float | None = None
+    last_utc = 0.0
+    try:
+        with files[2].open("wb") as binary:
+            for p, geom in data.point_batches():
+                utc = _utc_seconds(p["IsoTime"])
+                first_utc = float(utc[0]) if first_utc is None else first_utc
+                last_utc = float(utc[-1])
+                kg = np.asarray(p["AppliedKg"], float)
+                rpm = (np.asarray(p["RpmUp"], float), np.asarray(p["RpmLo"], float))
+                mass = rpm[0] * m.kg_per_rev_upper + rpm[1] * m.kg_per_rev_lower
+                for i, kg_rev in enumerate((m.kg_per_rev_upper, m.kg_per_rev_lower)):
+                    # split the row's kg between the layers by their share of the metered mass
+                    share = np.divide(
+                        rpm[i] * kg_rev, mass, out=np.zeros_like(mass), where=rpm[0] + rpm[1] > 0
+                    )
+                    layer_kg[i] += float(np.sum(kg * share))
+                binary.write(_records(p, shapely.get_coordinates(geom), utc, dlvs))
+    except OSError as exc:
+        raise MapError(f"cannot write the task data in {directory}: {exc}") from exc
+    if first_utc is None:
+        files[2].unlink(missing_ok=True)
+        raise MapError(f"{data.path}: no state row has a position: no time log to write")
     root = ET.Element(
         "ISO11783_TaskData",
         VersionMajor="4",
@@ -162,30 +188,13 @@ def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Pat
     )
     root.append(_device())
     tsk = ET.SubElement(root, "TSK", A="TSK1", B=task_name, G="4")
-    tim = ET.SubElement(tsk, "TIM", A=_iso_time(utc[0]), B=_iso_time(utc[-1]), D="4")
-    m = data.machine
-    kg = p["AppliedKg"]
-    rpm = (np.asarray(p["RpmUp"], float), np.asarray(p["RpmLo"], float))
-    both = rpm[0] + rpm[1]
-    for det, layer_rpm, kg_rev in (
-        ("DET2", rpm[0], m.kg_per_rev_upper),
-        ("DET3", rpm[1], m.kg_per_rev_lower),
-    ):
-        # split the row's kg between the layers by their share of the metered mass
-        share = np.divide(
-            layer_rpm * kg_rev,
-            rpm[0] * m.kg_per_rev_upper + rpm[1] * m.kg_per_rev_lower,
-            out=np.zeros_like(both),
-            where=both > 0,
-        )
-        layer_kg = float(np.sum(np.asarray(kg, float) * share))
+    tim = ET.SubElement(tsk, "TIM", A=_iso_time(first_utc), B=_iso_time(last_utc), D="4")
+    for det, kg_total in zip(("DET2", "DET3"), layer_kg, strict=True):
         # DDI 81 at its resolution (whole kg) for the software that reads only it; DDI 352
         # the same total in g
-        ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS), B=str(round(layer_kg)), C=det)
-        ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS_G), B=str(round(layer_kg * 1000.0)), C=det)
+        ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS), B=str(round(kg_total)), C=det)
+        ET.SubElement(tim, "DLV", A=_hex(DDI_TOTAL_MASS_G), B=str(round(kg_total * 1000.0)), C=det)
     ET.SubElement(tsk, "TLG", A=TLG, C="1")  # C 1: binary time log
-    files = [directory / "TASKDATA.XML", directory / f"{TLG}.XML", directory / f"{TLG}.BIN"]
-    dlvs = _dlvs()
     header = ET.Element("TIM", A="", D="4")
     ET.SubElement(header, "PTN", A="", B="", D="")
     for d in dlvs:
@@ -193,7 +202,6 @@ def write_taskdata(data: AsApplied, directory: Path, task_name: str) -> list[Pat
     try:
         _write_xml(root, files[0])
         _write_xml(header, files[1])
-        files[2].write_bytes(_records(data, utc, dlvs))
     except OSError as exc:
         raise MapError(f"cannot write the task data in {directory}: {exc}") from exc
     return files
@@ -210,9 +218,12 @@ def _utc_seconds(iso: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]:
     return ms.astype(np.int64).astype(float) / 1000.0
 
 
-def _records(data: AsApplied, utc: npt.NDArray[np.float64], dlvs: list[_Dlv]) -> bytes:
-    p = data.points
-    coords = shapely.get_coordinates(data.point_geom)
+def _records(
+    p: dict[str, npt.NDArray[np.generic]],
+    coords: npt.NDArray[np.float64],
+    utc: npt.NDArray[np.float64],
+    dlvs: list[_Dlv],
+) -> bytes:
     days_since = np.floor((utc - EPOCH_1980.timestamp()) / 86400.0)
     ms_of_day = np.round((utc - EPOCH_1980.timestamp() - days_since * 86400.0) * 1000.0)
     speed_mm_s = np.round(np.asarray(p["SPEED"], float) / 3.6 * 1000.0)

@@ -21,7 +21,7 @@ import numpy.typing as npt
 import shapely
 
 from topdress.errors import MapError
-from topdress.geo.asapplied import AsApplied, build, require_points
+from topdress.geo.asapplied import AsApplied, AsAppliedStream, require_any_point
 from topdress.geo.boundary import load_boundary
 from topdress.log.session import SessionReader, session_config
 from topdress.log.summary import summarise
@@ -32,6 +32,14 @@ ZERO_COLOUR: Final = "#d7301f"  # nothing applied
 # The paper's metering-speed classes (r/min, Fig. 11 style): stopped, then 10 r/min steps.
 RPM_BREAKS: Final = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0)
 STOP_KMH: Final = 0.5
+# A long session's map is thinned (`_thinned`): from THIN_FROM_ROWS state rows (half an hour at
+# 10 Hz) on, neighbouring swaths of a class are joined (MERGE_MAX at most, their shared edges
+# taken out to MERGE_TOLERANCE_DEG, about 5 mm) and the track keeps the points that turn it
+# by more than TRACK_TOLERANCE_DEG (about 0.1 m).
+THIN_FROM_ROWS: Final = 18_000
+MERGE_MAX: Final = 50
+MERGE_TOLERANCE_DEG: Final = 5e-8
+TRACK_TOLERANCE_DEG: Final = 1e-6
 
 
 @dataclass(frozen=True)
@@ -85,18 +93,6 @@ def map_layers(
     """swaths (each with its class), track, stops, classes: lon/lat GeoJSON-like dicts.
     `stops`: (lon, lat) of each stop (`log summary`'s, which `render` passes); None: where the
     exported speed falls below 0.5 km/h."""
-    if classes == "rpm":
-        value = np.asarray(data.swaths.get("RpmUp", np.zeros(0)), float)
-        cls = rpm_classes()
-    else:
-        value = np.asarray(data.swaths.get("AppliedRate", np.zeros(0)), float)
-        cls = rate_classes(value)
-    feats = []
-    rings = [shapely.get_coordinates(g).round(8).tolist() for g in data.swath_geom]
-    zone = data.swaths.get("Zone", np.array([""] * len(rings), dtype=object))
-    for ring, v, z in zip(rings, value, zone, strict=True):
-        k = next((i for i, c in enumerate(cls) if c.lo <= v < c.hi), 0)
-        feats.append({"ring": ring, "value": round(float(v), 2), "cls": k, "zone": str(z)})
     pts = shapely.get_coordinates(data.point_geom)
     if stops is None:
         speed = np.asarray(data.points.get("SPEED", np.zeros(0)), float)
@@ -104,13 +100,95 @@ def map_layers(
         where = pts[np.nonzero((speed < STOP_KMH) & moving_before)[0]]
     else:
         where = np.array(stops, dtype=float).reshape(-1, 2)
+    return _layers(pts, data.swath_geom, data.swaths, classes, where, thin=False)
+
+
+def _layers(
+    track: npt.NDArray[np.float64],
+    swath_geom: npt.NDArray[np.object_],
+    swaths: dict[str, npt.NDArray[np.generic]],
+    classes: str,
+    stops: npt.NDArray[np.float64],
+    thin: bool,
+) -> dict[str, Any]:
+    """The map's layers; `thin`: a long session's track without the points on a straight
+    line, and neighbouring swaths of one class drawn as one polygon (`_thinned`)."""
+    if classes == "rpm":
+        value = np.asarray(swaths.get("RpmUp", np.zeros(0)), float)
+        cls = rpm_classes()
+    else:
+        value = np.asarray(swaths.get("AppliedRate", np.zeros(0)), float)
+        cls = rate_classes(value)
+    zone = np.asarray(swaths.get("Zone", np.array([""] * swath_geom.size, dtype=object)))
+    k = np.zeros(value.size, dtype=np.intp)
+    for i in range(len(cls) - 1, -1, -1):  # the first class that holds a value, as before
+        k[(cls[i].lo <= value) & (value < cls[i].hi)] = i
+    geoms = swath_geom
+    if thin and geoms.size > 1:
+        geoms, value, k, zone = _thinned(geoms, swaths, classes, value, k, zone)
+        if track.shape[0] > 2:
+            line = shapely.simplify(
+                shapely.LineString(track), TRACK_TOLERANCE_DEG, preserve_topology=False
+            )
+            track = shapely.get_coordinates(line)
+    feats = []
+    for g, v, c, z in zip(geoms, value.tolist(), k.tolist(), zone.tolist(), strict=True):
+        ring = shapely.get_coordinates(g).round(8).tolist()
+        feats.append({"ring": ring, "value": round(v, 2), "cls": c, "zone": str(z)})
     return {
         "classes": [c.__dict__ | {"lo": _finite(c.lo), "hi": _finite(c.hi)} for c in cls],
         "swaths": feats,
-        "track": pts.round(8).tolist(),
-        "stops": where.round(8).tolist(),
+        "track": track.round(8).tolist(),
+        "stops": stops.round(8).tolist(),
         "unit": "r/min" if classes == "rpm" else "kg/ha",
     }
+
+
+def _thinned(
+    geoms: npt.NDArray[np.object_],
+    swaths: dict[str, npt.NDArray[np.generic]],
+    classes: str,
+    value: npt.NDArray[np.float64],
+    k: npt.NDArray[np.intp],
+    zone: npt.NDArray[np.generic],
+) -> tuple[
+    npt.NDArray[np.object_], npt.NDArray[np.float64], npt.NDArray[np.intp], npt.NDArray[np.generic]
+]:
+    """Runs of neighbouring swaths (one after the other, touching) in one class and zone, at
+    most MERGE_MAX of them, as one polygon: its value the run's dose (kg over area), or its
+    metering speed over time. A pass is a few polygons instead of one per metre."""
+    same = (k[1:] == k[:-1]) & (zone[1:] == zone[:-1]) & shapely.intersects(geoms[:-1], geoms[1:])
+    starts = [0]
+    for i, joined in enumerate(same.tolist(), start=1):
+        if not joined or i - starts[-1] >= MERGE_MAX:
+            starts.append(i)
+    bounds = np.append(starts, geoms.size)
+    if classes == "rpm":
+        num = np.asarray(swaths["RpmUp"], float) * np.asarray(swaths["DURATION"], float)
+        den = np.asarray(swaths["DURATION"], float)
+    else:
+        num, den = np.asarray(swaths["AppliedKg"], float), np.asarray(swaths["AREA"], float)
+    out_g, out_v, out_k, out_z = [], [], [], []
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+        if b - a == 1:
+            parts = [geoms[a]]
+            v = float(value[a])
+        else:
+            merged = shapely.simplify(shapely.union_all(geoms[a:b]), MERGE_TOLERANCE_DEG)
+            parts = [shapely.Polygon(p.exterior) for p in shapely.get_parts(merged) if p.area > 0]
+            total = float(np.sum(den[a:b]))
+            v = float(np.sum(num[a:b])) / total if total > 0 else float(value[a])
+        for part in parts:
+            out_g.append(part)
+            out_v.append(v)
+            out_k.append(int(k[a]))
+            out_z.append(zone[a])
+    return (
+        np.array(out_g, dtype=object),
+        np.array(out_v, dtype=float),
+        np.array(out_k, dtype=np.intp),
+        np.array(out_z, dtype=object),
+    )
 
 
 def _finite(x: float) -> float | None:
@@ -137,15 +215,24 @@ def boundary_rings(reader: SessionReader) -> tuple[list[list[list[float]]], str 
 
 def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
     """The map of the session to `out` (.png or .html); returns a line saying what was drawn."""
-    data = build(reader)
-    require_points(data)
+    stream = AsAppliedStream(reader)
+    require_any_point(stream)
     # The summary's stops (its speed and threshold): the map shows as many as it counts.
     stops = [
         (e.lon, e.lat)
         for e in summarise(reader).stops
         if e.kind == "stop" and e.lat is not None and e.lon is not None
     ]
-    layers = map_layers(data, classes, stops)
+    # Read a chunk at a time: only the track's coordinates and the swaths are kept.
+    track = stream.positions()
+    keep = ("AppliedRate", "RpmUp", "Zone", "AppliedKg", "AREA", "DURATION")
+    got = [({n: c[n] for n in keep}, g) for c, g in stream.swath_batches()]
+    swaths = {n: np.concatenate([c[n] for c, _ in got]) for n in keep} if got else {}
+    geoms = np.concatenate([g for _, g in got]) if got else np.empty(0, object)
+    n_swaths, thin = stream.swaths, stream.rows >= THIN_FROM_ROWS
+    del got, stream  # the day's columns: not needed for drawing
+    where = np.array(stops, dtype=float).reshape(-1, 2)
+    layers = _layers(track, geoms, swaths, classes, where, thin)
     layers["boundary"], why = boundary_rings(reader)
     suffix = out.suffix.lower()
     try:
@@ -158,7 +245,9 @@ def render(reader: SessionReader, out: Path, classes: str = "rate") -> str:
     except OSError as exc:
         raise MapError(f"cannot write {out}: {exc}") from exc
     return (
-        f"{out}: {len(layers['swaths'])} swaths in {len(layers['classes'])} classes, "
+        f"{out}: {n_swaths} swaths"
+        + (f" (drawn as {len(layers['swaths'])} polygons)" if thin else "")
+        + f" in {len(layers['classes'])} classes, "
         f"{len(layers['stops'])} stops" + (f"; {why}" if why else "")
     )
 

@@ -16,9 +16,10 @@ the speed source and the zone as codes, and the units in `NAME_units.txt` beside
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable, Iterable, Iterator
 from importlib import resources
 from pathlib import Path
-from typing import Final
+from typing import Final, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -29,7 +30,7 @@ from pyogrio.errors import DataSourceError, FieldError, GeometryError
 from pyproj import CRS, Transformer
 
 from topdress.errors import MapError
-from topdress.geo.asapplied import WGS84, AsApplied
+from topdress.geo.asapplied import WGS84, Batch
 
 FORMATS: Final = ("gpkg", "shp", "geojson", "csv")
 DRIVERS: Final = {"gpkg": "GPKG", "shp": "ESRI Shapefile", "geojson": "GeoJSON", "csv": "CSV"}
@@ -118,11 +119,22 @@ def output_paths(path: Path, fmt: str) -> dict[str, Path]:
     }
 
 
-def write(
-    data: AsApplied, path: Path, fmt: str, crs: str = "wgs84", fmis: bool = False
-) -> list[Path]:
-    """Write both layers; returns the files written. `crs` is wgs84 or utm (the field's zone);
-    `fmis`: numeric attributes only, for farm management software (Shapefile only)."""
+class Layers(Protocol):
+    """What is written: the field's UTM zone and the two layers in batches (`AsApplied` gives
+    each in one, `AsAppliedStream` a chunk of the session at a time)."""
+
+    @property
+    def utm(self) -> CRS | None: ...
+
+    def point_batches(self) -> Iterator[Batch]: ...
+
+    def swath_batches(self) -> Iterator[Batch]: ...
+
+
+def write(data: Layers, path: Path, fmt: str, crs: str = "wgs84", fmis: bool = False) -> list[Path]:
+    """Write both layers, a batch at a time; returns the files written. `crs` is wgs84 or utm
+    (the field's zone); `fmis`: numeric attributes only, for farm management software
+    (Shapefile only)."""
     if fmt not in FORMATS:
         raise MapError(f"{path}: unknown format {fmt!r} (one of {', '.join(FORMATS)})")
     if fmis:
@@ -134,12 +146,13 @@ def write(
     for p in set(paths.values()):
         _remove(p, fmt)
     written: list[Path] = []
-    for layer, cols, geom, gtype in (
-        (POINTS_LAYER, data.points, data.point_geom, "Point"),
-        (SWATHS_LAYER, data.swaths, data.swath_geom, "Polygon"),
+    names: list[str] = []
+    for layer, batches, gtype in (
+        (POINTS_LAYER, data.point_batches(), "Point"),
+        (SWATHS_LAYER, data.swath_batches(), "Polygon"),
     ):
         out = paths[layer]
-        _write_layer(out, layer, fmt, cols, _project(geom, target), gtype, target)
+        names += _write_batches(out, layer, fmt, batches, gtype, target)
         if out not in written:
             written.append(out)
     if fmt in ("shp", "geojson"):
@@ -153,9 +166,46 @@ def write(
     if fmt in ("shp", "csv"):
         sidecar = path.with_suffix("") if path.suffix.lower() == SUFFIX[fmt] else path
         sidecar = sidecar.with_name(f"{sidecar.name}_fields.csv")
-        _write_units(sidecar, fmt, [*data.points, *data.swaths])
+        _write_units(sidecar, fmt, names)
         written.append(sidecar)
     return written
+
+
+def _write_batches(
+    path: Path,
+    layer: str,
+    fmt: str,
+    batches: Iterable[Batch],
+    gtype: str,
+    crs: CRS,
+    columns: Callable[[dict[str, npt.NDArray[np.generic]]], dict[str, npt.NDArray[np.generic]]]
+    | None = None,
+) -> list[str]:
+    """A layer written a batch at a time (appended: a long day in bounded memory; CSV cannot
+    append, its batches are joined first); returns its columns' names."""
+    if fmt == "csv":
+        got = list(batches)
+        if got:
+            cols = {k: np.concatenate([c[k] for c, _ in got]) for k in got[0][0]}
+            batches = [(cols, np.concatenate([g for _, g in got]))]
+        else:
+            batches = []
+    names: list[str] = []
+    first = True
+    for cols, geom in batches:
+        if columns is not None:
+            cols = columns(cols)
+        if first:
+            names = list(cols)
+        # a GeoPackage's second layer goes into the file the first made
+        append = not first or (fmt == "gpkg" and layer == SWATHS_LAYER)
+        _write_layer(path, layer, fmt, cols, _project(geom, crs), gtype, crs, append)
+        first = False
+    if first:  # nothing: the layer is made empty
+        cols = {} if columns is None else columns({})
+        append = fmt == "gpkg" and layer == SWATHS_LAYER
+        _write_layer(path, layer, fmt, cols, np.empty(0, object), gtype, crs, append)
+    return names
 
 
 def fmis_columns(
@@ -179,21 +229,26 @@ def fmis_columns(
     return out
 
 
-def _write_fmis(data: AsApplied, path: Path, crs: str) -> list[Path]:
+def _write_fmis(data: Layers, path: Path, crs: str) -> list[Path]:
     target = WGS84 if crs == "wgs84" or data.utm is None else data.utm
     paths = output_paths(path, "shp")
     written: list[Path] = []
     used: list[str] = []
-    for layer, cols, geom, gtype in (
-        (POINTS_LAYER, fmis_columns(data.points, FMIS_POINTS), data.point_geom, "Point"),
-        (SWATHS_LAYER, fmis_columns(data.swaths), data.swath_geom, "Polygon"),
+
+    def points(cols: dict[str, npt.NDArray[np.generic]]) -> dict[str, npt.NDArray[np.generic]]:
+        return dict(list(fmis_columns(cols, FMIS_POINTS).items())[:FMIS_MAX_FIELDS])
+
+    def swaths(cols: dict[str, npt.NDArray[np.generic]]) -> dict[str, npt.NDArray[np.generic]]:
+        return dict(list(fmis_columns(cols).items())[:FMIS_MAX_FIELDS])
+
+    for layer, batches, columns, gtype in (
+        (POINTS_LAYER, data.point_batches(), points, "Point"),
+        (SWATHS_LAYER, data.swath_batches(), swaths, "Polygon"),
     ):
-        cols = dict(list(cols.items())[:FMIS_MAX_FIELDS])
         out = paths[layer]
         _remove(out, "shp")
-        _write_layer(out, layer, "shp", cols, _project(geom, target), gtype, target)
+        used += _write_batches(out, layer, "shp", batches, gtype, target, columns)
         written.append(out)
-        used += list(cols)
     stem = path.with_suffix("") if path.suffix.lower() == ".shp" else path
     units = stem.with_name(f"{stem.name}_units.txt")
     lines = ["field\tunit\tmeaning"]
@@ -228,6 +283,7 @@ def _write_layer(
     geom: npt.NDArray[np.object_],
     gtype: str,
     crs: CRS,
+    append: bool,
 ) -> None:
     names = [SHAPEFILE_NAMES.get(n, n) if fmt == "shp" else n for n in cols]
     # Arrow hands GDAL whole columns (several times faster than feature by feature); NaN is
@@ -248,12 +304,13 @@ def _write_layer(
         pyogrio.write_arrow(
             table,
             str(path),
-            layer=layer,
+            # a Shapefile's layer is its file: appending to another name writes nothing
+            layer=path.stem if fmt == "shp" and append else layer,
             geometry_name="geometry",
             driver=DRIVERS[fmt],
             geometry_type=gtype,
             crs=crs.to_wkt(),
-            append=fmt == "gpkg" and layer == SWATHS_LAYER,
+            append=append,
             layer_options=options,
             encoding="UTF-8" if fmt == "shp" else None,
         )

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,8 +99,52 @@ def _to_json_slow(event: Event) -> str:
     return json.dumps(obj, separators=(",", ":"), ensure_ascii=False)
 
 
+# The exact forms `to_json` writes (a number as Python or JSON writes it, strings with no
+# escapes but the line ends \r \n, lower-case hex of at most 8 bytes): read without json.loads,
+# which is most of the time a long day's replay spends reading. Anything else, valid or not,
+# takes the full parser.
+_NUM: Final = r"-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?"
+_TEXT: Final = r'"([^"\\\x00-\x1f]*(?:\\[rn][^"\\\x00-\x1f]*)*)"'
+_FAST: Final = re.compile(
+    r'\{"t":(' + _NUM + r"),(?:"
+    r'"(nmea|crop)":' + _TEXT + r'|"wheel_count":(0|[1-9][0-9]{0,30})'
+    r'|"can":\{"id":(0|[1-9][0-9]{0,15}),"data":"((?:[0-9a-f]{2}){0,8})"(?:,"dir":"(rx|tx)")?\}'
+    r")\}\n?\Z"
+)
+
+
 def parse(line: str) -> Event:
     """Parse one line; EventLineError says what is wrong."""
+    m = _FAST.match(line)
+    if m is not None:
+        event = _fast(m)
+        if event is not None:
+            return event
+    return _parse_json(line)
+
+
+def _fast(m: re.Match[str]) -> Event | None:
+    """The event of a line in `to_json`'s form; None when the full parser must judge it (a
+    time that is not finite, an identifier out of range)."""
+    t, key, text, wheel, can_id, data, direction = m.groups()
+    tf = float(t)
+    if not math.isfinite(tf):
+        return None
+    if key is not None and "\\" in text:
+        text = text.replace("\\r", "\r").replace("\\n", "\n")
+    if key == "nmea":
+        return NmeaEvent(tf, text)
+    if key == "crop":
+        return CropEvent(tf, text)
+    if wheel is not None:
+        return WheelEvent(tf, int(wheel))
+    ident = int(can_id)
+    if ident > _MAX_CAN_ID:
+        return None
+    return CanEvent(tf, ident, bytes.fromhex(data), direction)
+
+
+def _parse_json(line: str) -> Event:
     try:
         obj = json.loads(line)
     except json.JSONDecodeError as exc:
@@ -157,15 +202,52 @@ class ReadResult:
     parsed: int = 0  # well-formed lines (kept or not)
 
 
-def read_lines(lines: Iterable[str], keep: Callable[[Event], bool] | None = None) -> ReadResult:
+@dataclass(frozen=True)
+class Drop:
+    """Events a reader drops, told from a line in `to_json`'s form before an event is built:
+    crop lines (`crop`), CAN frames from the ECU (`can_rx`) but for the identifiers in
+    `rx_kept`. Lines in any other form are judged by `keep` once parsed."""
+
+    crop: bool = False
+    can_rx: bool = False
+    rx_kept: frozenset[int] = frozenset()
+
+    def drops(self, m: re.Match[str]) -> bool:
+        if not math.isfinite(float(m[1])):
+            return False  # the full parser says what is wrong with it
+        if m[2] == "crop":
+            return self.crop
+        if m[7] == "rx" and self.can_rx:
+            ident = int(m[5])
+            return ident <= _MAX_CAN_ID and ident not in self.rx_kept
+        return False
+
+
+def read_lines(
+    lines: Iterable[str], keep: Callable[[Event], bool] | None = None, drop: Drop | None = None
+) -> ReadResult:
     """Parse NDJSON lines; blank lines are skipped. `keep`: only the events it accepts are
-    kept (every line is still checked), so a reader that needs few holds only those."""
+    kept (every line is still checked), so a reader that needs few holds only those; `drop`:
+    the same told from the line, before an event is built (it must drop only what `keep`
+    drops)."""
     result = ReadResult()
+    match = _FAST.match
     for number, line in enumerate(lines, start=1):
+        m = match(line)
+        if m is not None:
+            if drop is not None and drop.drops(m):
+                result.parsed += 1
+                continue
+            event = _fast(m)
+            if event is not None:
+                result.parsed += 1
+                if keep is None or keep(event):
+                    result.events.append(event)
+                continue
         if not line.strip():
             continue
         try:
-            event = parse(line)
+            event = _parse_json(line)
             result.parsed += 1
             if keep is None or keep(event):
                 result.events.append(event)
@@ -175,11 +257,13 @@ def read_lines(lines: Iterable[str], keep: Callable[[Event], bool] | None = None
     return result
 
 
-def read_file(path: str | Path, keep: Callable[[Event], bool] | None = None) -> ReadResult:
+def read_file(
+    path: str | Path, keep: Callable[[Event], bool] | None = None, drop: Drop | None = None
+) -> ReadResult:
     try:
         # utf-8-sig: a file saved by an editor that puts a byte order mark first
         with open(path, encoding="utf-8-sig", errors="replace") as f:
-            return read_lines(f, keep)
+            return read_lines(f, keep, drop)
     except OSError as exc:
         raise LogError(f"cannot read events {path}: {exc}") from exc
 

@@ -30,6 +30,8 @@ from __future__ import annotations
 import bisect
 import csv
 import logging
+import math
+from array import array
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final, TextIO
@@ -40,7 +42,7 @@ from topdress.ecu import Ecu, EcuParams, EcuState
 from topdress.errors import ProtocolError
 from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
-from topdress.log.events import CanEvent, CropEvent, Event, NmeaEvent, WheelEvent
+from topdress.log.events import CanEvent, CropEvent, Drop, Event, NmeaEvent, WheelEvent
 from topdress.protocol.frames import GNSS_MAX_KMH
 
 _log = logging.getLogger(__name__)
@@ -156,18 +158,21 @@ def needed(event: Event) -> bool:
     return not isinstance(event, CropEvent)
 
 
+#: `needed` told from the lines: what replay drops without building an event.
+DROP: Final = Drop(crop=True, can_rx=True, rx_kept=frozenset({protocol.DEFAULT_IDS.gnss_lag}))
+
+
 def learned_lag_ms(events: Sequence[Event], ids: protocol.FrameIds) -> int | None:
     """The last GNSS lag the ECU reported as learned in recorded EcuGnssLag frames, or None."""
-    learned: int | None = None
-    for e in events:
+    for e in reversed(events):  # the ECU reports it at 10 Hz: the last one is enough
         if isinstance(e, CanEvent) and e.dir != "tx" and e.can_id == ids.gnss_lag:
             try:
                 frame = protocol.decode((e.can_id, e.data), ids)
             except ProtocolError:
                 continue
             if isinstance(frame, protocol.EcuGnssLag) and frame.learned_ms is not None:
-                learned = frame.learned_ms
-    return learned
+                return frame.learned_ms
+    return None
 
 
 def _us(t: float, t0: float) -> int:
@@ -184,8 +189,19 @@ def replay(
     time order (a stable sort: equal times keep their order)."""
     if not events:
         return []
-    ordered = sorted(events, key=lambda e: e.t)
+    # An exported file is in time order already: no sorted copy of a long day (its keys alone
+    # are 64 MB for 12 h).
+    ordered = events if _in_time_order(events) else sorted(events, key=lambda e: e.t)
     return _Replayer(ordered, cfg, speed_mode, stats or ReplayStats()).run()
+
+
+def _in_time_order(events: Sequence[Event]) -> bool:
+    prev = -math.inf
+    for e in events:
+        if e.t < prev:
+            return False
+        prev = e.t
+    return True
 
 
 class _Replayer:
@@ -200,6 +216,8 @@ class _Replayer:
         self.t0 = events[0].t
         self._cut_gaps()
         self.ids = protocol.FrameIds(**cfg.can.ids)
+        if self.ids == protocol.DEFAULT_IDS:  # its decoders are found without hashing the ids
+            self.ids = protocol.DEFAULT_IDS
         # The lag learned in the recorded session is where this run's learning starts (the
         # terminal would have pushed it for the next session with the same receiver).
         self.lag_start_ms = learned_lag_ms(events, self.ids)
@@ -215,6 +233,7 @@ class _Replayer:
         self.decoder = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.command = _Command(start=True, fan_rpm=float(cfg.machine.fan_rpm))
+        self.command_data: bytes | None = None  # the last PcCommand decoded (most repeat it)
         self.period_us = round(cfg.can.command_period_s * 1e6)
         self.last_cmd_us: int | None = None
         self.gnss_seq = 0
@@ -223,7 +242,7 @@ class _Replayer:
     def _cut_gaps(self) -> None:
         """`times`: the events' times on the replay clock, each pause cut to MAX_IDLE_S;
         `cuts`: (replay time, offset to the events' clock from there on)."""
-        self.times: list[float] = []
+        self.times = array("d")  # 8 bytes an event: a long day has millions
         self.cuts: list[tuple[float, float]] = [(self.t0, 0.0)]
         offset, prev = 0.0, self.t0
         for e in self.events:
@@ -250,7 +269,10 @@ class _Replayer:
         step, discard = ecu.step_raw, ecu.tx_discard
         updates = ecu.wheel_updates
         end_us = _us(self.times[-1], self.t0)
-        due_us = [_us(t, self.t0) for t in self.times]
+        try:
+            due_us: Sequence[int] = array("q", (_us(t, self.t0) for t in self.times))
+        except OverflowError:  # a bogus time far out: Python integers
+            due_us = [_us(t, self.t0) for t in self.times]
         wheel = self.wheel.walker()
         events, n_events = self.events, len(self.events)
         next_event = 0
@@ -290,8 +312,14 @@ class _Replayer:
             if not fix.ok:
                 self.stats.nmea_rejected += 1
             return self.tracker.update(e.t, fix) is not None
-        if isinstance(e, CanEvent) and e.dir != "rx" and e.can_id == self.ids.command:
-            _take_command(self.command, e, self.ids, self.stats)
+        if (
+            isinstance(e, CanEvent)
+            and e.dir != "rx"
+            and e.can_id == self.ids.command
+            and e.data != self.command_data
+            and _take_command(self.command, e, self.ids, self.stats)
+        ):
+            self.command_data = e.data
         return False
 
     def _send_gnss_time(self, now_us: int) -> None:
@@ -333,18 +361,20 @@ def _forwardable(kmh: float | None) -> float | None:
 
 def _take_command(
     command: _Command, e: CanEvent, ids: protocol.FrameIds, stats: ReplayStats
-) -> None:
+) -> bool:
+    """Keep the command's start flag, fan speed and rates; False when it did not decode."""
     try:
         decoded = protocol.decode((e.can_id, e.data), ids)
     except ProtocolError as exc:
         stats.bad_commands += 1
         _log.warning("recorded PcCommand at t=%r not decoded: %s", e.t, exc)
-        return
+        return False
     assert isinstance(decoded, protocol.PcCommand)
     command.start = decoded.start
     command.fan_rpm = decoded.fan_rpm
     command.rate_upper_kg_ha = decoded.rate_upper_kg_ha
     command.rate_lower_kg_ha = decoded.rate_lower_kg_ha
+    return True
 
 
 def _fmt(value: float | None) -> str:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import itertools
 import json
 import logging
 import os
@@ -765,6 +766,15 @@ class SessionReader:
         n = len(rows) if cols else self.count("state")
         got = dict(zip(cols, (list(c) for c in zip(*rows, strict=True)), strict=True)) if n else {}
         return {c: got.get(c, [None] * n) if c in present else [None] * n for c in columns}
+
+    def state_chunks(self, columns: tuple[str, ...], rows: int) -> Iterator[dict[str, list[Any]]]:
+        """`state_values` `rows` rows at a time: a long session read in bounded memory."""
+        present = self.state_columns()
+        cols = tuple(c for c in columns if c in present)
+        values = self._state_rows(cols)
+        while block := list(itertools.islice(values, rows)):
+            got = dict(zip(cols, (list(c) for c in zip(*block, strict=True)), strict=True))
+            yield {c: got[c] if c in present else [None] * len(block) for c in columns}
 
     def state_columns(self) -> frozenset[str]:
         """The state table's columns in this file (older files lack the added ones)."""

@@ -127,9 +127,9 @@ def summarise(reader: SessionReader) -> Summary:
     layers = [LayerSummary(), LayerSummary()]
     first: StateRow | None = None
     prev: StateRow | None = None
-    rows: list[StateRow] = []
+    stops = _Stops(kg_per_rev, cfg.speed)  # row by row: a long day is not held
     for row in reader.states():
-        rows.append(row)
+        stops.feed(row)
         s.state_rows += 1
         if prev is None:
             first = row
@@ -157,7 +157,7 @@ def summarise(reader: SessionReader) -> Summary:
         if layer.target_kg > 0:
             layer.rate_error_pct = (layer.applied_kg - layer.target_kg) / layer.target_kg * 100.0
     s.layers = dict(zip(LAYERS, layers, strict=True))
-    s.stops = headland_events(rows, kg_per_rev, cfg.speed)
+    s.stops = stops.finish()
     for kind, attr in (("stop", "stops_zero_pct"), ("headland", "headland_zero_pct")):
         events = [e for e in s.stops if e.kind == kind]
         if events:
@@ -269,51 +269,75 @@ def lag_text(lag: LagSummary | None) -> str:
 
 
 def headland_events(
-    rows: list[StateRow], kg_per_rev: tuple[float, float], speed: SpeedConfig
+    rows: Iterable[StateRow], kg_per_rev: tuple[float, float], speed: SpeedConfig
 ) -> list[StopEvent]:
     """Every stop in the field and every headland entry, with what was metered after it (the
     paper judged its headlands by whether the metering reached zero)."""
-    out: list[StopEvent] = []
-    v_min = speed.min_work_speed_kmh
-    for i in range(1, len(rows)):
-        prev, row = rows[i - 1], rows[i]
-        if _moving(prev, v_min) and not _moving(row, v_min):
-            out.append(_after(rows, i, "stop", kg_per_rev, lambda r: not _moving(r, v_min)))
-        if prev.zone == "field" and row.zone in ("headland", "outside"):
-            out.append(_after(rows, i, "headland", kg_per_rev, lambda r: r.zone != "field"))
-    return out
+    stops = _Stops(kg_per_rev, speed)
+    for row in rows:
+        stops.feed(row)
+    return stops.finish()
+
+
+class _Stops:
+    """`headland_events` a row at a time: each stop or headland entry stays open, summing
+    what is metered, until the machine moves on, the meters reach zero or it leaves the
+    headland. A row's interval is known when the next row comes."""
+
+    def __init__(self, kg_per_rev: tuple[float, float], speed: SpeedConfig) -> None:
+        self.kg_per_rev = kg_per_rev
+        self.v_min = speed.min_work_speed_kmh
+        self.out: list[StopEvent] = []
+        self.open: list[tuple[StopEvent, Callable[[StateRow], bool]]] = []
+        self.prev: StateRow | None = None
+
+    def feed(self, row: StateRow) -> None:
+        prev, v_min = self.prev, self.v_min
+        if prev is not None:
+            self._advance(prev, row.t - prev.t)
+            if _moving(prev, v_min) and not _moving(row, v_min):
+                self._start(row, "stop", lambda r: not _moving(r, v_min))
+            if prev.zone == "field" and row.zone in ("headland", "outside"):
+                self._start(row, "headland", lambda r: r.zone != "field")
+        self.prev = row
+
+    def finish(self) -> list[StopEvent]:
+        if self.prev is not None:
+            self._advance(self.prev, 0.0)  # the last row: nothing after it
+            self.prev = None
+        return self.out
+
+    def _start(self, start: StateRow, kind: str, lasts: Callable[[StateRow], bool]) -> None:
+        lat = start.outlet_lat if start.outlet_lat is not None else start.lat
+        lon = start.outlet_lon if start.outlet_lon is not None else start.lon
+        ev = StopEvent(kind, start.t, lat, lon, reached_zero=False, zero_after_s=None)
+        self.out.append(ev)
+        self.open.append((ev, lasts))
+
+    def _advance(self, row: StateRow, dt: float) -> None:
+        """Row `row` (its interval `dt`) for every open event."""
+        if not self.open:
+            return
+        still = []
+        kg_per_rev = self.kg_per_rev
+        for ev, lasts in self.open:
+            if not lasts(row):
+                continue
+            if row.meter_rpm_upper <= 0 and row.meter_rpm_lower <= 0:
+                ev.reached_zero, ev.zero_after_s = True, row.t - ev.t
+                continue
+            if 0 <= dt <= MAX_GAP_S:
+                ev.kg_after += (row.meter_rpm_upper * kg_per_rev[0]) / 60.0 * dt
+                ev.kg_after += (row.meter_rpm_lower * kg_per_rev[1]) / 60.0 * dt
+                ev.m_after += row.v_kmh / 3.6 * dt
+            still.append((ev, lasts))
+        self.open = still
 
 
 def _moving(row: StateRow, v_min: float) -> bool:
     # The GNSS speed where there is one: the selected wheel speed lags a stop by its update.
     v = row.v_gnss_kmh if row.v_gnss_kmh is not None else row.v_kmh
     return v >= v_min
-
-
-def _after(
-    rows: list[StateRow],
-    i: int,
-    kind: str,
-    kg_per_rev: tuple[float, float],
-    lasts: Callable[[StateRow], bool],
-) -> StopEvent:
-    start = rows[i]
-    lat = start.outlet_lat if start.outlet_lat is not None else start.lat
-    lon = start.outlet_lon if start.outlet_lon is not None else start.lon
-    ev = StopEvent(kind, start.t, lat, lon, reached_zero=False, zero_after_s=None)
-    for j in range(i, len(rows)):
-        row = rows[j]
-        if not lasts(row):
-            break
-        if row.meter_rpm_upper <= 0 and row.meter_rpm_lower <= 0:
-            ev.reached_zero, ev.zero_after_s = True, row.t - start.t
-            break
-        dt = rows[j + 1].t - row.t if j + 1 < len(rows) else 0.0
-        if 0 <= dt <= MAX_GAP_S:
-            ev.kg_after += (row.meter_rpm_upper * kg_per_rev[0]) / 60.0 * dt
-            ev.kg_after += (row.meter_rpm_lower * kg_per_rev[1]) / 60.0 * dt
-            ev.m_after += row.v_kmh / 3.6 * dt
-    return ev
 
 
 def _integrate(
