@@ -236,8 +236,8 @@ def test_streamed_in_small_chunks_is_the_whole_session(session: Path) -> None:
     assert max(swaths) <= 3 and sum(swaths) == whole.swath_geom.size
     assert stream.points == sum(points) and stream.swaths == sum(swaths)
     assert stream.applied_kg == pytest.approx(whole.applied_kg, rel=1e-12)
-    with pytest.raises(ValueError, match="at least 1"):
-        asapplied.AsAppliedStream(SessionReader(session), chunk_rows=0)
+    with SessionReader(session) as r, pytest.raises(ValueError, match="at least 1"):
+        asapplied.AsAppliedStream(r, chunk_rows=0)
 
 
 @pytest.mark.parametrize("fmt", ["gpkg", "shp", "geojson"])
