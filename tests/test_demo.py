@@ -22,6 +22,7 @@ from topdress.cli.demo import demo_config_toml, run_demo
 from topdress.cli.main import main
 from topdress.cli.run import EXIT_NO_ECU
 from topdress.config import default_config, loads_config
+from topdress.errors import ConfigError
 from topdress.ecu import meter_target_rpm
 from topdress.log.session import RawRecord, SessionReader
 from topdress.protocol import AckResult
@@ -398,3 +399,19 @@ def test_make_demo_starts_the_meters_and_reports_the_kg_applied(
     plain = capfd.readouterr().out
     assert "meters stopped until the operator starts them" in plain
     assert _kg_applied(plain) == 0.0
+
+
+def test_the_log_disks_free_space_margin_is_a_setting(tmp_path: Path) -> None:
+    """`[log] min_free_mib`: a margin larger than the disk's free space is the log_low_space
+    alarm from the start (the margin was fixed at 50 MiB in the code)."""
+    user = tmp_path / "mine.toml"
+    user.write_text("[log]\nmin_free_mib = 1000000\n", encoding="utf-8")  # ~1 TB
+    out = tmp_path / "out"
+    args = ["demo", "--config", str(user), "--duration", "3", "--out", str(out), "--start"]
+    assert main([*args, "--no-display"]) == 0
+    (session,) = out.glob("*.sqlite")
+    with SessionReader(session) as reader:
+        raised = [e.detail.get("name") for e in reader.events() if e.kind == "alarm.raised"]
+    assert "log_low_space" in raised
+    with pytest.raises(ConfigError, match=r"log\.min_free_mib"):
+        loads_config("[log]\nmin_free_mib = -1\n")

@@ -207,6 +207,9 @@ class CanConfig:
 @dataclass(frozen=True)
 class LogConfig:
     dir: str = "topdress-sessions"
+    # free space on the log's disk below which the log_low_space alarm is raised, MiB (at
+    # start and after every commit); 0 = no margin, only a full disk is an alarm
+    min_free_mib: float = _num(50.0, 0.0, 1_000_000.0)
 
 
 @dataclass(frozen=True)
@@ -820,6 +823,7 @@ cal_status = 0x18656465
 
 [log]
 dir = "topdress-sessions"  # one SQLite file per session
+min_free_mib = 50          # free space on the log's disk below this: an alarm, MiB
 
 [display]
 refresh_s = 0.5            # live status redrawn every 0.2..2 s on a terminal (1 line/s to a pipe)

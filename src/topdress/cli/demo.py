@@ -156,7 +156,11 @@ def run_terminal(
     except DeviceError:
         bus.shutdown()
         raise
-    session = SessionLog.create(cfg.log.dir, redacted_text(config_toml))  # never the PIN
+    session = SessionLog.create(  # never the PIN
+        cfg.log.dir,
+        redacted_text(config_toml),
+        min_free_bytes=round(cfg.log.min_free_mib * 1024 * 1024),
+    )
     opened = session.ok  # `ok` turns False once closed
     if not opened:
         console.message(f"warning: session log not written: {session.last_error}")
