@@ -29,6 +29,7 @@ there too while the old one keeps working, and the link moves to it once it is o
 
 from __future__ import annotations
 
+import math
 import gc
 import logging
 import threading
@@ -77,6 +78,9 @@ HINT_LINES = 20  # unusable lines in a row from one input before the operator is
 #: How long the ECU has to take its parameters on a changed [can] bus while the old one works
 #: (it answers within milliseconds; the fast retries take 0.8 s).
 NEW_BUS_WAIT_S = 3.0
+# At most one GNSS speed to the ECU this often (a 40 Hz cap, above any receiver's rate): a
+# receiver or a replayed file flooding lines must not flood the bus to the ECU with PcGnssTime
+GNSS_SEND_MIN_S = 0.025
 
 
 class Terminal:
@@ -126,6 +130,7 @@ class Terminal:
         self._t0: float | None = None
         self._gnss_state = "wait"
         self._gnss_seen = False
+        self._gnss_sent_t = -math.inf
         self._crop_state = self._crop_reported = "wait"
         self._crop_since = 0.0
         self._can_failing = False
@@ -437,6 +442,10 @@ class Terminal:
                 self._say_map_distances(t, fix.lat, fix.lon)
         if self.tracker.update(t, fix) is not None:
             self._gnss_seen = True
+            if t - self._gnss_sent_t < GNSS_SEND_MIN_S:
+                self.counters["gnss_send_skipped"] += 1
+                return
+            self._gnss_sent_t = t
             self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
             self.link.send_gnss_time(self.tracker.current(t, self.gnss.connected), 0.0)
 
