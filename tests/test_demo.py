@@ -22,8 +22,8 @@ from topdress.cli.demo import demo_config_toml, run_demo
 from topdress.cli.main import main
 from topdress.cli.run import EXIT_NO_ECU
 from topdress.config import default_config, loads_config
-from topdress.errors import ConfigError
 from topdress.ecu import meter_target_rpm
+from topdress.errors import ConfigError
 from topdress.log.session import RawRecord, SessionReader
 from topdress.protocol import AckResult
 from topdress.sim.live import PtyPort

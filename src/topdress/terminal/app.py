@@ -29,9 +29,9 @@ there too while the old one keeps working, and the link moves to it once it is o
 
 from __future__ import annotations
 
-import math
 import gc
 import logging
+import math
 import threading
 import time
 from collections import Counter
