@@ -15,32 +15,16 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
-from pathlib import Path
 
 from topdress.sim import experiments as ex
 from topdress.sim.qemu_ecu import (
-    QemuEcu,
-    QemuOptions,
     QemuSil,
-    QemuWorld,
     ensure_image,
+    qemu_machine,
     qemu_missing,
 )
-from topdress.sim.tractor import Drive
-from topdress.sim.world import SimConfig
 
 COLUMNS = ("dual_delay_m", "gnss_delay_m", "fused_delay_m")
-
-
-def qemu_lab(image: Path) -> ex.Lab:
-    @contextmanager
-    def machine(cfg: SimConfig, seed: int, drive: Drive) -> Iterator[QemuWorld]:
-        with QemuEcu(QemuOptions(image=image)) as ecu:
-            yield QemuWorld(ecu, cfg, seed=seed, drive=drive)
-
-    return ex.Lab(machine=machine, sil=QemuSil)
 
 
 def main() -> int:
@@ -53,7 +37,9 @@ def main() -> int:
     image = ensure_image()
     core = ex.table2(ex.Lab(), ex.TARGETS_KMH, args.reps, fused=ex.FUSED)
     t0 = time.perf_counter()
-    fw = ex.table2(qemu_lab(image), ex.TARGETS_KMH, args.reps, fused=ex.FUSED)
+    fw = ex.table2(
+        ex.Lab(machine=qemu_machine(image), sil=QemuSil), ex.TARGETS_KMH, args.reps, fused=ex.FUSED
+    )
     host_s = time.perf_counter() - t0
     worst = 0.0
     print("km/h  " + "  ".join(f"{c:>13} core/fw" for c in COLUMNS))

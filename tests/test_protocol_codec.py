@@ -1,4 +1,6 @@
-"""The committed C codec ecu/src/gen/td_can.[ch] is what cantools generates from the DBC today."""
+"""The committed C codecs (ecu/src/gen/td_can.[ch] from the bus DBC, ecu/ports/common/gen/
+td_hilcan.[ch] from the HIL DBC) are what cantools generates from the DBCs today; one run of
+the generator checks both."""
 
 from __future__ import annotations
 
@@ -28,3 +30,7 @@ def test_committed_codec_is_not_stale(tmp_path: Path) -> None:
         fresh = _normalised(tmp_path / name)
         committed = _normalised(REPO / "ecu" / "src" / "gen" / name)
         assert fresh == committed, f"ecu/src/gen/{name} is stale: run scripts/gen_codec.sh"
+    for name in ("td_hilcan.c", "td_hilcan.h"):
+        fresh = _normalised(tmp_path / name)
+        committed = _normalised(REPO / "ecu" / "ports" / "common" / "gen" / name)
+        assert fresh == committed, f"{name} is stale: run scripts/gen_codec.sh"

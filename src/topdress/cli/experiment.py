@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -15,15 +14,11 @@ from topdress.sim import experiments as ex
 from topdress.sim import fieldexp as fx
 from topdress.sim import report
 from topdress.sim.qemu_ecu import (
-    QemuEcu,
-    QemuOptions,
     QemuSil,
-    QemuWorld,
     ensure_image,
+    qemu_machine,
     qemu_missing,
 )
-from topdress.sim.tractor import Drive
-from topdress.sim.world import SimConfig
 
 NAMES = ("cv", "slip", "table2", "table34", "table5", "fig10", "field", "all")
 T = TypeVar("T")
@@ -74,17 +69,6 @@ def _field(out: Path, args: argparse.Namespace) -> Path:
     return fx.write_field(out, seeds, fx.FieldPlan(passes=args.passes))
 
 
-def _qemu_machine(image: Path) -> ex.Machine:
-    """Each run on a freshly booted firmware image, in lockstep with its World."""
-
-    @contextmanager
-    def machine(cfg: SimConfig, seed: int, drive: Drive) -> Iterator[QemuWorld]:
-        with QemuEcu(QemuOptions(image=image)) as ecu:
-            yield QemuWorld(ecu, cfg, seed=seed, drive=drive)
-
-    return machine
-
-
 def _lab(args: argparse.Namespace) -> ex.Lab:
     if args.ecu == "host":
         return ex.Lab(base_seed=args.seed, progress=_progress)
@@ -92,7 +76,7 @@ def _lab(args: argparse.Namespace) -> ex.Lab:
         raise ConfigError("--ecu", "qemu runs table2 only (the firmware's start delay)")
     if (why := qemu_missing()) is not None:
         raise DeviceError(f"--ecu qemu: {why}")
-    machine = _qemu_machine(ensure_image())
+    machine = qemu_machine(ensure_image())
     return ex.Lab(base_seed=args.seed, progress=_progress, machine=machine, sil=QemuSil)
 
 

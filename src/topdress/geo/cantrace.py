@@ -68,13 +68,14 @@ def write_trace(
     `shown`: the path errors name (the user's, when `path` is a temporary file)."""
     name = shown if shown is not None else path
     check_trace_path(name)
-    frames = _frames(reader, utc_offset(reader), channel)
+    offset = utc_offset(reader)
+    frames = _frames(reader, offset, channel)
     first = next(frames, None)
     writer: can.io.generic.MessageWriter
     try:
         if path.suffix.lower() == ".asc":
             # no frame: the session's UTC at its clock's zero
-            start = first.timestamp if first is not None else utc_offset(reader)
+            start = first.timestamp if first is not None else offset
             writer = _UtcAscWriter(path, start, channel=channel)
         else:
             writer = can.CanutilsLogWriter(path, channel=channel)

@@ -339,7 +339,6 @@ _FIELD_PARSERS = {"RMC": _rmc, "VTG": _vtg, "GGA": _gga}
 
 _F_TIME = re.compile(rb"^([01][0-9]|2[0-3])([0-5][0-9])([0-5][0-9])(?:\.([0-9]{1,6}))?$")
 _F_DMM = re.compile(rb"^[0-9]{4,}\.[0-9]*$")
-_F_NUM = _NUMBER
 
 
 def _f_time(text: bytes) -> dt.time | None:
@@ -379,7 +378,7 @@ def _f_num(text: bytes, hi: float) -> float | bool | None:
     """A plain number within 0..hi (None: empty; False: for the full path)."""
     if not text:
         return None
-    if _F_NUM.match(text) is None:
+    if _NUMBER.match(text) is None:
         return False
     value = float(text)
     return value if value <= hi else False

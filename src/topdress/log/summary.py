@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import json
 import logging
+from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from typing import Any, Final
 
 from topdress import protocol
-from topdress.config import MachineConfig, SpeedConfig
+from topdress.config import SpeedConfig
 from topdress.errors import ProtocolError
 from topdress.log.model import OPERATOR_KINDS, RAW_KINDS, SOURCES, LogEvent, StateRow
 from topdress.log.session import SessionReader, session_config
@@ -106,10 +107,6 @@ class Summary:
         return asdict(self)
 
 
-def _machine(config_toml: str) -> MachineConfig:
-    return session_config(config_toml).machine
-
-
 def summarise(reader: SessionReader) -> Summary:
     cfg = session_config(reader.config_toml)
     machine = cfg.machine
@@ -143,8 +140,8 @@ def summarise(reader: SessionReader) -> Summary:
     if first is not None and prev is not None:
         s.duration_s = prev.t - first.t
     s.schema = reader.version
-    s.events = reader.event_counts()
-    logged = list(reader.events())
+    logged = list(reader.events())  # read once: the counts and what follows
+    s.events = dict(sorted(Counter(e.kind for e in logged).items()))
     starts = [x.t for x in (first, logged[0] if logged else None) if x is not None]
     s.actions = operator_actions(logged, min(starts) if starts else 0.0)
     s.gnss_lag = lag_summary(logged)

@@ -28,6 +28,8 @@ import shutil
 import socket
 import subprocess
 import time
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from functools import cache
 from importlib import resources
@@ -307,7 +309,6 @@ class HilLink:
         self._clock = db.get_message_by_name("HilClock")
         self._duties: tuple[int, tuple[float, float, float, float]] | None = None
         self.frames: list[CanFrame] = []  # bus frames from the firmware, not yet taken
-        self.steps_seen = 0
         self._last_late = 0
 
     def wait_step(self, timeout_s: float, seq: int | None = None) -> FwStep:
@@ -338,7 +339,6 @@ class HilLink:
                     continue  # its duties were lost (a link opened mid-step): the next one
                 if seq is not None and got != seq:
                     raise DeviceError(f"the emulated ECU answered step {got}, not step {seq}")
-                self.steps_seen += 1
                 return FwStep(
                     time_us=int(s["HilStepTime"]),
                     seq=got,
@@ -504,3 +504,17 @@ class QemuSil(Sil):
                 result = "no answer" if ack is None else ack.result.name
                 raise EcuParamError(key, value, f"refused by the ECU: {result}")
         pc.start = True
+
+
+def qemu_machine(
+    image: Path,
+) -> Callable[[SimConfig, int, Drive], AbstractContextManager[QemuWorld]]:
+    """A `topdress.sim.experiments.Machine`: each run on a freshly booted firmware image, in
+    lockstep with its World."""
+
+    @contextmanager
+    def machine(cfg: SimConfig, seed: int, drive: Drive) -> Iterator[QemuWorld]:
+        with QemuEcu(QemuOptions(image=image)) as ecu:
+            yield QemuWorld(ecu, cfg, seed=seed, drive=drive)
+
+    return machine

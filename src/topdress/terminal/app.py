@@ -57,9 +57,15 @@ from topdress.i18n import Text, text
 from topdress.log.model import LogEvent
 from topdress.log.rows import state_row
 from topdress.log.session import SessionLog
-from topdress.protocol import EcuIdent, fault_names, protocol_version
+from topdress.protocol import EcuIdent, fault_names
 from topdress.terminal import signals
-from topdress.terminal.canlink import CanLink, EcuView, ident_mismatch, ident_text
+from topdress.terminal.canlink import (
+    CanLink,
+    EcuView,
+    ident_mismatch,
+    ident_text,
+    terminal_protocol,
+)
 from topdress.terminal.desk import OperatorDesk
 from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
 from topdress.terminal.inbox import Inbox
@@ -446,8 +452,9 @@ class Terminal:
                 self.counters["gnss_send_skipped"] += 1
                 return
             self._gnss_sent_t = t
-            self.link.set_gnss(self.tracker.current(t, self.gnss.connected), t)
-            self.link.send_gnss_time(self.tracker.current(t, self.gnss.connected), 0.0)
+            kmh = self.tracker.current(t, self.gnss.connected)
+            self.link.set_gnss(kmh, t)
+            self.link.send_gnss_time(kmh, 0.0)
 
     def _on_crop(self, t: float, line: bytes) -> None:
         if self.session is not None:
@@ -730,7 +737,7 @@ class Terminal:
             ecu_where=self.link.where,
             ecu_ident=None if ident is None else ident_text(ident),
             ecu_protocol=(
-                (ident.protocol_version, "{}.{}".format(*protocol_version()))
+                (ident.protocol_version, terminal_protocol())
                 if ident is not None and ident_mismatch(ident)
                 else None
             ),
@@ -783,7 +790,7 @@ class Terminal:
             target=ident.target,
             firmware=ident.firmware_version,
             protocol=ident.protocol_version,
-            terminal_protocol="{}.{}".format(*protocol_version()),
+            terminal_protocol=terminal_protocol(),
             transport=ident.transport,
             reset_cause=ident.reset_cause,
             clock_fallback=ident.clock_fallback,

@@ -109,6 +109,11 @@ def ident_mismatch(ident: protocol.EcuIdent) -> bool:
     return ident.protocol != protocol.protocol_version()
 
 
+def terminal_protocol() -> str:
+    """This terminal's protocol version, "1.1" (the DBC's VERSION)."""
+    return "{}.{}".format(*protocol.protocol_version())
+
+
 def ident_text(ident: protocol.EcuIdent) -> Text:
     """ "stm32f4 firmware 0.1.0, protocol 1.1" (the console, the screens, the event)."""
     return text(
@@ -517,7 +522,7 @@ class CanLink:
         if before is None or before.target != ident.target or before.firmware != ident.firmware:
             self._event(text("event.ecu_ident", ecu=ident_text(ident), transport=ident.transport))
         if ident_mismatch(ident) and (before is None or before.protocol != ident.protocol):
-            ours = "{}.{}".format(*protocol.protocol_version())
+            ours = terminal_protocol()
             self._event(text("event.ecu_protocol", ecu=ident.protocol_version, terminal=ours))
         if self._on_ident is not None:
             self._on_ident(ident, now)

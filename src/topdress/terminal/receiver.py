@@ -95,11 +95,13 @@ class ReceiverWatch:
     def _version(self, fix: GnssFix, line: bytes) -> None:
         if len(self._versions) >= MAX_VERSION_LINES or fix.type is None:
             return
-        body = line.decode("latin-1").strip().lstrip("$").split("*", 1)[0]
-        fields = body.split(",")
-        if fix.talker == "P" and fix.type.endswith("VER"):
+        ver = fix.talker == "P" and fix.type.endswith("VER")
+        if not ver and fix.type != "TXT":
+            return  # every other line: no decoding (this runs on each line of the session)
+        fields = line.decode("latin-1").strip().lstrip("$").split("*", 1)[0].split(",")
+        if ver:
             words = ",".join(fields[1:])
-        elif fix.type == "TXT" and len(fields) >= 5:
+        elif len(fields) >= 5:
             words = ",".join(fields[4:])
             if not _VERSION_TEXT.search(words):
                 return
