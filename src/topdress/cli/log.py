@@ -229,12 +229,14 @@ def _salvage(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from topdress import protocol
     from topdress.config import default_config, load_config
     from topdress.log.events import read_file
-    from topdress.log.replay import DROP, MAX_IDLE_S, ReplayStats, needed, replay, write_csv
+    from topdress.log.replay import MAX_IDLE_S, ReplayStats, kept, replay, write_csv
 
     cfg = load_config(args.config) if args.config is not None else default_config()
-    read = read_file(args.events, needed, DROP)
+    # with the configuration's frame ids: the ECU's learned lag is kept under its own id
+    read = read_file(args.events, *kept(protocol.FrameIds(**cfg.can.ids)))
     for number, reason in read.bad:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
     stats = ReplayStats()

@@ -149,17 +149,22 @@ def ecu_params(cfg: TerminalConfig, speed_mode: str, lag_start_ms: int | None = 
     ).validate()
 
 
-def needed(event: Event) -> bool:
-    """The events replay acts on (NMEA, wheel counts, frames to the ECU, and the ECU's learned
-    GNSS lag); crop lines and the ECU's other frames are ignored, so a reader need not keep
-    them (a 12 h day: 70 % of them)."""
-    if isinstance(event, CanEvent) and event.dir == "rx":
-        return event.can_id == protocol.DEFAULT_IDS.gnss_lag
-    return not isinstance(event, CropEvent)
+def kept(ids: protocol.FrameIds = protocol.DEFAULT_IDS) -> tuple[Callable[[Event], bool], Drop]:
+    """What replay acts on, for a session's frame ids: NMEA, wheel counts, frames to the ECU
+    and the ECU's learned GNSS lag; crop lines and the ECU's other frames are ignored, so a
+    reader need not keep them (a 12 h day: 70 % of them). As a test of an event, and as the
+    lines a reader drops without building an event."""
+
+    def needed(event: Event) -> bool:
+        if isinstance(event, CanEvent) and event.dir == "rx":
+            return event.can_id == ids.gnss_lag
+        return not isinstance(event, CropEvent)
+
+    return needed, Drop(crop=True, can_rx=True, rx_kept=frozenset({ids.gnss_lag}))
 
 
-#: `needed` told from the lines: what replay drops without building an event.
-DROP: Final = Drop(crop=True, can_rx=True, rx_kept=frozenset({protocol.DEFAULT_IDS.gnss_lag}))
+#: What replay keeps with the default frame ids.
+needed, DROP = kept()
 
 
 def learned_lag_ms(events: Sequence[Event], ids: protocol.FrameIds) -> int | None:
