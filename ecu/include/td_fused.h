@@ -63,6 +63,7 @@ typedef struct {
     float scale;               /**< wheel scale s = wheel / true speed, 0.5..1.5 (slip = 1 - s) */
     float p[6];                /**< covariance, upper triangle: vv va vs aa as ss */
     float q_jerk;              /**< jerk density, (m/s^3)^2/Hz */
+    float q_share;             /**< the share of q_jerk in force, 0..1: small while the wheel says the speed holds */
     float r_gnss;              /**< GNSS speed variance, (m/s)^2 */
     float wheel_rel;           /**< wheel noise, share of speed */
     float innov_ms;            /**< last GNSS innovation (z - prediction at its time of validity), m/s */

@@ -31,8 +31,11 @@
 #define TD_STEADY_A_MS2 0.3f
 #define TD_LEARN_MIN_MS 0.5f
 #define TD_STEADY_US 1500000u
-/* An accepted GNSS speed younger than this backs the estimate against a disagreeing wheel. */
-#define TD_GNSS_BACKS_US 1000000u
+/* An accepted GNSS speed younger than this backs the estimate against a disagreeing wheel, and
+ * lets the scale learn: one period of a 1 Hz receiver and its jitter (at 1 s exactly, the
+ * previous fix was always just too old when the next one came, and a 1 Hz receiver never
+ * taught the scale). */
+#define TD_GNSS_BACKS_US 1500000u
 /* A GNSS speed older than this (age + lag) is not applied. */
 #define TD_GNSS_MAX_DELAY_US 10000000u
 #define TD_KMH_PER_MS 3.6f

@@ -40,11 +40,17 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
-#define SCALE_PERIOD_S 0.25f /* the scale learns per fix as from a 4-5 Hz receiver */
+#define SCALE_PERIOD_S 0.25f
+#define WHEEL_MEAN_MAX_S 1.0f /* the wheel against a fix: its mean over the fix period, at most this */
+#define WHEEL_MEAN_N 8u       /* points of that mean */ /* the scale learns per fix as from a 4-5 Hz receiver */
 #define HIST_Z_MAX_MS 65.0f                   /* a wheel speed beyond this is no number (mm/s in 16 bits) */
 #define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
 #define ACCEL_BUCKETS 10u /* the wheel's own acceleration: two means of this many buckets (1 s each) */
 #define BUCKET_CLOSE_S (TD_FUSED_BUCKET_S - 1.0e-4f) /* sums of 10 ms steps fall just short */
+/* the jerk in flat motion (set_q_share) */
+#define Q_FLAT_MIN_MS 0.5f  /* below this speed the whole jerk */
+#define Q_FLAT_A_MS2 0.2f  /* tmp */
+#define Q_FLAT_SHARE 0.05f  /* tmp */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -62,6 +68,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->p[AA] = P0_A;
     f->p[AS] = 0.0f;
     f->p[SS] = P0_S;
+    f->q_share = 1.0f;
     f->innov_ms = 0.0f;
     f->since_gnss_s = 0.0f;
     f->run_s = 0.0f;
@@ -95,7 +102,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
         return;
     }
     float *p = f->p;
-    const float q = f->q_jerk;
+    const float q = f->q_jerk * f->q_share;
     const float dt2 = dt_s * dt_s;
     p[VV] += dt_s * (2.0f * p[VA] + dt_s * p[AA]) + q * dt2 * dt_s / 3.0f;
     p[VA] += dt_s * p[AA] + q * dt2 * 0.5f;
@@ -211,6 +218,20 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     return TD_FUSED_RESTARTED;
 }
 
+/* The jerk the model allows: the whole of it while the wheel's own acceleration says the speed
+ * changes, a small share while it holds (then the estimate averages the wheel's bounce over
+ * seconds instead of following it, and GNSS pins the mean); a launch from rest keeps it all. */
+static void set_q_share(td_fused_t *f) {
+    float aw = 0.0f;
+    if (f->v_ms < Q_FLAT_MIN_MS || !td_fused_wheel_accel(f, &aw)) {
+        f->q_share = 1.0f;
+        return;
+    }
+    const float x = aw / Q_FLAT_A_MS2;
+    const float share = x * x;
+    f->q_share = share < Q_FLAT_SHARE ? Q_FLAT_SHARE : (share > 1.0f ? 1.0f : share);
+}
+
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
     if (!(z_ms >= 0.0f && z_ms < HIST_Z_MAX_MS) || !(dt_s <= HIST_DT_MAX_S)) {
         /* no wheel (encoder fault), or no number: the history says nothing any more, and a
@@ -219,6 +240,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->hist_sum = 0.0f;
         f->hist_s = 0.0f;
         f->reopened = false;
+        f->q_share = 1.0f;
         return;
     }
     f->hist_sum += z_ms * dt_s;
@@ -233,6 +255,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         }
         f->hist_s -= TD_FUSED_BUCKET_S;
         f->hist_sum = z_ms * f->hist_s;
+        set_q_share(f);
     }
 }
 
@@ -266,6 +289,25 @@ bool td_fused_wheel_accel(const td_fused_t *f, float *a_ms2) {
     return true;
 }
 
+/* The wheel's mean over the fix period centred delay_s back (at most 1 s, in WHEEL_MEAN_N
+ * points): a fix from a receiver's filter stands for its period, and the mean takes the wheel's
+ * bounce out of the comparison as much as the period allows (at 1 Hz one 100 ms bucket gave
+ * the scale 2.7 % of bounce per fix). False where the span leaves the history. */
+static bool wheel_over(const td_fused_t *f, float delay_s, float period_s, float *z_ms) {
+    const float span = period_s < WHEEL_MEAN_MAX_S ? period_s : WHEEL_MEAN_MAX_S;
+    const float step = span / (float)WHEEL_MEAN_N;
+    float sum = 0.0f;
+    for (unsigned i = 0u; i < WHEEL_MEAN_N; i++) {
+        float w = 0.0f;
+        if (!td_fused_wheel_at(f, delay_s + ((float)i + 0.5f) * step - 0.5f * span, &w)) {
+            return false;
+        }
+        sum += w;
+    }
+    *z_ms = sum / (float)WHEEL_MEAN_N;
+    return true;
+}
+
 /* The scale from the wheel's history against GNSS at the same instant: no motion model between
  * them, so an acceleration cannot take up a scale error. Innovation in wheel m/s. */
 static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g, float period_s) {
@@ -285,7 +327,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float y = z_ms - (f->v_ms - f->a_ms2 * d);
     f->innov_ms = y;
     float w_then = 0.0f;
-    const bool have_w = td_fused_wheel_at(f, d, &w_then);
+    const bool have_w = wheel_over(f, d, f->since_gnss_s, &w_then) || td_fused_wheel_at(f, d, &w_then);
     const float g = td_fused_shape(f, z_ms, NULL);
     /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
     const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
