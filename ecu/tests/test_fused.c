@@ -424,9 +424,93 @@ static void test_slip_step_with_a_short_lag(void **state) {
     assert_true(fabs(r.f.a_ms2) < 0.15);
 }
 
+/* Steady at 3 m/s on a bouncing wheel (3 %, correlated over 0.1 s) with GNSS 1 s late: once the
+ * wheel's own acceleration says the speed holds, the jerk falls to a small share and the estimate
+ * averages the bounce instead of following it; a launch brings the whole jerk back within ~1 s. */
+static double bounce_run(bool share_held_at_1, double *share_end) {
+    run_t r;
+    run_init(&r);
+    assert_int_equal(td_fused_init(&r.f, 0.3f, 0.2f, 15.0f), TD_OK);
+    r.f.slip_shape = true; /* eq. 5: at 10.8 km/h the wheel moves half as much as the speed */
+    double b = 0.0;
+    double sq = 0.0;
+    double blk = 0.0;
+    int n = 0;
+    for (int k = 1; k <= 4000; k++) { /* 40 s */
+        const double t = k * DT;
+        const double v = t < 2.0 ? 1.5 * t : 3.0;
+        b = 0.905 * b + 0.425 * 0.03 * noise(&r) * 1.732; /* first order, 0.1 s, sd ~3 % */
+        td_fused_predict(&r.f, (float)DT);
+        const double z = 0.98 * td_fused_shape(&r.f, (float)v, NULL) * v * (1.0 + b);
+        (void)td_fused_wheel(&r.f, (float)z, 0.0f, false, true);
+        td_fused_record(&r.f, (float)z, (float)DT);
+        if (share_held_at_1) {
+            r.f.q_share = 1.0f;
+        }
+        if (k % 20 == 0) {
+            const double tg = t - 1.0;
+            const double vg = tg < 0.0 ? 0.0 : (tg < 2.0 ? 1.5 * tg : 3.0);
+            (void)td_fused_gnss(&r.f, (float)(vg + 0.05 * noise(&r)), 1.0f, t > 10.0);
+        }
+        if (t > 20.0) { /* the error's 1 s means: what the metering integrates */
+            blk += r.f.v_ms - v;
+            if (k % 100 == 0) {
+                sq += (blk / 100.0) * (blk / 100.0);
+                blk = 0.0;
+                n++;
+            }
+        }
+    }
+    *share_end = r.f.q_share;
+    return sqrt(sq / n);
+}
+
+static void test_flat_motion_shrinks_the_jerk(void **state) {
+    (void)state;
+    double share = 0.0;
+    double held = 0.0;
+    const double rms = bounce_run(false, &share);
+    const double rms_held = bounce_run(true, &held);
+    assert_float_equal(share, 0.05, 1e-6);
+    assert_float_equal(held, 1.0, 1e-6);
+    /* the error's 1 s means: 0.038 m/s against 0.068 with the whole jerk held */
+    assert_true(rms < 0.6 * rms_held);
+    assert_true(rms < 0.045); /* 1.5 % of 3 m/s */
+}
+
+static void test_a_launch_brings_the_jerk_back(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    run(&r, 20.0, v_const, 1.0, true, 0.5, 0.5, true);
+    assert_float_equal(r.f.q_share, 0.05, 1e-6);
+    /* 0.5 m/s^2 from 2 m/s: within 1.2 s the wheel's acceleration restores the whole jerk */
+    double t0 = r.t;
+    double back_s = -1.0;
+    while (r.t < t0 + 3.0) {
+        r.t += DT;
+        const double v = 2.0 + 0.5 * (r.t - t0);
+        td_fused_predict(&r.f, (float)DT);
+        (void)td_fused_wheel(&r.f, (float)v, 0.0f, false, true);
+        td_fused_record(&r.f, (float)v, (float)DT);
+        if (back_s < 0.0 && r.f.q_share >= 1.0f) {
+            back_s = r.t - t0;
+        }
+    }
+    assert_true(back_s > 0.0 && back_s < 1.2);
+    assert_float_equal(r.f.v_ms, 3.5, 0.1);
+    assert_float_equal(r.f.a_ms2, 0.5, 0.15);
+    /* standing (below 0.5 m/s) keeps the whole jerk */
+    td_fused_standstill(&r.f);
+    td_fused_record(&r.f, 0.0f, 0.1f);
+    assert_float_equal(r.f.q_share, 1.0, 1e-6);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_slip_step_with_a_short_lag),
+        cmocka_unit_test(test_flat_motion_shrinks_the_jerk),
+        cmocka_unit_test(test_a_launch_brings_the_jerk_back),
         cmocka_unit_test(test_constant_speed_learns_the_slip),
         cmocka_unit_test(test_no_learning_keeps_the_scale),
         cmocka_unit_test(test_ramp_and_steps_of_acceleration),

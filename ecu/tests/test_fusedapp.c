@@ -377,11 +377,40 @@ static void test_gnss_lag_learned_and_a_wrong_fixed_lag_overruled(void **state) 
     }
 }
 
+/* A 1 Hz receiver (one command a second carrying its speed) teaches the slip: the previous fix
+ * is a period old when the next comes, and it still backs the estimate. */
+static void test_a_1_hz_receiver_teaches_the_slip(void **state) {
+    (void)state;
+    const td_params_t p = fused_params();
+    rig_t r;
+    rig_start(&r, &p, 5000u, 0.0, 0.0);
+    r.edge_timing = true;
+    r.pc_sending = false;
+    bool learned = false;
+    for (int k = 0; k < 6000; k++) { /* 4 s standing, 3 s to 8 km/h, 53 s at 8 km/h */
+        const double t = k * 0.01;
+        const double v = t < 4.0 ? 0.0 : (t < 7.0 ? 8.0 * (t - 4.0) / 3.0 : 8.0);
+        r.wheel_kmh = v * 0.93;
+        r.pc_gnss_kmh = v;
+        if (k % 100 == 0) {
+            rig_send_command(&r);
+        }
+        rig_step(&r);
+        (void)rig_drain(&r, 0u);
+        learned = learned || rig_st(&r)->slip_learning;
+    }
+    const td_state_t *st = rig_st(&r);
+    assert_true(learned);
+    assert_float_equal(st->slip_pct, 7.0, 0.7); /* eq. 5 alone says 9.1 % at 8 km/h */
+    assert_float_equal(st->v_kmh, 8.0, 0.15);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_gnss_lag_learned_and_a_wrong_fixed_lag_overruled),
         cmocka_unit_test(test_fused_meters_on_the_estimate_with_learned_slip),
         cmocka_unit_test(test_fused_on_a_counts_only_port),
+        cmocka_unit_test(test_a_1_hz_receiver_teaches_the_slip),
         cmocka_unit_test(test_fused_gnss_lost_uses_the_wheel_with_its_scale),
         cmocka_unit_test(test_fused_encoder_fault_uses_gnss),
         cmocka_unit_test(test_fused_frozen_receiver_at_standstill),

@@ -122,7 +122,7 @@ typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED 
     td_fused_result_t;
 typedef struct {
     float v_ms; float a_ms2; float scale; float p[6]; float innov_ms; float run_s; int8_t run_sign;
-    float quiet_s; bool reopened; uint8_t wheel_rejects; ...;
+    float q_share; float quiet_s; bool reopened; uint8_t wheel_rejects; ...;
 } td_fused_t;
 int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct);
 void td_fused_predict(td_fused_t *f, float dt_s);
