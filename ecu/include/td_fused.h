@@ -6,6 +6,12 @@
  *
  * Model (docs/speed.md): constant acceleration driven by white jerk of density q = jerk^2,
  *   v' = v + a*dt,  a' = a,  s' = s (+ a slow random walk, only felt while it is learned).
+ * Flat motion: the jerk in force is q times a share, (a_w / 0.2 m/s^2)^2 within 0.05..1, where
+ *   a_w is the wheel's own acceleration (td_fused_wheel_accel, set at every 100 ms bucket);
+ *   below 0.5 m/s, or without 2 s of history, the whole of it. While the wheel says the speed
+ *   holds, the estimate then averages the wheel's bounce over seconds instead of following it
+ *   (eq. 5's slope halves what the wheel says of the speed at 10 km/h, so its bounce counts
+ *   double); a launch or a brake brings the whole jerk back within ~1 s.
  * Wheel (every step):   z_w = s * g(v) * v + noise,  H = [s (g + v g'), 0, g v], with g = 1 the
  *   scale is a constant; with the slip shape on, g(v) = 1 - eq. 5 slip(v) / 100 and s learns how
  *   far this soil is from the paper's wheat stubble (the slip then follows the speed at once),
@@ -20,6 +26,10 @@
  *      R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it in steady motion), with
  *      the scale's row of the gain zeroed. Beyond the history (a delay over ~3.5 s, or no wheel)
  *      the scale is learned through this update instead.
+ *   3. settled (below) and flat (jerk share < 0.3), not re-opened: the speed then was the speed
+ *      now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 + (0.2 m/s^2 d)^2
+ *      (an acceleration the wheel may not show yet): through v - a d, an acceleration left by
+ *      the wheel's bounce took up GNSS's difference and held v 2-5 % off for seconds.
  * The scale is learned only while the caller says (`learn`: GNSS good, motion steady) or while
  * re-opened, and kept through GNSS outages.
  * Scale random walk 2e-5/s; its variance never grows beyond the initial (10 %)^2.
@@ -39,7 +49,7 @@
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 160 bytes (76 of state, 84 of wheel history). No heap,
+ * Costs per step: ~120 float operations; 164 bytes (80 of state, 84 of wheel history). No heap,
  * no globals.
  */
 #ifndef TD_FUSED_H
@@ -63,7 +73,7 @@ typedef struct {
     float scale;               /**< wheel scale s = wheel / true speed, 0.5..1.5 (slip = 1 - s) */
     float p[6];                /**< covariance, upper triangle: vv va vs aa as ss */
     float q_jerk;              /**< jerk density, (m/s^3)^2/Hz */
-    float q_share;             /**< the share of q_jerk in force, 0..1: small while the wheel says the speed holds */
+    float q_share;             /**< the share of q_jerk in force, 0.05..1: small while the wheel says the speed holds */
     float r_gnss;              /**< GNSS speed variance, (m/s)^2 */
     float wheel_rel;           /**< wheel noise, share of speed */
     float innov_ms;            /**< last GNSS innovation (z - prediction at its time of validity), m/s */

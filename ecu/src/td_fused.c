@@ -51,6 +51,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_MIN_MS 0.5f  /* below this speed the whole jerk */
 #define Q_FLAT_A_MS2 0.2f  /* tmp */
 #define Q_FLAT_SHARE 0.05f  /* tmp */
+#define CRUISE_SHARE 0.3f
+#define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -123,7 +125,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
 
 /* Scalar measurement with H = h, innovation y, variance r. The scale's gain is zeroed unless
  * learning; the Joseph form P - K u' - u K' + S K K' keeps P right for that gain. */
-static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn) {
+static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn, bool hold_a) {
     float *p = f->p;
     const float u[3] = { p[VV] * h[0] + p[VA] * h[1] + p[VS] * h[2], p[VA] * h[0] + p[AA] * h[1] + p[AS] * h[2],
                          p[VS] * h[0] + p[AS] * h[1] + p[SS] * h[2] };
@@ -131,7 +133,7 @@ static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn
     if (!(s > 0.0f) || (y * y > GATE_SIGMA2 * s && fabsf(y) > GATE_MIN_MS)) {
         return false;
     }
-    const float k[3] = { u[0] / s, u[1] / s, learn ? u[2] / s : 0.0f };
+    const float k[3] = { u[0] / s, hold_a ? 0.0f : u[1] / s, learn ? u[2] / s : 0.0f };
     f->v_ms += k[0] * y;
     f->a_ms2 += k[1] * y;
     f->scale += k[2] * y;
@@ -195,7 +197,7 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
      * again, not because the estimate grew uncertain without it */
     const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
-    if (!held && update(f, h, y, r, learn)) {
+    if (!held && update(f, h, y, r, learn, false)) {
         f->wheel_rejects = 0u;
         return TD_FUSED_ACCEPTED;
     }
@@ -318,7 +320,7 @@ static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g, float 
      * are correlated through its filter), so a 1 Hz receiver teaches the scale as fast */
     const float n = period_s > SCALE_PERIOD_S ? period_s / SCALE_PERIOD_S : 1.0f;
     const float r = (sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss) / (n < 4.0f ? n : 4.0f);
-    (void)update(f, h, w_then - sg * z_ms, r, true);
+    (void)update(f, h, w_then - sg * z_ms, r, true, false);
 }
 
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn) {
@@ -375,7 +377,15 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     /* the jerk over the delay; in steady motion a small share of it */
     const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
     const bool learning = settled && (learn || f->reopened);
-    if (!update(f, h, y, r, learning && !have_w)) {
+    /* flat and settled: the speed then was the speed now, so the fix corrects v itself; through
+     * v - a d an acceleration could take up GNSS's difference and hold v off for seconds */
+    const bool cruise = learning && !f->reopened && f->q_share < CRUISE_SHARE;
+    const float hc[3] = { 1.0f, 0.0f, 0.0f };
+    const float rc = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
+    if (cruise) {
+        f->innov_ms = z_ms - f->v_ms;
+    }
+    if (!(cruise ? update(f, hc, z_ms - f->v_ms, rc, false, false) : update(f, h, y, r, learning && !have_w, false))) {
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
     }
     if (learning && have_w && z_ms > SCALE_MIN_MS) {
