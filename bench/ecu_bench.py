@@ -185,6 +185,9 @@ def fix_steps(exe: Path) -> tuple[list[Part], list[Part], int]:
         sys.exit(f"ecu_bench: {len(change)} fix periods dumped, the driver took {m[3]}")
     log(f"launch and brake, fused mode: {printed.strip()}")
     log(f"cruise at 8 km/h, a fix every 10 steps: {cruise_per_step(dumped)} instructions per step")
+    between = sum(p.total for p in dumped if not p.trigger.startswith("--dump-after"))
+    periods = DRIVE_STEPS - len(change) - len(steady)
+    log(f"{periods} periods without a fix: {round(between / periods)} instructions on the mean")
     return change, steady, sum(p.total for p in dumped)
 
 
