@@ -614,7 +614,10 @@ class Terminal:
         """The lag learned so far becomes the start value an ECU back from a loss is pushed, as
         the session's start value was at open; a number in gnss_lag_ms stays the one pushed."""
         learned = self.lag_watch.learned_ms
-        if learned is None or learned == self._lag_renewed_ms or self._fixed_lag_ms() is not None:
+        if self._fixed_lag_ms() is not None:
+            self._lag_renewed_ms = None  # set to "auto" again later: renewed then
+            return
+        if learned is None or learned == self._lag_renewed_ms:
             return
         self.link.renew({GNSS_LAG_ID: float(min(max(learned, 0), MAX_LAG_MS))})
         self._lag_renewed_ms = learned
