@@ -8,24 +8,31 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import can
 import pytest
+from topdress.ecu._core import lib
 
 from test_replay import drive_events
 from test_terminal import VirtualRig
 from topdress import protocol
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, loads_config
+from topdress.ecu.params import EcuParams, check
 from topdress.gnss.nmea import NmeaDecoder, make_sentence
 from topdress.log.events import write
 from topdress.log.model import LogEvent
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import lag_summary, summarise
 from topdress.sim.tractor import Drive, Segment
+from topdress.terminal.canlink import CanLink
 from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
 from topdress.terminal.receiver import ReceiverId, ReceiverWatch, input_key
 
 NMEA_LOGS = Path("/work/shared/nmea/gpsd-logs")
 SIM_LAG_MS = 1300  # the simulated receiver: 0.3 s latency + a 1.0 s velocity filter
+GNSS_LAG = protocol.param("GnssLag").id
+GNSS_LAG_AUTO = protocol.param("GnssLagAuto").id
+SIM_RECEIVER = ReceiverId("serial:/dev/ttyUSB0", ("GNGGA", "GNRMC", "GNVTG"))
 
 
 def _session(
@@ -48,6 +55,51 @@ def _session(
     finally:
         rig.close()
     return rig
+
+
+def _cruising(tmp_path: Path, toml: str) -> VirtualRig:
+    """A session left open: standing 2 s, then a start from rest to 8 km/h held for 60 m."""
+    drive = Drive(
+        [
+            Segment("stop", duration_s=2.0),
+            Segment("straight", speed_kmh=8.0, length_m=60.0, hold=True),
+            Segment("stop", duration_s=5.0),
+        ]
+    )
+    return VirtualRig(loads_config(toml), drive, SessionLog.create(tmp_path, toml))
+
+
+def _power_cycle(rig: VirtualRig, off_s: float = 1.0) -> None:
+    """The ECU off the bus for `off_s` (longer than the link's 0.5 s: the terminal reports it
+    lost), then its core starts over on the firmware's defaults: parameters and learned lag
+    gone, as after a power cut to the implement."""
+    rig.ecu_off = True
+    rig.run(rig.world.t_s + off_s)
+    w = rig.world
+    defaults = (w.cfg.ecu or EcuParams.defaults()).to_c()
+    check(lib.td_app_init(w.ecu._app, defaults, w.now_us), "power cycle")
+    rig.ecu_off = False
+
+
+def _sent(rig: VirtualRig, since_s: float = 0.0) -> list[tuple[float, protocol.Frame]]:
+    """The frames the terminal sent to the ECU from `since_s` on, decoded, in time order."""
+    assert rig.term.session is not None
+    with SessionReader(rig.term.session.path) as reader:
+        rows = [r for r in reader.raw() if r.kind == "can_tx" and r.t >= since_s]
+    out = []
+    for r in rows:
+        assert r.can_id is not None and r.data is not None
+        out.append((r.t, protocol.decode((r.can_id, r.data))))
+    return out
+
+
+def _lag_sets(rig: VirtualRig, since_s: float = 0.0) -> list[tuple[int, float]]:
+    """The GnssLag and GnssLagAuto values the terminal wrote from `since_s` on."""
+    return [
+        (f.param_id, f.value)
+        for _, f in _sent(rig, since_s)
+        if isinstance(f, protocol.PcParamSet) and f.param_id in (GNSS_LAG, GNSS_LAG_AUTO)
+    ]
 
 
 def _events(rig: VirtualRig, kind: str) -> list[LogEvent]:
@@ -112,6 +164,107 @@ def test_the_learned_lag_is_kept_and_starts_the_next_session(tmp_path: Path) -> 
     # nothing learned standing still: the kept lag stays as it was
     assert json.loads((tmp_path / STORE_FILE).read_text())["receivers"][0]["lag_ms"] == kept_ms
     assert not [e for e in second.events if "not the one whose lag was kept" in e[1]]
+
+
+def test_an_ecu_rebooted_mid_session_starts_from_the_lag_learned_so_far(tmp_path: Path) -> None:
+    LagStore(tmp_path / STORE_FILE).keep(SIM_RECEIVER, 500)  # an earlier session's lag
+    rig = _cruising(tmp_path, DEFAULT_TOML)
+    try:
+        rig.run(12.0)
+        assert rig.world.ecu.params.gnss_lag_ms == 500  # the start value, pushed at open
+        _power_cycle(rig)  # 12.0 .. 13.0 s, in the cruise at 8 km/h
+        assert rig.world.ecu.params.gnss_lag_ms == 0  # the firmware's default
+        rig.run(16.0)
+    finally:
+        rig.close()
+    learned = [x[1] for x in _lags(rig) if x[2] == "learned"]
+    assert learned and learned[-1] is not None and abs(learned[-1] - SIM_LAG_MS) <= 250
+    lag_ms = learned[-1]  # the last lag the ECU reported as learned before it went
+    # the parameters pushed again carry the learned lag as the start, not the session's 500 ms
+    assert _lag_sets(rig) == [
+        (GNSS_LAG, 500),
+        (GNSS_LAG_AUTO, 1),
+        (GNSS_LAG, lag_ms),
+        (GNSS_LAG_AUTO, 1),
+    ]
+    p = rig.world.ecu.params
+    assert (p.gnss_lag_ms, p.gnss_lag_auto) == (lag_ms, 1)
+    # the ECU learns again from it (nothing to learn in the cruise): in use at once
+    assert _lags(rig)[-1] == (lag_ms, None, "start")
+    (restored,) = _events(rig, "gnss_lag.restored")
+    assert 13.0 < restored.t < 13.5
+    assert restored.detail == {"input": "serial:/dev/ttyUSB0", "lag_ms": lag_ms, "start_ms": 500}
+    assert [m for _, m in rig.events if m.startswith("GNSS lag: the ECU restarted")] == [
+        f"GNSS lag: the ECU restarted; it learns again from the {lag_ms / 1000:.2f} s learned "
+        "in this session"
+    ]
+    # the ECU works for the terminal again, and the kept lag is the learned one
+    assert rig.snapshots[-1][1].ecu_link == "ok" and rig.world.ecu.state.running
+    assert json.loads((tmp_path / STORE_FILE).read_text())["receivers"][0]["lag_ms"] == lag_ms
+    assert rig.term.session is not None
+    with SessionReader(rig.term.session.path) as reader:
+        summary = lag_summary(reader.events())
+    assert summary is not None and (summary.learned_ms, summary.restored) == (lag_ms, 1)
+
+
+def test_an_ecu_rebooted_before_any_lag_is_learned_gets_the_start_value_again(
+    tmp_path: Path,
+) -> None:
+    LagStore(tmp_path / STORE_FILE).keep(SIM_RECEIVER, 500)
+    rig = _cruising(tmp_path, DEFAULT_TOML)
+    try:
+        rig.run(1.5)  # standing: nothing learned
+        _power_cycle(rig)
+        rig.run(3.0)
+    finally:
+        rig.close()
+    assert _lag_sets(rig) == [(GNSS_LAG, 500), (GNSS_LAG_AUTO, 1)] * 2
+    assert rig.world.ecu.params.gnss_lag_ms == 500
+    assert _events(rig, "gnss_lag.restored") == []
+
+
+def test_a_fixed_lag_survives_a_reboot_unchanged(tmp_path: Path) -> None:
+    LagStore(tmp_path / STORE_FILE).keep(SIM_RECEIVER, 500)  # not used: the lag is fixed
+    toml = DEFAULT_TOML.replace('gnss_lag_ms = "auto"', "gnss_lag_ms = 3000")
+    rig = _cruising(tmp_path, toml)
+    try:
+        rig.run(12.0)
+        _, learned, state = _lags(rig)[-1]  # the data overrule it meanwhile
+        assert state == "overruled" and learned is not None and abs(learned - SIM_LAG_MS) <= 250
+        _power_cycle(rig)
+        rig.run(16.0)
+    finally:
+        rig.close()
+    assert _lag_sets(rig) == [(GNSS_LAG, 3000), (GNSS_LAG_AUTO, 0)] * 2
+    p = rig.world.ecu.params
+    assert (p.gnss_lag_ms, p.gnss_lag_auto) == (3000, 0)
+    assert _lags(rig)[-1] == (3000, None, "fixed")  # the user's setting, as set
+    assert _events(rig, "gnss_lag.restored") == []
+
+
+def test_an_ecu_only_unheard_for_a_while_keeps_running_on_its_learned_lag(tmp_path: Path) -> None:
+    LagStore(tmp_path / STORE_FILE).keep(SIM_RECEIVER, 500)
+    rig = _cruising(tmp_path, DEFAULT_TOML)
+    try:
+        rig.run(12.0)
+        rig.ecu_silent = True  # its frames are lost; it hears the commands and meters on
+        rig.run(13.0)
+        rig.ecu_silent = False
+        rig.run(16.0)
+    finally:
+        rig.close()
+    assert [x for x in rig.events if x[1] == "ECU back"]
+    # the parameters pushed again: the running ECU answers Busy with its own start value 500 ms
+    # and goes on with the lag it learned; it is not stopped to write a start value
+    assert [pid for pid, _ in _lag_sets(rig, since_s=12.0)] == [GNSS_LAG, GNSS_LAG_AUTO]
+    commands = [
+        f for t, f in _sent(rig, since_s=12.0) if isinstance(f, protocol.PcCommand) and t < 15.9
+    ]
+    assert len(commands) >= 7 and all(c.start for c in commands)
+    assert rig.world.ecu.state.running and rig.world.ecu.params.gnss_lag_ms == 500
+    in_use, learned, state = _lags(rig)[-1]
+    assert state == "learned" and in_use == learned and abs(in_use - SIM_LAG_MS) <= 250
+    assert _events(rig, "gnss_lag.restored") == []
 
 
 def test_another_receiver_on_the_input_is_told_and_kept_apart(tmp_path: Path) -> None:
@@ -284,6 +437,9 @@ def test_lag_watch_reports_state_changes_and_moves_beyond_100_ms() -> None:
     assert again is not None and again.tell()
     assert str(again.message()) == "GNSS lag: learning from 1.05 s"
     assert watch.learned_ms == 1051  # the last learned is kept through it
+    # a lag in LagLearned while the ECU says it is at its start value is not taken as learned
+    watch.update(0.6, _frame(1400, 1400, 0), None)
+    assert watch.learned_ms == 1051
 
 
 def test_lag_watch_warns_of_an_overrule_that_holds() -> None:
@@ -355,3 +511,67 @@ def test_replay_defaults_to_the_fused_mode(tmp_path: Path) -> None:
     with outs["default"].open() as f:
         sources = {row["source"] for row in csv.DictReader(f)}
     assert "fused" in sources
+
+
+class _Wire:
+    """What a link sends, kept (a bus of one listener)."""
+
+    def __init__(self) -> None:
+        self.sent: list[protocol.Frame] = []
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.sent.append(protocol.decode(msg))
+
+
+def _ecu_frame(name: str, **signals: int) -> can.Message:
+    msg = protocol.database().get_message_by_name(name)
+    return can.Message(arbitration_id=msg.frame_id, data=msg.encode(signals), is_extended_id=True)
+
+
+def _busy(param_id: int, raw: int) -> can.Message:
+    return _ecu_frame("EcuParamAck", AckParamId=param_id, AckResult=3, AckRaw=raw)
+
+
+def _learned_lag(automatic: int) -> can.Message:
+    return _ecu_frame(
+        "EcuGnssLag",
+        LagInUse=1165,
+        LagLearned=1165,
+        LagEvidence=6.2,
+        LagFit=3,
+        LagState=1 if automatic else 3,
+        LagAuto=automatic,
+    )
+
+
+@pytest.mark.parametrize(
+    ("lag_auto", "ecu_auto", "stopped"),
+    [
+        (1, 1, False),  # learning on both sides: the learned lag stands, no stop
+        (0, 1, True),  # the push turns learning off: GnssLag becomes the lag in use
+        (1, 0, True),  # the ECU does not learn: its GnssLag is the lag in use
+    ],
+)
+def test_a_running_ecu_is_stopped_for_another_gnss_lag_only_when_it_is_the_lag_in_use(
+    lag_auto: int, ecu_auto: int, stopped: bool
+) -> None:
+    wire = _Wire()
+    link = CanLink(wire, loads_config("").can)
+    link.on_frame(_learned_lag(ecu_auto), 0.0)
+    link.begin({GNSS_LAG: 1300, GNSS_LAG_AUTO: lag_auto}, 0.0)
+    link.on_frame(_busy(GNSS_LAG, 500), 0.01)  # running, with 500 ms as its GnssLag
+    stops = [f for f in wire.sent if isinstance(f, protocol.PcCommand) and not f.start]
+    lag_sets = [f for f in wire.sent if isinstance(f, protocol.PcParamSet)]
+    assert len(stops) == int(stopped)
+    # a stop is followed by GnssLag written again; else the push goes on to GnssLagAuto
+    assert lag_sets[-1].param_id == (GNSS_LAG if stopped else GNSS_LAG_AUTO)
+
+
+def test_what_the_ecu_said_of_its_lag_is_forgotten_when_it_is_lost() -> None:
+    # back, it may have restarted: its learned lag from before is no reason to keep a GnssLag
+    lost = CanLink(_Wire(), loads_config("").can)
+    lost.on_frame(_learned_lag(1), 0.0)
+    status = can.Message(arbitration_id=protocol.DEFAULT_IDS.status, data=bytes(8))
+    lost.on_frame(status, 0.0)
+    lost.poll(1.0)  # no status for 1 s: lost
+    assert lost.state == "lost" and lost.ecu.lag is None

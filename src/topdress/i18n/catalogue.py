@@ -346,6 +346,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "first start",
         "{input} 上的 GNSS 接收机不是所保存滞后的那台：首次起步时学习其滞后",
     ),
+    "event.gnss_lag_restored": (
+        "GNSS lag: the ECU restarted; it learns again from the {s:.2f} s learned in this session",
+        "GNSS 滞后：ECU 已重启；从本次作业已学到的 {s:.2f} 秒重新开始学习",
+    ),
     "event.gnss_lag_store": ("GNSS lag file: {error}", "GNSS 滞后文件：{error}"),
     "manual.shown_percent": ("MANUAL model {percent} %", "手动 模型 {percent} %"),
     "main.rate_model": ("model rate", "模型施肥量"),

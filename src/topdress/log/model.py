@@ -85,6 +85,7 @@ EVENT_KINDS: Final = (
     "gnss_lag.receiver",
     "gnss_lag.changed",
     "gnss_lag.kept",
+    "gnss_lag.restored",
     "map.distance",
     "display.restarted",
     "display.lost",

@@ -70,6 +70,7 @@ class LagSummary:
     fixed_ms: float | None = None  # [ecu] gnss_lag_ms when fixed
     state: str | None = None  # the last state: start, learned, fixed, overruled
     overruled: int = 0  # times the data overruled a fixed lag
+    restored: int = 0  # times an ECU that restarted was pushed the lag learned so far
     changes: int = 0  # gnss_lag.changed events
 
 
@@ -238,6 +239,8 @@ def lag_summary(events: Iterable[LogEvent]) -> LagSummary | None:
                 out.overruled += 1
             learned = _int(d.get("learned_ms"))
             out.learned_ms = learned if learned is not None else out.learned_ms
+        elif ev.kind == "gnss_lag.restored":
+            out.restored += 1
         elif ev.kind == "gnss_lag.kept":
             lag = _int(d.get("lag_ms"))
             kept = lag if lag is not None else kept
@@ -260,6 +263,8 @@ def lag_text(lag: LagSummary | None) -> str:
         parts.append(f"configured {lag.fixed_ms / 1000:.2f} s")
     if lag.overruled:
         parts.append(f"overruled by the data {lag.overruled}x")
+    if lag.restored:
+        parts.append(f"pushed again to the restarted ECU {lag.restored}x")
     if lag.state is not None:
         parts.append(f"last state {lag.state}")
     return ", ".join(parts)

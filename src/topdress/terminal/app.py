@@ -17,7 +17,8 @@ calibration results, the GNSS lag the ECU learns) also goes to the session log a
 
 The GNSS lag learned with this receiver in an earlier session (topdress.terminal.gnsslag, kept
 beside the session logs) is the start value pushed to the ECU; the lag learned now is kept for
-the next session.
+the next session, and is the start value pushed again to an ECU that comes back from a loss
+(rebooted, it would start from the session's start value or its own default again).
 
 GNSS lost (port vanished, no valid fix, stale speed) is forwarded as "not available", so the
 ECU falls back to the wheel.
@@ -35,7 +36,7 @@ import math
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -60,6 +61,7 @@ from topdress.log.session import SessionLog
 from topdress.protocol import EcuIdent, fault_names
 from topdress.terminal import signals
 from topdress.terminal.canlink import (
+    GNSS_LAG_ID,
     CanLink,
     EcuView,
     ident_mismatch,
@@ -67,7 +69,7 @@ from topdress.terminal.canlink import (
     terminal_protocol,
 )
 from topdress.terminal.desk import OperatorDesk
-from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
+from topdress.terminal.gnsslag import MAX_LAG_MS, STORE_FILE, LagStore, LagWatch
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.receiver import ReceiverWatch, input_key
 from topdress.terminal.site import Maps, build_map_guard, build_site_rate
@@ -152,6 +154,7 @@ class Terminal:
         self.lags = LagStore(where / STORE_FILE if where is not None else None)
         self.lag_watch = LagWatch()
         self.lag_start = self.lags.for_input(self.receiver.input)
+        self._lag_renewed_ms: int | None = None  # the learned lag an ECU back is pushed
         if self.lags.error:
             self.event(text("event.gnss_lag_store", error=self.lags.error))
 
@@ -211,6 +214,7 @@ class Terminal:
             on_tx=self._log_tx,
             on_event=self.event,
             on_ident=self._log_ident,
+            on_again=self._on_params_again,
         )
 
     def take(self, section: str, new: TerminalConfig) -> None:
@@ -592,6 +596,7 @@ class Terminal:
         if frame is None or not self.link.ecu_alive:
             return
         change = self.lag_watch.update(now, frame, self._fixed_lag_ms())
+        self._renew_lag()
         if change is not None:
             self.log_event(now, "gnss_lag.changed", **change.detail())
             if change.tell():
@@ -604,6 +609,39 @@ class Terminal:
         if warning is not None:
             log.warning("%s", warning)
             self.event(warning)
+
+    def _renew_lag(self) -> None:
+        """The lag learned so far becomes the start value an ECU back from a loss is pushed, as
+        the session's start value was at open; a number in gnss_lag_ms stays the one pushed."""
+        learned = self.lag_watch.learned_ms
+        if self._fixed_lag_ms() is not None:
+            self._lag_renewed_ms = None  # set to "auto" again later: renewed then
+            return
+        if learned is None or learned == self._lag_renewed_ms:
+            return
+        self.link.renew({GNSS_LAG_ID: float(min(max(learned, 0), MAX_LAG_MS))})
+        self._lag_renewed_ms = learned
+
+    def _on_params_again(self, params: Mapping[int, float], now: float) -> None:
+        """The parameters are in force again in an ECU back from a loss: when they carried the
+        lag learned so far and the ECU has reported no learned lag of its own since (it
+        restarted), that lag is where its learning starts again: logged and told."""
+        pushed = params.get(GNSS_LAG_ID)
+        frame = self.link.ecu.lag
+        learned = self._lag_renewed_ms
+        if learned is None or pushed != learned or self._fixed_lag_ms() is not None:
+            return
+        if frame is not None and frame.learned_ms is not None:
+            return  # it kept what it learned: nothing was restored
+        start = self.lag_start
+        self.log_event(
+            now,
+            "gnss_lag.restored",
+            input=self.receiver.input,
+            lag_ms=learned,
+            start_ms=start.lag_ms if start is not None else None,
+        )
+        self.event(text("event.gnss_lag_restored", s=learned / 1000))
 
     def _on_receiver(self, now: float) -> None:
         """The receiver's identity settled: said in the log, and told when the lag pushed at

@@ -18,7 +18,11 @@ seconds on any monotonic clock (virtual in tests). It
   who the ECU is when that changes, warns when its protocol version is not the terminal's own
   (the DBC's VERSION), and hands it to `on_ident` (the terminal logs it);
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
-  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults).
+  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults), with
+  the values the terminal `renew`ed meanwhile (the GNSS lag learned so far), and tells
+  `on_again` once they are in force. A running ECU that answers Busy to a `GnssLag` while it
+  reports a lag learned since it was heard again is not stopped for it: that value is only where
+  learning starts, and it has learned.
   An ECU never heard is waited for ("wait"), not lost.
 
 It sends on anything with python-can's `send`: the terminal's `devices.can.CanPort`, which
@@ -49,6 +53,8 @@ MAX_FAN_RPM = 6000.0
 #: Waits between parameter tries once the fast retries went unanswered (the ECU is not on the
 #: bus yet): every 1 s for 5 s, then every 2 s; the last repeats.
 PARAM_BACKOFF_S = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
+GNSS_LAG_ID = protocol.param("GnssLag").id
+GNSS_LAG_AUTO_ID = protocol.param("GnssLagAuto").id
 # Tolerance of time comparisons: a deadline met to the microsecond counts as met.
 _EPS_S = 1e-6
 
@@ -134,6 +140,7 @@ class _ParamPush:
     deferred: set[int] = field(default_factory=set)  # ids moved to the end once (inconsistent)
     # A settings push (push_params): told the outcome instead of raising on a refusal.
     on_done: Callable[[str | None, list[int]], None] | None = None
+    again: bool = False  # the parameters in force, pushed again to an ECU back from a loss
 
     @property
     def done(self) -> bool:
@@ -175,9 +182,13 @@ class CanLink:
         on_tx: Callable[[can.Message], None] | None = None,
         on_event: Callable[[Text], None] | None = None,
         on_ident: Callable[[protocol.EcuIdent, float], None] | None = None,
+        on_again: Callable[[Mapping[int, float], float], None] | None = None,
     ) -> None:
+        """`on_again(params, now)`: the parameters pushed again to an ECU back from a loss are
+        all in force."""
         self._ack_timeout_s = param_ack_timeout_s
         self._on_ident = on_ident
+        self._on_again = on_again
         self._retries = param_retries
         self._backoff_s = param_backoff_s
         self._on_tx = on_tx
@@ -280,7 +291,8 @@ class CanLink:
             self.counters.rx_implausible += 1
             log.warning("ignored EcuParamAck for %s: %s", protocol.param_name(param_id), why)
             return
-        if ack.result is AckResult.BUSY and ack.raw != protocol.param(param_id).to_raw(value):
+        busy_other = ack.raw != protocol.param(param_id).to_raw(value)
+        if ack.result is AckResult.BUSY and busy_other and not self._lag_learned(param_id, push):
             # Running with another value (the terminal restarted mid-field with a new file):
             # stop it, then write again. Busy with the value already in force is as good as Ok.
             self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
@@ -307,6 +319,19 @@ class CanLink:
             self._on_push_done(now)
         else:
             self._send_param(now)
+
+    def _lag_learned(self, param_id: int, push: _ParamPush) -> bool:
+        """`GnssLag` is only where the ECU's learning starts: not worth a stop while it reports
+        a lag it learned since it was last heard again, learning on in it and in this push (a
+        push that turns learning off makes `GnssLag` the lag in use: written as any other)."""
+        lag = self.ecu.lag
+        return (
+            param_id == GNSS_LAG_ID
+            and lag is not None
+            and lag.automatic
+            and lag.learned_ms is not None
+            and dict(push.items).get(GNSS_LAG_AUTO_ID) == 1
+        )
 
     def _defer(self, push: _ParamPush, now: float) -> bool:
         """Move a parameter the ECU finds inconsistent with a value it still holds to the end,
@@ -340,6 +365,16 @@ class CanLink:
         else:
             self._send_param(now)
 
+    def renew(self, params: Mapping[int, float]) -> None:
+        """Values to push again, in place of those in force, when the ECU comes back from a loss
+        (it may have restarted on its defaults); nothing is sent now. ProtocolError for a value
+        the frame cannot carry."""
+        for param_id, value in params.items():
+            protocol.param(param_id).check(value)
+        merged = dict(self._params)
+        merged.update(params)
+        self._params = sorted(merged.items())
+
     def send(self, msg: can.Message) -> bool:
         """Send one frame now (calibration commands); a failure is counted as for commands."""
         return self._send(msg)
@@ -353,6 +388,10 @@ class CanLink:
             self._params = sorted(merged.items())
             push.on_done(None, [pid for pid, _ in push.items])
             push.on_done = None
+        if push is not None and push.again:
+            push.again = False
+            if self._on_again is not None:
+                self._on_again(dict(push.items), now)
         self._ready = True
         if self._waited:
             self._waited = False
@@ -537,7 +576,7 @@ class CanLink:
             return
         if push.done:
             if back:  # an ECU that rebooted meanwhile runs on its defaults
-                self._push = _ParamPush(list(self._params))
+                self._push = _ParamPush(list(self._params), again=True)
                 self._send_param(now)
         elif push.waiting:
             # It has just been powered: go on at once, not at the end of the backoff.
@@ -552,6 +591,8 @@ class CanLink:
             return
         self._lost = True
         self._alive = False
+        # What it said of its GNSS lag may not hold when it is back (it may have restarted).
+        self.ecu = replace(self.ecu, lag=None)
         self.counters.ecu_lost += 1
         self._event(text("event.ecu_lost", s=now - last))
 

@@ -13,6 +13,8 @@ The ECU learns the lag of the GNSS speed behind the wheel and reports it in `Ecu
   small JSON file beside the session logs, `STORE_FILE`, written atomically whenever the learned
   lag changes (a background thread: the write ends in an fsync) and at the end of the session; the
   next session pushes the lag kept for its GNSS input as `GnssLag`, the start of the learning.
+  Within a session the last learned lag is the start value an ECU that restarted is pushed
+  again (topdress.terminal.app), so a reboot does not send it back to the session's start.
 
 A file that cannot be read or parsed is an error told to the operator and logged, never a crash:
 a damaged one is moved aside (`.damaged`) and the lags are learned anew.
@@ -233,7 +235,9 @@ class LagWatch:
 
     def __init__(self) -> None:
         self.state: str | None = None
-        self.learned_ms: int | None = None  # the last learned lag the ECU reported
+        # the last learned lag the ECU reported: kept, and pushed again to an ECU back from a
+        # loss (docs/terminal.md)
+        self.learned_ms: int | None = None
         self._told_ms: int | None = None  # the learned lag of the last change
         self._view: LagView | None = None
         self._overruled_t: float | None = None  # since when the data overrule a fixed lag
@@ -254,8 +258,8 @@ class LagWatch:
     ) -> LagChange | None:
         view = LagView.of(frame, fixed_ms)
         self._view = view
-        if frame.learned_ms is not None:
-            self.learned_ms = frame.learned_ms
+        if frame.learned_ms is not None and view.state != "start":
+            self.learned_ms = frame.learned_ms  # never a start value: the ECU learned it
         was, moved = self.state, None
         if view.state == was:
             told, learned = self._told_ms, frame.learned_ms
