@@ -450,7 +450,9 @@ def _landed_edge_m(tmp_path: Path, lookahead: bool) -> tuple[float, float]:
     rx = two_zones(tmp_path / "rx.gpkg")
     toml = re.sub(r'(\[prescription\][^\n]*\n)path = ""', rf'\1path = "{rx}"', DEFAULT_TOML)
     # the paper's speed rule: the edge's geometry alone, not the fused estimate's first seconds
-    # (it is still learning the wheel's slip 20 m after a start from rest, ~4 % low)
+    # (20 m after a start from rest the wheel's bounce dips 3-5 % for ~2 s at this seed, and the
+    # fused speed follows it until GNSS, 1.3 s late, says otherwise: 277 kg/ha at the lowest
+    # metre, docs/speed.md)
     toml = toml.replace('mode = "fused"', 'mode = "paper"')
     if lookahead:
         toml = re.sub(r"\[lookahead\]\n(?:[^\[]*)", LOOKAHEAD, toml)
