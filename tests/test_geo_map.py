@@ -128,4 +128,5 @@ def test_a_long_sessions_map_is_thinned_and_covers_the_same_ground(
     track_full = shapely.LineString(full["track"])
     track_thin = shapely.LineString(thin["track"])
     assert len(thin["track"]) * 3 < len(full["track"])  # type: ignore[arg-type]
-    assert shapely.hausdorff_distance(track_full, track_thin) <= mapview.TRACK_TOLERANCE_DEG
+    # (both as drawn: rounded to 1e-8 degrees after the thinning)
+    assert shapely.hausdorff_distance(track_full, track_thin) <= mapview.TRACK_TOLERANCE_DEG + 2e-8
