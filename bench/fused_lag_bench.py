@@ -17,7 +17,10 @@ An independent model of a machine and its sensors writes raw-input events (the N
 
 Errors are taken at every speed update of the replay (500 ms) against the true speed then:
 RMS over the rows while accelerating / braking (|a| > 0.05 m/s^2), and in cruise (3 s after a
-change and later) the worst mean error of a cruise stretch, % of its speed.
+change and later) the worst mean error of a cruise stretch, % of its speed. The lag the ECU
+learned (no setting) is read at the end of the first cruise (the drive's events cut there: the
+first start from rest is all it has seen) and at the end of the drive, against the receiver's
+lag; the table gives the mean over the drives and the worst error.
 
     .venv/bin/python bench/fused_lag_bench.py            # the issue's three receivers
     .venv/bin/python bench/fused_lag_bench.py --matrix   # + receivers 0.2-2.0 s, 1-10 Hz, Doppler
@@ -83,6 +86,12 @@ def _profile(seed: int) -> list[tuple[float, float]]:
         pieces.append((rng.uniform(12.0, 25.0) if k < 5 else 4.0, target))
         v = target
     return pieces
+
+
+def first_cruise_end_s(seed: int) -> float:
+    """When the first cruise ends (the second speed change begins), s."""
+    pieces = _profile(seed)
+    return sum(dur for dur, _ in pieces[:3])
 
 
 def make_drive(seed: int) -> Drive:
@@ -199,6 +208,27 @@ def run(rx: Receiver, seed: int, mode: str, lag_ms: int | None, ground_slip: flo
     return score(drive, rows, stats.lag_learned_ms)
 
 
+def first_start_lag(rx: Receiver, seed: int) -> int | None:
+    """The lag learned with no setting after the first start: the drive's events cut at the end
+    of the first cruise, ms (None: not learned)."""
+    drive = make_drive(seed)
+    cut = first_cruise_end_s(seed)
+    events = wheel_events(drive, seed, 0.02) + gnss_events(drive, rx, seed)
+    stats = ReplayStats()
+    replay([e for e in events if e.t < cut], default_config(), "fused", stats)
+    return stats.lag_learned_ms
+
+
+def lag_cell(rx: Receiver, lags: Sequence[int | None]) -> str:
+    """Mean learned lag, ms, and the worst error against the receiver's lag."""
+    missing = sum(lag is None for lag in lags)
+    if missing:
+        return f"not learned in {missing} of {len(lags)}"
+    ms = [float(lag) for lag in lags if lag is not None]
+    worst = max((m - rx.lag_s * 1000 for m in ms), key=abs)
+    return f"{statistics.fmean(ms):.0f} ({worst:+.0f})"
+
+
 def mean_score(scores: Sequence[Score]) -> Score:
     lags = [s.lag_ms for s in scores if s.lag_ms is not None]
     return Score(
@@ -227,17 +257,22 @@ MATRIX_RECEIVERS = (
 
 
 def table(receivers: Sequence[Receiver], seeds: Sequence[int]) -> None:
-    print(
-        "| receiver lag | fused, no setting | paper rule | fused, lag set right | learned lag ms |"
-    )
-    print("|---|---|---|---|---|")
+    print("| receiver lag | fused, no setting | paper rule | fused, lag set right |")
+    print("|---|---|---|---|")
+    lags: list[str] = []
     for rx in receivers:
         right = round(rx.lag_s * 1000)
-        auto = mean_score([run(rx, s, "fused", None) for s in seeds])
+        autos = [run(rx, s, "fused", None) for s in seeds]
         paper = mean_score([run(rx, s, "paper", None) for s in seeds])
         fixed = mean_score([run(rx, s, "fused", right) for s in seeds])
-        learned = "-" if auto.lag_ms is None else str(auto.lag_ms)
-        print(f"| {rx.label()} | {cell(auto)} | {cell(paper)} | {cell(fixed)} | {learned} |")
+        print(f"| {rx.label()} | {cell(mean_score(autos))} | {cell(paper)} | {cell(fixed)} |")
+        first = lag_cell(rx, [first_start_lag(rx, s) for s in seeds])
+        lags.append(f"| {rx.label()} | {first} | {lag_cell(rx, [a.lag_ms for a in autos])} |")
+    print()
+    print("Learned lag (no setting), ms: mean over the drives (worst error against the receiver's)")
+    print("| receiver lag | after the first start | at the end of the drive |")
+    print("|---|---|---|")
+    print("\n".join(lags))
 
 
 def wrong_lags(seeds: Sequence[int]) -> None:

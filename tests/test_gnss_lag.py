@@ -311,6 +311,22 @@ def test_a_fixed_lag_the_data_contradict_is_an_event_and_a_warning(
     assert lag is not None and lag.overruled == 1 and lag.fixed_ms == 3000
 
 
+def test_a_right_fixed_lag_is_never_overruled(tmp_path: Path) -> None:
+    # the simulated receiver's own 1.3 s, fixed: the lag learned meanwhile agrees with it from
+    # the first start on, so the data never overrule it (a learner that came out short did,
+    # for ~5 s early in the session)
+    toml = DEFAULT_TOML.replace('gnss_lag_ms = "auto"', f"gnss_lag_ms = {SIM_LAG_MS}")
+    rig = _session(tmp_path, toml, until_s=25.0)
+    lags = _lags(rig)
+    assert "overruled" not in {state for _, _, state in lags}
+    fixed = [(in_use, learned) for in_use, learned, state in lags if state == "fixed"]
+    assert all(in_use == SIM_LAG_MS for in_use, _ in fixed)
+    learned = [ms for _, ms in fixed if ms is not None]
+    assert learned and abs(learned[-1] - SIM_LAG_MS) <= 100
+    assert not [e for e in _events(rig, "gnss_lag.changed") if e.detail["state"] == "overruled"]
+    assert not [m for _, m in rig.events if "contradicts the data" in m]
+
+
 def test_a_damaged_lag_file_is_told_and_logged_never_a_crash(tmp_path: Path) -> None:
     (tmp_path / STORE_FILE).write_text('{"version": 1, "receivers": [{"input": "serial:x", ')
     rig = _session(tmp_path, DEFAULT_TOML, until_s=12.0)

@@ -75,8 +75,8 @@ typedef struct {
     uint16_t lag_learned_ms;   /**< the lag learned from the wheel, ms; 0xFFFF until learned (td_lag.h) */
     uint8_t lag_state;         /**< td_lag_state_t: where gnss_lag_ms comes from */
     uint8_t lag_overruled;     /**< times a fixed GnssLag was overruled by the data (wrapping) */
-    float lag_evidence_s;      /**< seconds of speed change behind the learned lag (decayed) */
-    float lag_fit;             /**< its misfit r_min / r_max, 0..1 (small: a clear lag) */
+    float lag_evidence_s;      /**< seconds of speed change (the windows) behind the learned lag */
+    float lag_fit;             /**< the last result's distance from the lag before it, share of it, 0..1 (1: none yet) */
     bool slip_learning;        /**< the wheel scale is being learned now (GNSS good, motion steady) */
     bool edge_timing;          /**< the port supplied a wheel edge time at the last step */
     bool gnss_fused;           /**< the estimate accepted a GNSS speed within gnss_timeout_ms */

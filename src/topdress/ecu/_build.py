@@ -134,7 +134,12 @@ float td_fused_lead_ms(const td_fused_t *f, float lead_s);
 float td_fused_speed_std_ms(const td_fused_t *f);
 
 /* td_lag.h */
-typedef struct { float evidence_s; float lag_s; float fit; bool learned; ...; } td_lag_t;
+typedef struct { float u_m; float z_m; float t_s; } td_lag_sum_t;
+typedef struct {
+    td_lag_sum_t level; td_lag_sum_t change; float w0_ms; float z0_ms; float avg_s;
+    float weight_ms; float lag_s; float evidence_s; float fit; uint8_t phase; bool pending;
+    bool learned; bool area; ...;
+} td_lag_t;
 
 /* td_speedq.h */
 #define TD_SPEEDQ_MAX ...

@@ -63,7 +63,8 @@ class EcuState:
     gnss_delay_ms: int
     # the GNSS lag in use (ms), the one learned (None until learned), where it comes from
     # (0 start value, 1 learned, 2 fixed, 3 a fixed lag overruled by the data), how often a
-    # fixed lag was overruled, and the evidence (s of speed change) and misfit behind it
+    # fixed lag was overruled, the evidence (s of speed change) behind it and how far the last
+    # change found it off (share, 1 before any change settled)
     gnss_lag_ms: int
     lag_learned_ms: int | None
     lag_state: int

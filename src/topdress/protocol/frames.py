@@ -195,7 +195,8 @@ LAG_NONE_RAW = 0xFFFF  # EcuGnssLag.LagLearned: not learned yet
 @dataclass(frozen=True)
 class EcuGnssLag:
     """The GNSS lag the ECU adds to every fix's age (ms), the one it learned from the wheel
-    (ms, None until learned), the seconds of speed change and the misfit (0..1) behind it, where
+    (ms, None until learned), the seconds of speed change behind it and how far the last change
+    found it off (share of it, 0..1; 1 before any change settled), where
     the lag in use comes from (0 start value, 1 learned, 2 fixed, 3 a fixed lag overruled by
     the data) and whether GnssLagAuto is on."""
 
