@@ -125,7 +125,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
 
 /* Scalar measurement with H = h, innovation y, variance r. The scale's gain is zeroed unless
  * learning; the Joseph form P - K u' - u K' + S K K' keeps P right for that gain. */
-static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn, bool hold_a) {
+static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn) {
     float *p = f->p;
     const float u[3] = { p[VV] * h[0] + p[VA] * h[1] + p[VS] * h[2], p[VA] * h[0] + p[AA] * h[1] + p[AS] * h[2],
                          p[VS] * h[0] + p[AS] * h[1] + p[SS] * h[2] };
@@ -133,7 +133,7 @@ static bool update(td_fused_t *f, const float h[3], float y, float r, bool learn
     if (!(s > 0.0f) || (y * y > GATE_SIGMA2 * s && fabsf(y) > GATE_MIN_MS)) {
         return false;
     }
-    const float k[3] = { u[0] / s, hold_a ? 0.0f : u[1] / s, learn ? u[2] / s : 0.0f };
+    const float k[3] = { u[0] / s, u[1] / s, learn ? u[2] / s : 0.0f };
     f->v_ms += k[0] * y;
     f->a_ms2 += k[1] * y;
     f->scale += k[2] * y;
@@ -197,7 +197,7 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
      * again, not because the estimate grew uncertain without it */
     const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
-    if (!held && update(f, h, y, r, learn, false)) {
+    if (!held && update(f, h, y, r, learn)) {
         f->wheel_rejects = 0u;
         return TD_FUSED_ACCEPTED;
     }
@@ -320,16 +320,16 @@ static void learn_scale(td_fused_t *f, float z_ms, float w_then, float g, float 
      * are correlated through its filter), so a 1 Hz receiver teaches the scale as fast */
     const float n = period_s > SCALE_PERIOD_S ? period_s / SCALE_PERIOD_S : 1.0f;
     const float r = (sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + sg * sg * f->r_gnss) / (n < 4.0f ? n : 4.0f);
-    (void)update(f, h, w_then - sg * z_ms, r, true, false);
+    (void)update(f, h, w_then - sg * z_ms, r, true);
 }
 
 td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool learn) {
     const float d = delay_s > 0.0f ? delay_s : 0.0f;
-    const float h[3] = { 1.0f, -d, 0.0f };
+    float h[3] = { 1.0f, -d, 0.0f };
     const float y = z_ms - (f->v_ms - f->a_ms2 * d);
     f->innov_ms = y;
     float w_then = 0.0f;
-    const bool have_w = wheel_over(f, d, f->since_gnss_s, &w_then) || td_fused_wheel_at(f, d, &w_then);
+    const bool have_w = wheel_over(f, d, f->since_gnss_s, &w_then);
     const float g = td_fused_shape(f, z_ms, NULL);
     /* GNSS against the wheel at the fix's time, in speed: what a scale error leaves */
     const float ys = have_w ? z_ms - w_then / (f->scale * g) : y;
@@ -375,17 +375,17 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float period_s = f->since_gnss_s;
     f->since_gnss_s = 0.0f;
     /* the jerk over the delay; in steady motion a small share of it */
-    const float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
+    float r = f->r_gnss + (learn ? Q_STEADY : 1.0f) * f->q_jerk * d * d * d / 3.0f;
     const bool learning = settled && (learn || f->reopened);
     /* flat and settled: the speed then was the speed now, so the fix corrects v itself; through
      * v - a d an acceleration could take up GNSS's difference and hold v off for seconds */
     const bool cruise = learning && !f->reopened && f->q_share < CRUISE_SHARE;
-    const float hc[3] = { 1.0f, 0.0f, 0.0f };
-    const float rc = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
     if (cruise) {
+        h[1] = 0.0f;
+        r = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
         f->innov_ms = z_ms - f->v_ms;
     }
-    if (!(cruise ? update(f, hc, z_ms - f->v_ms, rc, false, false) : update(f, h, y, r, learning && !have_w, false))) {
+    if (!update(f, h, f->innov_ms, r, learning && !have_w && !cruise)) {
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */
     }
     if (learning && have_w && z_ms > SCALE_MIN_MS) {
