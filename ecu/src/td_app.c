@@ -43,6 +43,7 @@
  * used again once within TD_LAG_AGREE_MS. */
 #define TD_LAG_CONTRADICT_MS 300.0f
 #define TD_LAG_AGREE_MS 200.0f
+/* The first change's early lag may be this share of itself short of a filtered receiver's. */
 #define TD_LAG_EARLY_SHORT 0.5f
 #define TD_LAG_NONE 0xFFFFu
 /* Eq. 5 compensation: the slip is taken within 0..50 %. */
@@ -459,8 +460,9 @@ static void update_fused(td_app_t *app, uint32_t now_us, const td_io_in_t *in, u
     td_fused_predict(f, dt_s);
 
     const bool wheel_ok = (st->faults & TD_FAULT_WHEEL_ENCODER) == 0u;
-    td_fused_record(f, wheel_ok && e->started ? v_edge : -1.0f, dt_s);
-    td_lag_wheel(&app->lag, wheel_ok && e->started ? v_edge : -1.0f, dt_s);
+    const float v_hist = wheel_ok && e->started ? v_edge : -1.0f; /* < 0: no wheel */
+    td_fused_record(f, v_hist, dt_s);
+    td_lag_wheel(&app->lag, v_hist, dt_s);
     const bool gnss_ok = st->gnss_valid && (st->faults & TD_FAULT_GNSS_FROZEN) == 0u;
     const bool backs = gnss_ok && app->have_fused && td_age_us(now_us, app->gnss_fused_us) < TD_GNSS_BACKS_US;
     /* the paper's own test of uniform motion (the wheel's CV): the estimate's acceleration alone

@@ -40,18 +40,18 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define P_S_REOPEN 0.0009f    /* the scale's variance at least (3 %)^2 when re-opened */
 /* the wheel's history against GNSS: a bucket's bounce, share of its speed */
 #define HIST_REL 0.04f
-#define SCALE_PERIOD_S 0.25f
+#define SCALE_PERIOD_S 0.25f /* the scale learns per fix as from a 4-5 Hz receiver */
 #define WHEEL_MEAN_MAX_S 1.0f /* the wheel against a fix: its mean over the fix period, at most this */
-#define WHEEL_MEAN_N 8u       /* points of that mean */ /* the scale learns per fix as from a 4-5 Hz receiver */
+#define WHEEL_MEAN_N 8u       /* points of that mean */
 #define HIST_Z_MAX_MS 65.0f                   /* a wheel speed beyond this is no number (mm/s in 16 bits) */
 #define HIST_DT_MAX_S (TD_FUSED_HIST * TD_FUSED_BUCKET_S) /* a longer step leaves no history */
 #define ACCEL_BUCKETS 10u /* the wheel's own acceleration: two means of this many buckets (1 s each) */
 #define BUCKET_CLOSE_S (TD_FUSED_BUCKET_S - 1.0e-4f) /* sums of 10 ms steps fall just short */
 /* the jerk in flat motion (set_q_share) */
 #define Q_FLAT_MIN_MS 0.5f  /* below this speed the whole jerk */
-#define Q_FLAT_A_MS2 0.2f  /* tmp */
-#define Q_FLAT_SHARE 0.05f  /* tmp */
-#define CRUISE_SHARE 0.3f
+#define Q_FLAT_A_MS2 0.2f   /* the wheel's own acceleration at which the whole jerk is back */
+#define Q_FLAT_SHARE 0.05f  /* the least share */
+#define CRUISE_SHARE 0.3f   /* flat: a fix corrects v itself while the jerk's share is below this */
 #define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */

@@ -122,7 +122,7 @@ typedef enum { TD_FUSED_ACCEPTED = 0, TD_FUSED_REJECTED = 1, TD_FUSED_RESTARTED 
     td_fused_result_t;
 typedef struct {
     float v_ms; float a_ms2; float scale; float p[6]; float innov_ms; float run_s; int8_t run_sign;
-    float q_share; float quiet_s; bool reopened; uint8_t wheel_rejects; ...;
+    bool reopened; uint8_t wheel_rejects; ...;
 } td_fused_t;
 int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel_noise_pct);
 void td_fused_predict(td_fused_t *f, float dt_s);
@@ -132,14 +132,6 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
 void td_fused_standstill(td_fused_t *f);
 float td_fused_lead_ms(const td_fused_t *f, float lead_s);
 float td_fused_speed_std_ms(const td_fused_t *f);
-
-/* td_lag.h */
-typedef struct { float u_m; float z_m; float t_s; } td_lag_sum_t;
-typedef struct {
-    td_lag_sum_t level; td_lag_sum_t change; float w0_ms; float z0_ms; float avg_s;
-    float weight_ms; float lag_s; float evidence_s; float fit; uint8_t phase; bool pending;
-    bool learned; bool area; ...;
-} td_lag_t;
 
 /* td_speedq.h */
 #define TD_SPEEDQ_MAX ...
@@ -293,7 +285,7 @@ typedef struct {
 } td_cal_t;
 typedef struct {
     td_params_t p; td_state_t st; td_counters_t cnt; td_drive_t meter_drive[2]; td_fused_t fused;
-    td_lag_t lag; td_cal_t cal;
+    td_cal_t cal;
     ...;
 } td_app_t;
 int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
