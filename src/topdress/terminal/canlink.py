@@ -32,7 +32,7 @@ keeps the adapter open (and reopens it) in its own thread, or a bus itself in te
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Protocol
 
@@ -371,6 +371,10 @@ class CanLink:
         the frame cannot carry."""
         for param_id, value in params.items():
             protocol.param(param_id).check(value)
+        self._keep(params.items())
+
+    def _keep(self, params: Iterable[tuple[int, float]]) -> None:
+        """These values replace those kept for the push after the ECU comes back."""
         merged = dict(self._params)
         merged.update(params)
         self._params = sorted(merged.items())
@@ -383,9 +387,7 @@ class CanLink:
         push = self._push
         if push is not None and push.on_done is not None:
             # In force now: what is pushed again after the ECU comes back.
-            merged = dict(self._params)
-            merged.update(push.items)
-            self._params = sorted(merged.items())
+            self._keep(push.items)
             push.on_done(None, [pid for pid, _ in push.items])
             push.on_done = None
         if push is not None and push.again:
