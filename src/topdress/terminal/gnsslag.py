@@ -14,7 +14,9 @@ The ECU learns the lag of the GNSS speed behind the wheel and reports it in `Ecu
   lag changes (a background thread: the write ends in an fsync) and at the end of the session; the
   next session pushes the lag kept for its GNSS input as `GnssLag`, the start of the learning.
   Within a session the last learned lag is the start value an ECU that restarted is pushed
-  again (topdress.terminal.app), so a reboot does not send it back to the session's start.
+  again, so a reboot does not send it back to the session's start;
+- and `LagKeeper` does all of this for the terminal loop: the receiver on the GNSS input, the
+  start value pushed, the watch, the store, the learned lag renewed in the link.
 
 A file that cannot be read or parsed is an error told to the operator and logged, never a crash:
 a damaged one is moved aside (`.damaged`) and the lags are learned anew.
@@ -26,15 +28,19 @@ import datetime as dt
 import json
 import logging
 import os
+from collections.abc import Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from topdress import protocol
+from topdress.gnss.nmea import GnssFix
 from topdress.i18n import Text, text
 from topdress.outpath import atomic_write
-from topdress.terminal.receiver import ReceiverId
+from topdress.terminal.canlink import GNSS_LAG_ID, CanLink
+from topdress.terminal.journal import Journal, Settings
+from topdress.terminal.receiver import ReceiverId, ReceiverWatch, input_key
 from topdress.view.snapshot import LagView
 
 log = logging.getLogger(__name__)
@@ -276,3 +282,137 @@ class LagWatch:
         self.state = view.state
         self._told_ms = frame.learned_ms
         return LagChange(view, was, frame.evidence_s, frame.fit, moved, warned)
+
+
+class LagKeeper:
+    """The terminal's side of the GNSS lag: the receiver on the GNSS input, the lag kept for it
+    (the start value pushed), the ECU's reports watched, the learned lag kept and renewed."""
+
+    def __init__(self, settings: Settings, journal: Journal, where: Path | None) -> None:
+        """`where`: the folder of the session logs (None: kept in memory only)."""
+        self._settings = settings
+        self._journal = journal
+        self.receiver = ReceiverWatch(input_key(settings.cfg.gnss))
+        self.store = LagStore(where / STORE_FILE if where is not None else None)
+        self.watch = LagWatch()
+        self.start = self.store.for_input(self.receiver.input)
+        self._renewed_ms: int | None = None  # the learned lag an ECU back is pushed
+        if self.store.error:
+            journal.event(text("event.gnss_lag_store", error=self.store.error))
+
+    def start_ms(self) -> int | None:
+        """Where the ECU's learning starts: the lag learned so far in this session, else the
+        one kept for this receiver's input (a fixed gnss_lag_ms overrides both)."""
+        if self.watch.learned_ms is not None:
+            return self.watch.learned_ms
+        return self.start.lag_ms if self.start is not None else None
+
+    def opened(self, now: float) -> None:
+        """The `gnss_lag.start` event at open."""
+        start = self.start
+        self._journal.log_event(
+            now,
+            "gnss_lag.start",
+            input=self.receiver.input,
+            kept_ms=start.lag_ms if start is not None else None,
+            fixed_ms=self._settings.fixed_lag_ms(),
+            error=self.store.error,
+        )
+
+    def see(self, t: float, fix: GnssFix, line: bytes) -> None:
+        """A decoded line: the receiver's identity, said once it settles, and told when the
+        lag pushed at start was kept for another receiver on this input."""
+        if not self.receiver.see(t, fix, line):
+            return
+        rid = self.receiver.receiver
+        start = self.start
+        same = start.receiver.same(rid) if start is not None else None
+        self._journal.log_event(
+            t,
+            "gnss_lag.receiver",
+            input=rid.input,
+            sentences=list(rid.sentences),
+            versions=list(rid.versions),
+            start_ms=start.lag_ms if start is not None else None,
+            same_receiver=same,
+        )
+        if same is False:
+            self._journal.event(text("event.gnss_lag_other", input=rid.input))
+
+    def view(self, link: CanLink) -> LagView | None:
+        frame = link.ecu.lag
+        if frame is None or not link.ecu_alive:
+            return None
+        return LagView.of(frame, self._settings.fixed_lag_ms())
+
+    def track(self, now: float, link: CanLink) -> None:
+        """The tick's turn: the ECU's last EcuGnssLag watched, the learned lag kept."""
+        frame = link.ecu.lag
+        if frame is None or not link.ecu_alive:
+            return
+        change = self.watch.update(now, frame, self._settings.fixed_lag_ms())
+        self._renew(link)
+        if change is not None:
+            self._journal.log_event(now, "gnss_lag.changed", **change.detail())
+            if change.tell():
+                self._journal.event(change.message())
+            else:
+                log.info("%s", change.message())
+            if frame.learned_ms is not None:
+                self.keep(now, final=False)
+        warning = self.watch.warning(now)
+        if warning is not None:
+            log.warning("%s", warning)
+            self._journal.event(warning)
+
+    def _renew(self, link: CanLink) -> None:
+        """The lag learned so far becomes the start value an ECU back from a loss is pushed, as
+        the session's start value was at open; a number in gnss_lag_ms stays the one pushed."""
+        learned = self.watch.learned_ms
+        if self._settings.fixed_lag_ms() is not None:
+            self._renewed_ms = None  # set to "auto" again later: renewed then
+            return
+        if learned is None or learned == self._renewed_ms:
+            return
+        link.renew({GNSS_LAG_ID: float(min(max(learned, 0), MAX_LAG_MS))})
+        self._renewed_ms = learned
+
+    def again(self, params: Mapping[int, float], now: float, link: CanLink) -> None:
+        """The parameters are in force again in an ECU back from a loss: when they carried the
+        lag learned so far and the ECU has reported no learned lag of its own since (it
+        restarted), that lag is where its learning starts again: logged and told."""
+        learned = self._renewed_ms
+        if learned is None or params.get(GNSS_LAG_ID) != learned:
+            return
+        frame = link.ecu.lag
+        if self._settings.fixed_lag_ms() is not None:
+            return
+        if frame is not None and frame.learned_ms is not None:
+            return  # it kept what it learned: nothing was restored
+        start = self.start
+        self._journal.log_event(
+            now,
+            "gnss_lag.restored",
+            input=self.receiver.input,
+            lag_ms=learned,
+            start_ms=start.lag_ms if start is not None else None,
+        )
+        self._journal.event(text("event.gnss_lag_restored", s=learned / 1000))
+
+    def keep(self, now: float, final: bool) -> None:
+        """Keep the learned lag for this receiver (in the background while running); at the end
+        of the session also the `gnss_lag.kept` event, saying what was kept."""
+        rid = self.receiver.receiver
+        learned = self.watch.learned_ms
+        if learned is not None and rid.known:
+            self.store.keep(rid, learned, wait=final)
+        if final:
+            self.store.wait()
+            self._journal.log_event(
+                now,
+                "gnss_lag.kept",
+                input=rid.input,
+                sentences=list(rid.sentences),
+                lag_ms=learned if rid.known else None,
+                error=self.store.error,
+            )
