@@ -1,7 +1,9 @@
 """The GNSS input of the terminal loop: NMEA lines decoded, the speed to the ECU, where the
 machine and its outlet are, and how far it is from the maps.
 
-A new GNSS speed goes to the ECU at once (PcCommand with `send_on_gnss`, and PcGnssTime). A lost
+A new GNSS speed goes to the ECU at once (PcCommand with `send_on_gnss`, and PcGnssTime with
+the fix's age: the time from the line's arrival, its receive timestamp on the line source, to
+the frame's transmission, so a wait in the loop's inbox is not learned as receiver lag). A lost
 GNSS (no fix, port gone, stale speed) goes out as "not available" at the next tick, so the ECU
 falls back to the wheel.
 """
@@ -91,7 +93,8 @@ class GnssIn:
         self._sent_t = t
         kmh = self.tracker.current(t, self._lines.gnss.connected)
         link.set_gnss(kmh, t)
-        link.send_gnss_time(kmh, 0.0)
+        # The fix's age when its frame goes out: from the line's arrival, not the loop's tick.
+        link.send_gnss_time(kmh, 1000.0 * max(0.0, self._journal.clock() - t))
 
     def tick(self, now: float, link: CanLink, odometer_m: float, ahead_m: float) -> Where:
         """The tick's turn: a GNSS speed lost is told the ECU at once (not at the next command
