@@ -145,9 +145,10 @@ int td_proto_encode_gnss_time(const td_gnss_time_t *g, td_can_frame_t *f);
 int td_proto_encode_fused(const td_fused_diag_t *d, td_can_frame_t *f);
 int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f);
 int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f);
-/** EcuIdent: the port's identity with the firmware and protocol versions of td_version.h.
+/** EcuIdent: the port's identity with the firmware and protocol versions of td_version.h, and
+ *  `on_defaults`: no PcParamSet taken since power-up (tells a power-up from a command timeout).
  *  TD_E_ARG for a target, transport or reset cause outside its value table. */
-int td_proto_encode_ident(const td_ident_t *id, td_can_frame_t *f);
+int td_proto_encode_ident(const td_ident_t *id, bool on_defaults, td_can_frame_t *f);
 /**
  * Decode PcParamSet into the parameter id and its physical value (units of td_params.h).
  * TD_E_UNKNOWN_PARAM for an id outside 1..TD_PARAM_COUNT, TD_E_RANGE outside the DBC range.

@@ -180,7 +180,7 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
 
 int td_app_set_ident(td_app_t *app, const td_ident_t *ident) {
     td_can_frame_t probe;
-    if (app == NULL || td_proto_encode_ident(ident, &probe) != TD_OK) {
+    if (app == NULL || td_proto_encode_ident(ident, false, &probe) != TD_OK) {
         return TD_E_ARG;
     }
     app->ident = *ident;
@@ -320,6 +320,7 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
         switch (rc) {
         case TD_OK:
             ack.result = 0u;
+            app->params_taken = true; /* EcuIdent says so from now on (OnDefaults 0) */
             break;
         case TD_E_UNKNOWN_PARAM:
             ack.result = 1u;
@@ -750,7 +751,7 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
     }
     if (app->ident_due) {
         td_can_frame_t f;
-        (void)td_proto_encode_ident(&app->ident, &f);
+        (void)td_proto_encode_ident(&app->ident, !app->params_taken, &f);
         txq_push(app, &f);
         app->ident_due = false;
     }

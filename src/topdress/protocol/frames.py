@@ -217,8 +217,9 @@ RESET_CAUSES = ("unknown", "power-on", "pin", "watchdog", "hard fault", "softwar
 @dataclass(frozen=True)
 class EcuIdent:
     """Who the ECU is: target, firmware version, the protocol (DBC) version it was built with,
-    its transport, the cause of its last reset and whether its clock fell back to the internal
-    oscillator."""
+    its transport, the cause of its last reset, whether its clock fell back to the internal
+    oscillator, and whether it runs on its firmware defaults (no parameter taken since
+    power-up: it restarted)."""
 
     target: str  # TARGETS
     firmware: tuple[int, int, int]
@@ -226,6 +227,7 @@ class EcuIdent:
     transport: str  # TRANSPORTS
     reset_cause: str  # RESET_CAUSES
     clock_fallback: bool
+    on_defaults: bool = False
 
     @property
     def firmware_version(self) -> str:
@@ -506,6 +508,7 @@ def _decode_ident(data: bytes) -> EcuIdent:
         "Transport",
         "ResetCause",
         "ClockFallback",
+        "OnDefaults",
     ).decode(data)
     return EcuIdent(
         target=TARGETS[raw[0]],
@@ -514,6 +517,7 @@ def _decode_ident(data: bytes) -> EcuIdent:
         transport=TRANSPORTS[raw[6]],
         reset_cause=RESET_CAUSES[raw[7]],
         clock_fallback=bool(raw[8]),
+        on_defaults=bool(raw[9]),
     )
 
 

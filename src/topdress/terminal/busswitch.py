@@ -251,4 +251,5 @@ class BusSwitch:
             transport=ident.transport,
             reset_cause=ident.reset_cause,
             clock_fallback=ident.clock_fallback,
+            on_defaults=ident.on_defaults,
         )

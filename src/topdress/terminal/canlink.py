@@ -18,7 +18,9 @@ seconds on any monotonic clock (virtual in tests). It
   who the ECU is when that changes, warns when its protocol version is not the terminal's own
   (the DBC's VERSION), and hands it to `on_ident` (the terminal logs it);
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
-  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults), with
+  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults); an ECU
+  that rebooted faster than that says so in its EcuIdent (`OnDefaults`), and is pushed them
+  again too; both with
   the values the terminal `renew`ed meanwhile (the GNSS lag learned so far), and tells
   `on_again` once they are in force. A running ECU that answers Busy to a `GnssLag` while it
   reports a lag learned since it was heard again is not stopped for it: that value is only where
@@ -92,6 +94,7 @@ class LinkCounters:
     tx_errors: int = 0
     param_retries: int = 0
     ecu_lost: int = 0
+    ecu_restarts: int = 0  # EcuIdent said the ECU restarted on its defaults while heard
     clamped: int = 0
 
 
@@ -565,8 +568,30 @@ class CanLink:
         if ident_mismatch(ident) and (before is None or before.protocol != ident.protocol):
             ours = terminal_protocol()
             self._event(text("event.ecu_protocol", ecu=ident.protocol_version, terminal=ours))
+        if ident.on_defaults:
+            self._restarted(now, had=before is not None and not before.on_defaults)
         if self._on_ident is not None:
             self._on_ident(ident, now)
+
+    def _restarted(self, now: float, had: bool) -> None:
+        """The ECU says it runs on its firmware defaults (EcuIdent.OnDefaults) after it said it
+        had parameters (`had`), or amid a push it took some of: it restarted, and whatever it
+        took is gone, though it was never unheard long enough to be lost (it rebooted within
+        ecu_timeout_s). The parameters in force are pushed again from the first; a settings
+        change under way is refused."""
+        push = self._push
+        if push is None or self._lost:
+            return  # nothing to push yet, or lost: the status that ends the loss pushes them
+        if not (had or (not push.done and push.index > 0)):
+            return
+        self.counters.ecu_restarts += 1
+        self._event(text("event.ecu_restarted"))
+        if push.on_done is not None and not push.done:
+            self._push = None
+            push.on_done(str(text("event.ecu_restarted")), [])
+        again = self._ready or push.again
+        self._push = _ParamPush(list(self._params), again=again)
+        self._send_param(now)
 
     def _on_heard(self, now: float, back: bool) -> None:
         """The first status frame, or the first after a loss."""
