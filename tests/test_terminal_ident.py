@@ -18,7 +18,7 @@ from topdress.i18n import render
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import format_text, summarise
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
-from topdress.terminal.canlink import ident_mismatch
+from topdress.terminal.ecuview import ident_mismatch
 
 
 def _ident_frame(protocol_minor: int, target: int = 1, reset: int = 2) -> can.Message:

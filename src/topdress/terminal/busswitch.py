@@ -23,7 +23,8 @@ from topdress.devices.can import CanPort
 from topdress.errors import EcuParamError
 from topdress.i18n import text
 from topdress.protocol import EcuIdent
-from topdress.terminal.canlink import CanLink, terminal_protocol
+from topdress.terminal.canlink import CanLink
+from topdress.terminal.ecuview import terminal_protocol
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.lines import in_background

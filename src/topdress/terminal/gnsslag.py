@@ -38,8 +38,9 @@ from topdress import protocol
 from topdress.gnss.nmea import GnssFix
 from topdress.i18n import Text, text
 from topdress.outpath import atomic_write
-from topdress.terminal.canlink import GNSS_LAG_ID, CanLink
+from topdress.terminal.canlink import CanLink
 from topdress.terminal.journal import Journal, Settings
+from topdress.terminal.parampush import GNSS_LAG_ID
 from topdress.terminal.receiver import ReceiverId, ReceiverWatch, input_key
 from topdress.view.snapshot import LagView
 

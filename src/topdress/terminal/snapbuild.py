@@ -9,7 +9,7 @@ from typing import Any
 
 from topdress.crop.sensors import CompensatedNdvi
 from topdress.terminal.busswitch import BusSwitch
-from topdress.terminal.canlink import EcuView, ident_mismatch, ident_text, terminal_protocol
+from topdress.terminal.ecuview import EcuView, ident_mismatch, ident_text, terminal_protocol
 from topdress.terminal.gnssin import GnssIn
 from topdress.terminal.gnsslag import LagKeeper
 from topdress.terminal.inbox import Inbox
