@@ -11,6 +11,7 @@ from typing import Any
 
 from topdress.errors import LogError, OutputError
 from topdress.outpath import check_output, is_stdout, open_text_output, write_output
+from topdress.protocol.model import SpeedMode
 
 
 def register(sub: Any) -> None:
@@ -91,8 +92,8 @@ def register(sub: Any) -> None:
     replay.add_argument("events", type=Path, metavar="EVENTS.ndjson")
     replay.add_argument(
         "--speed-mode",
-        choices=("paper", "gnss", "wheel", "fused"),
-        default="fused",
+        choices=[str(m) for m in SpeedMode],
+        default=str(SpeedMode.FUSED),
         help="fused = the fused estimate (default); paper = the dual speed mode; gnss / wheel = "
         "one source only",
     )

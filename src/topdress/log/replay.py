@@ -42,6 +42,7 @@ from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.events import CanEvent, CropEvent, Drop, Event, NmeaEvent, WheelEvent
 from topdress.protocol.frames import GNSS_MAX_KMH
+from topdress.protocol.model import SpeedMode
 
 _log = logging.getLogger(__name__)
 
@@ -184,7 +185,7 @@ Source = Callable[[], Iterable[Event]]
 def replay(
     events: Sequence[Event],
     cfg: TerminalConfig,
-    speed_mode: str = "fused",
+    speed_mode: str = SpeedMode.FUSED,
     stats: ReplayStats | None = None,
 ) -> list[ReplayRow]:
     """Run `events` through a fresh ECU core; rows at each speed update. Events are taken in
@@ -195,7 +196,7 @@ def replay(
 def replay_stream(
     source: Source,
     cfg: TerminalConfig,
-    speed_mode: str = "fused",
+    speed_mode: str = SpeedMode.FUSED,
     stats: ReplayStats | None = None,
 ) -> Iterator[ReplayRow]:
     """`replay` of events in time order that are read twice and never held: a first pass

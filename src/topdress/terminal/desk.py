@@ -22,7 +22,7 @@ from topdress.crop.sensors import CompensatedNdvi
 from topdress.ecu import meter_rate_kg_ha
 from topdress.errors import ConfigError, ProtocolError
 from topdress.i18n import Text, text
-from topdress.protocol import Fault, Source
+from topdress.protocol import Compare, Fault, Source, SpeedMode
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
 from topdress.terminal.busswitch import BusSwitch
 from topdress.terminal.calibration import CalCommand, CalibrationError, Wizard
@@ -393,7 +393,7 @@ def speed_why(snap: Snapshot, cfg: TerminalConfig) -> Text | None:
         return None
     s = cfg.speed
     src = text(f"source.{snap.source}")
-    if s.mode != "paper":
+    if s.mode != SpeedMode.PAPER:
         return text("why.mode", source=src, mode=s.mode)
     faults = Fault(snap.faults)
     if snap.source == Source.NONE:
@@ -404,7 +404,7 @@ def speed_why(snap: Snapshot, cfg: TerminalConfig) -> Text | None:
         return text("why.gnss_frozen")
     if snap.gnss_kmh is None or Fault.GNSS_LOST in faults:
         return text("why.no_gnss", source=src)
-    cmp_v = snap.gnss_kmh if s.switch_compare == "gnss" else snap.v_wheel_kmh
+    cmp_v = snap.gnss_kmh if s.switch_compare == Compare.GNSS else snap.v_wheel_kmh
     cv = text("why.cv_none") if snap.cv_pct is None else text("why.cv", cv=snap.cv_pct)
     rule = dict(
         cv=cv,
