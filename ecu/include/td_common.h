@@ -13,6 +13,7 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include "td_dbc.h" /* the protocol's ids, value tables and parameter table (from the DBC) */
 
 /* ---- error codes (negative) ---- */
 #define TD_OK 0
@@ -42,20 +43,18 @@
 /** Layers / metering motors and fans. */
 typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
 
-/** Speed sources, as sent in EcuDiag.SpeedSource. TD_SRC_FUSED: the fused estimate fed by both
- *  the wheel and GNSS (in TD_MODE_FUSED, WHEEL and GNSS name the one sensor still feeding it). */
-typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED = 3 } td_source_t;
-
-/** Speed modes, as in parameter SpeedMode. TD_MODE_FUSED: the Kalman estimate of td_fused.h. */
-typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2, TD_MODE_FUSED = 3 } td_speed_mode_t;
+/* td_dbc.h (generated from the DBC's value tables):
+ * td_source_t, the speed source in use (EcuDiag.SpeedSource). TD_SRC_FUSED: the fused estimate
+ *  fed by both the wheel and GNSS (in TD_MODE_FUSED, WHEEL and GNSS name the one sensor still
+ *  feeding it).
+ * td_speed_mode_t, the speed mode (parameter SpeedMode). TD_MODE_FUSED: the Kalman estimate of
+ *  td_fused.h.
+ * td_compare_t, which speed the dual rule compares with switch_speed_kmh (SwitchCompare). */
 
 /** Slip compensation of the wheel speed (parameter SlipComp). Modes dual, wheel and GNSS: none,
  *  the scale the fused estimate learned, eq. 5. The fused mode always compensates: eq. 5's shape
  *  in speed times a learned factor, except with TD_SLIP_LEARNED (one learned constant scale). */
 typedef enum { TD_SLIP_OFF = 0, TD_SLIP_LEARNED = 1, TD_SLIP_MODEL = 2 } td_slip_comp_t;
-
-/** Which speed the dual rule compares with switch_speed_kmh (parameter SwitchCompare). */
-typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
 
 /** Elapsed microseconds from `then_us` to `now_us`, correct across the 2^32 wrap. */
 static inline uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us) {

@@ -309,7 +309,7 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
     int rc = td_proto_decode_param_set(frame, &id, &value);
     if (rc == TD_E_LENGTH) {
         ack.param_id = frame->dlc > 0u ? frame->data[0] : 0u;
-        ack.result = 5u;
+        ack.result = (uint8_t)TD_ACK_BAD_FRAME;
         app->cnt.rx_bad_length++;
     } else {
         ack.param_id = frame->data[0];
@@ -319,20 +319,20 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
         }
         switch (rc) {
         case TD_OK:
-            ack.result = 0u;
+            ack.result = (uint8_t)TD_ACK_OK;
             app->params_taken = true; /* EcuIdent says so from now on (OnDefaults 0) */
             break;
         case TD_E_UNKNOWN_PARAM:
-            ack.result = 1u;
+            ack.result = (uint8_t)TD_ACK_UNKNOWN_PARAM;
             break;
         case TD_E_RANGE:
-            ack.result = 2u;
+            ack.result = (uint8_t)TD_ACK_OUT_OF_RANGE;
             break;
         case TD_E_BUSY:
-            ack.result = 3u;
+            ack.result = (uint8_t)TD_ACK_BUSY;
             break;
         default:
-            ack.result = 4u;
+            ack.result = (uint8_t)TD_ACK_INCONSISTENT;
             break;
         }
         float in_force = 0.0f;
