@@ -37,6 +37,8 @@ ENUMS = {
 }
 #: Value tables the core uses as plain constants (the paper's bytes): (frame, signal) -> prefix.
 CONSTANTS = {("EcuStatus", "RunState"): "TD_RUN"}
+#: Bit words whose bits the DBC names, lowest first, in the signal's TdBits attribute.
+BITS = {("EcuDiag", "FaultWord"): "TD_FAULT"}
 FIELD_ATTRIBUTE = "TdField"
 _TYPES = {"F32": "TD_PF32", "U8": "TD_PU8", "U16": "TD_PU16"}
 
@@ -51,6 +53,14 @@ def _choices(db: cantools.database.Database, frame: str, signal: str) -> dict[in
     if not sig.choices:
         raise SystemExit(f"{frame}.{signal} has no value table in {DBC}")
     return {int(k): str(v) for k, v in sorted(sig.choices.items())}
+
+
+def _bits(db: cantools.database.Database, frame: str, signal: str) -> list[str]:
+    sig = db.get_message_by_name(frame).get_signal_by_name(signal)
+    attrs = sig.dbc.attributes if sig.dbc is not None else {}
+    if "TdBits" not in attrs:
+        raise SystemExit(f"{frame}.{signal} has no TdBits attribute in {DBC}")
+    return str(attrs["TdBits"].value).split()
 
 
 def _storage(scale: float, raw_max: int) -> str:
@@ -79,6 +89,10 @@ def generate(db: cantools.database.Database) -> str:
         out += ["", f"/* {frame}.{signal} */"]
         for code, name in _choices(db, frame, signal).items():
             out.append(f"#define {prefix}_{upper(name)} 0x{code:02X}u")
+    for (frame, signal), prefix in BITS.items():
+        out += ["", f"/* {frame}.{signal}: one bit each, lowest first */"]
+        for bit, name in enumerate(_bits(db, frame, signal)):
+            out.append(f"#define {prefix}_{upper(name)} (1u << {bit})")
     for (frame, signal), (ctype, prefix) in ENUMS.items():
         members = ", ".join(
             f"{prefix}_{upper(name)} = {code}" for code, name in _choices(db, frame, signal).items()

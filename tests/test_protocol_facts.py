@@ -14,7 +14,7 @@ import cantools
 import pytest
 
 from topdress import protocol
-from topdress.protocol import Source, SpeedMode
+from topdress.protocol import Fault, Source, SpeedMode
 from topdress.protocol.dbc import frame_ids, value_table
 
 REPO = Path(__file__).resolve().parents[1]
@@ -66,6 +66,7 @@ def test_no_frame_identifier_is_written_by_hand() -> None:
 
 _C_TABLES = re.compile(
     r"#define\s+TD_(?:ID|RUN)_\w+\s+0x|#define\s+TD_PARAM_COUNT\s+\d"
+    r"|#define\s+TD_FAULT_\w+\s+\(?\s*1u?\s*<<"
     r"|typedef\s+enum\s*\{\s*TD_(?:SRC|MODE|CMP|ACK|CAL|CAL_R|LAG|TARGET|TRANSPORT|RESET)_\w+\s*="
     r"|offsetof\(td_params_t,\s*(?!field\))\w+"
 )
@@ -106,6 +107,16 @@ def test_no_python_source_lists_a_value_table_by_hand(table: str) -> None:
     assert not found, f"the {table} written by hand (take them from the enum):\n" + "\n".join(found)
 
 
+def test_no_python_source_numbers_the_fault_bits_by_hand() -> None:
+    bit = re.compile(rf"\b(?:{'|'.join(f.name or '' for f in Fault)})\s*=\s*(?:1\s*<<|0x|\d)")
+    found = []
+    for path in _sources():
+        if path.suffix == ".py":
+            text = path.read_text(encoding="utf-8")
+            found += [f"{path.relative_to(REPO)}: {m[0]}" for m in bit.finditer(text)]
+    assert not found, "fault bits numbered by hand (the DBC's TdBits):\n" + "\n".join(found)
+
+
 def test_no_python_source_maps_a_parameter_to_its_field_by_hand() -> None:
     signals = "|".join(spec.signal for spec in protocol.params())
     pair = re.compile(rf"\"(?:{signals})\"\s*:\s*\(\s*\"[a-z_]+\"")  # a field, not a `section.key`
@@ -123,6 +134,8 @@ def test_the_guards_catch_a_copy() -> None:
     assert _C_TABLES.search("typedef enum { TD_MODE_DUAL = 0, TD_MODE_FUSED = 3 } td_speed_mode_t;")
     assert _C_TABLES.search("{ (uint16_t)offsetof(td_params_t, working_width_m), F32 }")
     assert not _C_TABLES.search("{ (uint16_t)offsetof(td_params_t, field), (uint8_t)(type) }")
+    assert _C_TABLES.search("#define TD_FAULT_GNSS_LOST (1u << 1)   /**< GNSS speed missing */")
+    assert not _C_TABLES.search("#define TD_FAULT_LATCHED_MASK (TD_FAULT_WHEEL_ENCODER | x)")
 
 
 def test_python_reads_what_the_dbc_says() -> None:
@@ -141,6 +154,12 @@ def test_python_reads_what_the_dbc_says() -> None:
         assert [m.code for m in enum] == sorted(m.code for m in enum)
         assert len(list(enum)) == len(choices)
     assert SpeedMode.PAPER.code == 0 and value_table("EcuDiag", "SpeedMode")[0] == "Dual"
+    word = diag.get_signal_by_name("FaultWord")
+    assert word.dbc is not None
+    assert [f.name for f in Fault] == [
+        re.sub(r"(?<=[a-z])(?=[A-Z])", "_", n).upper()
+        for n in word.dbc.attributes["TdBits"].value.split()
+    ]
     for spec in protocol.params():
         sig = db.get_message_by_name("PcParamSet").get_signal_by_name(spec.signal)
         assert sig.dbc is not None and sig.dbc.attributes["TdField"].value == spec.key

@@ -26,16 +26,24 @@
 #define TD_E_INCONSISTENT (-7) /**< parameter set inconsistent (e.g. CV window > queue length) */
 #define TD_E_FULL (-8)         /**< transmit queue full, frame dropped */
 
-/* ---- fault word bits (td_app_t.faults) ---- */
-#define TD_FAULT_CMD_TIMEOUT (1u << 0)   /**< no valid PcCommand for > cmd_timeout_ms: meters stopped; clears on the next valid command */
-#define TD_FAULT_GNSS_LOST (1u << 1)     /**< GNSS speed missing (0xFF) or stale (> gnss_timeout_ms): wheel speed used; clears when GNSS returns */
-#define TD_FAULT_WHEEL_ENCODER (1u << 2) /**< wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms: GNSS used; latched until a stop command */
-#define TD_FAULT_UPPER_BLOCKED (1u << 3) /**< upper meter commanded but not turning for > blocked_time_ms: upper motor stopped; latched until a stop command */
-#define TD_FAULT_LOWER_BLOCKED (1u << 4) /**< same, lower meter */
-#define TD_FAULT_UPPER_FAN_LOW (1u << 5) /**< upper fan below fan_min_rpm after the spin-up grace: upper meter held at zero; clears when the fan is up */
-#define TD_FAULT_LOWER_FAN_LOW (1u << 6) /**< same, lower fan */
-#define TD_FAULT_NO_SPEED (1u << 7)      /**< neither speed source usable: meters held at zero */
-#define TD_FAULT_GNSS_FROZEN (1u << 8)   /**< running, wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms and the GNSS value never changed meanwhile (frozen receiver): GNSS not used; clears when the wheel turns or GNSS drops below enc_fault_gnss_kmh (a GNSS value that changes while the wheel still reads ~0 latches WHEEL_ENCODER instead) */
+/* ---- fault word bits (td_app_t.faults): TD_FAULT_* of td_dbc.h, named in the DBC ----
+ * CMD_TIMEOUT   no valid PcCommand for > cmd_timeout_ms: meters stopped; clears on the next
+ *               valid command
+ * GNSS_LOST     GNSS speed missing (0xFF) or stale (> gnss_timeout_ms): wheel speed used;
+ *               clears when GNSS returns
+ * WHEEL_ENCODER wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms: GNSS
+ *               used; latched until a stop command
+ * UPPER_BLOCKED upper meter commanded but not turning for > blocked_time_ms: upper motor
+ *               stopped; latched until a stop command
+ * LOWER_BLOCKED same, lower meter
+ * UPPER_FAN_LOW upper fan below fan_min_rpm after the spin-up grace: upper meter held at zero;
+ *               clears when the fan is up
+ * LOWER_FAN_LOW same, lower fan
+ * NO_SPEED      neither speed source usable: meters held at zero
+ * GNSS_FROZEN   running, wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms
+ *               and the GNSS value never changed meanwhile (frozen receiver): GNSS not used;
+ *               clears when the wheel turns or GNSS drops below enc_fault_gnss_kmh (a GNSS value
+ *               that changes while the wheel still reads ~0 latches WHEEL_ENCODER instead) */
 
 /** Latched faults: cleared only by a stop command (operator acknowledgement). */
 #define TD_FAULT_LATCHED_MASK (TD_FAULT_WHEEL_ENCODER | TD_FAULT_UPPER_BLOCKED | TD_FAULT_LOWER_BLOCKED)

@@ -39,6 +39,17 @@
 #define TD_RUN_STOPPED 0x00u
 #define TD_RUN_RUNNING 0x0Au
 
+/* EcuDiag.FaultWord: one bit each, lowest first */
+#define TD_FAULT_CMD_TIMEOUT (1u << 0)
+#define TD_FAULT_GNSS_LOST (1u << 1)
+#define TD_FAULT_WHEEL_ENCODER (1u << 2)
+#define TD_FAULT_UPPER_BLOCKED (1u << 3)
+#define TD_FAULT_LOWER_BLOCKED (1u << 4)
+#define TD_FAULT_UPPER_FAN_LOW (1u << 5)
+#define TD_FAULT_LOWER_FAN_LOW (1u << 6)
+#define TD_FAULT_NO_SPEED (1u << 7)
+#define TD_FAULT_GNSS_FROZEN (1u << 8)
+
 /** EcuDiag.SpeedSource */
 typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED = 3 } td_source_t;
 

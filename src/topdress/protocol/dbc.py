@@ -46,6 +46,17 @@ def value_table(frame: str, signal: str) -> dict[int, str]:
     raise ProtocolError(f"{frame}.{signal} has no value table in the protocol")
 
 
+@cache
+def bit_names(frame: str, signal: str) -> tuple[str, ...]:
+    """The names of a bit word's bits, lowest first (the signal's TdBits attribute)."""
+    ident = frame_ids().get(frame)
+    pattern = rf'^BA_ "TdBits" SG_ (\d+) {signal} "([^"]*)";'
+    for raw, names in re.findall(pattern, dbc_text(), re.M):
+        if int(raw) & ~_EXTENDED == ident:
+            return tuple(names.split())
+    raise ProtocolError(f"{frame}.{signal} has no TdBits attribute in the protocol")
+
+
 def snake(name: str) -> str:
     """A DBC name in snake case: "GnssLagAuto" -> "gnss_lag_auto", "Stm32f4" -> "stm32f4"."""
     return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()

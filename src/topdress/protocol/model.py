@@ -13,7 +13,7 @@ from enum import Enum, IntEnum, IntFlag, StrEnum
 from typing import TypeVar
 
 from topdress.errors import ProtocolError
-from topdress.protocol.dbc import frame_ids, snake, value_table
+from topdress.protocol.dbc import bit_names, frame_ids, snake, value_table
 
 E = TypeVar("E", bound=Enum)
 
@@ -100,21 +100,30 @@ _MODE_CODES = dbc_codes(SpeedMode, "EcuDiag", "SpeedMode", {"Dual": "PAPER"})
 _COMPARE_CODES = dbc_codes(Compare, "EcuDiag", "SwitchCompare")
 
 
+_FAULT_BITS = {
+    snake(name).upper(): 1 << bit for bit, name in enumerate(bit_names("EcuDiag", "FaultWord"))
+}
+
+
 class Fault(IntFlag):
-    """The ECU fault word (TD_FAULT_* of td_common.h; EcuDiag.FaultWord)."""
+    """The ECU fault word (EcuDiag.FaultWord; the DBC names its bits, lowest first, as the C
+    core's TD_FAULT_* are generated from; what each means: ecu/include/td_common.h)."""
 
-    CMD_TIMEOUT = 1 << 0
-    GNSS_LOST = 1 << 1
-    WHEEL_ENCODER = 1 << 2
-    UPPER_BLOCKED = 1 << 3
-    LOWER_BLOCKED = 1 << 4
-    UPPER_FAN_LOW = 1 << 5
-    LOWER_FAN_LOW = 1 << 6
-    NO_SPEED = 1 << 7
-    GNSS_FROZEN = 1 << 8
+    CMD_TIMEOUT = _FAULT_BITS["CMD_TIMEOUT"]
+    GNSS_LOST = _FAULT_BITS["GNSS_LOST"]
+    WHEEL_ENCODER = _FAULT_BITS["WHEEL_ENCODER"]
+    UPPER_BLOCKED = _FAULT_BITS["UPPER_BLOCKED"]
+    LOWER_BLOCKED = _FAULT_BITS["LOWER_BLOCKED"]
+    UPPER_FAN_LOW = _FAULT_BITS["UPPER_FAN_LOW"]
+    LOWER_FAN_LOW = _FAULT_BITS["LOWER_FAN_LOW"]
+    NO_SPEED = _FAULT_BITS["NO_SPEED"]
+    GNSS_FROZEN = _FAULT_BITS["GNSS_FROZEN"]
 
 
-#: The fault word's bits by name, lowest first (ecu/include/td_common.h).
+if set(_FAULT_BITS) != set(Fault.__members__):
+    raise ProtocolError("the DBC's EcuDiag.FaultWord bits are not Fault's members")
+
+#: The fault word's bits by name, lowest first (the DBC's order).
 FAULT_NAMES: tuple[str, ...] = tuple(str(f.name) for f in Fault)
 
 
