@@ -27,7 +27,8 @@ from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import lag_summary, summarise
 from topdress.sim.tractor import Drive, Segment
 from topdress.terminal.canlink import CanLink
-from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
+from topdress.terminal.gnsslag import LagWatch
+from topdress.terminal.lagstore import STORE_FILE, LagStore
 from topdress.terminal.receiver import ReceiverId, ReceiverWatch, input_key
 
 NMEA_LOGS = Path("/work/shared/nmea/gpsd-logs")
