@@ -9,12 +9,13 @@ The ECU learns the lag of the GNSS speed behind the wheel and reports it in `Ecu
   is first learned, and warned when the data overrule a fixed lag for `WARN_S` (the learner's
   first estimate, after 1.5 s of speed change, can still be far from where it settles: it
   overruled a right 1.3 s for 5 s on the simulated machine; the session log has it at once);
-- **keeps** it (`LagStore`, terminal.lagstore): the last learned lag per receiver (topdress.terminal.receiver) in a
-  small JSON file beside the session logs, `STORE_FILE`, written atomically whenever the learned
-  lag changes (a background thread: the write ends in an fsync) and at the end of the session; the
-  next session pushes the lag kept for its GNSS input as `GnssLag`, the start of the learning.
-  Within a session the last learned lag is the start value an ECU that restarted is pushed
-  again, so a reboot does not send it back to the session's start;
+- **keeps** it (`LagStore`, terminal.lagstore): the last learned lag per receiver
+  (topdress.terminal.receiver) in a small JSON file beside the session logs, `STORE_FILE`,
+  written atomically whenever the learned lag changes (a background thread: the write ends in an
+  fsync) and at the end of the session; the next session pushes the lag kept for its GNSS input
+  as `GnssLag`, the start of the learning. Within a session the last learned lag is the start
+  value an ECU that restarted is pushed again, so a reboot does not send it back to the
+  session's start;
 - and `LagKeeper` does all of this for the terminal loop: the receiver on the GNSS input, the
   start value pushed, the watch, the store, the learned lag renewed in the link.
 
