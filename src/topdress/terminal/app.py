@@ -10,8 +10,9 @@ on a device, only on that queue, with a timeout that keeps its 10 Hz tick:
 - an operator command: to the operator's desk (terminal.desk);
 - every tick: the NDVI where the meters are now (sensor mean through the distance queue, driven
   by the ECU's selected speed), the rate per layer from the NDVI model and the maps, the next
-  command, the links' states (terminal.linkwatch), the GNSS lag (terminal.gnsslag), one state
-  row to the session log, and a fresh `Snapshot` for the display (terminal.snapbuild).
+  command (terminal.busswitch), the links' states (terminal.linkwatch), the GNSS lag
+  (terminal.gnsslag), a fresh `Snapshot` for the display (terminal.snapbuild) with the desk's
+  fields, and one state row to the session log.
 
 The loop only dispatches and orders; each part owns its state and is handed the parts it works
 with (the settings in force and the journal of events, terminal.journal, are shared by all).
@@ -297,16 +298,17 @@ class Terminal:
         # No command goes out before the parameters are in force anyway; while they are pushed
         # again (ECU back), a stop here would stop a running ECU for a command period.
         # The operator's state (stopped, paused, manual, a calibration) decides what goes out.
-        start, fan, upper, lower = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
-        link.set_command(start, fan, upper, lower)
-        self.can.poll(now)
+        command = self.desk.rates((rates.upper_kg_ha, rates.lower_kg_ha))
+        self.can.poll(now, command)
         # Before the desk's alarms: a link lost is logged ahead of the alarm it raises.
         self.watch.tick(now, at.gnss_kmh)
+        lag = self.lags.track(now, self.link)
         snap = self.picture.build(
             now - (self._t0 if self._t0 is not None else now),
             ndvi_sensors,
             ndvi,
-            (upper, lower),
+            (command[2], command[3]),
+            lag,
             utc=self.gnss_in.utc.now(now),
             heading_deg=outlet.heading_deg if outlet is not None else None,
             outlet_lat=outlet.lat if outlet is not None else None,
@@ -314,7 +316,6 @@ class Terminal:
             zone=site.zone,
             prescription_kg_ha=site.prescription_kg_ha,
         )
-        self.lags.track(now, self.link)
         self.snapshot = replace(snap, **vars(self.desk.after_tick(now, snap, at.off_map)))
         if self.session is not None:
             self.session.state(state_row(now, self.snapshot))

@@ -151,8 +151,11 @@ class BusSwitch:
         elif kind == "can_next":
             self._poll_new_bus(t, payload)
 
-    def poll(self, now: float) -> None:
-        """The tick's turn: the link readied on a new bus, then the link in use."""
+    def poll(self, now: float, command: tuple[bool, float, float, float]) -> None:
+        """The tick's turn: the next command (start, fan rpm, upper and lower kg/ha) set on the
+        link in use, the link readied on a new bus, then the link in use (it may be that one
+        now)."""
+        self.link.set_command(*command)
         self._poll_new_bus(now)
         self.link.poll(now)
 

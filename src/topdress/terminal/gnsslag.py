@@ -209,17 +209,12 @@ class LagKeeper:
         if same is False:
             self._journal.event(text("event.gnss_lag_other", input=rid.input))
 
-    def view(self, link: CanLink) -> LagView | None:
+    def track(self, now: float, link: CanLink) -> LagView | None:
+        """The tick's turn: the ECU's last EcuGnssLag watched, the learned lag kept; the lag as
+        shown (None while the ECU is not heard or has not said)."""
         frame = link.ecu.lag
         if frame is None or not link.ecu_alive:
             return None
-        return LagView.of(frame, self._settings.fixed_lag_ms())
-
-    def track(self, now: float, link: CanLink) -> None:
-        """The tick's turn: the ECU's last EcuGnssLag watched, the learned lag kept."""
-        frame = link.ecu.lag
-        if frame is None or not link.ecu_alive:
-            return
         change = self.watch.update(now, frame, self._settings.fixed_lag_ms())
         self._renew(link)
         if change is not None:
@@ -234,6 +229,7 @@ class LagKeeper:
         if warning is not None:
             log.warning("%s", warning)
             self._journal.event(warning)
+        return LagView.of(frame, self._settings.fixed_lag_ms())
 
     def _renew(self, link: CanLink) -> None:
         """The lag learned so far becomes the start value an ECU back from a loss is pushed, as

@@ -15,7 +15,7 @@ from topdress.terminal.gnsslag import LagKeeper
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal
 from topdress.terminal.linkwatch import LinkWatch
-from topdress.view.snapshot import Snapshot, ecu_values
+from topdress.view.snapshot import LagView, Snapshot, ecu_values
 
 
 class SnapshotBuilder:
@@ -45,10 +45,11 @@ class SnapshotBuilder:
         ndvi_sensors: float | None,
         ndvi: float | None,
         rates: tuple[float, float],
+        lag: LagView | None,
         **site: Any,
     ) -> Snapshot:
-        """The loop's state `t_s` after it opened; `site`: the Snapshot fields of time, outlet
-        and site."""
+        """The loop's state `t_s` after it opened; `lag`: the GNSS lag as the ECU reports it;
+        `site`: the Snapshot fields of time, outlet and site."""
         link = self._bus.link
         live = link.ecu_alive
         # The ECU's last frames are history once it is not heard: nothing is shown from them.
@@ -78,7 +79,7 @@ class SnapshotBuilder:
             distance_m=self._ndvi.odometer.distance_m,
             counters=self.counters(),
             last_event=self._journal.last_event,
-            gnss_lag=self._lags.view(link),
+            gnss_lag=lag,
             **site,
         )
 
