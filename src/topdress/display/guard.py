@@ -265,13 +265,17 @@ class GuardMiddleware:
         self, scope: Scope, send: Send, info: ClientInfo, query: dict[str, str]
     ) -> None:
         given = query.pop(KIOSK_PARAM)
-        if self.attempts is not None and self.attempts.locked_for(info.address) > 0:
-            await _refuse(scope, send, 429, "too many wrong attempts: try again later\n")
-            return
+        # The right token passes even during a lockout: guesses of other sources (a page's
+        # <img>, any local process) must not lock the cab out of its own display, and a
+        # token of 256 random bits needs no lockout to stay unguessed. Wrong ones are counted.
         if not self.guard.kiosk_ok(given):
+            locked = self.attempts is not None and self.attempts.locked_for(info.address) > 0
             if self.attempts is not None:
                 self.attempts.failed(info.address, "kiosk")
-            await _refuse(scope, send, 403, "wrong kiosk token\n")
+            if locked:
+                await _refuse(scope, send, 429, "too many wrong attempts: try again later\n")
+            else:
+                await _refuse(scope, send, 403, "wrong kiosk token\n")
             return
         # The token leaves the address bar: the cookie carries it from now on.
         location = str(scope.get("path", "/")) + (f"?{urlencode(query)}" if query else "")

@@ -93,9 +93,11 @@ class MainScreen:
             ui.button(tr("op.start"), icon="play_arrow", on_click=lambda: send(op.Start())).props(
                 "color=green-9 size=lg no-caps"
             ).classes("flex-1 h-16 text-lg").mark("start")
-            ui.button(tr("op.pause"), icon="pause", on_click=lambda: send(op.Pause())).props(
-                "color=amber-8 text-color=black size=lg no-caps"
-            ).classes("flex-1 h-16 text-lg td-edge").mark("pause")
+            ui.button(
+                tr("op.pause"), icon="pause", on_click=lambda: send(op.Pause(), guarded=False)
+            ).props("color=amber-8 text-color=black size=lg no-caps").classes(
+                "flex-1 h-16 text-lg td-edge"
+            ).mark("pause")
 
     def _build_rates(self) -> None:
         u = self.units

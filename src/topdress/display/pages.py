@@ -7,7 +7,7 @@ redraws every open page's content in place.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -127,6 +127,23 @@ def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> Non
     ui.timer(UPDATE_PERIOD_S, update)
 
 
+def stop_button(on_stop: Callable[[], Awaitable[None]]) -> ui.button:
+    """Stop: one touch on every screen, in every state, from every client (no PIN, no lockout,
+    no confirmation; it also ends a calibration). Outside the header, fixed over its place in
+    the bar and above every dialog, menu and select list (style.CSS), so no overlay takes the
+    touch. It acts on the press: an open menu cancels a touch's click (Quasar prevents the
+    touchstart outside it), not its pointer events; a keyboard's click (detail 0) acts too."""
+    button = (
+        ui.button(tr("op.stop"), icon="stop")
+        .props("color=red-9 size=lg no-caps")
+        .classes("td-stop text-xl font-bold")
+        .mark("stop")
+    )
+    button.on("pointerdown", on_stop)
+    button.on("click", on_stop, js_handler="(e) => { if (e.detail === 0) emit(e); }")
+    return button
+
+
 class Header:
     """What every screen shows on top: the screens, language and units, Stop, the run state and
     the alarm banner. Built once per page; `update` and `relabel` change text in place."""
@@ -167,13 +184,8 @@ class Header:
                         "units"
                     ):
                         self.units_item = ui.label("")
-                # Stop: one touch on every screen, in every state (it also ends a calibration).
-                self.stop = (
-                    ui.button(tr("op.stop"), icon="stop", on_click=self._stop)
-                    .props("color=red-9 size=lg no-caps")
-                    .classes("td-stop text-xl font-bold")
-                    .mark("stop")
-                )
+                # Stop's place in the bar; Stop itself floats above every overlay (below).
+                ui.element("div").classes("td-stop-place")
             with ui.row().classes("w-full items-center no-wrap gap-2"):
                 self.state = (
                     ui.label("--").classes("text-xl font-bold px-2 rounded").mark("op_state")
@@ -190,10 +202,11 @@ class Header:
                     )
                     self.banner_ack.set_visibility(False)
                 self.clock = ui.label("").classes("font-mono text-sm").mark("clock")
+        self.stop = stop_button(self._stop)
         self.relabel()
 
     async def _stop(self) -> None:
-        await self.actions.send(op.Stop())
+        await self.actions.send(op.Stop(), guarded=False)
 
     async def _ack(self) -> None:
         if self._shown_alarm:

@@ -18,6 +18,8 @@ PRIMARY = "#1565c0"  # white text on it 5.8:1, against the day page 5.8:1
 PRIMARY_NIGHT = "#1976d2"  # white text on it 4.6:1, against the night page and cards 3.7:1
 TOUCH_PX = 48  # the smallest control
 STOP_PX = 64  # Stop, on every screen
+STOP_W_PX = 144  # Stop's width, whatever the language's word
+STOP_Z = 9000  # above every overlay (Quasar's: 6000), below the stale page (liveness: 100000)
 
 #: The header bar, day and night (white text on it: 11.6:1 and 15.4:1).
 BAR_DAY = "#1b4332"
@@ -35,6 +37,10 @@ CSS = f"""
 .q-tab {{ min-height: {TOUCH_PX}px; }}
 .td-stop {{ min-height: {STOP_PX}px !important; min-width: {STOP_PX * 2}px !important;
   border: 3px solid #fff; }}
+/* Stop over its place in the header bar, above Quasar's dialogs and menus (z-index 6000) */
+.td-stop {{ position: fixed !important; top: 4px; right: 4px; z-index: {STOP_Z};
+  width: {STOP_W_PX}px; }}
+.td-stop-place {{ width: {STOP_W_PX}px; height: {STOP_PX}px; flex: none; }}
 /* a light fill (amber) on a light page: its edge carries the 3:1 */
 .td-edge {{ border: 2px solid #000; }}
 body.body--dark .td-edge {{ border-color: #fff; }}

@@ -1,0 +1,177 @@
+"""Stop is never gated: touched with a finger (touch events over the DevTools protocol) at
+800×480 while the meters run, it stops them with every overlay open (the counter-reset
+confirmation, the view menu, the language list) and during a lockout of every address, on a
+page that has not given the PIN.
+
+The browser is a tablet behind the cab's trusted proxy (its requests carry X-Forwarded-For), a
+PIN is set and the cab's browser is recognised by its kiosk cookie, so this browser needs the
+PIN to start. One demo and one browser for the whole module.
+"""
+
+from __future__ import annotations
+
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from browser import DemoProcess, chromium, missing_browser, until, viewport
+
+pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
+
+W, H = 800, 480
+PIN = "4321"
+TABLET = "10.9.9.9"
+
+
+@pytest.fixture(scope="module")
+def tablet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[DemoProcess, Any]]:
+    where = tmp_path_factory.mktemp("stop")
+    config = where / "cab.toml"
+    config.write_text(
+        f'[display]\npin = "{PIN}"\ntrusted_proxies = ["127.0.0.1"]\n'
+        f'kiosk_token_file = "{where / "kiosk-token"}"\n'
+    )
+    demo = DemoProcess(where / "demo", passes=1, duration_s=600.0,
+                       extra=("--config", str(config)))  # fmt: skip
+    driver = None
+    try:
+        demo.wait_served()
+        driver = chromium(where / "profile", W, H)
+        viewport(driver, W, H)
+        driver.execute_cdp_cmd("Network.enable", {})
+        driver.execute_cdp_cmd(
+            "Network.setExtraHTTPHeaders", {"headers": {"X-Forwarded-For": TABLET}}
+        )
+        driver.execute_cdp_cmd(
+            "Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 1}
+        )
+        yield demo, driver
+    finally:
+        if driver is not None:
+            driver.quit()
+        code = demo.stop()
+        assert code == 0, demo.output()
+
+
+def _el(driver: Any, tid: str) -> Any:
+    from selenium.webdriver.common.by import By
+
+    return driver.find_element(By.CSS_SELECTOR, f'[data-testid="{tid}"]')
+
+
+def _text(driver: Any, tid: str) -> str:
+    return str(_el(driver, tid).text)
+
+
+def _touch(driver: Any, tid: str) -> None:
+    """A finger on the element's centre: touchStart and touchEnd, nothing else."""
+    r = driver.execute_script(
+        "const r = arguments[0].getBoundingClientRect();"
+        "return [r.left + r.width / 2, r.top + r.height / 2];",
+        _el(driver, tid),
+    )
+    point = {"x": r[0], "y": r[1]}
+    driver.execute_cdp_cmd(
+        "Input.dispatchTouchEvent", {"type": "touchStart", "touchPoints": [point]}
+    )
+    driver.execute_cdp_cmd("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
+
+
+def _press(driver: Any, tid: str) -> None:
+    """A pointer's press and release on the element's centre (the controls around Stop)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    ActionChains(driver).move_to_element(_el(driver, tid)).click().perform()
+
+
+def _live(driver: Any) -> None:
+    first = _text(driver, "clock")
+    until("the page connected", lambda: _text(driver, "clock") != first)
+
+
+def _run(driver: Any) -> None:
+    _press(driver, "start")
+    until("RUNNING", lambda: _text(driver, "op_state") == "RUNNING")
+
+
+def _open_reset(driver: Any) -> None:
+    from selenium.webdriver.common.by import By
+
+    driver.find_element(By.XPATH, "//button[.//span[text()='Counters']]").click()
+    _press(driver, "reset_field")
+    until("the reset confirmation", lambda: _el(driver, "reset_ask").is_displayed())
+
+
+def _open_menu(driver: Any) -> None:
+    _press(driver, "view_menu")
+    until("the view menu", lambda: _el(driver, "night").is_displayed())
+
+
+def _open_language(driver: Any) -> None:
+    from selenium.webdriver.common.by import By
+
+    _press(driver, "language")
+    until("the language list", lambda: driver.find_elements(By.CSS_SELECTOR, ".q-menu .q-item"))
+
+
+def test_stop_over_every_overlay_and_through_a_lockout(
+    tablet: tuple[DemoProcess, Any],
+) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    demo, driver = tablet
+    driver.get(demo.url + "/")
+    until(
+        "the ECU",
+        lambda: _text(driver, "op_state") == "STOPPED" and "tank" in _text(driver, "tank"),
+    )
+    _live(driver)
+    # Starting needs the PIN here (a tablet); the tab keeps it.
+    _press(driver, "start")
+    box = until("the PIN dialog", lambda: driver.find_element(By.CSS_SELECTOR, ".q-dialog input"))
+    box.send_keys(PIN)
+    box.send_keys(Keys.ENTER)
+    until("RUNNING", lambda: _text(driver, "op_state") == "RUNNING")
+
+    for name, open_overlay in (
+        ("reset confirmation", _open_reset),
+        ("view menu", _open_menu),
+        ("language list", _open_language),
+    ):
+        if _text(driver, "op_state") != "RUNNING":
+            _run(driver)
+        open_overlay(driver)
+        _touch(driver, "stop")
+        until(f"STOPPED by a touch on Stop over the {name}",
+              lambda: _text(driver, "op_state") == "STOPPED", 10.0)  # fmt: skip
+        driver.get(demo.url + "/")  # whatever the overlay left behind
+        until("the page", lambda: _text(driver, "op_state") == "STOPPED")
+        _live(driver)
+        # the reload forgot the PIN: start again with it
+        _press(driver, "start")
+        box = until(
+            "the PIN dialog", lambda: driver.find_element(By.CSS_SELECTOR, ".q-dialog input")
+        )
+        box.send_keys(PIN)
+        box.send_keys(Keys.ENTER)
+        until("RUNNING", lambda: _text(driver, "op_state") == "RUNNING")
+
+    # Everyone locked out: 20 wrong kiosk tokens from rotating forwarded addresses.
+    for n in range(20):
+        request = urllib.request.Request(
+            f"{demo.url}/?kiosk=guess{n}", headers={"X-Forwarded-For": f"10.0.1.{n}"}
+        )
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(request, timeout=5)
+        assert refused.value.code in (403, 429)
+    # A fresh page (no PIN given) under the lockout: Stop still stops, no dialog asked.
+    driver.get(demo.url + "/")
+    until("the page", lambda: _text(driver, "op_state") == "RUNNING")
+    _live(driver)
+    _touch(driver, "stop")
+    until("STOPPED by Stop during a lockout", lambda: _text(driver, "op_state") == "STOPPED", 10.0)
+    assert not driver.find_elements(By.CSS_SELECTOR, ".q-dialog input")
