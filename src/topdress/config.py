@@ -101,6 +101,12 @@ class GnssConfig:
     rmc_timeout_s: float = _num(1.5, 0.1, 60.0)
     # A GNSS speed older than this is not forwarded (the ECU gets "not available").
     stale_s: float = _num(2.0, 0.1, 60.0)
+    # Without fixes the outlet is dead reckoned along the last heading by the wheel's distance
+    # for this far, m; past it the position is unknown: no boundary switch-off, an alarm, and
+    # the rate below (a fix's normal age is ~1.5 s, 3 m at 8 km/h, inside it).
+    dead_reckon_m: float = _num(10.0, 0.0, 500.0)
+    # The rate while the position is unknown, kg/ha; -1: the last rate metered in the field.
+    unknown_kg_ha: float = _num(-1.0, -1.0, 1200.0)
 
 
 CROP_COLUMN_NAMES = ("sensor_id", "red", "red_edge", "nir", "ndre", "ndvi")
@@ -762,6 +768,8 @@ path = ""                  # NMEA file when source = "file"
 replay_interval_s = 0.1    # pause between the lines of that file (0 = as fast as read)
 rmc_timeout_s = 1.5        # VTG speed used only when no RMC came for this long
 stale_s = 2.0              # a GNSS speed older than this is sent as "not available"
+dead_reckon_m = 10.0       # without fixes the outlet is carried this far, then "unknown"
+unknown_kg_ha = -1.0       # rate while the position is unknown; -1 = the last in the field
 
 [crop]
 source = "serial"          # serial | file | stdin

@@ -20,12 +20,22 @@ from nicegui import ui
 from topdress.config import TerminalConfig
 from topdress.display.hub import DisplayHub, TrackPoint
 from topdress.errors import TopdressError
+from topdress.view.snapshot import ZONE_UNKNOWN
 
 log = logging.getLogger(__name__)
 
 _EARTH_R_M = 6_371_000.0
 MAX_SEGMENTS = 3000  # swath pieces kept on the live map (older ones drop off)
 MACHINE_LEN_M = 3.0  # the machine's arrow
+ARROW_FIX = {
+    "color": "#000",
+    "weight": 1,
+    "dashArray": "",
+    "fillColor": "#fdd835",
+    "fillOpacity": 1,
+}
+#: The arrow while the position is dead reckoned past its limit: hollow, dashed, an estimate.
+ARROW_ESTIMATED = {"color": "#d50000", "weight": 3, "dashArray": "4 3", "fillOpacity": 0.2}
 
 LatLon = tuple[float, float]
 Ring = list[LatLon]
@@ -178,6 +188,7 @@ class LiveMap:
         self._last: TrackPoint | None = None
         self._segments: deque[Any] = deque()
         self._machine: Any = None
+        self._estimated = False  # the arrow drawn as an estimate (position unknown)
         self._centred = False
 
     def _draw_field(self) -> None:
@@ -228,11 +239,15 @@ class LiveMap:
         p = self._last
         arrow = machine_arrow(p.lat, p.lon, p.heading_deg, MACHINE_LEN_M)
         if self._machine is None:
-            style = {"color": "#000", "weight": 1, "fillColor": "#fdd835", "fillOpacity": 1}
-            self._machine = self.map.generic_layer(name="polygon", args=[arrow, style])
+            self._machine = self.map.generic_layer(name="polygon", args=[arrow, ARROW_FIX])
         elif points:
             self.map.run_layer_method(self._machine.id, "setLatLngs", arrow)
             self.map.run_layer_method(self._machine.id, "bringToFront")
+        estimated = self.hub.latest()[2].zone == ZONE_UNKNOWN
+        if estimated != self._estimated:
+            self._estimated = estimated
+            style = ARROW_ESTIMATED if estimated else ARROW_FIX
+            self.map.run_layer_method(self._machine.id, "setStyle", style)
         if not self._centred:
             self.map.set_center((p.lat, p.lon))
             self._centred = True

@@ -63,6 +63,11 @@ class OutletFix:
     lat: float
     lon: float
     heading_deg: float | None  # None: not known yet (no offset needed)
+    carried_m: float = 0.0  # dead reckoned along the heading since the last fix, m
+
+    def reckoned_past(self, limit_m: float) -> bool:
+        """Carried farther from its fix than `limit_m` (gnss.dead_reckon_m): not known."""
+        return self.carried_m > limit_m
 
 
 class OutletTracker:
@@ -102,7 +107,7 @@ class OutletTracker:
         if heading is None:
             if self.along_m or self.across_m:
                 return None
-            return OutletFix(lat, lon, None)
-        ahead = max(odometer_m - odo, 0.0) + self.along_m
-        lat, lon = offset_position(lat, lon, heading, ahead, self.across_m)
-        return OutletFix(lat, lon, heading)
+            return OutletFix(lat, lon, None, max(odometer_m - odo, 0.0))
+        carried = max(odometer_m - odo, 0.0)
+        lat, lon = offset_position(lat, lon, heading, carried + self.along_m, self.across_m)
+        return OutletFix(lat, lon, heading, carried)

@@ -372,6 +372,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "alarm.fan_low_upper": ("upper fan low", "上层风机转速低"),
     "alarm.fan_low_lower": ("lower fan low", "下层风机转速低"),
     "alarm.gnss_lost": ("GNSS lost: metering on the ground wheel", "GNSS 丢失：按地轮速度排肥"),
+    "alarm.position_unknown": (
+        "position unknown (no GNSS fix): boundary and map not applied",
+        "位置未知（无 GNSS 定位）：不按边界和处方图施肥",
+    ),
     "alarm.crop_lost": ("crop sensors lost: no NDVI", "作物传感器丢失：无 NDVI"),
     "alarm.ecu_lost": ("ECU lost: no status frames", "控制器丢失：无状态帧"),
     "alarm.wrong_field_prescription": (
@@ -756,6 +760,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "zone.field": ("in the field", "田块内"),
     "zone.headland": ("headland: meters off", "地头：停止排肥"),
     "zone.outside": ("outside the field", "田块外"),
+    "zone.unknown": ("position unknown: last rate kept", "位置未知：保持上次施肥量"),
     "main.tank_none": ("tank: no fill entered", "料箱：未输入装料量"),
     "main.tank_left": ("tank {kg} {unit} left", "料箱剩余 {kg} {unit}"),
     "main.covers": ("enough for {area} {unit}", "可施 {area} {unit}"),

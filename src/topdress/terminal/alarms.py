@@ -52,6 +52,7 @@ class AlarmInputs:
     # that is not ok then is an alarm, not only a lost one.
     operating: bool = False
     tank_low: Text | None = None  # the tank below its alarm level (the text with its figures)
+    position_lost: bool = False  # the outlet dead reckoned past its limit (site.UNKNOWN)
 
 
 @dataclass
@@ -169,6 +170,8 @@ class AlarmBook:
                 )
         if x.tank_low is not None:
             yield "tank_low", x.tank_low
+        if x.position_lost and x.operating:
+            yield "position_unknown", text("alarm.position_unknown")
 
     def _off_rate(self, i: int, t_s: float, x: AlarmInputs) -> bool:
         target = x.target_rpm[i]

@@ -186,6 +186,8 @@ class Terminal:
             self.ndvi.retune(new.crop, new.lookahead.total_s)
         elif section == "rate":
             self.site.retune(new.rate)
+        elif section == "gnss":
+            self.site.unknown_kg_ha = new.gnss.unknown_kg_ha
 
     # ---- life cycle ---------------------------------------------------------------------------
     def open(self) -> None:
@@ -290,6 +292,7 @@ class Terminal:
             ndvi,
             (outlet.lat, outlet.lon) if outlet is not None else None,
             (target.lat, target.lon) if target is not None else None,
+            lost=at.lost,
         )
         if ndvi is None and site.used_ndvi:
             self.counters["no_ndvi_ticks"] += 1

@@ -32,7 +32,7 @@ from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.leadcal import LeadCal
 from topdress.terminal.lines import Lines
-from topdress.terminal.site import OffMap
+from topdress.terminal.site import UNKNOWN, OffMap
 from topdress.terminal.surface import DisplayWatch
 from topdress.view import commands as op
 from topdress.view.snapshot import (
@@ -290,6 +290,7 @@ class OperatorDesk:
             display_down=self.display.down,
             display_lost=self.display.lost,
             operating=self.op.state in (op.RUNNING, op.PAUSED),
+            position_lost=snap.zone == UNKNOWN,
             tank_low=(
                 text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0)) if low else None
             ),

@@ -39,6 +39,7 @@ class Where:
     outlet: OutletFix | None
     target: OutletFix | None
     off_map: tuple[OffMap, ...]
+    lost: bool = False  # the outlet dead reckoned past gnss.dead_reckon_m (site.UNKNOWN)
 
 
 class GnssIn:
@@ -106,12 +107,13 @@ class GnssIn:
                 link.send_now()
         outlet = self.outlet.position(odometer_m)
         target = self.outlet.position(odometer_m + ahead_m) if ahead_m > 0.0 else outlet
-        if outlet is not None:
+        lost = outlet is not None and outlet.reckoned_past(self._settings.cfg.gnss.dead_reckon_m)
+        if outlet is not None and not lost:
             off_map = self.guard.outside(outlet.lat, outlet.lon)
         else:
             off_map = ()
             self.guard.forget()
-        return Where(gnss_kmh, outlet, target, off_map)
+        return Where(gnss_kmh, outlet, target, off_map, lost)
 
     def _say_map_distances(self, t: float, lat: float, lon: float) -> None:
         """Once, at the first fix: how far each map is from the machine (a map of another field

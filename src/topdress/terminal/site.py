@@ -10,10 +10,15 @@ from typing import TYPE_CHECKING, Final
 from topdress.config import RateConfig, TerminalConfig
 from topdress.crop.rate import RateModel, build_rate_model
 from topdress.errors import MapError
+from topdress.view.snapshot import ZONE_UNKNOWN
 
 if TYPE_CHECKING:  # GDAL, shapely and PROJ cost ~60 MB: loaded only when a map is configured
     from topdress.geo.boundary import FieldBoundary
     from topdress.geo.prescription import RateMap
+
+
+#: The zone while the position is dead reckoned past its limit.
+UNKNOWN: Final = ZONE_UNKNOWN
 
 
 @dataclass(frozen=True)
@@ -34,8 +39,12 @@ class SiteRate:
       while the outlet's position is not known, `prescription.outside_kg_ha`.
     - `prescription.mode = "bound"`: the NDVI model's rate, limited to the zone's min and
       max; the zone's rate while there is no NDVI; outside every zone `outside_kg_ha`.
-    - Boundary: 0 (meters off) in the headland strip, outside the field, and while the
-      position is not known (it cannot be told to be inside).
+    - Boundary: 0 (meters off) in the headland strip, outside the field, and before the
+      first fix (it cannot be told to be inside).
+    - Position lost (`lost`: dead reckoned past `gnss.dead_reckon_m`): zone "unknown", the
+      rate `unknown_kg_ha`, or (< 0) the last one decided in the field. A position carried
+      too far on an old heading (a turn) would switch the meters off inside the field: the
+      boundary's switch-off never acts on it.
     """
 
     def __init__(
@@ -45,12 +54,15 @@ class SiteRate:
         boundary: FieldBoundary | None = None,
         mode: str = "alone",
         outside_kg_ha: float = 0.0,
+        unknown_kg_ha: float = -1.0,
     ) -> None:
         self.model = model
         self.prescription = prescription
         self.boundary = boundary
         self.mode = mode
         self.outside_kg_ha = outside_kg_ha
+        self.unknown_kg_ha = unknown_kg_ha
+        self.last_field_kg_ha = 0.0  # the last rate decided with the outlet in the field
 
     def retune(self, rate: RateConfig) -> None:
         """A changed [rate] section: the NDVI model is built anew (the prescription and the
@@ -62,10 +74,26 @@ class SiteRate:
         ndvi: float | None,
         outlet: tuple[float, float] | None,
         ahead: tuple[float, float] | None = None,
+        lost: bool = False,
     ) -> SiteDecision:
         """`outlet`: where the outlets are (the boundary's zone); `ahead`: where they will be
         when the product commanded now lands (the look-ahead; the prescription is looked up
-        there, as the NDVI is), None = at the outlet."""
+        there, as the NDVI is), None = at the outlet; `lost`: the position is dead reckoned
+        past its limit."""
+        if lost:
+            rate = self.unknown_kg_ha if self.unknown_kg_ha >= 0.0 else self.last_field_kg_ha
+            return SiteDecision(rate, UNKNOWN, None, used_ndvi=False)
+        decision = self._decide(ndvi, outlet, ahead)
+        if decision.zone == "field" or (decision.zone is None and outlet is not None):
+            self.last_field_kg_ha = decision.total_kg_ha
+        return decision
+
+    def _decide(
+        self,
+        ndvi: float | None,
+        outlet: tuple[float, float] | None,
+        ahead: tuple[float, float] | None,
+    ) -> SiteDecision:
         zone = None
         if self.boundary is not None:
             zone = self.boundary.zone(*outlet) if outlet is not None else None
@@ -190,5 +218,10 @@ def build_site_rate(cfg: TerminalConfig, model: RateModel, maps: Maps | None = N
     """The site rate over `maps`, or over the configured files loaded now."""
     m = maps if maps is not None else load_maps(cfg)
     return SiteRate(
-        model, m.prescription, m.boundary, cfg.prescription.mode, cfg.prescription.outside_kg_ha
+        model,
+        m.prescription,
+        m.boundary,
+        cfg.prescription.mode,
+        cfg.prescription.outside_kg_ha,
+        cfg.gnss.unknown_kg_ha,
     )

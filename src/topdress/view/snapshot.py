@@ -17,6 +17,10 @@ from topdress.view.commands import ManualView
 TICK_S = 0.1  # the control tick, and the period of snapshots and state rows (10 Hz)
 
 
+#: Snapshot.zone while the outlet's position is dead reckoned past its limit.
+ZONE_UNKNOWN = "unknown"
+
+
 @dataclass(frozen=True)
 class AlarmView:
     name: str
@@ -160,7 +164,9 @@ class Snapshot:
     heading_deg: float | None = None
     outlet_lat: float | None = None  # the meters' outlet (antenna + [machine] offsets)
     outlet_lon: float | None = None
-    zone: str | None = None  # field boundary: field, headland, outside; None = no boundary
+    # field boundary: field, headland, outside; ZONE_UNKNOWN: the position dead reckoned past
+    # gnss.dead_reckon_m (an estimate); None = no boundary
+    zone: str | None = None
     prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
     gnss_lag: LagView | None = None  # the ECU's GNSS lag (None: no EcuGnssLag heard)
 
