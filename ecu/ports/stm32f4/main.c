@@ -2,11 +2,11 @@
  * @file main.c
  * @brief The topdress ECU on an STM32F405/407: the port contract of td_port.h on this chip.
  *
- * Transport, chosen at start: CAN1 when the bxCAN controller answers its initialisation
- * request; otherwise (an emulator, which has none) SLCAN on USART1 with the simulated machine
- * in the loop: its counters come in as HIL frames instead of from the timers and the duties go
- * out as HIL frames, the PWM pins staying off. Everything between (td_app_rx, td_app_step,
- * td_app_tx_pop) is the same code on the same path either way.
+ * Transport, chosen at build: CAN1 on a board; in the emulator build (`VARIANT=qemu`, FW_QEMU)
+ * SLCAN on USART1 with the simulated machine in the loop: its counters come in as HIL frames
+ * instead of from the timers and the duties go out as HIL frames, the PWM pins staying off.
+ * Everything between (td_app_rx, td_app_step, td_app_tx_pop) is the same code on the same path
+ * either way. Nothing in the board image guesses whether it runs in an emulator.
  *
  * The step's tick: SysTick every 10 ms on CAN. On the HIL link the simulator's first HilClock
  * chooses: lockstep (one step per HilSensors, at the simulator's time: the emulated ECU is then
@@ -14,9 +14,11 @@
  * watchdog) or SysTick as on the board.
  *
  * Safe state: at reset the PWM timer is stopped and its pins are inputs (pull-downs on the
- * driver board); after init the outputs are driven low (MOE = 0) until the first valid
- * PcCommand; a hard fault turns them off and resets; the independent watchdog resets a loop
- * that stops feeding it (~100 ms), which again starts with the outputs off.
+ * driver board); the first thing main does, before the clock start, is drive them low
+ * (MOE = 0); they stay low until the first valid PcCommand, and for good on the
+ * internal-oscillator fallback (the ECU is then silent on the bus). A hard fault or a lost
+ * crystal turns them off and resets; the independent watchdog resets a loop that stops feeding
+ * it (~100 ms), which again starts with the outputs off.
  */
 #include <stddef.h>
 #include "board.h"
@@ -24,6 +26,13 @@
 #include "td_app.h"
 #include "td_hil.h"
 #include "td_slcan.h"
+#include "stm32f4_regs.h"
+
+#if defined(FW_QEMU)
+#define HIL_BUILD true
+#else
+#define HIL_BUILD false
+#endif
 
 static td_app_t app; /* the one instance (td_port.h) */
 static td_params_t params;
@@ -31,7 +40,7 @@ static fw_clock_t clk;
 static td_hil_t hil;
 static td_slcan_parser_t slcan;
 static bool slcan_open;
-static bool hil_mode;
+static const bool hil_mode = HIL_BUILD;
 static uint32_t slcan_tx_dropped;
 
 static void slcan_send(const td_can_frame_t *f) {
@@ -112,6 +121,7 @@ static uint32_t hil_wait_step(void) {
 }
 
 int main(void) {
+    fw_io_outputs_off(); /* first: on the reset clock, before anything can take time */
     const td_reset_cause_t cause = fw_reset_cause();
     fw_clock_init(&clk);
     fw_time_init(&clk);
@@ -119,12 +129,17 @@ int main(void) {
     td_params_t *const p = &params;
     td_params_default(p); /* the terminal pushes its parameters over CAN at every connection */
     const uint32_t ids[] = { p->command_id, TD_ID_PC_PARAM_SET, TD_ID_PC_CAL_COMMAND, TD_ID_PC_GNSS_TIME };
-    hil_mode = !fw_can_init(&clk, BOARD_CAN_BITRATE, ids, sizeof ids / sizeof ids[0]);
     if (hil_mode) {
         td_hil_init(&hil);
         td_slcan_init(&slcan);
         fw_uart_init(&clk, BOARD_SLCAN_BAUD);
+    } else if (!fw_can_init(&clk, ids, sizeof ids / sizeof ids[0])) {
+        for (;;) { /* a CAN controller that never answers: a broken chip; outputs off, no watchdog */
+            wait_for_interrupt();
+        }
     }
+    /* only a clock from the crystal drives the outputs (and the bus: fw_can_init) */
+    const bool on_crystal = clk.source == (uint8_t)FW_CLOCK_PLL_HSE;
     if (td_app_init(&app, p, fw_micros()) != TD_OK) {
         for (;;) { /* defaults that do not validate: no control, the watchdog is not started */
         }
@@ -168,7 +183,7 @@ int main(void) {
             fw_uart_pump();
         } else {
             fw_io_write(&out);
-            fw_io_enable(app.have_cmd); /* outputs stay low until the first valid command */
+            fw_io_enable(app.have_cmd && on_crystal); /* low until the first valid command */
             while (td_app_tx_pop(&app, &f)) {
                 (void)fw_can_write(&f);
             }
