@@ -93,8 +93,14 @@ def image() -> Path:
     if shutil.which("arm-none-eabi-gcc") is None:
         pytest.skip("arm-none-eabi-gcc is not installed (scripts/sysdeps.sh firmware)")
     subprocess.run(
-        ["make", "--no-print-directory", "-s", "-f", "ecu/ports/stm32f4/firmware.mk"]
-        + ["VARIANT=qemu"],
+        [
+            "make",
+            "--no-print-directory",
+            "-s",
+            "-f",
+            "ecu/ports/stm32f4/firmware.mk",
+            "VARIANT=qemu",
+        ],
         cwd=REPO,
         check=True,
         capture_output=True,
