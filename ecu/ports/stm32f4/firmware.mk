@@ -3,7 +3,8 @@
 #
 #   BOARD=generic8 (default) | olimex_e407 | olimex_p407   the board header boards/$(BOARD).h
 #   VARIANT=board (default) | qemu                         qemu: the emulator build (SLCAN/HIL on
-#                                                          USART1, no clock set-up), never flashed
+#                                                          USART1, no clock set-up, the generic
+#                                                          board), never flashed
 #   FW_CFLAGS=-DBOARD_CAN_BITRATE=500000                   a board header's guarded default
 # Out: build/fw/topdress-ecu-stm32f4.{elf,bin,hex,map} for the default board, build/fw-$(BOARD)/
 # for another, build/fw-qemu/ for the emulator build; the flash, RAM and stack figures.
@@ -14,6 +15,7 @@ VARIANT ?= board
 NAME := topdress-ecu-stm32f4
 PORT := ecu/ports/stm32f4
 ifeq ($(VARIANT),qemu)
+override BOARD := generic8
 OUT ?= build/fw-qemu
 VARIANT_FLAGS := -DFW_QEMU=1
 else ifeq ($(VARIANT),board)

@@ -40,6 +40,11 @@ void fw_tick_start(const fw_clock_t *c);
 void fw_wait_step(void);
 
 /* ---- fw_io.c: encoders, capture, tachometers, PWM, safe state ---------------------------- */
+/** A pin (port A = 0 .. E = 4) to its alternate function `af` with `pull` (GPIO_PULL_*);
+ *  PIN_AF(PIN_x, pull) takes the board header's triple. */
+void fw_pin_af(uint32_t port, uint32_t pin, uint32_t af, uint32_t pull);
+#define PIN_AF(p, pull) FW_PIN_AF_(p, pull)
+#define FW_PIN_AF_(port, pin, af, pull) fw_pin_af(port, pin, af, pull)
 /** The PWM outputs driven low with MOE off, frozen under a debugger: the first thing main does,
  *  on the reset clock, before the clock start. */
 void fw_io_outputs_off(void);

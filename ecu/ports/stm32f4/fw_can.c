@@ -55,14 +55,9 @@ bool fw_can_init(const fw_clock_t *c, const uint32_t *ids, unsigned n) {
         RCC->APB1ENR &= ~RCC_APB1ENR_CAN1;
         return false;
     }
-    {
-        /* pins only once the controller is known to be there */
-        gpio_t *const b = GPIOB;
-        RCC->AHB1ENR |= RCC_AHB1ENR_GPIOB;
-        b->MODER = (b->MODER & ~(0xFu << 16)) | (GPIO_MODE_AF << 16) | (GPIO_MODE_AF << 18);
-        b->PUPDR = (b->PUPDR & ~(3u << 16)) | (GPIO_PULL_UP << 16); /* RX idles recessive */
-        b->AFR[1] = (b->AFR[1] & ~0xFFu) | 0x99u;                   /* PB8, PB9: AF9 */
-    }
+    /* pins only once the controller is known to be there (GPIO clocks: fw_io_outputs_off) */
+    PIN_AF(PIN_CAN_RX, GPIO_PULL_UP); /* RX idles recessive */
+    PIN_AF(PIN_CAN_TX, 0u);
     CAN1->MCR = CAN_MCR_INRQ | CAN_MCR_ABOM | CAN_MCR_TXFP;
     CAN1->BTR = c->source == (uint8_t)FW_CLOCK_PLL_HSE ? fw_can_btr[0] : (fw_can_btr[1] | CAN_BTR_SILM);
     /* filters (32.7.4): banks 0..nb-1 in 32-bit identifier-list mode, FIFO 0 */

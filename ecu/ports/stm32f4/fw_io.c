@@ -51,14 +51,12 @@ static td_wheel_capture_t wheel;
 static td_ctr_t meter[2], fan[2];
 static uint32_t pwm_top;
 
-static void pin_af(uint32_t port, uint32_t pin, uint32_t af, uint32_t pull) {
+void fw_pin_af(uint32_t port, uint32_t pin, uint32_t af, uint32_t pull) {
     gpio_t *g = ports[port];
     g->MODER = (g->MODER & ~(3u << (2u * pin))) | (GPIO_MODE_AF << (2u * pin));
     g->PUPDR = (g->PUPDR & ~(3u << (2u * pin))) | (pull << (2u * pin));
     g->AFR[pin >> 3] = (g->AFR[pin >> 3] & ~(0xFu << (4u * (pin & 7u)))) | (af << (4u * (pin & 7u)));
 }
-#define PIN_AF(p, pull) pin_af_(p, pull)
-#define pin_af_(port, pin, af, pull) pin_af(port, pin, af, pull)
 
 void TIM2_IRQHandler(void) {
     const uint32_t sr = TIM2->SR;

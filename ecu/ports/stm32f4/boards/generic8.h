@@ -38,9 +38,9 @@
 #define PIN_PWM_METER_LO 2u, 7u, 3u
 #define PIN_PWM_FAN_UP 2u, 8u, 3u
 #define PIN_PWM_FAN_LO 2u, 9u, 3u
-/* the emulator build's SLCAN link and the ROM bootloader's USART1 (field update) */
-#define PIN_SLCAN_TX 0u, 9u, 7u
-#define PIN_SLCAN_RX 0u, 10u, 7u
+/* USART1: the emulator build's SLCAN link and the ROM bootloader's serial port (field update) */
+#define PIN_SERIAL_TX 0u, 9u, 7u
+#define PIN_SERIAL_RX 0u, 10u, 7u
 /* pins the board uses for something else: SWD, the crystal */
 #define BOARD_RESERVED_PINS "PA13 PA14 PH0 PH1"
 

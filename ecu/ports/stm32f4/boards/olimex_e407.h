@@ -41,9 +41,10 @@
 #define PIN_PWM_METER_LO 4u, 11u, 1u
 #define PIN_PWM_FAN_UP 4u, 13u, 1u
 #define PIN_PWM_FAN_LO 4u, 14u, 1u
-/* USART3 on PB10/PB11: the ROM bootloader's second USART (USART1's PA9/PA10 are USB here) */
-#define PIN_SLCAN_TX 1u, 10u, 7u
-#define PIN_SLCAN_RX 1u, 11u, 7u
+/* USART3 on PB10/PB11: the ROM bootloader's second serial port, for the field update
+ * (USART1's PA9/PA10 are USB here) */
+#define PIN_SERIAL_TX 1u, 10u, 7u
+#define PIN_SERIAL_RX 1u, 11u, 7u
 #define BOARD_RESERVED_PINS                                                                 \
     "PA13 PA14 PH0 PH1 PA1 PA2 PA7 PC1 PC4 PC5 PG11 PG13 PG14 PC8 PC9 PC10 PC11 PC12 PD2 " \
     "PA9 PA10 PA11 PA12 PB12 PB13 PB14 PB15"

@@ -3,8 +3,8 @@
  * @brief Olimex STM32-P407 (STM32F407ZGT6, 25 MHz crystal). The pin map keeps off the board's
  *        Ethernet PHY (RMII: PA1, PA2, PA7, PC1, PC4, PC5, PG11, PG13, PG14), its microSD slot
  *        (PC8-PC12, PD2) and its two USB ports (OTG FS PA9-PA12, OTG HS PB12-PB15), which is why
- *        the PWM moves (as on the E407) to TIM1 (TIM8's CH3/CH4 exist only on PC8/PC9 in this package) and the
- *        lower fan's tachometer to TIM8 (TIM12 exists only on PB14/PB15).
+ *        the PWM moves to TIM1 (TIM8's CH3/CH4 exist only on PC8/PC9 in this package) and the
+ *        lower fan's tachometer to TIM8 (TIM12 exists only on PB14/PB15), as on the E407.
  *
  * CAN1 on PB8/PB9 is the pair the P407 routes to its CAN connector (its board support in
  * other projects uses the same pair).
@@ -41,9 +41,10 @@
 #define PIN_PWM_METER_LO 4u, 11u, 1u
 #define PIN_PWM_FAN_UP 4u, 13u, 1u
 #define PIN_PWM_FAN_LO 4u, 14u, 1u
-/* USART3 on PB10/PB11: the ROM bootloader's second USART (USART1's PA9/PA10 are USB here) */
-#define PIN_SLCAN_TX 1u, 10u, 7u
-#define PIN_SLCAN_RX 1u, 11u, 7u
+/* USART3 on PB10/PB11: the ROM bootloader's second serial port, for the field update
+ * (USART1's PA9/PA10 are USB here) */
+#define PIN_SERIAL_TX 1u, 10u, 7u
+#define PIN_SERIAL_RX 1u, 11u, 7u
 #define BOARD_RESERVED_PINS                                                                 \
     "PA13 PA14 PH0 PH1 PA1 PA2 PA7 PC1 PC4 PC5 PG11 PG13 PG14 PC8 PC9 PC10 PC11 PC12 PD2 " \
     "PA9 PA10 PA11 PA12 PB12 PB13 PB14 PB15"
