@@ -24,6 +24,7 @@
 #include "board.h"
 #include "fw.h"
 #include "td_app.h"
+#include "td_can.h"
 #include "td_hil.h"
 #include "td_slcan.h"
 #include "stm32f4_regs.h"
@@ -52,6 +53,40 @@ static void slcan_send(const td_can_frame_t *f) {
 }
 
 static td_ident_t ident;
+
+static uint16_t sat16(uint32_t v) {
+    return v > 0xFFFFu ? 0xFFFFu : (uint16_t)v;
+}
+
+/* Once a second on CAN: the controller's health (EcuCanHealth) and, after a fault reset, one
+ * register of what the fault handler kept (EcuFaultRecord), the next one each second. */
+static void send_diagnostics(void) {
+    static uint8_t fault_reg;
+    fw_can_stats_t st;
+    fw_can_stats(&st);
+    const struct td_can_ecu_can_health_t h = {
+        .tx_errors = st.tec,
+        .rx_errors = st.rec,
+        .bus_state = st.state,
+        .error_passive_count = sat16(st.error_passive),
+        .bus_off_count = sat16(st.bus_off),
+        .rx_overruns = st.rx_overruns > 0xFFu ? 0xFFu : (uint8_t)st.rx_overruns,
+    };
+    td_can_frame_t f = { .id = TD_CAN_ECU_CAN_HEALTH_FRAME_ID, .extended = 1u, .dlc = 8u };
+    (void)td_can_ecu_can_health_pack(f.data, &h, sizeof f.data);
+    (void)fw_can_write(&f);
+    fw_fault_record_t r;
+    fw_fault_record(&r);
+    if (r.kind == (uint8_t)FW_FAULT_NONE) {
+        return;
+    }
+    const uint32_t regs[6] = { r.cfsr, r.hfsr, r.mmfar, r.bfar, r.pc, r.lr };
+    const struct td_can_ecu_fault_record_t fr = { .register_id = fault_reg, .kind = r.kind, .value = regs[fault_reg] };
+    f.id = TD_CAN_ECU_FAULT_RECORD_FRAME_ID;
+    (void)td_can_ecu_fault_record_pack(f.data, &fr, sizeof f.data);
+    (void)fw_can_write(&f);
+    fault_reg = (uint8_t)((fault_reg + 1u) % 6u);
+}
 
 /* The first HilClock chose the step's tick. Lockstep: the core starts again on the simulator's
  * clock (nothing has stepped yet; its time base moves from the chip's TIM2 to the simulator's). */
@@ -151,6 +186,7 @@ int main(void) {
     (void)td_app_set_ident(&app, &ident);
     fw_watchdog_start();
     fw_tick_start(&clk); /* on the HIL link in lockstep it only wakes the wait for the watchdog */
+    uint32_t steps = 0u;
     for (;;) {
         uint32_t now;
         td_can_frame_t f;
@@ -186,6 +222,9 @@ int main(void) {
             fw_io_enable(app.have_cmd && on_crystal); /* low until the first valid command */
             while (td_app_tx_pop(&app, &f)) {
                 (void)fw_can_write(&f);
+            }
+            if (++steps % BOARD_STEP_HZ == 0u) {
+                send_diagnostics();
             }
         }
         fw_watchdog_feed();
