@@ -129,6 +129,8 @@ class FrameIds:
     fused_aux: int = 0x18666465
     gnss_lag: int = 0x18696465
     ident: int = 0x18676465
+    can_health: int = 0x186A6465
+    fault_record: int = 0x186B6465
 
 
 DEFAULT_IDS = FrameIds()

@@ -69,6 +69,7 @@ from topdress.terminal.canlink import (
     terminal_protocol,
 )
 from topdress.terminal.desk import OperatorDesk
+from topdress.terminal.ecuhealth import health_text
 from topdress.terminal.gnsslag import MAX_LAG_MS, STORE_FILE, LagStore, LagWatch
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.receiver import ReceiverWatch, input_key
@@ -774,6 +775,7 @@ class Terminal:
             ecu_link=self.ecu_state,
             ecu_where=self.link.where,
             ecu_ident=None if ident is None else ident_text(ident),
+            ecu_can_health=None if ecu.can_health is None else health_text(ecu.can_health),
             ecu_protocol=(
                 (ident.protocol_version, terminal_protocol())
                 if ident is not None and ident_mismatch(ident)

@@ -43,6 +43,7 @@ from topdress.config import CanConfig
 from topdress.errors import DeviceError, EcuParamError, ProtocolError
 from topdress.i18n import Text, text
 from topdress.protocol import AckResult, FrameIds
+from topdress.terminal.ecuhealth import FaultRecord, health_event
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +109,7 @@ class EcuView:
     cal_t: float | None = None  # when that status arrived (the terminal's clock)
     lag: protocol.EcuGnssLag | None = None  # the GNSS lag in use and learned
     ident: protocol.EcuIdent | None = None  # who the ECU says it is (EcuIdent)
+    can_health: protocol.EcuCanHealth | None = None  # a firmware's CAN controller (ecuhealth)
 
 
 def ident_mismatch(ident: protocol.EcuIdent) -> bool:
@@ -203,6 +205,7 @@ class CanLink:
         self.counters = LinkCounters()
         self.command = command
         self.ecu = EcuView()
+        self._fault_record = FaultRecord()  # a firmware's EcuFaultRecord round
         self._push: _ParamPush | None = None
         self._params: list[tuple[int, float]] = []
         self._next_cmd_t: float | None = None
@@ -552,6 +555,15 @@ class CanLink:
             self.ecu = replace(self.ecu, lag=decoded)
         elif isinstance(decoded, protocol.EcuIdent):
             self._take_ident(decoded, now)
+        elif isinstance(decoded, protocol.EcuCanHealth):
+            said = health_event(self.ecu.can_health, decoded)
+            self.ecu = replace(self.ecu, can_health=decoded)
+            if said is not None:
+                self._event(said)
+        elif isinstance(decoded, protocol.EcuFaultRecord):
+            said = self._fault_record.take(decoded)
+            if said is not None:
+                self._event(said)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
     def _take_ident(self, ident: protocol.EcuIdent, now: float) -> None:
