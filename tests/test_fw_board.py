@@ -148,6 +148,40 @@ def test_bit_timing_sample_point_87_5(tmp_path: Path, bitrate: int) -> None:
         assert sjw == 2
 
 
+@host_cc
+@pytest.mark.parametrize("bitrate", [500_000, 250_000, 125_000, 100_000])
+def test_fixed_timing_is_what_the_host_tested_search_finds(tmp_path: Path, bitrate: int) -> None:
+    # td_bxcan_timing() (ecu/ports/common, tested by make ctest) picks the same register value
+    # from the board's 40 MHz APB1 at 87.5 %
+    (fixed,) = _board_values(
+        tmp_path,
+        "generic8",
+        ("BOARD_CAN_BTR_FOR(BOARD_APB1_HZ)",),
+        f"-DBOARD_CAN_BITRATE={bitrate}",
+    )
+    src = tmp_path / "timing.c"
+    src.write_text(
+        '#include <stdio.h>\n#include "td_bxcan.h"\nint main(void) {\n'
+        "    td_bxcan_timing_t t;\n"
+        f"    if (td_bxcan_timing(40000000u, {bitrate}u, 875u, &t) != 0) return 1;\n"
+        '    printf("%lu\\n", (unsigned long)t.btr);\n    return 0;\n}\n'
+    )
+    exe = tmp_path / "timing"
+    assert CC is not None
+    common = REPO / "ecu" / "ports" / "common"
+    inc = [
+        "-I",
+        str(common),
+        "-I",
+        str(REPO / "ecu" / "include"),
+        "-I",
+        str(REPO / "ecu" / "src" / "gen"),
+    ]
+    subprocess.run([CC, *inc, "-o", str(exe), str(src), str(common / "td_bxcan.c")], check=True)
+    searched = int(subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout)
+    assert searched == fixed
+
+
 # ---- pin maps ------------------------------------------------------------------------------
 
 ROLES = {

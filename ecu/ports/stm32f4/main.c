@@ -221,9 +221,11 @@ int main(void) {
             fw_io_write(&out);
             fw_io_enable(app.have_cmd && on_crystal); /* low until the first valid command */
             while (td_app_tx_pop(&app, &f)) {
-                (void)fw_can_write(&f);
+                if (on_crystal) { /* silent on the fallback: nothing queued for the bus */
+                    (void)fw_can_write(&f);
+                }
             }
-            if (++steps % BOARD_STEP_HZ == 0u) {
+            if (on_crystal && ++steps % BOARD_STEP_HZ == 0u) {
                 send_diagnostics();
             }
         }
