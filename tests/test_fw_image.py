@@ -33,14 +33,16 @@ def _build(out: Path, *more: str) -> Path:
     return out / ELF
 
 
+# the repository's own outputs (make rebuilds what changed, usually nothing: `make firmware` and
+# the QEMU tests build the same)
 @pytest.fixture(scope="module")
-def board(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return _build(tmp_path_factory.mktemp("board"))
+def board() -> Path:
+    return _build(REPO / "build" / "fw")
 
 
 @pytest.fixture(scope="module")
-def emulator(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return _build(tmp_path_factory.mktemp("qemu"), "VARIANT=qemu")
+def emulator() -> Path:
+    return _build(REPO / "build" / "fw-qemu", "VARIANT=qemu")
 
 
 def _function(elf: Path, name: str) -> list[str]:
