@@ -77,6 +77,13 @@ def test_the_link_keeps_health_and_says_state_changes_and_the_fault_record() -> 
             "MMFAR 0xE000ED34 BFAR 0x20020000 PC 0x08001C3A LR 0x08001B01 "
             "(find the PC in the firmware's map file)"
         ]
+        # a crystal failure (kind 2) has no registers to wait for: said at its first frame
+        link.on_frame(_fault(0, 2, 0), 15.0)
+        link.on_frame(_fault(1, 2, 0), 16.0)
+        assert [e for e in events if "crystal" in e] == [
+            "ECU crystal failure before this start: it ran on its internal oscillator, off the bus "
+            "with its outputs off (check the crystal and its load capacitors)"
+        ]
         before = link.counters.rx_malformed
         link.on_frame(can.Message(arbitration_id=0x186B6465, data=b"\x09" * 8), 20.0)
         assert link.counters.rx_malformed == before + 1

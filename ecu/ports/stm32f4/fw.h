@@ -93,7 +93,8 @@ void fw_uart_pump(void);
 typedef enum {
     FW_FAULT_NONE = 0,
     FW_FAULT_HARD = 1,         /**< a hard fault (or any unexpected exception) */
-    FW_FAULT_CLOCK_LOST = 2    /**< the clock security system saw the crystal stop */
+    FW_FAULT_CRYSTAL = 2       /**< the crystal stopped while running (the clock security
+                                    system) or did not start at an earlier start */
 } fw_fault_kind_t;
 
 /** What the fault handler kept across its reset (zero when the last reset was not a fault). */
@@ -110,5 +111,8 @@ void fw_watchdog_start(void);
 void fw_watchdog_feed(void);
 /** The record the last reset left (from fw_reset_cause()). */
 void fw_fault_record(fw_fault_record_t *r);
+/** On the internal-oscillator fallback, where nothing can be sent: keep the record (or, with
+ *  none, a crystal failure) across the next reset for a start on the crystal to send. */
+void fw_fault_keep_for_next_start(void);
 
 #endif /* TD_FW_H */

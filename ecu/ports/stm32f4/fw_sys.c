@@ -13,7 +13,7 @@
 #include "stm32f4_regs.h"
 
 #define FAULT_MARK 0x48415244u /* "HARD" */
-#define CLOCK_MARK 0x48534531u /* "HSE1": the crystal was lost while running */
+#define KEPT_MARK 0x4B455054u  /* "KEPT": a record to send, not a hard fault at this reset */
 
 /* Not zeroed at start (.noinit): a mark and its complement, so power-up garbage is not a mark. */
 typedef struct {
@@ -34,7 +34,7 @@ void fw_fault_record(fw_fault_record_t *r) {
 td_reset_cause_t fw_reset_cause(void) {
     const uint32_t csr = RCC->CSR;
     const bool faulted = kept_valid(FAULT_MARK);
-    if (faulted || kept_valid(CLOCK_MARK)) {
+    if (faulted || kept_valid(KEPT_MARK)) {
         last.cfsr = kept.rec.cfsr;
         last.hfsr = kept.rec.hfsr;
         last.mmfar = kept.rec.mmfar;
@@ -136,6 +136,20 @@ void NMI_Handler(void) {
     kept.rec.bfar = 0u;
     kept.rec.pc = 0u;
     kept.rec.lr = 0u;
-    kept.rec.kind = (uint8_t)FW_FAULT_CLOCK_LOST;
-    keep_and_reset(CLOCK_MARK);
+    kept.rec.kind = (uint8_t)FW_FAULT_CRYSTAL;
+    keep_and_reset(KEPT_MARK);
+}
+
+void fw_fault_keep_for_next_start(void) {
+    const bool hard = last.kind == (uint8_t)FW_FAULT_HARD;
+    kept.rec.cfsr = last.cfsr;
+    kept.rec.hfsr = last.hfsr;
+    kept.rec.mmfar = last.mmfar;
+    kept.rec.bfar = last.bfar;
+    kept.rec.pc = last.pc;
+    kept.rec.lr = last.lr;
+    kept.rec.kind = hard ? (uint8_t)FW_FAULT_HARD : (uint8_t)FW_FAULT_CRYSTAL;
+    __asm__ volatile("dsb" ::: "memory");
+    kept.mark = KEPT_MARK; /* the next reset's cause stays its own */
+    kept.mark_inv = ~KEPT_MARK;
 }

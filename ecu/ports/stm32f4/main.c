@@ -175,6 +175,9 @@ int main(void) {
     }
     /* only a clock from the crystal drives the outputs (and the bus: fw_can_init) */
     const bool on_crystal = clk.source == (uint8_t)FW_CLOCK_PLL_HSE;
+    if (!hil_mode && !on_crystal) {
+        fw_fault_keep_for_next_start(); /* said at the next start that can send it */
+    }
     if (td_app_init(&app, p, fw_micros()) != TD_OK) {
         for (;;) { /* defaults that do not validate: no control, the watchdog is not started */
         }

@@ -250,7 +250,7 @@ class EcuIdent:
 #: EcuCanHealth's bus states and EcuFaultRecord's registers and kinds (DBC value tables).
 BUS_STATES = ("error-active", "error-passive", "bus-off")
 FAULT_REGISTERS = ("CFSR", "HFSR", "MMFAR", "BFAR", "PC", "LR")
-FAULT_KINDS = ("none", "hard fault", "clock lost")
+FAULT_KINDS = ("none", "hard fault", "crystal failure")
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,9 @@ class FaultRecord:
         if rec.kind != self.kind or self.values.get(rec.register, rec.value) != rec.value:
             self.values, self.kind, self.said = {}, rec.kind, False  # another fault
         self.values[rec.register] = rec.value
+        if not self.said and rec.kind == "crystal failure":  # no registers to wait for
+            self.said = True
+            return text("event.ecu_crystal_failure")
         if self.said or len(self.values) < len(protocol.FAULT_REGISTERS):
             return None
         self.said = True
