@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import signal
 import socket
+import threading
 import time
 import urllib.request
 from collections.abc import Callable, Iterator
@@ -176,6 +177,10 @@ def test_a_killed_display_is_started_again_counted_and_logged(
     assert down.why == "killed by signal 9"
     (restarted,) = [c for c in term.posted if isinstance(c, DisplayEvent)]
     assert restarted.kind == "display.restarted" and restarted.detail["n"] == 1
+    # the outage the driver had: from the kill until the new process served (importing
+    # NiceGUI takes seconds), not the 0.5 s wait before its start
+    assert float(restarted.detail["down_s"]) > 1.0
+    assert restarted.detail["why"] == "killed by signal 9"
     assert link.restarts == 1
     assert "display down (killed by signal 9); starting it again in 0.5 s" in messages
 
@@ -206,3 +211,66 @@ def test_a_display_that_cannot_start_is_said_and_tried_again(
         squatter.close()
     until("served again", lambda: answers(link.opts.url), timeout_s=60.0)
     assert link.restarts == 1
+
+
+class _DeadChild:
+    """A display process as `DisplayLink._down` handles it, already gone."""
+
+    def __init__(self, started: float, alive_at: float | None) -> None:
+        self.started = started
+        self.alive_at = alive_at
+        self.conn = self
+        self.killed = 0
+
+    def close(self) -> None:
+        pass
+
+    def kill(self) -> None:
+        self.killed += 1
+
+
+def test_the_restart_wait_is_bounded_while_the_meters_are_on() -> None:
+    """Killed each time it comes back: the waits grow to 30 s stopped, but never past
+    METERING_RETRY_S while the meters run (the driver's pause limit is 10 s)."""
+    from dataclasses import replace
+
+    from topdress.cli import display as cli_display
+    from topdress.view.snapshot import Snapshot
+
+    def waits(operator: str) -> list[float]:
+        term = RecordingTerminal(default_config())
+        link = DisplayLink(term, DisplayOptions("127.0.0.1", 1), lambda m: None)  # type: ignore[arg-type]
+        link.publish(replace(Snapshot(), operator=operator))
+        out = []
+        for i in range(7):
+            now = 100.0 + 10 * i
+            link._down(_DeadChild(now - 2.0, now - 1.0), "killed by signal 9", now)  # type: ignore[arg-type]
+            out.append(link._next_start - now)
+        return out
+
+    assert waits(op.STOPPED) == [0.5, 1.0, 2.0, 4.0, 8.0, 15.0, 30.0]
+    assert waits(op.RUNNING) == [0.5] + [cli_display.METERING_RETRY_S] * 6
+    assert waits(op.PAUSED) == [0.5] + [cli_display.METERING_RETRY_S] * 6
+
+
+def test_a_stalled_terminal_does_not_hold_its_silence_against_the_display() -> None:
+    """The terminal suspended 5 s: the display's last "alive" is 5 s old when the watch wakes
+    (its messages wait unread in the socket); the watch moves its times on by the stall, so a
+    healthy display is not killed (a display that hangs still is, 3 s later)."""
+    from topdress.cli.display import ALIVE_TIMEOUT_S
+
+    term = RecordingTerminal(default_config())
+    link = DisplayLink(term, DisplayOptions("127.0.0.1", 1), lambda m: None)  # type: ignore[arg-type]
+
+    class Proc:
+        def poll(self) -> None:
+            return None
+
+    child = _DeadChild(started=0.0, alive_at=100.0)
+    child.proc = Proc()  # type: ignore[attr-defined]
+    child.ended = threading.Event()  # type: ignore[attr-defined]
+    child.error = None  # type: ignore[attr-defined]
+    assert link._why_down(child, 105.1) == "no answer for 3 s"  # type: ignore[arg-type]
+    DisplayLink.after_stall(child, 5.0)  # type: ignore[arg-type]
+    assert link._why_down(child, 105.1) is None  # type: ignore[arg-type]
+    assert link._why_down(child, 105.1 + ALIVE_TIMEOUT_S) == "no answer for 3 s"  # type: ignore[arg-type]

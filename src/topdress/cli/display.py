@@ -38,6 +38,7 @@ from topdress.display.guard import printable
 from topdress.display.options import DisplayError, DisplayOptions, check_security, port_free
 from topdress.display.process import Hello
 from topdress.terminal.app import Terminal
+from topdress.view import commands as op
 from topdress.view.commands import CommandResult, DisplayEvent, DisplayState
 from topdress.view.snapshot import Snapshot
 
@@ -48,6 +49,12 @@ STABLE_S = 60.0  # a display that served this long starts its waits over
 START_TIMEOUT_S = 30.0  # from its start to its first "alive" (importing NiceGUI takes seconds)
 ALIVE_TIMEOUT_S = 3.0  # then: silent this long, it hangs; it is killed and started again
 WATCH_PERIOD_S = 0.1
+#: While the meters are on, a display that went down is tried again at least this often: the
+#: back-off never leaves the driver without Stop on screen for long (display.lost_pause_s).
+METERING_RETRY_S = 1.0
+#: The watch waking this late was the terminal itself stalled (suspended, swapped out), not
+#: the display: its silence meanwhile is not held against it.
+STALL_S = 1.0
 #: The events a display process may put into the session log.
 DISPLAY_EVENTS = ("display.pin_failed", "display.pin_lockout")
 
@@ -169,6 +176,8 @@ class DisplayLink:
         self._next_start = 0.0
         self._down_since: float | None = None
         self._told: DisplayState | None = None
+        self._why_restarted = ""
+        self.metering = False  # the operator has the meters on (the last snapshot's state)
 
     # ---- life cycle ----------------------------------------------------------------------
     def start(self) -> str:
@@ -239,6 +248,7 @@ class DisplayLink:
         if self.term.cfg is not self._cfg:  # settings applied: the display shows the new ones
             self._cfg = self.term.cfg
             self._out.append(("cfg", self._cfg))
+        self.metering = snapshot.operator != op.STOPPED
         self._snaps.append(snapshot)
         self._wake.set()
 
@@ -303,10 +313,14 @@ class DisplayLink:
 
     # ---- keeping it alive ------------------------------------------------------------------
     def _watch(self) -> None:
+        last = time.monotonic()
         while not self._stop.wait(WATCH_PERIOD_S):
             with self._lock:
                 child = self._child
             now = time.monotonic()
+            if now - last > STALL_S and child is not None:
+                self.after_stall(child, now - last - WATCH_PERIOD_S)
+            last = now
             if child is None:
                 if now >= self._next_start:
                     self._start_again()
@@ -316,10 +330,37 @@ class DisplayLink:
                 self._down(child, why, now)
             elif child.alive_at is not None:
                 if self._down_since is not None:
-                    self._down_since = None
+                    self._back(now)
                 if now - child.started >= STABLE_S:
                     self._failures = 0
                 self._tell(DisplayState("ok", child.pages, "", self.restarts))
+
+    @staticmethod
+    def after_stall(child: _Child, stall_s: float) -> None:
+        """The terminal did not run for `stall_s`: neither did its reading of the display's
+        "alive" messages, which may still wait in the socket. The display's times move on by
+        the stall, so a healthy one is not killed for the terminal's own pause."""
+        child.started += stall_s
+        if child.alive_at is not None:
+            child.alive_at += stall_s
+
+    def _back(self, now: float) -> None:
+        """The display serving again: the outage the driver had, from down to serving."""
+        assert self._down_since is not None
+        down_s = now - self._down_since
+        self._down_since = None
+        self.term.post(
+            DisplayEvent(
+                "display.restarted",
+                {"n": self.restarts, "why": self._why_restarted, "down_s": round(down_s, 2)},
+            )
+        )
+
+    def _wait_s(self) -> float:
+        """The wait before the next start: growing, unless the meters are on."""
+        wait_s = RESTART_BACKOFF_S[min(self._failures, len(RESTART_BACKOFF_S) - 1)]
+        self._failures += 1
+        return min(wait_s, METERING_RETRY_S) if self.metering else wait_s
 
     def _why_down(self, child: _Child, now: float) -> str | None:
         code = child.proc.poll()
@@ -345,8 +386,7 @@ class DisplayLink:
         child.kill()
         if child.alive_at is not None and now - child.started >= STABLE_S:
             self._failures = 0
-        wait_s = RESTART_BACKOFF_S[min(self._failures, len(RESTART_BACKOFF_S) - 1)]
-        self._failures += 1
+        wait_s = self._wait_s()
         self._next_start = now + wait_s
         if self._down_since is None:
             self._down_since = now
@@ -357,20 +397,14 @@ class DisplayLink:
         why = self._told.why if self._told is not None else ""
         if not port_free(self.opts.host, self.opts.port):
             self._down_since = self._down_since or time.monotonic()
-            wait_s = RESTART_BACKOFF_S[min(self._failures, len(RESTART_BACKOFF_S) - 1)]
-            self._failures += 1
+            wait_s = self._wait_s()
             self._next_start = time.monotonic() + wait_s
             busy = f"{self.opts.host}:{self.opts.port} is in use"
             self._tell(DisplayState("down", 0, busy, self.restarts))
             self.message(f"display down ({busy}); trying again in {wait_s:g} s")
             return
         self.restarts += 1
-        down_s = time.monotonic() - self._down_since if self._down_since is not None else 0.0
-        self.term.post(
-            DisplayEvent(
-                "display.restarted", {"n": self.restarts, "why": why, "down_s": round(down_s, 2)}
-            )
-        )
+        self._why_restarted = why  # told with the outage once the new one serves (_back)
         try:
             self._spawn()
         except OSError as exc:  # no process could be made (memory, file descriptors)
