@@ -12,7 +12,7 @@ from dataclasses import replace
 from itertools import pairwise
 
 import pytest
-from nicegui import ui
+from nicegui import Client, ui
 from nicegui.testing import User
 
 from topdress import i18n
@@ -999,3 +999,35 @@ async def test_units_tank_and_area_left(user: User) -> None:
     (sent,) = term.sent
     assert isinstance(sent, op.FillTank)
     assert (sent.fill_kg, sent.alarm_kg) == pytest.approx((453.59237, 90.718474))
+
+
+async def test_a_viewer_tab_is_not_the_operators_page_and_stop_needs_no_pin(
+    user: User, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A tablet's tab (not the cab's browser, a PIN set) only viewing does not count as the
+    operator's page for the pause rule; its Stop and Pause go out at once, no PIN asked, and
+    with them the tab becomes an operator's page."""
+    monkeypatch.setattr(pages, "client_is_remote", lambda: True)
+    term = Terminal()
+    hub = DisplayHub(pinned, term.post)
+    hub.publish(working(operator="running"))
+    register_pages(hub)
+    await user.open("/")
+    open_ids = [*Client.instances, "gone"]
+    assert hub.operator_pages_connected(open_ids) == 0
+    user.find(marker="stop").click()
+    user.find(marker="pause").click()
+    await settle(user, term, 2)
+    assert term.sent == [op.Stop(), op.Pause()]
+    await user.should_not_see(marker="pin")
+    assert hub.operator_pages_connected(open_ids) == 1
+    assert hub.operator_pages_connected([]) == 0  # closed: forgotten
+
+
+async def test_the_cab_page_is_the_operators_page(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/")
+    assert len(hub.operator_pages) == 1
+    assert hub.operator_pages_connected(hub.operator_pages) == 1

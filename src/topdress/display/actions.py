@@ -26,10 +26,13 @@ WRONG_PIN_DELAY_S = 1.0
 class Actions:
     """One browser tab's command path."""
 
-    def __init__(self, hub: DisplayHub, remote: bool, address: str = "") -> None:
+    def __init__(
+        self, hub: DisplayHub, remote: bool, address: str = "", client_id: str = ""
+    ) -> None:
         self.hub = hub
         self.remote = remote  # not the cab's own browser (topdress.display.guard)
         self.address = address  # the client's, for counting wrong PINs
+        self.client_id = client_id  # the page's: one that sends a command is the operator's
         self.unlocked = False
 
     async def unlock(self) -> bool:
@@ -74,6 +77,8 @@ class Actions:
             return None
         if guarded and not await self.unlock():
             return None
+        if self.client_id:
+            self.hub.operator_pages.add(self.client_id)  # this page claimed operation
         future = self.hub.post(command)
         try:
             result = await asyncio.wait_for(asyncio.wrap_future(future), COMMAND_TIMEOUT_S)

@@ -11,7 +11,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from typing import Any
@@ -84,6 +84,17 @@ class DisplayHub:
         self._track_serial = 0
         self._prefs = ViewPrefs()
         self._prefs_version = 0
+        # The operator's pages (NiceGUI client ids): the cab's own browser's, and any page that
+        # sent a command. Only these count as "a page open" for the terminal's pause rule: a
+        # viewer tab left open elsewhere does not keep the meters going.
+        self.operator_pages: set[str] = set()
+
+    def operator_pages_connected(self, connected: Iterable[str]) -> int:
+        """How many of the `connected` pages (client ids) are the operator's; forgets the
+        operator's pages no longer there."""
+        ids = set(connected)
+        self.operator_pages &= ids
+        return len(self.operator_pages)
 
     # ---- the control loop's side ---------------------------------------------------------
     def publish(self, snapshot: Snapshot) -> None:

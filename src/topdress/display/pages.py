@@ -76,7 +76,10 @@ def operator_surface(hub: DisplayHub) -> Actions:
     remote = client_is_remote()
     ui.element("span").props(f'data-operator="{"remote" if remote else "cab"}" hidden')
     watch_liveness(hub)
-    return Actions(hub, remote, client_info().address)
+    client_id = ui.context.client.id
+    if not remote:
+        hub.operator_pages.add(client_id)
+    return Actions(hub, remote, client_info().address, client_id)
 
 
 def frame(hub: DisplayHub, path: str, build: Callable[[Actions], Screen]) -> None:

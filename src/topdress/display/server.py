@@ -32,7 +32,8 @@ def run_server(
 
     async def heartbeat() -> None:
         while True:
-            pages = sum(1 for c in list(Client.instances.values()) if c.has_socket_connection)
+            clients = list(Client.instances.values())
+            pages = hub.operator_pages_connected(c.id for c in clients if c.has_socket_connection)
             await asyncio.to_thread(alive, pages)  # a socket write: off the event loop
             await asyncio.sleep(ALIVE_PERIOD_S)
 
