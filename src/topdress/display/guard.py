@@ -250,10 +250,11 @@ class GuardMiddleware:
             await _refuse(scope, send, 403, "cross-origin request refused\n")
             return
         peer = scope.get("client")
-        info = self.guard.client(
-            str(peer[0]) if peer else "", headers, _cookie(headers.get(b"cookie", ""), KIOSK_COOKIE)
-        )
+        cookie = _cookie(headers.get(b"cookie", ""), KIOSK_COOKIE)
+        info = self.guard.client(str(peer[0]) if peer else "", headers, cookie)
         scope[SCOPE_KEY] = info
+        if cookie and self.guard.kiosk_token and not info.cab and self.attempts is not None:
+            self.attempts.failed(info.address, "kiosk_cookie")  # a guess too: counted, logged
         if scope["type"] == "http" and self.guard.kiosk_token:
             query = dict(parse_qsl(bytes(scope.get("query_string", b"")).decode("latin-1")))
             if KIOSK_PARAM in query:
@@ -273,7 +274,7 @@ class GuardMiddleware:
             if self.attempts is not None:
                 self.attempts.failed(info.address, "kiosk")
             if locked:
-                await _refuse(scope, send, 429, "too many wrong attempts: try again later\n")
+                await _refuse(scope, send, 429, LOCKED_PAGE, "text/html")
             else:
                 await _refuse(scope, send, 403, "wrong kiosk token\n")
             return
@@ -297,7 +298,19 @@ class GuardMiddleware:
         await send({"type": "http.response.body", "body": b""})
 
 
-async def _refuse(scope: Scope, send: Send, status: int, body: str) -> None:
+#: A locked-out page: says where Stop is meanwhile and tries again by itself.
+LOCKED_PAGE = """<!doctype html><html><head><meta charset="utf-8">
+<meta http-equiv="refresh" content="5;url=/"><title>topdress</title></head>
+<body style="font:24px sans-serif;background:#1b4332;color:#fff;padding:16px">
+<p>Too many wrong attempts from this address: trying again in 5 s.</p>
+<p><b>Stop</b>: the terminal's console (type <code>stop</code>) or the machine's stop switch.</p>
+</body></html>
+"""
+
+
+async def _refuse(
+    scope: Scope, send: Send, status: int, body: str, kind: str = "text/plain"
+) -> None:
     if scope["type"] == "websocket":  # closed before acceptance: the server answers 403
         await send({"type": "websocket.close", "code": 1008})
         return
@@ -307,7 +320,7 @@ async def _refuse(scope: Scope, send: Send, status: int, body: str) -> None:
             "type": "http.response.start",
             "status": status,
             "headers": [
-                (b"content-type", b"text/plain; charset=utf-8"),
+                (b"content-type", f"{kind}; charset=utf-8".encode()),
                 (b"content-length", str(len(data)).encode()),
             ],
         }
