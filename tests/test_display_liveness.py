@@ -274,3 +274,35 @@ def test_a_stalled_terminal_does_not_hold_its_silence_against_the_display() -> N
     DisplayLink.after_stall(child, 5.0)  # type: ignore[arg-type]
     assert link._why_down(child, 105.1) is None  # type: ignore[arg-type]
     assert link._why_down(child, 105.1 + ALIVE_TIMEOUT_S) == "no answer for 3 s"  # type: ignore[arg-type]
+
+
+def test_night_mode_and_units_outlive_the_display_and_the_terminal(tmp_path: Path) -> None:
+    """Chosen on the page (the display process tells the terminal), kept for the display
+    started again and, in log.dir, for the next terminal; a damaged file gives the defaults."""
+    from topdress.cli.display import PREFS_FILE, load_prefs
+    from topdress.config import loads_config
+    from topdress.display.hub import DisplayHub, ViewPrefs
+
+    cfg = loads_config(f'[log]\ndir = "{tmp_path}"\n')
+    link = DisplayLink(RecordingTerminal(cfg), DisplayOptions("127.0.0.1", 1), lambda m: None)  # type: ignore[arg-type]
+    link.keep_prefs_in(tmp_path / PREFS_FILE)
+    assert link.prefs == (False, "metric")
+    link.take_prefs(True, "imperial")
+    link.take_prefs(False, "furlongs")  # not a choice: ignored
+    again = DisplayLink(RecordingTerminal(cfg), DisplayOptions("127.0.0.1", 1), lambda m: None)  # type: ignore[arg-type]
+    again.keep_prefs_in(tmp_path / PREFS_FILE)
+    assert again.prefs == (True, "imperial")
+
+    (tmp_path / PREFS_FILE).write_text("{not json")
+    assert load_prefs(tmp_path / PREFS_FILE) == (False, "metric")
+    (tmp_path / PREFS_FILE).write_text('{"night": "yes", "units": 3}')
+    assert load_prefs(tmp_path / PREFS_FILE) == (False, "metric")
+
+    # the display's end: each change told once (to the terminal, over the socket)
+    told: list[ViewPrefs] = []
+    hub = DisplayHub(lambda: cfg)
+    hub.set_prefs(True, "imperial")  # from the Hello: before anyone listens
+    hub.on_prefs = told.append
+    hub.set_prefs(night=True)
+    hub.set_prefs(units="metric")
+    assert told == [ViewPrefs(True, "metric")]

@@ -17,6 +17,7 @@ Everything the display process writes reaches the console escaped and prefixed `
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import secrets
 import signal
@@ -30,6 +31,7 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 from topdress import i18n
@@ -134,6 +136,22 @@ def kiosk_token(path: str) -> str:
     return token
 
 
+PREFS_FILE = "display-prefs.json"  # night mode and units, in log.dir
+UNITS = ("metric", "imperial")
+
+
+def load_prefs(path: Path) -> tuple[bool, str]:
+    """(night, units) from `path`; the defaults when it is missing or not ours."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False, "metric"
+    if not isinstance(doc, dict):
+        return False, "metric"
+    night, units = doc.get("night"), doc.get("units")
+    return night is True, units if units in UNITS else "metric"
+
+
 class _Child:
     """One display process and its socket."""
 
@@ -178,6 +196,8 @@ class DisplayLink:
         self._told: DisplayState | None = None
         self._why_restarted = ""
         self.metering = False  # the operator has the meters on (the last snapshot's state)
+        self.prefs_path: Path | None = None  # where they are kept (start: in log.dir)
+        self.prefs = (False, "metric")  # (night, units)
 
     # ---- life cycle ----------------------------------------------------------------------
     def start(self) -> str:
@@ -190,6 +210,7 @@ class DisplayLink:
                 "(another topdress? choose another with --port or display.port)"
             )
         self._kiosk = kiosk_token(self.term.cfg.display.kiosk_token_file)
+        self.keep_prefs_in(Path(self.term.cfg.log.dir) / PREFS_FILE)
         self._cfg = self.term.cfg
         self._spawn()
         for target, name in ((self._send, "display-tx"), (self._watch, "display-watch")):
@@ -215,7 +236,8 @@ class DisplayLink:
         # The options (the PIN and the kiosk token with them) go over the socket, never on a
         # command line. A started-again display takes the configuration in force now.
         cfg = self.term.cfg
-        child.conn.send(Hello(self.opts, cfg, i18n.language(), self._kiosk))
+        night, units = self.prefs
+        child.conn.send(Hello(self.opts, cfg, i18n.language(), self._kiosk, night, units))
         with self._lock:
             self._cfg = cfg
             self._child = child
@@ -284,6 +306,8 @@ class DisplayLink:
                 child.error = printable(str(msg[1]))
             elif kind == "cmd":
                 self._command(int(msg[1]), msg[2])
+            elif kind == "prefs":
+                self.take_prefs(bool(msg[1]), str(msg[2]))
             elif kind == "lang":
                 i18n.set_language(str(msg[1]))  # the console follows
             elif kind == "event" and msg[1] in DISPLAY_EVENTS:
@@ -293,6 +317,25 @@ class DisplayLink:
                     if isinstance(v, str | int | float)
                 }
                 self.term.post(DisplayEvent(str(msg[1]), detail))
+
+    def keep_prefs_in(self, path: Path) -> None:
+        """Night mode and units from `path` (a terminal started again), kept there."""
+        self.prefs_path = path
+        self.prefs = load_prefs(path)
+
+    def take_prefs(self, night: bool, units: str) -> None:
+        """The operator's night mode and units: kept for the next display process and in
+        `prefs_path` for the next terminal (a file that cannot be written is said)."""
+        if units not in UNITS:
+            return
+        self.prefs = (night, units)
+        if self.prefs_path is None:
+            return
+        try:
+            self.prefs_path.parent.mkdir(parents=True, exist_ok=True)
+            self.prefs_path.write_text(json.dumps({"night": night, "units": units}) + "\n")
+        except OSError as exc:
+            self.message(f"display: view preferences not saved ({exc.strerror})")
 
     def _relay(self, child: _Child) -> None:
         """What the display process writes (its log, a traceback): to the console, each line

@@ -88,6 +88,7 @@ class DisplayHub:
         # sent a command. Only these count as "a page open" for the terminal's pause rule: a
         # viewer tab left open elsewhere does not keep the meters going.
         self.operator_pages: set[str] = set()
+        self.on_prefs: Callable[[ViewPrefs], None] | None = None  # told each change
 
     def operator_pages_connected(self, connected: Iterable[str]) -> int:
         """How many of the `connected` pages (client ids) are the operator's; forgets the
@@ -150,6 +151,8 @@ class DisplayHub:
         if new != self._prefs:
             self._prefs = new
             self._prefs_version += 1
+            if self.on_prefs is not None:
+                self.on_prefs(new)
 
     @property
     def pin_required(self) -> bool:

@@ -47,6 +47,8 @@ class Hello:
     cfg: TerminalConfig
     language: str
     kiosk_token: str = ""  # the cab's browser's (display.kiosk_token_file); never on a command line
+    night: bool = False  # the view's night mode and units as the operator last chose them
+    units: str = "metric"
 
 
 # ---- the display process ---------------------------------------------------------------------
@@ -105,6 +107,10 @@ def _serve(conn: Connection) -> int:
         on_language=lambda code: remote.send("lang", code),
         report=remote.report,
     )
+    hub.set_prefs(hello.night, hello.units)
+    # The terminal keeps them (and a file beside the session logs): a display started again,
+    # or a terminal started again, shows what the operator chose.
+    hub.on_prefs = lambda p: remote.send("prefs", p.night, p.units)
     dc = hello.cfg.display
     guard = Guard.of(dc.allowed_hosts, dc.trusted_proxies, hello.kiosk_token)
 
