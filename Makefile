@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware
+.PHONY: demo test ctest pytest lint bench sysdeps browser qemu office screenshots clean firmware
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -29,6 +29,10 @@ browser:
 qemu:
 	bash scripts/sysdeps.sh qemu
 
+# the farm office's tests and bench (tests/test_office*.py): PostgreSQL and PostGIS
+office:
+	bash scripts/sysdeps.sh office
+
 # The ECU firmware for the STM32F405/407 (docs/firmware.md): build/fw/topdress-ecu-stm32f4.elf,
 # .bin, .hex, with its flash, RAM and worst stack figures.
 firmware:
@@ -48,7 +52,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
 
-pytest: $(STAMP) browser qemu
+pytest: $(STAMP) browser qemu office
 	$(BIN)/python -m pytest -q
 
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
@@ -57,7 +61,7 @@ screenshots: $(STAMP) browser
 
 test: ctest lint pytest
 
-bench: $(STAMP) browser
+bench: $(STAMP) browser office
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/fused_lag_bench.py
 	$(BIN)/python bench/fw_bench.py
@@ -67,6 +71,7 @@ bench: $(STAMP) browser
 	$(BIN)/python bench/maps_bench.py
 	$(BIN)/python bench/display_bench.py
 	$(BIN)/python bench/longday_bench.py
+	$(BIN)/python bench/office_bench.py
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c

@@ -299,6 +299,17 @@ class OperatorConfig:
 
 
 @dataclass(frozen=True)
+class OfficeConfig:
+    # The farm office's database (docs/office.md): a PostgreSQL URL ("" = no office; the cab
+    # works alone). The cab sends its sessions there by itself, off the control loop.
+    url: str = ""
+    interval_s: float = _num(300.0, 10.0, 86_400.0)  # between two syncs
+    machine: str = ""  # this machine's id in the office ("" = the host's name)
+    farm: str = ""  # the farm the office database belongs to ("" = not checked)
+    product: str = "fertilizer"  # what the machine spreads, as the office's swaths name it
+
+
+@dataclass(frozen=True)
 class TerminalConfig:
     machine: MachineConfig = field(default_factory=MachineConfig)
     speed: SpeedConfig = field(default_factory=SpeedConfig)
@@ -313,6 +324,7 @@ class TerminalConfig:
     prescription: PrescriptionConfig = field(default_factory=PrescriptionConfig)
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
     lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
+    office: OfficeConfig = field(default_factory=OfficeConfig)
 
     def ecu_params(self, lag_start_ms: int | None = None) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start, by the table
