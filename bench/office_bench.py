@@ -93,12 +93,15 @@ def season(conn: psycopg.Connection, work: Path, machines: int, sessions: int) -
         """
         INSERT INTO session (id, machine_id, season, file_name, created_utc, config_toml,
             state_rows, state_digest, event_rows, event_digest, swaths_of_rows, closed,
-            applied_kg, area_ha, summary, start_utc, end_utc)
+            applied_kg, area_ha, summary, start_utc, end_utc, cover)
         SELECT c.id, s.machine_id, s.season, s.file_name || '-' || c.k, s.created_utc,
             s.config_toml, s.state_rows, s.state_digest, s.event_rows, s.event_digest,
             s.swaths_of_rows, true, s.applied_kg, s.area_ha, s.summary,
-            s.start_utc + c.k * interval '1 hour', s.end_utc + c.k * interval '1 hour'
+            s.start_utc + c.k * interval '1 hour', s.end_utc + c.k * interval '1 hour',
+            ST_Translate(s.cover, (c.k % 20) * 0.0015, ((c.k / 20) + 10 * m.n) * 0.0005)
         FROM copies c JOIN session s ON s.id = c.src
+        JOIN (SELECT id, row_number() OVER (ORDER BY id) - 1 AS n FROM machine) m
+          ON m.id = c.machine_id
         """
     )
     cols = ", ".join(schema.STATE_TYPES)

@@ -37,6 +37,8 @@ _log = logging.getLogger(__name__)
 BATCH_ROWS: Final = 20_000  # state rows a transaction
 _STATE_COLS: Final = tuple(STATE_TYPES)
 LAYER: Final = "upper+lower"  # the as-applied swaths carry both layers' sum
+#: a session's cover is simplified to about 5 cm: a thousandth of the area of a 3 m strip
+COVER_TOLERANCE_DEG: Final = 5e-7
 
 
 @dataclass
@@ -350,6 +352,12 @@ def _send_swaths(
                     )
                 )
                 n += 1
+    conn.execute(
+        "UPDATE session SET cover = (SELECT ST_SimplifyPreserveTopology("
+        "ST_UnaryUnion(ST_Collect(geom)), %s) FROM swath WHERE season = %s AND session_id = %s) "
+        "WHERE id = %s",
+        (COVER_TOLERANCE_DEG, season, sid, sid),
+    )
     applied = sum(layer.applied_kg for layer in summary.layers.values())
     conn.execute(
         "UPDATE session SET swaths_of_rows = %s, closed = %s, applied_kg = %s, area_ha = %s, "

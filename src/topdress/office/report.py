@@ -166,6 +166,7 @@ def build(
         _add_summaries(conn, out, args)
         out.fields = _lines(conn, "field", "field")
         out.zones = _lines(conn, "zone", "field || ' / ' || pzone", "WHERE pzone IS NOT NULL")
+        conn.execute("CREATE INDEX ON r (session_id)")
         out.double = _double(conn)
         out.uncovered = _uncovered(conn, filters.field)
         out.problems = [
@@ -212,17 +213,29 @@ def _add_summaries(conn: psycopg.Connection[Any], out: Report, args: dict[str, A
 
 
 def _double(conn: psycopg.Connection[Any]) -> list[Overlap]:
+    """Ground two machines both covered: the sessions' covers (the unions of their swaths,
+    made when they were sent) of different machines that meet (found by their GiST index),
+    intersected pair by pair, then joined per field and pair of machines."""
     rows = conn.execute(
         """
-        WITH m AS (SELECT field, machine_id, ST_UnaryUnion(ST_Collect(geom)) AS g
-                   FROM r GROUP BY field, machine_id),
-        x AS (SELECT a.field, a.machine_id AS ma, b.machine_id AS mb,
-                     ST_CollectionExtract(ST_Intersection(a.g, b.g), 3) AS g
-              FROM m a JOIN m b ON a.field = b.field AND a.machine_id < b.machine_id
-              WHERE ST_Intersects(a.g, b.g))
+        WITH p AS (
+            SELECT a.machine_id AS ma, b.machine_id AS mb,
+                   ST_CollectionExtract(ST_Intersection(a.cover, b.cover), 3) AS g
+            FROM session a JOIN session b
+              ON a.cover && b.cover AND a.machine_id < b.machine_id
+             AND ST_Intersects(a.cover, b.cover)
+            WHERE a.id IN (SELECT session_id FROM r) AND b.id IN (SELECT session_id FROM r)),
+        f AS (
+            SELECT coalesce(f.name, %s) AS field, p.ma, p.mb,
+                   CASE WHEN f.name IS NULL THEN p.g
+                        ELSE ST_CollectionExtract(ST_Intersection(p.g, f.boundary), 3) END AS g
+            FROM p LEFT JOIN field f ON ST_Intersects(p.g, f.boundary)),
+        x AS (SELECT field, ma, mb, ST_UnaryUnion(ST_Collect(g)) AS g FROM f
+              WHERE NOT ST_IsEmpty(g) GROUP BY field, ma, mb)
         SELECT field, ma, mb, ST_Area(g::geography) / 10000, ST_AsBinary(g) FROM x
-        WHERE NOT ST_IsEmpty(g) ORDER BY field, ma, mb
-        """
+        ORDER BY field, ma, mb
+        """,
+        (NO_FIELD,),
     ).fetchall()
     return [
         Overlap(str(r[0]), str(r[1]), str(r[2]), float(r[3]), shapely.from_wkb(bytes(r[4])))
@@ -231,17 +244,22 @@ def _double(conn: psycopg.Connection[Any]) -> list[Overlap]:
 
 
 def _uncovered(conn: psycopg.Connection[Any], only: str | None) -> list[Uncovered]:
+    """Each field's ground no session's cover reached."""
     rows = conn.execute(
         """
-        WITH u AS (SELECT field, ST_UnaryUnion(ST_Collect(geom)) AS g FROM r GROUP BY field),
-        d AS (SELECT f.name, f.boundary,
-                     CASE WHEN u.g IS NULL THEN f.boundary
-                          ELSE ST_CollectionExtract(ST_Difference(f.boundary, u.g), 3) END AS g
-              FROM field f LEFT JOIN u ON u.field = f.name
-              WHERE %s::text IS NULL OR f.name = %s)
+        WITH d AS (
+            SELECT f.name, f.boundary, (
+                SELECT ST_UnaryUnion(ST_Collect(s.cover)) FROM session s
+                WHERE s.cover && f.boundary AND s.id IN (SELECT session_id FROM r)
+            ) AS u
+            FROM field f WHERE %s::text IS NULL OR f.name = %s),
+        g AS (SELECT name, boundary,
+                     CASE WHEN u IS NULL THEN boundary
+                          ELSE ST_CollectionExtract(ST_Difference(boundary, u), 3) END AS g
+              FROM d)
         SELECT name, ST_Area(boundary::geography) / 10000, ST_Area(g::geography) / 10000,
                ST_AsBinary(g)
-        FROM d ORDER BY name
+        FROM g ORDER BY name
         """,
         (only, only),
     ).fetchall()

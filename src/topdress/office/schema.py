@@ -56,10 +56,12 @@ CREATE TABLE session (
     applied_kg double precision,
     area_ha double precision,
     summary jsonb,
+    cover geometry(Geometry, 4326),  -- the union of its swaths: the ground it covered
     first_push timestamptz NOT NULL DEFAULT now(),
     last_push timestamptz NOT NULL DEFAULT now()
 );
 CREATE INDEX session_season ON session (season, machine_id);
+CREATE INDEX session_cover ON session USING gist (cover);
 CREATE TABLE state (
     season int NOT NULL,
     session_id uuid NOT NULL,
