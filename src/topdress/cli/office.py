@@ -78,6 +78,12 @@ def register(sub: Any) -> None:
     )
     report.set_defaults(func=_report)
 
+    serve = osub.add_parser("serve", help="the season's map and report on a read-only web page")
+    db_args(serve)
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8090)
+    serve.set_defaults(func=_serve)
+
 
 def _report_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--season", type=int, help="the year (default: the latest)")
@@ -178,4 +184,11 @@ def _report(args: argparse.Namespace) -> int:
             report.write_csv(rep, f)
     if args.gpkg is not None:
         report.write_gpkg(rep, args.gpkg)
+    return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from topdress.display.office_page import serve
+
+    serve(conninfo(args), args.host, args.port)
     return 0

@@ -271,7 +271,7 @@ def _uncovered(conn: psycopg.Connection[Any], only: str | None) -> list[Uncovere
 # ---- output ----
 
 
-def _f(value: float | None, fmt: str = ".1f") -> str:
+def figure(value: float | None, fmt: str = ".1f") -> str:
     return "-" if value is None else format(value, fmt)
 
 
@@ -298,9 +298,9 @@ def text(report: Report) -> str:
         for x in lines:
             out.append(
                 f"{x.name:<28} {x.sessions:>8} {x.area_ha:>9.3f} {x.applied_kg:>11.1f} "
-                f"{_f(x.applied_kg_ha):>7} {_f(x.prescribed_kg):>11} "
-                f"{_f(x.prescribed_kg_ha):>7} {_f(x.diff_kg, '+.1f'):>9} "
-                f"{_f(x.diff_pct, '+.1f'):>7}"
+                f"{figure(x.applied_kg_ha):>7} {figure(x.prescribed_kg):>11} "
+                f"{figure(x.prescribed_kg_ha):>7} {figure(x.diff_kg, '+.1f'):>9} "
+                f"{figure(x.diff_pct, '+.1f'):>7}"
             )
         if not lines:
             out.append("  (none)")
