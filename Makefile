@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
+CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
 DURATION ?= 30
 
 .PHONY: demo test ctest pytest lint bench sysdeps browser qemu office screenshots clean firmware

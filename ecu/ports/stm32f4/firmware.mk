@@ -34,6 +34,6 @@ $(OUT)/%.hex: $(OUT)/%.elf
 # the generated codecs convert through double on purpose (cantools)
 $(OUT)/obj/%/gen/td_can.o $(OUT)/obj/%/gen/td_hilcan.o: CFLAGS += -Wno-double-promotion
 
-$(OUT)/obj/%.o: %.c $(wildcard ecu/include/*.h ecu/ports/common/*.h $(PORT)/*.h) $(MAKEFILE_LIST)
+$(OUT)/obj/%.o: %.c $(wildcard ecu/include/*.h ecu/src/gen/*.h ecu/ports/common/*.h $(PORT)/*.h) $(MAKEFILE_LIST)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@

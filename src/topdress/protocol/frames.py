@@ -16,7 +16,7 @@ import can
 import cantools
 
 from topdress.errors import ProtocolError
-from topdress.protocol.dbc import message
+from topdress.protocol.dbc import message, snake, value_table
 from topdress.protocol.layout import FrameLayout, checks, encoder, layout
 from topdress.protocol.model import (
     DEFAULT_IDS,
@@ -33,7 +33,16 @@ from topdress.protocol.params import ParamSpec, param
 GNSS_NA_RAW = 0xFF  # PcCommand.GnssSpeed: "not available"
 GNSS_MAX_KMH = 25.0  # raw 251..254 are out of range
 NA_RAW_16 = 0xFFFF  # EcuDiag.Cv undefined, EcuSpeeds.GnssSpeedFine not valid
-_RUN = 0x0A
+_RUN = next(k for k, v in value_table("PcCommand", "StartStop").items() if v == "Start")
+
+
+def _words(frame: str, signal: str, sep: str = " ") -> tuple[str, ...]:
+    """The names of a DBC value table in code order, in lower-case words: "BadValue" ->
+    "bad value" (`sep` between the words)."""
+    table = value_table(frame, signal)
+    if list(table) != list(range(len(table))):
+        raise ProtocolError(f"{frame}.{signal}: the codes are not 0..{len(table) - 1}")
+    return tuple(snake(name).replace("_", sep) for name in table.values())
 
 
 @dataclass(frozen=True)
@@ -136,8 +145,8 @@ class PcCalCommand:
 
 
 #: EcuCalStatus.CalState and CalReason (DBC value tables).
-CAL_STATES = ("idle", "running", "done", "aborted")
-CAL_REASONS = ("none", "reset", "running", "moving", "blocked", "timeout", "bad value", "fans off")
+CAL_STATES = _words("EcuCalStatus", "CalState")
+CAL_REASONS = _words("EcuCalStatus", "CalReason")
 
 
 @dataclass(frozen=True)
@@ -209,16 +218,17 @@ class EcuGnssLag:
 
 
 #: EcuIdent's value tables (DBC): the target, the transport, the cause of the last reset.
-TARGETS = ("host", "stm32f4")
-TRANSPORTS = ("in-process", "can", "slcan-hil")
-RESET_CAUSES = ("unknown", "power-on", "pin", "watchdog", "hard fault", "software", "brown-out")
+TARGETS = _words("EcuIdent", "Target")
+TRANSPORTS = _words("EcuIdent", "Transport", "-")
+RESET_CAUSES = _words("EcuIdent", "ResetCause", "-")
 
 
 @dataclass(frozen=True)
 class EcuIdent:
     """Who the ECU is: target, firmware version, the protocol (DBC) version it was built with,
-    its transport, the cause of its last reset and whether its clock fell back to the internal
-    oscillator."""
+    its transport, the cause of its last reset, whether its clock fell back to the internal
+    oscillator, and whether it runs on its firmware defaults (no parameter taken since
+    power-up: it restarted)."""
 
     target: str  # TARGETS
     firmware: tuple[int, int, int]
@@ -226,6 +236,7 @@ class EcuIdent:
     transport: str  # TRANSPORTS
     reset_cause: str  # RESET_CAUSES
     clock_fallback: bool
+    on_defaults: bool = False
 
     @property
     def firmware_version(self) -> str:
@@ -506,6 +517,7 @@ def _decode_ident(data: bytes) -> EcuIdent:
         "Transport",
         "ResetCause",
         "ClockFallback",
+        "OnDefaults",
     ).decode(data)
     return EcuIdent(
         target=TARGETS[raw[0]],
@@ -514,6 +526,7 @@ def _decode_ident(data: bytes) -> EcuIdent:
         transport=TRANSPORTS[raw[6]],
         reset_cause=RESET_CAUSES[raw[7]],
         clock_fallback=bool(raw[8]),
+        on_defaults=bool(raw[9]),
     )
 
 
