@@ -21,8 +21,6 @@ from office_rig import (
     fill,
     latlon,
     needs_postgres,
-    office_cluster,
-    office_db,
     session,
 )
 from topdress.cli.main import main
@@ -33,7 +31,6 @@ from topdress.office import report, schema
 from topdress.office.push import push, sync
 
 pytestmark = needs_postgres
-__all__ = ["office_cluster", "office_db"]  # the fixtures, imported for pytest
 
 
 def _rows(db: str, sid: str) -> tuple[int, int, float]:

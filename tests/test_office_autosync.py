@@ -8,13 +8,12 @@ from pathlib import Path
 
 import psycopg
 
-from office_rig import FARM, config, fill, needs_postgres, office_cluster, office_db
+from office_rig import FARM, config, fill, needs_postgres
 from topdress.config import OfficeConfig
 from topdress.log.session import SessionLog
 from topdress.office.autosync import OfficeSync
 
 pytestmark = needs_postgres
-__all__ = ["office_cluster", "office_db"]
 
 
 def _office_rows(db: str) -> tuple[int, bool] | None:

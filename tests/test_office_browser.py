@@ -15,14 +15,13 @@ import psycopg
 import pytest
 
 from browser import answers, chromium, free_port, missing_browser
-from office_rig import needs_postgres, office_cluster, office_db, session
+from office_rig import needs_postgres, session
 from topdress.office.push import push
 
 pytestmark = [
     needs_postgres,
     pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser())),
 ]
-__all__ = ["office_cluster", "office_db"]
 
 
 @pytest.fixture

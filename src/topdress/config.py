@@ -887,5 +887,12 @@ command_ms = 0             # the terminal's command path (program cycle + comman
 meter_ms = 0               # meter response; also the ECU's LeadMeter
 airline_ms = 0             # air-line transport; also the ECU's LeadAirLine
 stop_ms = 0                # the ECU's look-ahead while the speed falls (LeadStop); 0 = as rising
+
+[office]                   # the farm office's database (docs/office.md); url = "" works alone
+url = ""                   # e.g. "postgresql://cab@office.lan/topdress" (passwords: ~/.pgpass)
+interval_s = 300.0         # between two syncs of the log directory (a thread of its own)
+machine = ""               # this machine's id in the office; "" = the host's name
+farm = ""                  # refuse an office database of another farm; "" = not checked
+product = "fertilizer"     # what the machine spreads, as the office's swaths name it
 """
 )
