@@ -365,3 +365,18 @@ def test_damaged_file_is_a_log_error(tmp_path: Path) -> None:
     bad.write_bytes(b"not a database at all" * 100)
     with pytest.raises(LogError):
         SessionReader(bad)
+
+
+def test_sync_of_a_directory_and_the_conflict_exit_code(
+    office_db: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    session(tmp_path / "cab", "m1", seconds=5)
+    session(tmp_path / "cab", "m2", north_m=5.0, seconds=5)
+    assert main(["office", "sync", "--sessions", str(tmp_path / "cab"), "--db", office_db]) == 0
+    assert capsys.readouterr().out.count("50 new state rows") == 2
+    assert main(["office", "sync", "--sessions", str(tmp_path / "cab"), "--db", office_db]) == 0
+    assert capsys.readouterr().out.count("nothing new") == 2
+    one = str(tmp_path / "cab" / "m1.sqlite")
+    assert main(["office", "push", one, "--machine", "m7", "--db", office_db]) == 4
+    assert "sent by machine 'm1' already" in capsys.readouterr().err
+    assert main(["office", "sync", "--sessions", str(tmp_path / "none"), "--db", office_db]) == 2
