@@ -304,6 +304,12 @@ def text(report: Report) -> str:
             )
         if not lines:
             out.append("  (none)")
+        if title == "machine" and lines:
+            out.append("  the sessions' own summaries (topdress log summary):")
+            out.extend(
+                f"  {x.name}: {figure(x.summary_kg)} kg over {figure(x.summary_area_ha, '.3f')} ha"
+                for x in lines
+            )
     out.append("")
     out.append("ground covered by two machines")
     for o in report.double:
