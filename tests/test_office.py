@@ -321,7 +321,11 @@ def test_report_against_the_sessions_summaries(office_db: str, tmp_path: Path) -
     assert "machine,m1,2," in text and "double,north / m1 + m2" in text
     import pyogrio
 
-    assert [str(n) for n, _ in pyogrio.list_layers(out)] == ["double_coverage", "never_covered"]
+    names = ["fields", "zones", "double_coverage", "never_covered"]
+    assert [str(n) for n, _ in pyogrio.list_layers(out)] == names
+    _, table = pyogrio.read_arrow(out, layer="zones")
+    assert table["name"].to_pylist() == ["north / feature 0 (fid 0)", "north / feature 1 (fid 1)"]
+    assert table["applied_kg"].to_pylist() == pytest.approx([low.applied_kg, high.applied_kg])
 
 
 def test_two_pushes_of_one_session_at_once_leave_one_copy(office_db: str, tmp_path: Path) -> None:

@@ -98,6 +98,7 @@ class Report:
     double: list[Overlap] = field(default_factory=list)
     uncovered: list[Uncovered] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)  # sync problems of the season
+    shapes: dict[str, Any] = field(default_factory=dict)  # field and zone lines' polygons
 
     @property
     def lines(self) -> list[Line]:
@@ -169,6 +170,14 @@ def build(
         conn.execute("CREATE INDEX ON r (session_id)")
         out.double = _double(conn)
         out.uncovered = _uncovered(conn, filters.field)
+        out.shapes = {
+            str(name): shapely.from_wkb(bytes(wkb))
+            for name, wkb in conn.execute(
+                "SELECT name, ST_AsBinary(boundary) FROM field UNION ALL "
+                "SELECT field || ' / ' || zone, ST_AsBinary(ST_Union(geom)) "
+                "FROM prescription_zone GROUP BY field, zone"
+            )
+        }
         out.problems = [
             f"{r[0]:%Y-%m-%d %H:%M} {r[1]} {r[2]}: {r[3]}"
             for r in conn.execute(
@@ -385,11 +394,33 @@ def _r(value: float | None) -> str:
     return "" if value is None else f"{value:.6g}"
 
 
+_TEXT_COLUMNS: Final = frozenset({"name", "field", "machine_a", "machine_b"})
+
+
 def write_gpkg(report: Report, path: Path) -> None:
-    """Two layers a GIS opens beside the swaths: double_coverage and never_covered."""
+    """The report for a GIS: the dose per field and per zone on their polygons (`fields`,
+    `zones`), and the ground covered twice and never (`double_coverage`, `never_covered`)."""
     if path.exists():
         path.unlink()
-    layers = (
+
+    def dose(lines: list[Line]) -> tuple[dict[str, list[Any]], list[Any]]:
+        drawn = [x for x in lines if x.name in report.shapes]
+        cols: dict[str, list[Any]] = {
+            "name": [x.name for x in drawn],
+            "sessions": [float(x.sessions) for x in drawn],
+            "area_ha": [x.area_ha for x in drawn],
+            "applied_kg": [x.applied_kg for x in drawn],
+            "applied_kg_ha": [x.applied_kg_ha for x in drawn],
+            "prescribed_kg": [x.prescribed_kg for x in drawn],
+            "prescribed_kg_ha": [x.prescribed_kg_ha for x in drawn],
+            "diff_kg": [x.diff_kg for x in drawn],
+            "diff_pct": [x.diff_pct for x in drawn],
+        }
+        return cols, [report.shapes[x.name] for x in drawn]
+
+    layers: tuple[tuple[str, dict[str, list[Any]], list[Any]], ...] = (
+        ("fields", *dose(report.fields)),
+        ("zones", *dose(report.zones)),
         (
             "double_coverage",
             {
@@ -415,7 +446,7 @@ def write_gpkg(report: Report, path: Path) -> None:
             multi = [shapely.multipolygons(shapely.get_parts(g)) for g in geoms]
             table = pa.table(
                 {
-                    k: pa.array(v, type=pa.float64() if k.endswith("_ha") else pa.string())
+                    k: pa.array(v, type=pa.string() if k in _TEXT_COLUMNS else pa.float64())
                     for k, v in cols.items()
                 }
                 | {
