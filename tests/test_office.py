@@ -5,6 +5,8 @@ the sessions' own summaries."""
 from __future__ import annotations
 
 import hashlib
+import os
+import pwd
 import random
 import shutil
 import sqlite3
@@ -28,6 +30,7 @@ from topdress.errors import LogError, OfficeConflict, OfficeError
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import summarise
 from topdress.office import report, schema
+from topdress.office.cluster import SERVICE_USERS, Cluster
 from topdress.office.push import push, sync
 
 pytestmark = needs_postgres
@@ -384,3 +387,22 @@ def test_sync_of_a_directory_and_the_conflict_exit_code(
     assert main(["office", "push", one, "--machine", "m7", "--db", office_db]) == 4
     assert "sent by machine 'm1' already" in capsys.readouterr().err
     assert main(["office", "sync", "--sessions", str(tmp_path / "none"), "--db", office_db]) == 2
+
+
+def test_local_cluster_runs_unprivileged_with_its_socket_in_the_directory(
+    office_cluster: Cluster, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert office_cluster.running()
+    assert (office_cluster.socket_dir / ".s.PGSQL.5432").is_socket()
+    owner = office_cluster.pgdata.stat().st_uid
+    assert owner != 0  # the server refuses root: it runs as an unprivileged user
+    if os.geteuid() != 0:
+        assert owner == os.geteuid()
+    else:
+        users = {u.pw_name: u.pw_uid for u in pwd.getpwall()}
+        assert owner == next(users[n] for n in SERVICE_USERS if n in users)
+    assert main(["office", "start", "--data", str(office_cluster.data)]) == 0
+    assert "office database running" in capsys.readouterr().out  # not started twice
+    with psycopg.connect(office_cluster.conninfo) as conn:
+        row = conn.execute("SELECT extversion FROM pg_extension WHERE extname = 'postgis'")
+        assert row.fetchone() is not None
