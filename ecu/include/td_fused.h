@@ -83,6 +83,9 @@ typedef struct {
     int8_t run_sign;           /**< their sign (0: none) */
     float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
     float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
+    float ramp_s;              /**< time since the estimate's acceleration went beyond 0.15 m/s^2, s (0: none) */
+    float ramp_v0_ms;          /**< the estimate's speed then, m/s */
+    float ramp_z0_ms;          /**< and GNSS's 1 s mean, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
