@@ -51,6 +51,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_MIN_MS 0.5f  /* below this speed the whole jerk */
 #define Q_FLAT_A_MS2 0.2f   /* the wheel's own acceleration at which the whole jerk is back */
 #define Q_FLAT_SHARE 0.05f  /* the least share */
+#define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
+#define WHEEL_FLAT_GAIN 30.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
 /* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
 #define RAMP_A_MS2 0.15f     /* the estimate's acceleration beyond this is a ramp it believes in */
@@ -60,7 +62,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define RAMP_P_A 0.01f       /* and the acceleration's, (0.1 m/s^2)^2 */
 #define RAMP_SIGMA2 9.0f     /* GNSS apart from the scaled wheel by 3 GNSS sigmas */
 #define RAMP_W_S 0.5f        /* the wheel's mean over its last this long */   /* flat: a fix corrects v itself while the jerk's share is below this */
-#define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
+#define CRUISE_A_MS2 0.05f    /* an acceleration the wheel may not have shown yet, over the delay */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -210,8 +212,13 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     /* z = s * g(v) * v: dz/dv = s * (g + v * g'), dz/ds = g * v */
     const float h[3] = { f->scale * (g + f->v_ms * dg), 0.0f, g * f->v_ms };
     const float sd = f->wheel_rel * z_ms;
-    const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
     const float y = z_ms - f->scale * g * f->v_ms;
+    float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
+    if (gnss_backs && f->q_share < CRUISE_SHARE && fabsf(y) < WHEEL_FLAT_REL * z_ms) {
+        /* flat motion, the wheel within its bounce: the bounce wanders over seconds and is no
+         * white noise, so GNSS holds the level; a wheel beyond it weighs in full at once */
+        r *= WHEEL_FLAT_GAIN;
+    }
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
      * again, not because the estimate grew uncertain without it */
     const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
