@@ -69,7 +69,7 @@ static void test_constant_speed_learns_the_slip(void **state) {
     assert_float_equal(r.f.v_ms, 2.0, 0.02);
     assert_float_equal(r.f.a_ms2, 0.0, 0.05);
     assert_float_equal(r.f.scale, 0.92, 0.005);
-    /* 0.062: in flat motion the wheel within its bounce weighs a tenth (td_fused_wheel) */
+    /* 0.062: in flat motion the wheel within its bounce weighs a thirtieth (td_fused_wheel) */
     assert_true(td_fused_speed_std_ms(&r.f) < 0.07f);
 }
 
