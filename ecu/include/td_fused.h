@@ -30,10 +30,10 @@
  *      the scale's row of the gain zeroed. Beyond the history (a delay over ~3.5 s, or no wheel)
  *      the scale is learned through this update instead.
  *   3. settled (below) and flat (jerk share < 0.3), not re-opened: the speed then was the speed
- *      now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 + (0.05 m/s^2 d)^2
+ *      now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 + (0.2 m/s^2 d)^2
  *      (an acceleration the wheel may not show yet): through v - a d, an acceleration left by
  *      the wheel's bounce took up GNSS's difference and held v 2-5 % off for seconds.
- *   4. a speed change GNSS does not show: the estimate's acceleration went beyond 0.15 m/s^2
+ *   4. a speed change GNSS does not show: the estimate's acceleration went beyond 0.1 m/s^2
  *      longer than d + 0.2 s ago, its speed has moved by more than 0.1 m/s since, GNSS's 1 s mean
  *      has not (within 0.1 m/s), and GNSS stands apart from the wheel at the fix's time against
  *      the change by 3 GNSS sigmas: the wheel's scale stepped (a wet patch). The scale is set
@@ -92,7 +92,7 @@ typedef struct {
     int8_t run_sign;           /**< their sign (0: none) */
     float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
     float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
-    float ramp_s;              /**< time since the estimate's acceleration went beyond 0.15 m/s^2, s (0: none) */
+    float ramp_s;              /**< time since the estimate's acceleration went beyond 0.1 m/s^2, s (0: none) */
     float ramp_v0_ms;          /**< the estimate's speed then, m/s */
     float ramp_z0_ms;          /**< and GNSS's 1 s mean, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */

@@ -55,14 +55,14 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define WHEEL_FLAT_GAIN 30.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
 /* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
-#define RAMP_A_MS2 0.15f     /* the estimate's acceleration beyond this is a ramp it believes in */
+#define RAMP_A_MS2 0.1f     /* the estimate's acceleration beyond this is a ramp it believes in */
 #define RAMP_MARGIN_S 0.2f   /* GNSS shows a change this long after the delay, or it was none */
 #define RAMP_MAX_S 5.0f      /* a change is checked this long after it began */
 #define RAMP_P_S 0.0004f     /* the scale's variance after the step, (2 %)^2 */
 #define RAMP_P_A 0.01f       /* and the acceleration's, (0.1 m/s^2)^2 */
 #define RAMP_SIGMA2 9.0f     /* GNSS apart from the scaled wheel by 3 GNSS sigmas */
 #define RAMP_W_S 0.5f        /* the wheel's mean over its last this long */   /* flat: a fix corrects v itself while the jerk's share is below this */
-#define CRUISE_A_MS2 0.05f    /* an acceleration the wheel may not have shown yet, over the delay */
+#define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
