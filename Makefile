@@ -67,6 +67,7 @@ test: ctest lint pytest
 bench: $(STAMP) browser office
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/fused_lag_bench.py
+	$(BIN)/python bench/field_speed_bench.py
 	$(BIN)/python bench/fw_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
