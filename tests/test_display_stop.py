@@ -36,7 +36,7 @@ def tablet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[DemoProce
     )
     demo = DemoProcess(where / "demo", passes=1, duration_s=600.0,
                        extra=("--config", str(config)))  # fmt: skip
-    driver = None
+    driver: Any = None
     try:
         demo.wait_served()
         driver = chromium(where / "profile", W, H)
@@ -175,3 +175,53 @@ def test_stop_over_every_overlay_and_through_a_lockout(
     _touch(driver, "stop")
     until("STOPPED by Stop during a lockout", lambda: _text(driver, "op_state") == "STOPPED", 10.0)
     assert not driver.find_elements(By.CSS_SELECTOR, ".q-dialog input")
+
+
+#: Every tab's and header button's label whose text runs over more than one line.
+WRAPPED_JS = """
+const out = [];
+for (const el of document.querySelectorAll(
+    '.q-tab__label, header .q-btn .block, [data-testid="panels"] .q-btn .block')) {
+  const r = el.getBoundingClientRect(), s = getComputedStyle(el);
+  const line = parseFloat(s.lineHeight) || parseFloat(s.fontSize) * 1.2;
+  if (r.width > 0 && r.height > line * 1.5) out.push([el.textContent.trim(), r.height, line]);
+}
+return out;
+"""
+
+
+#: The language selector's field: its fill as drawn (r, g, b).
+SELECT_FILL_JS = """
+const el = document.querySelector('[data-testid="language"]');
+const field = el.querySelector('.q-field__control') || el.closest('.q-field').querySelector(
+  '.q-field__control');
+const c = getComputedStyle(field).backgroundColor.match(/[0-9.]+/g).map(Number);
+return c.length > 3 && c[3] === 0 ? [0, 0, 0] : c.slice(0, 3);
+"""
+
+
+def test_chinese_labels_do_not_wrap_and_the_language_field_stays_dark_at_night(
+    tablet: tuple[DemoProcess, Any],
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    demo, driver = tablet
+    driver.get(demo.url + "/")
+    until("the page", lambda: _text(driver, "op_state"))
+    _press(driver, "view_menu")
+    until("the menu", lambda: _el(driver, "night").is_displayed())
+    _el(driver, "night").click()
+    until("night", lambda: driver.execute_script(
+        "return document.body.classList.contains('body--dark')"))  # fmt: skip
+    _press(driver, "language")
+    item = "//div[contains(@class,'q-menu')]//div[contains(@class,'q-item')]"
+    until("the language list", lambda: driver.find_element(
+        By.XPATH, f"{item}[.//span[contains(text(),'中文')]]")).click()  # fmt: skip
+    try:
+        until("Chinese", lambda: "主" in _text(driver, "nav_main"))
+        assert driver.execute_script(WRAPPED_JS) == []
+        # chosen (the field focused) by night: not a white field with white text on it
+        assert max(driver.execute_script(SELECT_FILL_JS)) < 128
+    finally:
+        _press(driver, "language")
+        until("the list", lambda: driver.find_element(By.XPATH, f"{item}[1]")).click()

@@ -172,8 +172,8 @@ class MainScreen:
         }
         self.tabs = (
             ui.toggle(names, value="map", on_change=lambda e: self._show(str(e.value)))
-            .props("no-caps spread unelevated toggle-color=green-9 text-color=green-10")
-            .classes("w-full")
+            .props("no-caps unelevated toggle-color=green-9 text-color=green-10")
+            .classes("w-full td-panels")
             .mark("panels")
         )
         self.panels: dict[str, ui.column] = {}

@@ -173,8 +173,8 @@ class Header:
                         value=i18n.language(),
                         on_change=lambda e: hub.set_language(str(e.value)),
                     )
-                    .props("dark options-dark standout hide-bottom-space")
-                    .classes("w-36")
+                    .props('dark options-dark standout="bg-grey-10 text-white" hide-bottom-space')
+                    .classes("w-36 td-lang")
                     .mark("language")
                 )
                 menu_button = ui.button(icon="tune").props("flat").classes("text-white")

@@ -40,6 +40,13 @@ CSS = f"""
 /* Stop over its place in the header bar, above Quasar's dialogs and menus (z-index 6000) */
 .td-stop {{ position: fixed !important; top: 4px; right: 4px; z-index: {STOP_Z};
   width: {STOP_W_PX}px; }}
+/* the panel row: each label on one line (Chinese words too), the buttons as wide as they are */
+.td-panels .q-btn {{ padding: 0 8px; flex: 1 1 auto; }}
+.td-panels .q-btn .block {{ white-space: nowrap; }}
+/* the language field sits on the dark bar by day and night: white words on a dark fill, also
+   focused (Quasar's standout would turn it white, black words, on a night screen) */
+.td-lang .q-field__native, .td-lang .q-field__native span, .td-lang .q-select__dropdown-icon
+  {{ color: #fff !important; }}
 .td-stop-place {{ width: {STOP_W_PX}px; height: {STOP_PX}px; flex: none; }}
 /* a light fill (amber) on a light page: its edge carries the 3:1 */
 .td-edge {{ border: 2px solid #000; }}
