@@ -284,3 +284,16 @@ def test_every_route_is_behind_the_guard(plain: Served) -> None:
     with socket.create_connection(("127.0.0.1", plain.port)) as s:
         s.sendall(b"GET / HTTP/1.1\r\nHost: attacker.example\r\n\r\n")
         assert s.recv(64).startswith(b"HTTP/1.1 421")
+
+
+def test_one_host_with_a_numeric_port_is_all_that_is_taken() -> None:
+    from topdress.display.guard import Guard
+
+    guard = Guard.of(["cab.example"], [], "")
+    assert guard.host_ok("127.0.0.1:8080") and guard.host_ok("[::1]:80")
+    assert guard.host_ok("cab.example") and guard.host_ok("localhost:65535")
+    assert not guard.host_ok("127.0.0.1:abc")  # not a port
+    assert not guard.host_ok("127.0.0.1:99999")
+    assert not guard.host_ok("127.0.0.1:١٢٣")  # digits, but not ASCII ones
+    # two Host headers, joined by the middleware: which one a proxy believed is unknown
+    assert not guard.host_ok("127.0.0.1:8080, rebind.attacker.example")

@@ -92,7 +92,12 @@ class Guard:
 
     # ---- Host and Origin --------------------------------------------------------------------
     def host_ok(self, host: str) -> bool:
-        name, _ = split_host(host)
+        """One Host (two are joined with ", " by the middleware: refused), its port digits."""
+        if "," in host:
+            return False
+        name, port = split_host(host)
+        if port and not (port.isascii() and port.isdigit() and int(port) <= 65535):
+            return False
         return bool(name) and (
             _ip(name) is not None or name == "localhost" or name in self.allowed_hosts
         )
