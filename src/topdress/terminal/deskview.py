@@ -56,7 +56,7 @@ def speed_why(snap: Snapshot, cfg: TerminalConfig) -> Text | None:
     s = cfg.speed
     src = text(f"source.{snap.source}")
     if s.mode != SpeedMode.PAPER:
-        return text("why.mode", source=src, mode=s.mode)
+        return text("why.mode", source=src, mode=text(f"value.{SpeedMode(s.mode).value}"))
     faults = Fault(snap.faults)
     if snap.source == Source.NONE:
         return text("why.none")
