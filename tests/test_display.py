@@ -427,7 +427,7 @@ async def test_manual_rate_is_sent_and_shown_as_such(user: User) -> None:
     hub.publish(working(t_s=13.0, manual=ManualView("fixed", 120.0, 80.0)))
     await shows(user, "manual_state", "MANUAL 120.0 / 80.0 kg/ha")
     hub.publish(working(t_s=13.1, manual=ManualView("percent", percent=-20.0)))
-    await shows(user, "manual_state", "MANUAL model -20 %")
+    await shows(user, "manual_state", "MANUAL -20 % of plan")
 
 
 async def test_alarms_show_as_a_banner_on_every_screen_and_are_acknowledged(user: User) -> None:
@@ -940,7 +940,7 @@ async def test_the_manual_panel_shows_what_is_in_force_and_a_refused_rate_says_w
             rate_kg_ha=(600.0, 600.0),
         )
     )
-    await shows(user, "manual_state", "MANUAL model +200 % · limited to 600")
+    await shows(user, "manual_state", "MANUAL +200 % of plan · limited to 600")
 
 
 async def test_rate_steps_are_one_touch(user: User) -> None:
@@ -952,7 +952,7 @@ async def test_rate_steps_are_one_touch(user: User) -> None:
     user.find(marker="rate_plus").click()
     await settle(user, term, 1)
     hub.publish(working(t_s=12.1, manual=ManualView("percent", percent=10.0)))
-    await shows(user, "manual_state", "MANUAL model +10 %")
+    await shows(user, "manual_state", "MANUAL +10 % of plan")
     user.find(marker="rate_plus").click()
     await settle(user, term, 2)
     hub.publish(working(t_s=12.2, manual=ManualView("fixed", 120.0, 80.0)))

@@ -160,7 +160,7 @@ def test_manual_fixed_and_percent_rates_are_commanded_and_shown() -> None:
     finally:
         rig.close()
     texts = [e for _, e in rig.events]
-    assert "operator: rate: manual +20 % on the model" in texts
+    assert "operator: rate: manual +20 % on the planned rate" in texts
 
 
 def test_off_rate_and_blocked_meters_raise_alarms_the_operator_acknowledges(

@@ -141,13 +141,16 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "manual.title": ("Manual rate", "手动施肥量"),
     "manual.off": ("NDVI model", "NDVI 模型"),
     "manual.fixed": ("fixed kg/ha", "固定施肥量"),
-    "manual.percent": ("± % on the model", "模型 ± %"),
+    "manual.percent": ("± % on the planned rate", "计划施肥量 ± %"),
     "manual.shown_fixed": ("MANUAL {upper} / {lower} {unit}", "手动 {upper} / {lower} {unit}"),
     "manual.fixed_is": (
         "manual {upper:.1f}/{lower:.1f} kg/ha",
         "手动 {upper:.1f}/{lower:.1f} kg/ha",
     ),
-    "manual.percent_is": ("manual {percent:+.0f} % on the model", "手动 模型 {percent:+.0f} %"),
+    "manual.percent_is": (
+        "manual {percent:+.0f} % on the planned rate",
+        "手动 计划施肥量 {percent:+.0f} %",
+    ),
     "manual.model_is": ("model", "模型"),
     # ---- answers to the operator's commands
     "op.done.started": ("started", "已开始"),
@@ -369,7 +372,8 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "GNSS 滞后：ECU 已重启；从本次作业已学到的 {s:.2f} 秒重新开始学习",
     ),
     "event.gnss_lag_store": ("GNSS lag file: {error}", "GNSS 滞后文件：{error}"),
-    "manual.shown_percent": ("MANUAL model {percent} %", "手动 模型 {percent} %"),
+    # on the model's or the prescription's rate, whichever is in force: "planned"
+    "manual.shown_percent": ("MANUAL {percent} % of plan", "手动 计划 {percent} %"),
     "main.rate_model": ("model rate", "模型施肥量"),
     "main.rate_applied": ("rate applied", "实际施肥量"),
     "alarm.title": ("Alarms", "报警"),
