@@ -75,16 +75,12 @@ test: ctest lint pytest
 
 check: ctest lint pytest-fast
 
+# Every script's figures also go to bench/figures.json and docs/figures.md (bench/figures.py).
+BENCHES := ecu_bench.py fused_lag_bench.py fw_bench.py sim_bench.py terminal_bench.py can_bench.py maps_bench.py display_bench.py longday_bench.py
+bench: SHELL := /bin/bash
 bench: $(STAMP) browser
-	$(BIN)/python bench/ecu_bench.py
-	$(BIN)/python bench/fused_lag_bench.py
-	$(BIN)/python bench/fw_bench.py
-	$(BIN)/python bench/sim_bench.py
-	$(BIN)/python bench/terminal_bench.py
-	$(BIN)/python bench/can_bench.py
-	$(BIN)/python bench/maps_bench.py
-	$(BIN)/python bench/display_bench.py
-	$(BIN)/python bench/longday_bench.py
+	set -o pipefail; for b in $(BENCHES); do \
+	    $(BIN)/python bench/$$b | $(BIN)/python bench/figures.py $$b || exit 1; done
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c
