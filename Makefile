@@ -30,11 +30,14 @@ browser:
 qemu:
 	bash scripts/sysdeps.sh qemu
 
-# The ECU firmware for the STM32F405/407 (docs/firmware.md): build/fw/topdress-ecu-stm32f4.elf,
-# .bin, .hex, with its flash, RAM and worst stack figures.
+# The ECU firmware for the STM32F405/407 (docs/firmware.md): an image per board header
+# (build/fw/topdress-ecu-stm32f4.elf for the generic 8 MHz board, build/fw-BOARD/ for the others)
+# and the emulator build (build/fw-qemu/), each with its flash, RAM and worst stack figures.
+FW_BOARDS := generic8 olimex_e407 olimex_p407
 firmware:
 	bash scripts/sysdeps.sh firmware
-	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk
+	for b in $(FW_BOARDS); do $(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk BOARD=$$b || exit 1; done
+	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk VARIANT=qemu
 
 # The C tests twice: instrumented for line coverage (printed, at least 90 % of the core's and the
 # ports' lines), then under ASan+UBSan.

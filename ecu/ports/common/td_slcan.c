@@ -182,8 +182,9 @@ unsigned td_slcan_reply(td_slcan_event_t ev, char *buf, unsigned size) {
         s = "\a";
         break;
     case TD_SLCAN_NONE:
-    case TD_SLCAN_FRAME: /* nothing to answer: a frame is passed on, not acknowledged */
-        return 0u;
+    case TD_SLCAN_FRAME:
+    default:
+        return 0u; /* a frame or nothing: no reply */
     }
     const unsigned n = (unsigned)strlen(s);
     if (buf == NULL || size < n) {

@@ -17,6 +17,8 @@
 #define TD_ID_ECU_FUSED_AUX 0x18666465u
 #define TD_ID_ECU_GNSS_LAG 0x18696465u
 #define TD_ID_ECU_IDENT 0x18676465u
+#define TD_ID_ECU_CAN_HEALTH 0x186A6465u
+#define TD_ID_ECU_FAULT_RECORD 0x186B6465u
 /* Every frame's identifier: X(TD_ID_<FRAME>). */
 #define TD_FRAME_IDS(X) \
     X(TD_ID_ECU_STATUS) \
@@ -33,6 +35,8 @@
     X(TD_ID_ECU_FUSED_AUX) \
     X(TD_ID_ECU_GNSS_LAG) \
     X(TD_ID_ECU_IDENT) \
+    X(TD_ID_ECU_CAN_HEALTH) \
+    X(TD_ID_ECU_FAULT_RECORD) \
     /* end */
 
 /* EcuStatus.RunState */

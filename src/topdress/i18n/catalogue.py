@@ -278,6 +278,20 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "{target} firmware {firmware}, protocol {protocol}",
         "{target} 固件 {firmware}，协议 {protocol}",
     ),
+    "view.ecu_can_health": (
+        "CAN {state}, errors tx {tec} rx {rec}, error-passive {passive}x, bus-off {bus_off}x",
+        "CAN {state}，错误计数 发送 {tec} 接收 {rec}，被动错误 {passive} 次，总线关闭 {bus_off} 次",
+    ),
+    "event.ecu_can_health": ("ECU CAN controller: {health}", "控制器 CAN：{health}"),
+    "event.ecu_fault_record": (
+        "ECU reset after a {kind}; it kept {registers} (find the PC in the firmware's map file)",
+        "控制器因{kind}复位；保留的寄存器 {registers}（在固件的 map 文件中查找 PC）",
+    ),
+    "event.ecu_crystal_failure": (
+        "ECU crystal failure before this start: it ran on its internal oscillator, off the bus "
+        "with its outputs off (check the crystal and its load capacitors)",
+        "控制器本次启动前晶振故障：曾以内部振荡器运行，未上总线且输出关闭（请检查晶振及其负载电容）",
+    ),
     "event.ecu_lost": ("ECU lost: no status for {s:.1f} s", "控制器丢失：{s:.1f} 秒无状态帧"),
     "event.ecu_wait_silent": (
         "ECU wait: {name} unacknowledged after {tries} tries on CAN {where}; still trying (is "

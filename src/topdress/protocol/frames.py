@@ -247,6 +247,36 @@ class EcuIdent:
         return f"{self.protocol[0]}.{self.protocol[1]}"
 
 
+#: EcuCanHealth's bus states and EcuFaultRecord's registers and kinds (DBC value tables).
+BUS_STATES = ("error-active", "error-passive", "bus-off")
+FAULT_REGISTERS = ("CFSR", "HFSR", "MMFAR", "BFAR", "PC", "LR")
+FAULT_KINDS = ("none", "hard fault", "crystal failure")
+
+
+@dataclass(frozen=True)
+class EcuCanHealth:
+    """The firmware's CAN controller, once a second: its transmit and receive error counters
+    (0..255), its state (BUS_STATES), the entries into error-passive and bus-off since it
+    started and the receive FIFO overruns (each saturating at its field's maximum)."""
+
+    tx_errors: int
+    rx_errors: int
+    bus_state: str  # BUS_STATES
+    error_passive_count: int
+    bus_off_count: int
+    rx_overruns: int
+
+
+@dataclass(frozen=True)
+class EcuFaultRecord:
+    """One register of what the firmware's fault handler kept across its reset: the register
+    (FAULT_REGISTERS), the kind of fault (FAULT_KINDS) and its value."""
+
+    register: str  # FAULT_REGISTERS
+    kind: str  # FAULT_KINDS
+    value: int
+
+
 Frame = (
     PcCommand
     | EcuStatus
@@ -262,6 +292,8 @@ Frame = (
     | EcuFusedAux
     | EcuGnssLag
     | EcuIdent
+    | EcuCanHealth
+    | EcuFaultRecord
 )
 
 
@@ -530,6 +562,28 @@ def _decode_ident(data: bytes) -> EcuIdent:
     )
 
 
+def _decode_can_health(data: bytes) -> EcuCanHealth:
+    raw, _ = _plain(
+        "EcuCanHealth",
+        "TxErrors",
+        "RxErrors",
+        "BusState",
+        "ErrorPassiveCount",
+        "BusOffCount",
+        "RxOverruns",
+    ).decode(data)
+    if raw[2] >= len(BUS_STATES):
+        raise ProtocolError(f"EcuCanHealth: BusState {raw[2]} is not a state")
+    return EcuCanHealth(raw[0], raw[1], BUS_STATES[raw[2]], raw[3], raw[4], raw[5])
+
+
+def _decode_fault_record(data: bytes) -> EcuFaultRecord:
+    raw, _ = _plain("EcuFaultRecord", "RegisterId", "Kind", "Value").decode(data)
+    if raw[0] >= len(FAULT_REGISTERS) or raw[1] >= len(FAULT_KINDS):
+        raise ProtocolError(f"EcuFaultRecord: register {raw[0]}, kind {raw[1]} out of range")
+    return EcuFaultRecord(FAULT_REGISTERS[raw[0]], FAULT_KINDS[raw[1]], raw[2])
+
+
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
     """True for the identifier of a frame of the protocol (to tell malformed from foreign)."""
     return frame_id in (
@@ -547,6 +601,8 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
         ids.fused_aux,
         ids.gnss_lag,
         ids.ident,
+        ids.can_health,
+        ids.fault_record,
     )
 
 
@@ -579,6 +635,8 @@ def _decoders(ids: FrameIds) -> dict[int, Callable[[bytes], Frame]]:
         ids.fused_aux: _decode_fused_aux,
         ids.gnss_lag: _decode_gnss_lag,
         ids.ident: _decode_ident,
+        ids.can_health: _decode_can_health,
+        ids.fault_record: _decode_fault_record,
     }
 
 

@@ -176,6 +176,8 @@ class FrameIds:
     fused_aux: int = _IDS["EcuFusedAux"]
     gnss_lag: int = _IDS["EcuGnssLag"]
     ident: int = _IDS["EcuIdent"]
+    can_health: int = _IDS["EcuCanHealth"]
+    fault_record: int = _IDS["EcuFaultRecord"]
 
 
 DEFAULT_IDS = FrameIds()

@@ -46,6 +46,7 @@ from topdress import protocol
 from topdress.config import CanConfig
 from topdress.errors import DeviceError, ProtocolError
 from topdress.i18n import Text, text
+from topdress.terminal.ecuhealth import FaultRecord, health_event
 from topdress.terminal.ecuview import (
     Command,
     EcuView,
@@ -112,6 +113,7 @@ class CanLink:
         self.counters = LinkCounters()
         self.command = command
         self.ecu = EcuView()
+        self._fault_record = FaultRecord()  # a firmware's EcuFaultRecord round
         self._params = ParamPusher(
             self._send,
             self.ids,
@@ -324,6 +326,15 @@ class CanLink:
             self.ecu = replace(self.ecu, lag=decoded)
         elif isinstance(decoded, protocol.EcuIdent):
             self._take_ident(decoded, now)
+        elif isinstance(decoded, protocol.EcuCanHealth):
+            said = health_event(self.ecu.can_health, decoded)
+            self.ecu = replace(self.ecu, can_health=decoded)
+            if said is not None:
+                self._event(said)
+        elif isinstance(decoded, protocol.EcuFaultRecord):
+            said = self._fault_record.take(decoded)
+            if said is not None:
+                self._event(said)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
     def _take_ident(self, ident: protocol.EcuIdent, now: float) -> None:

@@ -55,6 +55,7 @@ class EcuView:
     cal_t: float | None = None  # when that status arrived (the terminal's clock)
     lag: protocol.EcuGnssLag | None = None  # the GNSS lag in use and learned
     ident: protocol.EcuIdent | None = None  # who the ECU says it is (EcuIdent)
+    can_health: protocol.EcuCanHealth | None = None  # a firmware's CAN controller (ecuhealth)
 
 
 def ident_mismatch(ident: protocol.EcuIdent) -> bool:

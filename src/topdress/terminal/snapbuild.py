@@ -9,6 +9,7 @@ from typing import Any
 
 from topdress.crop.sensors import CompensatedNdvi
 from topdress.terminal.busswitch import BusSwitch
+from topdress.terminal.ecuhealth import health_text
 from topdress.terminal.ecuview import EcuView, ident_mismatch, ident_text, terminal_protocol
 from topdress.terminal.gnssin import GnssIn
 from topdress.terminal.gnsslag import LagKeeper
@@ -67,6 +68,7 @@ class SnapshotBuilder:
             ecu_link=self._bus.ecu_state,
             ecu_where=link.where,
             ecu_ident=None if ident is None else ident_text(ident),
+            ecu_can_health=None if ecu.can_health is None else health_text(ecu.can_health),
             ecu_protocol=(
                 (ident.protocol_version, terminal_protocol())
                 if ident is not None and ident_mismatch(ident)
