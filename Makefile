@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
 DURATION ?= 30
 
-.PHONY: demo test check ctest pytest pytest-fast lint lint-c bench sysdeps browser qemu screenshots clean firmware
+.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu screenshots clean firmware
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -39,8 +39,8 @@ firmware:
 	for b in $(FW_BOARDS); do $(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk BOARD=$$b || exit 1; done
 	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk VARIANT=qemu
 
-# The C tests twice: instrumented for line coverage (printed, at least 90 % of the core's and the
-# ports' lines), then under ASan+UBSan.
+# The C tests, instrumented for line coverage (printed; at least 90 % of the core's and the
+# ports' lines).
 ctest: sysdeps
 	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug -DTD_COVERAGE=ON >/dev/null
 	cmake --build build/ecu -j2
@@ -48,6 +48,9 @@ ctest: sysdeps
 	ctest --test-dir build/ecu --output-on-failure
 	gcovr -r ecu build/ecu -e 'ecu/tests/' -e 'ecu/.*/tests/' -e '.*/gen/.*' \
 	    -o build/ecu/coverage.txt --print-summary --fail-under-line 90
+
+# The same tests under ASan+UBSan (make test only).
+ctest-san: sysdeps
 	cmake -S ecu -B build/ecu-san -DCMAKE_BUILD_TYPE=Debug -DTD_SANITIZE=ON >/dev/null
 	cmake --build build/ecu-san -j2
 	ctest --test-dir build/ecu-san --output-on-failure
@@ -74,7 +77,7 @@ pytest-fast: $(STAMP)
 screenshots: $(STAMP) browser
 	TOPDRESS_SCREENSHOTS=docs $(BIN)/python -m pytest -q tests/test_display_browser.py tests/test_display_cab.py
 
-test: ctest lint pytest
+test: ctest ctest-san lint pytest
 
 check: ctest lint pytest-fast
 
