@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
 DURATION ?= 30
 
-.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu screenshots clean firmware
+.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu office screenshots clean firmware
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -29,6 +29,10 @@ browser:
 # the emulated firmware's tests (tests/test_ecu_qemu.py): qemu-system-arm and the firmware's compiler
 qemu:
 	bash scripts/sysdeps.sh qemu
+
+# the farm office's tests and bench (tests/test_office*.py): PostgreSQL and PostGIS
+office:
+	bash scripts/sysdeps.sh office
 
 # The ECU firmware for the STM32F405/407 (docs/firmware.md): an image per board header
 # (build/fw/topdress-ecu-stm32f4.elf for the generic 8 MHz board, build/fw-BOARD/ for the others)
@@ -65,12 +69,12 @@ lint: $(STAMP) lint-c
 	$(BIN)/mypy
 
 # The whole suite with Python line coverage (printed; at least 85 %) and the slowest 15 tests.
-pytest: $(STAMP) browser qemu
+pytest: $(STAMP) browser qemu office
 	$(BIN)/python -m pytest -q --durations=15 --cov=topdress --cov-report=term:skip-covered \
 	    --cov-fail-under=85 -n 2
 
 # The fast tier's tests: no browser, no QEMU, no wall-clock demo (markers in pyproject.toml).
-pytest-fast: $(STAMP)
+pytest-fast: $(STAMP) office
 	$(BIN)/python -m pytest -q --durations=15 -m "not browser and not qemu and not wallclock" -n 2
 
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
@@ -82,9 +86,10 @@ test: ctest ctest-san lint pytest
 check: ctest lint pytest-fast
 
 # Every script's figures also go to bench/figures.json and docs/figures.md (bench/figures.py).
-BENCHES := ecu_bench.py fused_lag_bench.py fw_bench.py sim_bench.py terminal_bench.py can_bench.py maps_bench.py display_bench.py longday_bench.py
+BENCHES := ecu_bench.py fused_lag_bench.py field_speed_bench.py fw_bench.py sim_bench.py terminal_bench.py \
+           can_bench.py maps_bench.py display_bench.py longday_bench.py office_bench.py
 bench: SHELL := /bin/bash
-bench: $(STAMP) browser
+bench: $(STAMP) browser office
 	set -o pipefail; for b in $(BENCHES); do \
 	    $(BIN)/python bench/$$b | $(BIN)/python bench/figures.py $$b || exit 1; done
 
