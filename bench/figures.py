@@ -4,7 +4,7 @@ writes docs/figures.md from that file. Other docs link to docs/figures.md instea
 numbers, so a figure cannot go stale in one place while it is fresh in another
 (tests/test_figures.py checks that no doc repeats one by hand).
 
-A line `name: value  (note)` is a figure; any other line (the tables some scripts print) is
+A line `snake_name: number  (note)` is a figure; any other line (the tables some scripts print) is
 kept as the script's text."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 STORE = ROOT / "bench" / "figures.json"
 DOC = ROOT / "docs" / "figures.md"
-FIGURE = re.compile(r"^([a-z][a-z0-9_]*)(?: \([^)]*\))?: (\S+)\s*(.*)$")
+FIGURE = re.compile(r"^([a-z][a-z0-9]*_[a-z0-9_]+)(?: \([^)]*\))?: (-?[\d.]+)\s*(.*)$")
 
 
 def parse(lines: list[str]) -> tuple[dict[str, dict[str, str]], list[str]]:
@@ -79,8 +79,8 @@ def main() -> int:
         "figures": figures,
         "text": text,
     }
-    STORE.write_text(json.dumps(store, indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    DOC.write_text(render(store), encoding="utf-8")
+    STORE.write_text(json.dumps(store, indent=1) + "\n", encoding="utf-8")
+    DOC.write_text(render(load()), encoding="utf-8")
     return 0
 
 
