@@ -828,3 +828,26 @@ def test_the_tank_counts_down_what_was_applied_and_alarms_at_its_level() -> None
         assert str(low.text).startswith("tank low: 2 kg left")
     finally:
         rig.close()
+
+
+def test_the_tank_outlives_a_terminal_started_again(tmp_path: Path) -> None:
+    """The fill entered and what was applied from it: kept with the counters, so the next
+    terminal goes on from what is left (not "no fill entered")."""
+    rig = make_rig(
+        drive(stand(2.0), straight(8.0, 60.0), stand(5.0)),
+        autostart=True,
+        session=SessionLog.create(tmp_path, DEFAULT_TOML),
+    )
+    try:
+        assert post(rig, op.FillTank(500.0, 50.0)).ok
+        rig.run(30.0)
+        tank = rig.term.snapshot.tank
+        assert tank.remaining_kg is not None and tank.remaining_kg < 500.0
+    finally:
+        rig.close()
+    again = make_rig(drive(stand(5.0)), session=SessionLog.create(tmp_path, DEFAULT_TOML))
+    try:
+        again.run(1.0)
+        assert again.term.snapshot.tank == tank
+    finally:
+        again.close()

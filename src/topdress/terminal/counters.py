@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from topdress.outpath import atomic_write
-from topdress.view.snapshot import CounterView
+from topdress.view.snapshot import CounterView, TankView
 
 log = logging.getLogger(__name__)
 
@@ -92,6 +92,7 @@ class WorkCounters:
         self.path = path
         self.error: str | None = None  # the last load/save problem, for the operator
         self.counters = {name: CounterView(since=_now_iso()) for name in COUNTERS}
+        self.tank = TankView()  # the tank's fill and what is left: kept with the counters
         self._last_save_t: float | None = None
         self._dirty = False
         # Each counter as it was before its last reset, while the terminal runs: the reset can
@@ -113,6 +114,7 @@ class WorkCounters:
         try:
             doc = json.loads(text)
             self.counters = {name: _from_json(doc[name]) for name in COUNTERS}
+            self.tank = _tank(doc.get("tank"))
         except (ValueError, KeyError, IndexError, TypeError) as exc:
             # Kept aside, not overwritten: the season's figures may be recoverable by hand.
             aside = path.with_name(path.name + ".damaged")
@@ -123,6 +125,10 @@ class WorkCounters:
     def add(self, area_ha: float, kg: tuple[float, float], dt_s: float, d_m: float) -> None:
         for name in COUNTERS:
             self.counters[name] = self.counters[name].add(area_ha, kg, dt_s, d_m)
+        self._dirty = True
+
+    def set_tank(self, tank: TankView) -> None:
+        self.tank = tank
         self._dirty = True
 
     def reset(self, which: str) -> None:
@@ -160,7 +166,9 @@ class WorkCounters:
         """Write the counters as they are now; `wait` False: in the background."""
         if self.path is None:
             return
-        text = json.dumps({name: asdict(v) for name, v in self.counters.items()}, indent=2)
+        doc: dict[str, Any] = {name: asdict(v) for name, v in self.counters.items()}
+        doc["tank"] = asdict(self.tank)
+        text = json.dumps(doc, indent=2)
         self._dirty = False
         if wait:
             self._saver.wait()  # an older text must not land after this one
@@ -176,3 +184,18 @@ class WorkCounters:
             self.error = f"cannot save the counters to {self.path}: {exc}"
             log.warning("%s", self.error)
             self._dirty = True  # tried again at the next period
+
+
+def _tank(raw: Any) -> TankView:
+    """The tank as saved (absent in files of older versions: no fill entered)."""
+    if raw is None:
+        return TankView()
+    fill, left, alarm = raw["fill_kg"], raw["remaining_kg"], raw["alarm_kg"]
+    for v in (fill, left):
+        if v is not None and not isinstance(v, int | float):
+            raise TypeError(f"tank: {v!r} is not a number")
+    if not isinstance(alarm, int | float):
+        raise TypeError(f"tank: {alarm!r} is not a number")
+    return TankView(
+        None if fill is None else float(fill), None if left is None else float(left), float(alarm)
+    )

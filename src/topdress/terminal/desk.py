@@ -88,7 +88,7 @@ class OperatorDesk:
         self._t0: float | None = None  # when the loop opened
         self._last_t: float | None = None
         self._model_rates = (0.0, 0.0)
-        self.tank = TankView()  # no fill entered yet
+        self.tank = self.counters.tank  # as the last run left it (none: no fill entered yet)
 
     @property
     def wizard(self) -> Wizard | LeadCal | None:
@@ -177,6 +177,7 @@ class OperatorDesk:
                     False, text("op.error.tank", fill=c.fill_kg, alarm=c.alarm_kg)
                 )
             self.tank = TankView(c.fill_kg, c.fill_kg, c.alarm_kg)
+            self.counters.set_tank(self.tank)
             self._journal.log_event(now, "tank.filled", fill_kg=c.fill_kg, alarm_kg=c.alarm_kg)
             return self._done(text("op.done.tank", kg=c.fill_kg, alarm=c.alarm_kg))
         if isinstance(c, op.Help):
@@ -335,6 +336,7 @@ class OperatorDesk:
         left = self.tank.remaining_kg
         if left is not None:
             self.tank = replace(self.tank, remaining_kg=left - kg[0] - kg[1])
+            self.counters.set_tank(self.tank)
 
     def close(self) -> None:
         self.counters.save()
