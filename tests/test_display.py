@@ -1031,3 +1031,14 @@ async def test_the_cab_page_is_the_operators_page(user: User) -> None:
     await user.open("/")
     assert len(hub.operator_pages) == 1
     assert hub.operator_pages_connected(hub.operator_pages) == 1
+
+
+def test_the_speed_chart_follows_the_units() -> None:
+    from topdress.display.units import Units
+
+    hist = [working(t_s=t / 10) for t in range(10)]
+    metric = speed_options(hist)
+    imperial = speed_options(hist, units=Units("imperial"))
+    assert metric["series"][2]["data"][-1][1] == 8.0
+    assert imperial["series"][2]["data"][-1][1] == pytest.approx(8.0 / 1.609344, abs=0.01)
+    assert "mph" in str(imperial["yAxis"]) and "km/h" in str(metric["yAxis"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from topdress.display.units import Units
 from topdress.i18n import tr
 from topdress.protocol.model import Source
 from topdress.view.snapshot import Snapshot
@@ -59,19 +60,22 @@ def sampled(history: list[Snapshot]) -> list[Snapshot]:
     return history[(len(history) - 1) % CHART_EVERY :: CHART_EVERY] if history else []
 
 
-def speed_options(history: list[Snapshot], window_s: float = 60.0) -> dict[str, Any]:
-    """Wheel, GNSS and selected speed (km/h) against time, with bands naming the source the
-    ECU metered on."""
+def speed_options(
+    history: list[Snapshot], window_s: float = 60.0, units: Units | None = None
+) -> dict[str, Any]:
+    """Wheel, GNSS and selected speed (km/h, or mph in imperial `units`) against time, with
+    bands naming the source the ECU metered on."""
+    u = units or Units()
     history = sampled(history)
     t_end = history[-1].t_s if history else 0.0
     wheel, gnss, selected, marks = [], [], [], []
     for s in history:
         t = round(s.t_s, 2)
-        wheel.append([t, round(s.v_wheel_kmh, 2) if s.ecu_live else None])
-        gnss.append([t, None if s.gnss_kmh is None else round(s.gnss_kmh, 2)])
-        selected.append([t, round(s.v_kmh, 2) if s.ecu_live else None])
+        wheel.append([t, round(u.speed(s.v_wheel_kmh), 2) if s.ecu_live else None])
+        gnss.append([t, None if s.gnss_kmh is None else round(u.speed(s.gnss_kmh), 2)])
+        selected.append([t, round(u.speed(s.v_kmh), 2) if s.ecu_live else None])
         marks.append(s.source if s.ecu_live else "none")
-    opts = _axes(tr("unit.kmh"), history[0].t_s if history else 0.0, t_end, window_s)
+    opts = _axes(u.speed_unit, history[0].t_s if history else 0.0, t_end, window_s)
     sel = _series(tr("chart.selected"), selected, "#2e7d32")
     # Bands under the selected speed say which source drove it.
     sel["markArea"] = {"silent": True, "data": _source_bands(history, marks)}

@@ -201,7 +201,9 @@ class MainScreen:
         with ui.row().classes("w-full flex-1 no-wrap gap-1"):
             with ui.column().classes("flex-1 min-w-0 h-full gap-0"):
                 ui.label(tr("chart.speed_title")).classes("text-sm font-bold")
-                self.speed_chart = ui.echart(speed_options([])).classes("w-full flex-1")
+                self.speed_chart = ui.echart(speed_options([], units=self.units)).classes(
+                    "w-full flex-1"
+                )
             with ui.column().classes("flex-1 min-w-0 h-full gap-0"):
                 ui.label(tr("chart.meter_title")).classes("text-sm font-bold")
                 self.meter_chart = ui.echart(meter_options([])).classes("w-full flex-1")
@@ -396,7 +398,7 @@ class MainScreen:
         if s.t_s - self._chart_t >= CHART_PERIOD_S or s.t_s < self._chart_t:
             self._chart_t = s.t_s
             history = self.hub.history()
-            self.speed_chart.options.update(speed_options(history))
+            self.speed_chart.options.update(speed_options(history, units=self.units))
             self.speed_chart.update()
             self.meter_chart.options.update(meter_options(history))
             self.meter_chart.update()
