@@ -297,3 +297,24 @@ def test_one_host_with_a_numeric_port_is_all_that_is_taken() -> None:
     assert not guard.host_ok("127.0.0.1:١٢٣")  # digits, but not ASCII ones
     # two Host headers, joined by the middleware: which one a proxy believed is unknown
     assert not guard.host_ok("127.0.0.1:8080, rebind.attacker.example")
+
+
+def test_the_lockout_of_everyone_is_logged_as_everyone() -> None:
+    from topdress.display.hub import DisplayHub
+
+    def lockouts(addresses: list[str]) -> list[dict[str, object]]:
+        reports: list[tuple[str, dict[str, object]]] = []
+        hub = DisplayHub(
+            lambda: loads_config("[display]\n"),
+            report=lambda k, d: reports.append((k, d)),
+            clock=lambda: 100.0,
+        )
+        for address in addresses:
+            hub.failed(address, "pin")
+        return [d for k, d in reports if k == "display.pin_lockout"]
+
+    # an attacker changing address, 1 guess each: everyone locked out, logged so
+    (everyone,) = lockouts([f"10.0.1.{i}" for i in range(20)])
+    assert everyone["address"] == "*" and everyone["lockout_s"] == 60.0
+    (one,) = lockouts(["10.0.0.9"] * 5)
+    assert one["address"] == "10.0.0.9"

@@ -18,7 +18,7 @@ from typing import Any
 
 from topdress import i18n
 from topdress.config import TerminalConfig, check_pin
-from topdress.display.guard import PinGate
+from topdress.display.guard import GLOBAL, PinGate
 from topdress.view.commands import CommandResult
 from topdress.view.snapshot import TICK_S, Snapshot
 
@@ -181,11 +181,17 @@ class DisplayHub:
     def failed(self, address: str, what: str) -> None:
         """A wrong guess of a secret (`pin`, `kiosk` token) from `address`."""
         with self._pins_lock:
-            failures, lockout_s = self._pins.failed(address, self._clock())
+            now = self._clock()
+            failures, lockout_s = self._pins.failed(address, now)
+            # the lockout of everyone (guesses from many addresses) is not this address's
+            everyone = bool(lockout_s) and self._pins.locked_for(GLOBAL, now) >= lockout_s
         self.report("display.pin_failed", address=address, what=what, failures=failures)
         if lockout_s:
             self.report(
-                "display.pin_lockout", address=address, failures=failures, lockout_s=lockout_s
+                "display.pin_lockout",
+                address=GLOBAL if everyone else address,
+                failures=failures,
+                lockout_s=lockout_s,
             )
 
     def report(self, kind: str, **detail: Any) -> None:
