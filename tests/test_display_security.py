@@ -318,3 +318,29 @@ def test_the_lockout_of_everyone_is_logged_as_everyone() -> None:
     assert everyone["address"] == "*" and everyone["lockout_s"] == 60.0
     (one,) = lockouts(["10.0.0.9"] * 5)
     assert one["address"] == "10.0.0.9"
+
+
+async def test_one_pin_try_a_second_per_tab_not_per_dialog(
+    user: User, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A wrong PIN, the dialog cancelled and opened again: the next try still waits its turn
+    (the tab's, WRONG_PIN_DELAY_S set long here), so new dialogs give no faster guessing."""
+    monkeypatch.setattr(pages, "client_is_remote", lambda: True)
+    from topdress.display import actions
+
+    monkeypatch.setattr(actions, "WRONG_PIN_DELAY_S", 30.0)
+    reports: list[tuple[str, dict[str, object]]] = []
+    term = Terminal()
+    hub = DisplayHub(pinned, term.post, report=lambda k, d: reports.append((k, d)))
+    hub.publish(working(operator="stopped"))
+    register_pages(hub)
+    await user.open("/")
+    for _ in range(3):
+        user.find(marker="start").click()
+        await user.should_see(marker="pin")
+        user.find(marker="pin").type("0000")
+        user.find(marker="pin_ok").click()
+        await asyncio.sleep(0.2)
+        user.find("Cancel").click()
+        await asyncio.sleep(0.1)
+    assert [k for k, _ in reports] == ["display.pin_failed"]  # the 2nd and 3rd still wait

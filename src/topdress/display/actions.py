@@ -33,6 +33,9 @@ class Actions:
         self.remote = remote  # not the cab's own browser (topdress.display.guard)
         self.address = address  # the client's, for counting wrong PINs
         self.client_id = client_id  # the page's: one that sends a command is the operator's
+        # One PIN try a second from the tab, across its dialogs (a new dialog is no new try).
+        self._pin_lock = asyncio.Lock()
+        self._next_try = 0.0
         self.unlocked = False
 
     async def unlock(self) -> bool:
@@ -44,19 +47,16 @@ class Actions:
             pin = ui.input(tr("pin.label"), password=True).props("autofocus").mark("pin")
             wrong = ui.label("").classes("td-bad")
 
-            lock = asyncio.Lock()
-            next_try = [0.0]
-
             async def submit() -> None:
-                # One try a second from a tab, however fast keys, clicks or a script come:
-                # guessing stays slow even before a lockout.
-                async with lock:
-                    await asyncio.sleep(max(0.0, next_try[0] - time.monotonic()))
+                # One try a second from a tab, however fast keys, clicks, dialogs or a script
+                # come: guessing stays slow even before a lockout.
+                async with self._pin_lock:
+                    await asyncio.sleep(max(0.0, self._next_try - time.monotonic()))
                     wait_s = self.hub.try_pin(self.address, pin.value or "")
                     if wait_s is None:
                         dialog.submit(True)
                         return
-                    next_try[0] = time.monotonic() + WRONG_PIN_DELAY_S
+                    self._next_try = time.monotonic() + WRONG_PIN_DELAY_S
                 pin.value = ""
                 wrong.set_text(tr("pin.locked", s=wait_s) if wait_s > 0 else tr("pin.wrong"))
 
