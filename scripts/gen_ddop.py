@@ -30,6 +30,7 @@ def render(pool: bytes, m: Machine, layout: Layout) -> tuple[str, str]:
 
 #define TD_DDOP_LEN {len(pool)}u            /**< bytes of the pool */
 #define TD_DDOP_NAME_OFFSET {layout.name_offset}u    /**< where the DVC's NAME goes (8 bytes) */
+#define TD_DDOP_LOCALIZATION_OFFSET {layout.localization_offset}u /**< DVC localization label */
 #define TD_DDOP_EL_DEVICE {layout.device}u
 #define TD_DDOP_EL_BOOM {layout.boom}u
 #define TD_DDOP_EL_UPPER {layout.bins[0]}u

@@ -105,6 +105,7 @@ class Layout:
     bins: list[int] = field(default_factory=list)
     sections: list[int] = field(default_factory=list)
     name_offset: int = 0
+    localization_offset: int = 0
     structure_label: bytes = b""
 
 
@@ -282,6 +283,7 @@ def build(m: Machine, structure_label: bytes | None = None) -> tuple[bytes, Layo
         raise ValueError("the structure label is 7 bytes")
     head = dvc(structure_label)
     layout.name_offset = 3 + 2 + len(_text("topdress")) + len(_text(m.software_version))
+    layout.localization_offset = len(head) - 8  # 7 bytes and the extended label's length
     layout.structure_label = structure_label
     return head + body, layout
 

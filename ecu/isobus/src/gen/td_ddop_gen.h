@@ -6,6 +6,7 @@
 
 #define TD_DDOP_LEN 1515u            /**< bytes of the pool */
 #define TD_DDOP_NAME_OFFSET 20u    /**< where the DVC's NAME goes (8 bytes) */
+#define TD_DDOP_LOCALIZATION_OFFSET 37u /**< DVC localization label */
 #define TD_DDOP_EL_DEVICE 0u
 #define TD_DDOP_EL_BOOM 2u
 #define TD_DDOP_EL_UPPER 3u
