@@ -407,7 +407,7 @@ static void measure(td_tc_t *tc, uint8_t my, uint32_t now_us, uint32_t dist_mm, 
     for (i = 0u; i < TD_TC_VARS && q->count + 2u < TD_IB_TXQ_LEN; i++) {
         td_tc_var_t *v = &tc->vars[i];
         bool due = !v->sent_once;
-        const int32_t delta = v->value - v->last_sent;
+        const int64_t delta = (int64_t)v->value - v->last_sent; /* any two int32 values */
         if (find(tc, v->element, v->ddi) != v) {
             continue; /* the second copy of a one-layer machine's bin */
         }
@@ -417,7 +417,7 @@ static void measure(td_tc_t *tc, uint8_t my, uint32_t now_us, uint32_t dist_mm, 
         if (v->dist_mm != 0u && dist_mm - v->last_mm >= v->dist_mm) {
             due = true;
         }
-        if (v->change != 0 && (delta >= v->change || -delta >= v->change)) {
+        if (v->change != 0 && (delta >= v->change || -delta >= v->change)) { /* both widen */
             due = true;
         }
         if ((v->min_on && crossed(v->min_thr, v->last_sent, v->value, true)) ||
