@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
+CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
 .PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware
@@ -69,4 +69,4 @@ bench: $(STAMP) browser
 	$(BIN)/python bench/longday_bench.py
 
 clean:
-	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c
+	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c src/topdress/isobus/_isobus*.so src/topdress/isobus/_isobus.c
