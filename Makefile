@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware
+.PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware interop
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -54,6 +54,10 @@ pytest: $(STAMP) browser qemu
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
 screenshots: $(STAMP) browser
 	TOPDRESS_SCREENSHOTS=docs $(BIN)/python -m pytest -q tests/test_display_browser.py tests/test_display_cab.py
+
+# the ISOBUS layer against stacks nobody here wrote (can-j1939, isoxml), alone (docs/isobus.md)
+interop: $(STAMP)
+	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py
 
 test: ctest lint pytest
 

@@ -17,6 +17,8 @@ from isoxml.util.isoxml_io import isoxml_from_text
 from topdress.config import default_config
 from topdress.isobus.ddop import Machine, build, parse, to_isoxml
 
+pytestmark = pytest.mark.interop
+
 REPO = Path(__file__).resolve().parents[1]
 
 
