@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
+CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
 .PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware interop
@@ -29,11 +29,14 @@ browser:
 qemu:
 	bash scripts/sysdeps.sh qemu
 
-# The ECU firmware for the STM32F405/407 (docs/firmware.md): build/fw/topdress-ecu-stm32f4.elf,
-# .bin, .hex, with its flash, RAM and worst stack figures.
+# The ECU firmware for the STM32F405/407 (docs/firmware.md): an image per board header
+# (build/fw/topdress-ecu-stm32f4.elf for the generic 8 MHz board, build/fw-BOARD/ for the others)
+# and the emulator build (build/fw-qemu/), each with its flash, RAM and worst stack figures.
+FW_BOARDS := generic8 olimex_e407 olimex_p407
 firmware:
 	bash scripts/sysdeps.sh firmware
-	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk
+	for b in $(FW_BOARDS); do $(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk BOARD=$$b || exit 1; done
+	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk VARIANT=qemu
 
 ctest: sysdeps
 	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null

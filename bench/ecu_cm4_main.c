@@ -24,7 +24,7 @@ int main(void) {
     for (;;) {
         const uint32_t now = hw_now_us;
         if (hw_rx_ready != 0u) {
-            td_can_frame_t rx = { 0x0A5C6465u, 1u, 8u, { 0x0A, 0, 0, 0, 0, 0, 0, 0 } };
+            td_can_frame_t rx = { TD_ID_PC_COMMAND, 1u, 8u, { 0x0A, 0, 0, 0, 0, 0, 0, 0 } };
             (void)td_app_rx(&app, &rx, now);
         }
         const td_io_in_t in = { hw_counter[0],

@@ -5,6 +5,11 @@ Prints exactly:
     fw_ram_bytes: N            data + bss + the stack reservation (budget 16384)
     fw_stack_worst_bytes: N    deepest thread path + one handler per preemption level with
                                exception frames (scripts/fw_report.py)
+  the same three for every board header (ecu/ports/stm32f4/boards/BOARD.h) and the emulator
+  build (BOARD = qemu):
+    fw_BOARD_flash_bytes: N
+    fw_BOARD_ram_bytes: N
+    fw_BOARD_stack_worst_bytes: N
   free-running (the firmware on its own SysTick, the guest on the host clock, the plant
   answering each step), QEMU netduinoplus2 with the simulated machine in the loop
   (sim.qemu_ecu), 10 s of a 6.5 km/h pass:
@@ -40,9 +45,9 @@ def log(msg: str) -> None:
     print(f"fw_bench: {msg}", file=sys.stderr)
 
 
-def footprint() -> dict[str, int]:
+def footprint(*args: str) -> dict[str, int]:
     done = subprocess.run(
-        ["make", "--no-print-directory", "-s", "-f", "ecu/ports/stm32f4/firmware.mk"],
+        ["make", "--no-print-directory", "-s", "-f", "ecu/ports/stm32f4/firmware.mk", *args],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -78,6 +83,11 @@ def main() -> int:
     print(f"fw_flash_bytes: {f['flash_bytes']}")
     print(f"fw_ram_bytes: {f['ram_bytes']}")
     print(f"fw_stack_worst_bytes: {f['stack_worst_bytes']}")
+    boards = sorted(p.stem for p in (REPO / "ecu" / "ports" / "stm32f4" / "boards").glob("*.h"))
+    for name, args in [(b, (f"BOARD={b}",)) for b in boards] + [("qemu", ("VARIANT=qemu",))]:
+        f = footprint(*args)
+        for key in ("flash_bytes", "ram_bytes", "stack_worst_bytes"):
+            print(f"fw_{name}_{key}: {f[key]}")
     t = qemu_timing(lockstep=False)
     if t is not None:
         print(f"fw_qemu_step_mean_us: {t['mean_us']:.1f}")

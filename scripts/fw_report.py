@@ -5,8 +5,8 @@ Usage: fw_report.py IMAGE.elf OBJ_DIR [--quiet]
 Stack: every object's call graph with its functions' frame sizes (gcc -fcallgraph-info=su,
 OBJ_DIR/**/*.ci) gives the deepest path from the reset handler and from each interrupt handler.
 The worst case is the thread's deepest path plus one of each preemption level's deepest handler
-(TIM2 capture at priority 1, CAN and USART at 2, SysTick at 4; handlers of one level do not
-preempt each other), each entry with a full exception frame with FPU state (26 words + 1 for
+(the clock security system's NMI, TIM2 capture at priority 1, CAN and USART at 2, SysTick at 4;
+handlers of one level do not preempt each other), each entry with a full exception frame with FPU state (26 words + 1 for
 alignment). Functions without a frame size (newlib's memcpy, memset, libgcc) count 64 bytes and
 are listed. A recursive call or a call through a pointer makes the analysis fail.
 
@@ -28,10 +28,11 @@ RAM_ORIGIN = 0x20000000
 UNKNOWN_FRAME = 64  # a library leaf without -fstack-usage (newlib-nano's are smaller)
 EXCEPTION_FRAME = 27 * 4  # R0-R3, R12, LR, PC, xPSR, S0-S15, FPSCR, alignment word
 THREAD_ROOTS = ("Reset_Handler",)
-# preemption levels, highest priority first (fw_io.c, fw_can.c, fw_uart.c, fw_clock.c)
+# preemption levels, highest priority first (fw_sys.c, fw_io.c, fw_can.c, fw_uart.c, fw_clock.c)
 LEVELS = (
+    ("NMI_Handler",),
     ("TIM2_IRQHandler",),
-    ("CAN1_RX0_IRQHandler", "CAN1_TX_IRQHandler", "USART1_IRQHandler"),
+    ("CAN1_RX0_IRQHandler", "CAN1_TX_IRQHandler", "CAN1_SCE_IRQHandler", "USART1_IRQHandler"),
     ("SysTick_Handler",),
 )
 

@@ -520,3 +520,22 @@ def test_interface_without_its_driver_is_a_device_error_and_exit_2(
     assert main(["run", "--config", str(config), "--duration", "1"]) == 2
     err = capsys.readouterr().err
     assert "kvaser" in err and "Traceback" not in err
+
+
+def test_ecu_rebooted_within_the_timeout_gets_the_parameters_again(rig: Rig) -> None:
+    """No silence to lose it by: the fresh ECU's EcuIdent (OnDefaults) says it restarted."""
+    rig.link.begin({1: 4.2, 6: 7}, 0.0)
+    rig.link.set_command(True, 3000, 200, 100)
+    rig.run(1.0)
+    assert rig.link.ecu.ident is not None and not rig.link.ecu.ident.on_defaults
+    rig.twin = SimulatedEcu(rig.ecu_bus, now=rig.t)  # a reset between two of its steps
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(3.6)
+    rig.run(2.0)
+    assert rig.link.counters.ecu_lost == 0 and rig.link.counters.ecu_restarts == 1
+    assert rig.twin.ecu.params.working_width_m == pytest.approx(4.2)
+    assert rig.twin.ecu.params.queue_len == 7
+    assert rig.link.counters.tx_params == 4 and rig.link.state == "ok"
+    assert rig.twin.ecu.state.running  # commanded again once its parameters were in force
+    assert [e for _, e in rig.events][-1] == (
+        "ECU restarted on its defaults: its parameters are sent again"
+    )

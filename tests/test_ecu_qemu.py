@@ -93,12 +93,19 @@ def image() -> Path:
     if shutil.which("arm-none-eabi-gcc") is None:
         pytest.skip("arm-none-eabi-gcc is not installed (scripts/sysdeps.sh firmware)")
     subprocess.run(
-        ["make", "--no-print-directory", "-s", "-f", "ecu/ports/stm32f4/firmware.mk"],
+        [
+            "make",
+            "--no-print-directory",
+            "-s",
+            "-f",
+            "ecu/ports/stm32f4/firmware.mk",
+            "VARIANT=qemu",
+        ],
         cwd=REPO,
         check=True,
         capture_output=True,
     )
-    return REPO / "build" / "fw" / "topdress-ecu-stm32f4.elf"
+    return REPO / "build" / "fw-qemu" / "topdress-ecu-stm32f4.elf"
 
 
 def _config() -> tuple[SimConfig, Drive, PcParams]:

@@ -5,6 +5,7 @@ layout for the task data, python-can and cantools for the CAN trace."""
 from __future__ import annotations
 
 import itertools
+import json
 import shutil
 import sqlite3
 import struct
@@ -14,6 +15,7 @@ import time
 import xml.etree.ElementTree as ET
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import can
 import numpy as np
@@ -26,7 +28,8 @@ from geo_rig import record
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML
 from topdress.ecu import meter_rate_kg_ha
-from topdress.geo.asapplied import rate_kg_ha
+from topdress.geo import vector
+from topdress.geo.asapplied import AsAppliedStream, rate_kg_ha
 from topdress.log.session import SessionReader
 from topdress.log.summary import summarise
 from topdress.sim.tractor import Drive
@@ -356,3 +359,29 @@ def test_the_fmis_shapefile_has_numeric_attributes_only(session: Path, tmp_path:
     codes = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
     assert list(cols["SpeedSrc"]) == [codes[s] for s in full["SpeedSrc"]]
     assert main([*args[:-2], "--format", "gpkg", "--out", str(tmp_path / "x.gpkg")]) == 2
+
+
+def test_geojson_in_many_batches_is_one_collection_as_written_at_once(
+    session: Path, tmp_path: Path
+) -> None:
+    """GeoJSON's batches are stitched into one FeatureCollection (GDAL's own append reads the
+    whole file again at each batch): the same features, in order, as one batch gives."""
+    layers: dict[str, dict[str, Any]] = {}
+    for label, chunk, batch in (("one", 1_000_000, 1_000_000), ("many", 7, 3)):
+        with SessionReader(session) as reader:
+            written = vector.write(
+                AsAppliedStream(reader, chunk, batch), tmp_path / f"{label}.geojson", "geojson"
+            )
+        assert [p.name for p in written] == [
+            f"{label}_points.geojson",
+            f"{label}_swaths.geojson",
+            f"{label}_swaths.qml",
+        ]
+        layers[label] = {p.stem.split("_")[1]: json.loads(p.read_text()) for p in written[:2]}
+    for kind in ("points", "swaths"):
+        one, many = layers["one"][kind], layers["many"][kind]
+        assert many["type"] == "FeatureCollection" and many["crs"] == one["crs"]
+        assert len(many["features"]) == len(one["features"]) > 60
+        assert many["features"] == one["features"]
+        _, cols = _read(tmp_path / f"many_{kind}.geojson")
+        assert len(cols["__geom__"]) == len(one["features"])

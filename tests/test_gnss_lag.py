@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import csv
 import json
+from collections import deque
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
@@ -25,7 +27,8 @@ from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import lag_summary, summarise
 from topdress.sim.tractor import Drive, Segment
 from topdress.terminal.canlink import CanLink
-from topdress.terminal.gnsslag import STORE_FILE, LagStore, LagWatch
+from topdress.terminal.gnsslag import LagWatch
+from topdress.terminal.lagstore import STORE_FILE, LagStore
 from topdress.terminal.receiver import ReceiverId, ReceiverWatch, input_key
 
 NMEA_LOGS = Path("/work/shared/nmea/gpsd-logs")
@@ -591,3 +594,76 @@ def test_what_the_ecu_said_of_its_lag_is_forgotten_when_it_is_lost() -> None:
     lost.on_frame(status, 0.0)
     lost.poll(1.0)  # no status for 1 s: lost
     assert lost.state == "lost" and lost.ecu.lag is None
+
+
+class _HeldRig(VirtualRig):
+    """The rig with the terminal's inbox held back: every GNSS line waits `hold_s` there before
+    the loop takes it (a busy loop, a flood of other inputs), though it arrived, and was
+    stamped, on time. The ECU's frames are taken at once (its parameter push goes on)."""
+
+    def __init__(self, hold_s: float, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.hold_s = hold_s
+        self._held: deque[tuple[str, float, Any]] = deque()
+
+    def run(self, until_s: float) -> None:
+        w, term = self.world, self.term
+        while w.t_s < until_s - 1e-9:
+            while (msg := self.ecu_bus.recv(timeout=0)) is not None:
+                w.deliver_can(msg)
+            out = w.step()
+            t = out.t_s
+            for line in out.nmea:
+                self.gnss.emit(t, line.encode())
+            for line in out.crop:
+                self.crop.emit(t, line.encode())
+            for frame_id, data in out.can:
+                term.inbox.put(("can", t, can.Message(arbitration_id=frame_id, data=data)))
+            while not term.inbox.empty():
+                item = term.inbox.get()
+                assert item is not None
+                if item[0] == "nmea":
+                    self._held.append(item)
+                else:
+                    term.handle(*item)
+            while self._held and self._held[0][1] <= t - self.hold_s + 1e-9:
+                term.handle(*self._held.popleft())
+            if round(t * 100) % 10 == 0:
+                term.tick(t)
+                self.snapshots.append((t, term.snapshot))
+
+
+def _learned_with_inbox_held(tmp_path: Path, hold_s: float) -> tuple[int, list[int]]:
+    """The lag the ECU learned on a start from rest, and the fix ages the terminal sent."""
+    drive = Drive(
+        [
+            Segment("stop", duration_s=2.0),
+            Segment("straight", speed_kmh=8.0, length_m=30.0, hold=True),
+            Segment("stop", duration_s=5.0),
+        ]
+    )
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = _HeldRig(hold_s, loads_config(DEFAULT_TOML), drive, session)
+    try:
+        rig.run(20.0)
+    finally:
+        rig.close()
+    learned = [x[1] for x in _lags(rig) if x[2] == "learned"]
+    assert learned and learned[-1] is not None
+    ages = [f.age_ms for _, f in _sent(rig) if isinstance(f, protocol.PcGnssTime)]
+    return learned[-1], ages
+
+
+def test_a_fix_held_in_the_inbox_is_sent_with_its_true_age_and_the_lag_does_not_move(
+    tmp_path: Path,
+) -> None:
+    """The age sent with each GNSS speed is the time from the line's arrival (its receive
+    timestamp) to the frame's transmission, so the loop's own wait is not learned as lag."""
+    free, free_ages = _learned_with_inbox_held(tmp_path / "free", 0.0)
+    held, held_ages = _learned_with_inbox_held(tmp_path / "held", 0.4)
+    assert abs(free - SIM_LAG_MS) <= 250
+    assert free_ages and set(free_ages) == {0}  # taken at once: no age
+    # every fix went out 400 ms after it came in (the wait of the 10 ms step included)
+    assert held_ages and min(held_ages) >= 400 and max(held_ages) <= 410
+    # the lag the ECU learns is the receiver's, not the receiver's plus the inbox's 400 ms
+    assert abs(held - free) <= 60, (held, free)

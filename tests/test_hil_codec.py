@@ -3,6 +3,7 @@ firmware's identifiers are the DBC's (the codec's freshness: tests/test_protocol
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from topdress import protocol
@@ -19,4 +20,7 @@ def test_hil_frames_are_apart_from_the_bus_frames() -> None:
     # the firmware's identifiers (td_hil.h) are the DBC's
     header = (REPO / "ecu" / "ports" / "common" / "td_hil.h").read_text(encoding="utf-8")
     for m in hil_database().messages:
-        assert f"0x{m.frame_id:08X}u" in header, m.name
+        # the port's names for them are the generated codec's, never a number written by hand
+        generated = "TD_HILCAN_" + re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", m.name).upper()
+        assert f"{generated}_FRAME_ID" in header, m.name
+        assert f"{m.frame_id:08X}" not in header.upper(), m.name

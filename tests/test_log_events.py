@@ -172,7 +172,7 @@ def test_the_pin_is_never_written_only_its_key(
     config.write_text(DEFAULT_TOML, encoding="utf-8")
     session = SessionLog.create(tmp_path / "logs", DEFAULT_TOML)
     rig = make_rig(drive(stand(30.0)), session=session)
-    rig.term.desk.config_path = config
+    rig.term.desk.settings.config_path = config
     try:
         rig.run(2.0)
         res = post(rig, op.ApplySettings("display", {"host": "0.0.0.0", "pin": PIN}))

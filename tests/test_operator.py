@@ -324,7 +324,7 @@ def test_catch_test_standing_gives_kg_per_rev_and_applies_it(tmp_path: Path) -> 
     true_kg_rev = 0.3
     path = _config_file(tmp_path)
     rig = make_rig(drive(stand(120.0)))
-    rig.term.desk.config_path = path
+    rig.term.desk.settings.config_path = path
     try:
         rig.run(3.0)
         res = post(rig, op.StartCatchTest("lower", revolutions=10.0, meter_rpm=20.0))
@@ -456,7 +456,7 @@ def _refuse_param(rig: VirtualRig, param_id: int) -> None:
 def test_settings_to_the_ecu_acknowledged_saved_or_refused_and_put_back(tmp_path: Path) -> None:
     path = _config_file(tmp_path)
     rig = make_rig(drive(stand(60.0)))
-    rig.term.desk.config_path = path
+    rig.term.desk.settings.config_path = path
     try:
         rig.run(2.0)
         bad = post(rig, op.ApplySettings("speed", {"cv_threshold_pct": 80.0}))
@@ -612,7 +612,7 @@ def test_lookahead_calibration_measures_meter_and_air_line_times(tmp_path: Path)
     to the simulated command-to-landing time and the air-line part to the plant's transport."""
     path = _config_file(tmp_path)
     rig = make_rig(drive(stand(200.0)))
-    rig.term.desk.config_path = path
+    rig.term.desk.settings.config_path = path
     world = rig.world
     try:
         rig.run(2.0)
@@ -708,7 +708,7 @@ def test_a_refused_look_ahead_parameter_is_shown_at_its_field(
     tmp_path: Path, values: dict[str, int], pid: int, key: str
 ) -> None:
     rig = make_rig(drive(stand(30.0)))
-    rig.term.desk.config_path = _config_file(tmp_path)
+    rig.term.desk.settings.config_path = _config_file(tmp_path)
     try:
         rig.run(2.0)
         _refuse_param(rig, pid)

@@ -13,7 +13,7 @@ from topdress.config import ECU_KEYS, SPEED_MODE_IDS, default_config, loads_conf
 from topdress.config_edit import section_values, validate_section
 from topdress.ecu import Ecu, EcuParams
 from topdress.protocol import SpeedMode, database
-from topdress.terminal.desk import refused_key
+from topdress.terminal.desksettings import refused_key
 
 
 def _dbc_param_ids() -> list[int]:

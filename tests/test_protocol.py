@@ -60,6 +60,8 @@ def test_frame_ids_are_the_dbc_ids_and_the_papers() -> None:
         "EcuFusedAux": DEFAULT_IDS.fused_aux,
         "EcuGnssLag": DEFAULT_IDS.gnss_lag,
         "EcuIdent": DEFAULT_IDS.ident,
+        "EcuCanHealth": DEFAULT_IDS.can_health,
+        "EcuFaultRecord": DEFAULT_IDS.fault_record,
     }
     assert DEFAULT_IDS.status == 0x185C6465 and DEFAULT_IDS.command == 0x0A5C6465
     assert all(m.is_extended_frame and m.length == 8 for m in db.messages)

@@ -1,6 +1,6 @@
 """The committed C codecs (ecu/src/gen/td_can.[ch] from the bus DBC, ecu/ports/common/gen/
-td_hilcan.[ch] from the HIL DBC) are what cantools generates from the DBCs today; one run of
-the generator checks both."""
+td_hilcan.[ch] from the HIL DBC) and the protocol's facts for the core (ecu/src/gen/td_dbc.h)
+are what the generators make of the DBCs today; one run of scripts/gen_codec.sh checks all."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def test_committed_codec_is_not_stale(tmp_path: Path) -> None:
         env=env,
         capture_output=True,
     )
-    for name in ("td_can.c", "td_can.h"):
+    for name in ("td_can.c", "td_can.h", "td_dbc.h"):
         fresh = _normalised(tmp_path / name)
         committed = _normalised(REPO / "ecu" / "src" / "gen" / name)
         assert fresh == committed, f"ecu/src/gen/{name} is stale: run scripts/gen_codec.sh"

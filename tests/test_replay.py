@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import itertools
 import math
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -23,7 +24,14 @@ from topdress.gnss.nmea import NmeaDecoder, make_sentence
 from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.events import CanEvent, Event, NmeaEvent, WheelEvent, read_file, write
 from topdress.log.export import session_events
-from topdress.log.replay import MAX_IDLE_S, ReplayRow, ReplayStats, ecu_params, replay
+from topdress.log.replay import (
+    MAX_IDLE_S,
+    ReplayRow,
+    ReplayStats,
+    ecu_params,
+    replay,
+    replay_stream,
+)
 from topdress.log.session import SessionLog, SessionReader
 
 R_M, PPR = 0.0615, 500
@@ -333,3 +341,46 @@ def test_the_step_loops_wheel_walker_gives_what_the_search_gives() -> None:
     times = range(0, 260_000, 10_000)
     assert [walk(t) for t in times] == [w.at(t) for t in times]
     assert [walk(t) for t in (0, 60_000, 250_000)] != [7, 7, 7]
+
+
+def test_replay_streams_a_file_in_two_passes_with_the_rows_of_a_whole_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`topdress replay` goes through the file twice (the survey, then the run), holding no
+    list of its events, and writes what a replay of all events read at once gives."""
+    events = drive_events(20.0)
+    passes: list[int] = []
+    streamed = list(replay_stream(source_of(events, passes), default_config(), "paper"))
+    assert streamed == replay(events, default_config(), "paper") and len(streamed) > 30
+    assert passes == [len(events), len(events)]
+    # out of time order: sorted once in memory, then the same rows
+    swapped = [events[0], events[2], events[1], *events[3:]]
+    assert swapped[1].t > swapped[2].t
+    passes.clear()
+    assert list(replay_stream(source_of(swapped, passes), default_config(), "paper")) == streamed
+    assert passes == [len(events), len(events)]  # the survey, then one read to sort
+    # the command over a file with a malformed line: said once, the rows as above
+    path = tmp_path / "e.ndjson"
+    with path.open("w") as f:
+        write(events[:100], f)
+        f.write("{not json\n")
+        write(events[100:], f)
+    out = tmp_path / "r.csv"
+    assert main(["replay", str(path), "--speed-mode", "paper", "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.count("e.ndjson:101: skipped") == 1
+    assert f"{len(streamed)} speed updates from {len(events)} events" in captured.out
+    with out.open() as f:
+        assert [float(r["t"]) for r in csv.DictReader(f)] == pytest.approx(
+            [r.t for r in streamed], abs=1e-3
+        )
+
+
+def source_of(events: list[Event], passes: list[int]) -> Callable[[], Iterator[Event]]:
+    def source() -> Iterator[Event]:
+        passes.append(0)
+        for e in events:
+            passes[-1] += 1
+            yield e
+
+    return source

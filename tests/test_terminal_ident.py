@@ -8,15 +8,17 @@ from pathlib import Path
 
 import can
 import pytest
+from topdress.ecu._core import lib
 
 from test_terminal import VirtualRig, _drive
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, loads_config
+from topdress.ecu.params import EcuParams, check
 from topdress.i18n import render
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import format_text, summarise
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
-from topdress.terminal.canlink import ident_mismatch
+from topdress.terminal.ecuview import ident_mismatch
 
 
 def _ident_frame(protocol_minor: int, target: int = 1, reset: int = 2) -> can.Message:
@@ -33,6 +35,7 @@ def _ident_frame(protocol_minor: int, target: int = 1, reset: int = 2) -> can.Me
             "Transport": 1,
             "ResetCause": reset,
             "ClockFallback": 0,
+            "OnDefaults": 0,
         }
     )
     return can.Message(arbitration_id=msg.frame_id, data=data, is_extended_id=True)
@@ -60,6 +63,7 @@ def test_the_host_core_is_logged_shown_and_summarised(tmp_path: Path) -> None:
         events = [e for e in reader.events() if e.kind == "ecu.ident"]
         summary = summarise(reader)
     # at power-up and again when the terminal starts commanding: logged each time, said once
+    # (the first parameter reached the core before its first step: not on its defaults)
     assert len(events) == 2
     assert (
         dict(events[0].detail)
@@ -72,6 +76,7 @@ def test_the_host_core_is_logged_shown_and_summarised(tmp_path: Path) -> None:
             "transport": "in-process",
             "reset_cause": "unknown",
             "clock_fallback": False,
+            "on_defaults": False,
         }
     )
     assert (
@@ -156,3 +161,35 @@ def test_mismatch_is_any_other_version(minor: int, differs: bool) -> None:
     ident = protocol.decode(_ident_frame(minor))
     assert isinstance(ident, protocol.EcuIdent)
     assert ident_mismatch(ident) is differs
+
+
+def test_an_ecu_restarted_faster_than_the_timeout_is_sent_its_parameters_again(
+    tmp_path: Path,
+) -> None:
+    """A reset shorter than `[can] ecu_timeout_s` never makes the ECU lost; its EcuIdent says it
+    runs on its firmware defaults (OnDefaults), and the terminal pushes its parameters again."""
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = VirtualRig(loads_config(DEFAULT_TOML), _drive(8.0, 60.0), session)
+    fused = protocol.SpeedMode.FUSED.code
+    try:
+        rig.run(8.0)
+        w = rig.world
+        assert w.ecu.params.speed_mode == fused and w.ecu.state.running  # the file's mode
+        restarted_t = w.t_s
+        defaults = (w.cfg.ecu or EcuParams.defaults()).to_c()
+        check(lib.td_app_init(w.ecu._app, defaults, w.now_us), "reset")
+        assert w.ecu.params.speed_mode != fused  # the firmware's default: the paper's rule
+        rig.run(11.0)
+    finally:
+        rig.close()
+    after = [s for t, s in rig.snapshots if t > restarted_t]
+    assert all(s.ecu_link != "lost" for s in after)  # never unheard for 0.5 s
+    assert rig.term.link.counters.ecu_lost == 0 and rig.term.link.counters.ecu_restarts == 1
+    assert rig.world.ecu.params.speed_mode == fused  # pushed again
+    assert rig.world.ecu.state.running and after[-1].ecu_link == "ok"
+    said = [(t, e) for t, e in rig.events if e.startswith("ECU restarted")]
+    assert [e for _, e in said] == ["ECU restarted on its defaults: its parameters are sent again"]
+    assert restarted_t < said[0][0] < restarted_t + 0.1
+    with SessionReader(session.path) as reader:
+        idents = [e for e in reader.events() if e.kind == "ecu.ident"]
+    assert [e.detail["on_defaults"] for e in idents if e.t > restarted_t][:1] == [True]

@@ -137,6 +137,7 @@ typedef struct {
     td_cal_t cal;              /**< metering catch test (td_cal.h) */
     td_ident_t ident;          /**< who the ECU is (EcuIdent); host until the port says otherwise */
     bool ident_due;            /**< EcuIdent goes out at the next step */
+    bool params_taken;         /**< a PcParamSet was taken since power-up (EcuIdent.OnDefaults 0) */
 } td_app_t;
 
 /** Initialise with a parameter set (validated: TD_E_RANGE / TD_E_INCONSISTENT on a bad one). */

@@ -28,8 +28,6 @@
 #include "td_pid.h"
 #include "td_port.h"
 
-#define TD_ID_PC_CAL_COMMAND 0x0A646465u
-#define TD_ID_ECU_CAL_STATUS 0x18656465u
 
 #define TD_CAL_MAX_WHEEL_KMH 0.5f  /**< ground wheel faster than this: the machine moves, abort */
 #define TD_CAL_MIN_RPM 0.5f        /**< slowest meter speed of a catch test, r/min */
@@ -37,18 +35,11 @@
 #define TD_CAL_MAX_REV 1000.0f     /**< most revolutions of one catch test */
 #define TD_CAL_SLACK_S 10.0f       /**< time budget: twice the nominal duration plus this, s */
 
-typedef enum { TD_CAL_IDLE = 0, TD_CAL_RUNNING = 1, TD_CAL_DONE = 2, TD_CAL_ABORTED = 3 } td_cal_state_t;
-
-typedef enum {
-    TD_CAL_R_NONE = 0,     /**< running or done normally */
-    TD_CAL_R_RESET = 1,    /**< the PC sent reset during the test */
-    TD_CAL_R_RUNNING = 2,  /**< a start command is in force (refused, or aborted by a start) */
-    TD_CAL_R_MOVING = 3,   /**< the ground wheel turns */
-    TD_CAL_R_BLOCKED = 4,  /**< the meter does not turn */
-    TD_CAL_R_TIMEOUT = 5,  /**< longer than the time budget */
-    TD_CAL_R_BAD_VALUE = 6, /**< revolutions or speed outside their range */
-    TD_CAL_R_FANS_OFF = 7   /**< a look-ahead test without a start command in force (no fans) */
-} td_cal_reason_t;
+/* td_cal_state_t (EcuCalStatus.CalState) and td_cal_reason_t (CalReason): td_dbc.h. The reasons:
+ * NONE running or done normally; RESET the PC sent reset during the test; RUNNING a start
+ * command is in force (refused, or aborted by a start); MOVING the ground wheel turns; BLOCKED
+ * the meter does not turn; TIMEOUT longer than the time budget; BAD_VALUE revolutions or speed
+ * outside their range; FANS_OFF a look-ahead test without a start command in force (no fans). */
 
 /** What the catch test reads each step (from td_app's inputs and state). */
 typedef struct {

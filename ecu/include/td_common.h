@@ -13,6 +13,7 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include "td_dbc.h" /* the protocol's ids, value tables and parameter table (from the DBC) */
 
 /* ---- error codes (negative) ---- */
 #define TD_OK 0
@@ -25,16 +26,24 @@
 #define TD_E_INCONSISTENT (-7) /**< parameter set inconsistent (e.g. CV window > queue length) */
 #define TD_E_FULL (-8)         /**< transmit queue full, frame dropped */
 
-/* ---- fault word bits (td_app_t.faults) ---- */
-#define TD_FAULT_CMD_TIMEOUT (1u << 0)   /**< no valid PcCommand for > cmd_timeout_ms: meters stopped; clears on the next valid command */
-#define TD_FAULT_GNSS_LOST (1u << 1)     /**< GNSS speed missing (0xFF) or stale (> gnss_timeout_ms): wheel speed used; clears when GNSS returns */
-#define TD_FAULT_WHEEL_ENCODER (1u << 2) /**< wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms: GNSS used; latched until a stop command */
-#define TD_FAULT_UPPER_BLOCKED (1u << 3) /**< upper meter commanded but not turning for > blocked_time_ms: upper motor stopped; latched until a stop command */
-#define TD_FAULT_LOWER_BLOCKED (1u << 4) /**< same, lower meter */
-#define TD_FAULT_UPPER_FAN_LOW (1u << 5) /**< upper fan below fan_min_rpm after the spin-up grace: upper meter held at zero; clears when the fan is up */
-#define TD_FAULT_LOWER_FAN_LOW (1u << 6) /**< same, lower fan */
-#define TD_FAULT_NO_SPEED (1u << 7)      /**< neither speed source usable: meters held at zero */
-#define TD_FAULT_GNSS_FROZEN (1u << 8)   /**< running, wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms and the GNSS value never changed meanwhile (frozen receiver): GNSS not used; clears when the wheel turns or GNSS drops below enc_fault_gnss_kmh (a GNSS value that changes while the wheel still reads ~0 latches WHEEL_ENCODER instead) */
+/* ---- fault word bits (td_app_t.faults): TD_FAULT_* of td_dbc.h, named in the DBC ----
+ * CMD_TIMEOUT   no valid PcCommand for > cmd_timeout_ms: meters stopped; clears on the next
+ *               valid command
+ * GNSS_LOST     GNSS speed missing (0xFF) or stale (> gnss_timeout_ms): wheel speed used;
+ *               clears when GNSS returns
+ * WHEEL_ENCODER wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms: GNSS
+ *               used; latched until a stop command
+ * UPPER_BLOCKED upper meter commanded but not turning for > blocked_time_ms: upper motor
+ *               stopped; latched until a stop command
+ * LOWER_BLOCKED same, lower meter
+ * UPPER_FAN_LOW upper fan below fan_min_rpm after the spin-up grace: upper meter held at zero;
+ *               clears when the fan is up
+ * LOWER_FAN_LOW same, lower fan
+ * NO_SPEED      neither speed source usable: meters held at zero
+ * GNSS_FROZEN   running, wheel reads ~0 while GNSS > enc_fault_gnss_kmh for > enc_fault_time_ms
+ *               and the GNSS value never changed meanwhile (frozen receiver): GNSS not used;
+ *               clears when the wheel turns or GNSS drops below enc_fault_gnss_kmh (a GNSS value
+ *               that changes while the wheel still reads ~0 latches WHEEL_ENCODER instead) */
 
 /** Latched faults: cleared only by a stop command (operator acknowledgement). */
 #define TD_FAULT_LATCHED_MASK (TD_FAULT_WHEEL_ENCODER | TD_FAULT_UPPER_BLOCKED | TD_FAULT_LOWER_BLOCKED)
@@ -42,20 +51,18 @@
 /** Layers / metering motors and fans. */
 typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
 
-/** Speed sources, as sent in EcuDiag.SpeedSource. TD_SRC_FUSED: the fused estimate fed by both
- *  the wheel and GNSS (in TD_MODE_FUSED, WHEEL and GNSS name the one sensor still feeding it). */
-typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED = 3 } td_source_t;
-
-/** Speed modes, as in parameter SpeedMode. TD_MODE_FUSED: the Kalman estimate of td_fused.h. */
-typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2, TD_MODE_FUSED = 3 } td_speed_mode_t;
+/* td_dbc.h (generated from the DBC's value tables):
+ * td_source_t, the speed source in use (EcuDiag.SpeedSource). TD_SRC_FUSED: the fused estimate
+ *  fed by both the wheel and GNSS (in TD_MODE_FUSED, WHEEL and GNSS name the one sensor still
+ *  feeding it).
+ * td_speed_mode_t, the speed mode (parameter SpeedMode). TD_MODE_FUSED: the Kalman estimate of
+ *  td_fused.h.
+ * td_compare_t, which speed the dual rule compares with switch_speed_kmh (SwitchCompare). */
 
 /** Slip compensation of the wheel speed (parameter SlipComp). Modes dual, wheel and GNSS: none,
  *  the scale the fused estimate learned, eq. 5. The fused mode always compensates: eq. 5's shape
  *  in speed times a learned factor, except with TD_SLIP_LEARNED (one learned constant scale). */
 typedef enum { TD_SLIP_OFF = 0, TD_SLIP_LEARNED = 1, TD_SLIP_MODEL = 2 } td_slip_comp_t;
-
-/** Which speed the dual rule compares with switch_speed_kmh (parameter SwitchCompare). */
-typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
 
 /** Elapsed microseconds from `then_us` to `now_us`, correct across the 2^32 wrap. */
 static inline uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us) {

@@ -49,17 +49,15 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include "td_common.h"
 #include "td_fused.h"
 
 #define TD_LAG_MAX_S 3.0f /**< learned lags are 0..3 s */
 
-/** Where the GNSS lag in use comes from (EcuGnssLag.LagState). */
-typedef enum {
-    TD_LAG_START = 0,     /**< learning (GnssLagAuto 1), not learned yet: GnssLag is used */
-    TD_LAG_LEARNED = 1,   /**< learned (GnssLagAuto 1): the learned lag is used */
-    TD_LAG_FIXED = 2,     /**< GnssLagAuto 0: GnssLag is used, the data do not contradict it */
-    TD_LAG_OVERRULED = 3  /**< GnssLagAuto 0, but the learned lag differs by more than 0.3 s: it is used */
-} td_lag_state_t;
+/* td_lag_state_t, where the GNSS lag in use comes from (EcuGnssLag.LagState): td_dbc.h.
+ * START learning (GnssLagAuto 1), not learned yet: GnssLag is used; LEARNED learned (GnssLagAuto
+ * 1): the learned lag is used; FIXED GnssLagAuto 0: GnssLag is used, the data do not contradict
+ * it; OVERRULED GnssLagAuto 0, but the learned lag differs by more than 0.3 s: it is used. */
 
 /** Integrals over a stretch of time: of u (m), of z (m), and its length (s). */
 typedef struct {

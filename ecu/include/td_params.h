@@ -65,12 +65,11 @@ typedef struct {
     /* not on CAN: fixed properties of the build */
     float fan_rpm_at_full_duty;     /**< fan feed-forward scale, rpm, (0, 60000], default 4000 */
     uint16_t fan_spinup_ms;         /**< grace after start before FAN_LOW is flagged, default 3000 */
-    uint32_t status_id;             /**< EcuStatus identifier, 29-bit, default 0x185C6465 */
-    uint32_t command_id;            /**< PcCommand identifier, 29-bit, default 0x0A5C6465; the two differ and take no other frame's id */
+    uint32_t status_id;             /**< EcuStatus identifier, 29-bit, default TD_ID_ECU_STATUS */
+    uint32_t command_id;            /**< PcCommand identifier, 29-bit, default TD_ID_PC_COMMAND; the two differ and take no other frame's id */
 } td_params_t;
 
-/** Number of the highest parameter id. */
-#define TD_PARAM_COUNT 39u
+/* TD_PARAM_COUNT, the number of the highest parameter id: td_dbc.h (PcParamSet). */
 
 /** Fill `p` with the defaults. */
 void td_params_default(td_params_t *p);

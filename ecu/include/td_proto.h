@@ -11,23 +11,12 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include "td_common.h"
 #include "td_port.h"
 
-#define TD_ID_ECU_STATUS 0x185C6465u
-#define TD_ID_PC_COMMAND 0x0A5C6465u
-#define TD_ID_ECU_DIAG 0x185D6465u
-#define TD_ID_ECU_SPEEDS 0x185E6465u
-#define TD_ID_ECU_TARGETS 0x185F6465u
-#define TD_ID_PC_PARAM_SET 0x0A606465u
-#define TD_ID_ECU_PARAM_ACK 0x18616465u
-#define TD_ID_PC_GNSS_TIME 0x0A626465u
-#define TD_ID_ECU_FUSED 0x18636465u
-#define TD_ID_ECU_FUSED_AUX 0x18666465u
-#define TD_ID_ECU_GNSS_LAG 0x18696465u
-#define TD_ID_ECU_IDENT 0x18676465u
-
-#define TD_RUN_STOPPED 0x00u
-#define TD_RUN_RUNNING 0x0Au
+/* Frame identifiers (TD_ID_*), EcuStatus.RunState (TD_RUN_*) and EcuIdent's targets,
+ * transports and reset causes (td_target_t, td_transport_t, td_reset_cause_t): td_dbc.h, from
+ * the DBC. */
 
 /** PcCommand (paper Table 1), physical. */
 typedef struct {
@@ -70,7 +59,7 @@ typedef struct {
 
 typedef struct {
     uint8_t param_id;
-    uint8_t result;            /**< 0 ok, 1 unknown param, 2 out of range, 3 busy, 4 inconsistent, 5 bad frame */
+    uint8_t result;            /**< td_ack_result_t */
     uint32_t raw;              /**< the value now in force, raw DBC units */
 } td_param_ack_t;
 
@@ -111,19 +100,6 @@ typedef struct {
     uint8_t state;             /**< td_lag_state_t */
     bool automatic;            /**< GnssLagAuto */
 } td_gnss_lag_t;
-/** Targets, transports and reset causes of EcuIdent (DBC value tables). */
-typedef enum { TD_TARGET_HOST = 0, TD_TARGET_STM32F4 = 1 } td_target_t;
-typedef enum { TD_TRANSPORT_IN_PROCESS = 0, TD_TRANSPORT_CAN = 1, TD_TRANSPORT_SLCAN_HIL = 2 } td_transport_t;
-typedef enum {
-    TD_RESET_UNKNOWN = 0,
-    TD_RESET_POWER_ON = 1,
-    TD_RESET_PIN = 2,
-    TD_RESET_WATCHDOG = 3,
-    TD_RESET_HARD_FAULT = 4,
-    TD_RESET_SOFTWARE = 5,
-    TD_RESET_BROWN_OUT = 6
-} td_reset_cause_t;
-
 /** What the port says of itself (td_app_set_ident); the versions come from td_version.h. */
 typedef struct {
     uint8_t target;            /**< td_target_t */
@@ -145,9 +121,10 @@ int td_proto_encode_gnss_time(const td_gnss_time_t *g, td_can_frame_t *f);
 int td_proto_encode_fused(const td_fused_diag_t *d, td_can_frame_t *f);
 int td_proto_encode_fused_aux(const td_fused_aux_t *a, td_can_frame_t *f);
 int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f);
-/** EcuIdent: the port's identity with the firmware and protocol versions of td_version.h.
+/** EcuIdent: the port's identity with the firmware and protocol versions of td_version.h, and
+ *  `on_defaults`: no PcParamSet taken since power-up (tells a power-up from a command timeout).
  *  TD_E_ARG for a target, transport or reset cause outside its value table. */
-int td_proto_encode_ident(const td_ident_t *id, td_can_frame_t *f);
+int td_proto_encode_ident(const td_ident_t *id, bool on_defaults, td_can_frame_t *f);
 /**
  * Decode PcParamSet into the parameter id and its physical value (units of td_params.h).
  * TD_E_UNKNOWN_PARAM for an id outside 1..TD_PARAM_COUNT, TD_E_RANGE outside the DBC range.

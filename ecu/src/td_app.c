@@ -180,7 +180,7 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us) {
 
 int td_app_set_ident(td_app_t *app, const td_ident_t *ident) {
     td_can_frame_t probe;
-    if (app == NULL || td_proto_encode_ident(ident, &probe) != TD_OK) {
+    if (app == NULL || td_proto_encode_ident(ident, false, &probe) != TD_OK) {
         return TD_E_ARG;
     }
     app->ident = *ident;
@@ -309,7 +309,7 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
     int rc = td_proto_decode_param_set(frame, &id, &value);
     if (rc == TD_E_LENGTH) {
         ack.param_id = frame->dlc > 0u ? frame->data[0] : 0u;
-        ack.result = 5u;
+        ack.result = (uint8_t)TD_ACK_BAD_FRAME;
         app->cnt.rx_bad_length++;
     } else {
         ack.param_id = frame->data[0];
@@ -319,19 +319,20 @@ static int apply_param_set(td_app_t *app, const td_can_frame_t *frame) {
         }
         switch (rc) {
         case TD_OK:
-            ack.result = 0u;
+            ack.result = (uint8_t)TD_ACK_OK;
+            app->params_taken = true; /* EcuIdent says so from now on (OnDefaults 0) */
             break;
         case TD_E_UNKNOWN_PARAM:
-            ack.result = 1u;
+            ack.result = (uint8_t)TD_ACK_UNKNOWN_PARAM;
             break;
         case TD_E_RANGE:
-            ack.result = 2u;
+            ack.result = (uint8_t)TD_ACK_OUT_OF_RANGE;
             break;
         case TD_E_BUSY:
-            ack.result = 3u;
+            ack.result = (uint8_t)TD_ACK_BUSY;
             break;
         default:
-            ack.result = 4u;
+            ack.result = (uint8_t)TD_ACK_INCONSISTENT;
             break;
         }
         float in_force = 0.0f;
@@ -750,7 +751,7 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
     }
     if (app->ident_due) {
         td_can_frame_t f;
-        (void)td_proto_encode_ident(&app->ident, &f);
+        (void)td_proto_encode_ident(&app->ident, !app->params_taken, &f);
         txq_push(app, &f);
         app->ident_due = false;
     }

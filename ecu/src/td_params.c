@@ -8,7 +8,7 @@
 #include "td_cal.h"
 #include "td_proto.h"
 
-typedef enum { F32, U8, U16 } td_ptype_t;
+typedef enum { TD_PF32, TD_PU8, TD_PU16 } td_ptype_t;
 
 typedef struct {
     uint16_t offset;   /* offsetof the field in td_params_t */
@@ -17,61 +17,28 @@ typedef struct {
     uint32_t raw_min, raw_max;
 } td_pdesc_t;
 
-#define P(field, type, scale, lo, hi) { (uint16_t)offsetof(td_params_t, field), (type), (scale), (lo), (hi) }
+/* Index = parameter id - 1: the table of td_dbc.h, generated from PcParamSet's multiplexed
+ * signals (their TdField attribute names the field). */
+#define TD_PDESC(id, signal, field, type, scale, lo, hi) \
+    { (uint16_t)offsetof(td_params_t, field), (uint8_t)(type), (scale), (lo), (hi) },
+static const td_pdesc_t k_desc[TD_PARAM_COUNT] = { TD_PARAM_TABLE(TD_PDESC) };
 
-/* Index = parameter id - 1. Raw ranges exactly as the multiplexed signals of PcParamSet;
- * test_params checks this table against the generated codec. */
-static const td_pdesc_t k_desc[TD_PARAM_COUNT] = {
-    P(working_width_m, F32, 0.001f, 500u, 30000u),
-    P(kg_per_rev[0], F32, 0.0001f, 10u, 50000u),
-    P(kg_per_rev[1], F32, 0.0001f, 10u, 50000u),
-    P(wheel_radius_m, F32, 0.0001f, 200u, 10000u),
-    P(wheel_ppr, U16, 1.0f, 1u, 10000u),
-    P(queue_len, U8, 1.0f, 2u, 16u),
-    P(cv_window, U8, 1.0f, 2u, 16u),
-    P(cv_threshold_pct, F32, 0.01f, 10u, 5000u),
-    P(switch_speed_kmh, F32, 0.01f, 0u, 2500u),
-    P(speed_mode, U8, 1.0f, 0u, 3u),
-    P(switch_compare, U8, 1.0f, 0u, 1u),
-    P(pid_kp, F32, 0.0001f, 0u, 100000u),
-    P(pid_ki, F32, 0.0001f, 0u, 100000u),
-    P(pid_kd, F32, 0.0001f, 0u, 100000u),
-    P(pid_kff, F32, 0.00001f, 0u, 100000u),
-    P(cmd_timeout_ms, U16, 1.0f, 100u, 10000u),
-    P(gnss_timeout_ms, U16, 1.0f, 100u, 10000u),
-    P(min_work_speed_kmh, F32, 0.01f, 0u, 1000u),
-    P(wheel_update_ms, U16, 1.0f, 50u, 5000u),
-    P(wheel_samples, U8, 1.0f, 1u, 16u),
-    P(meter_counts_per_rev, U16, 1.0f, 1u, 65535u),
-    P(fan_min_rpm, U16, 1.0f, 0u, 6000u),
-    P(fan_ppr, U8, 1.0f, 1u, 255u),
-    P(enc_fault_gnss_kmh, F32, 0.01f, 50u, 2500u),
-    P(enc_fault_time_ms, U16, 1.0f, 100u, 30000u),
-    P(blocked_time_ms, U16, 1.0f, 100u, 30000u),
-    P(status_period_ms, U16, 1.0f, 20u, 1000u),
-    P(slip_comp, U8, 1.0f, 0u, 2u),
-    P(gnss_lag_ms, U16, 1.0f, 0u, 3000u),
-    P(lead_meter_ms, U16, 1.0f, 0u, 3000u),
-    P(lead_air_ms, U16, 1.0f, 0u, 5000u),
-    P(fused_jerk_ms3, F32, 0.01f, 1u, 5000u),
-    P(fused_gnss_std_kmh, F32, 0.01f, 1u, 1000u),
-    P(fused_wheel_noise_pct, F32, 0.01f, 10u, 5000u),
-    P(wheel_stop_ms, U16, 1.0f, 20u, 5000u),
-    P(drive_adapt, U8, 1.0f, 0u, 1u),
-    P(meter_tau_ms, U16, 1.0f, 0u, 2000u),
-    P(lead_stop_ms, U16, 1.0f, 0u, 5000u),
-    P(gnss_lag_auto, U8, 1.0f, 0u, 1u),
-};
+/* Each field is stored as the table says (a build error otherwise: an array of size -1). */
+#define TD_PSIZE_TD_PF32 sizeof(float)
+#define TD_PSIZE_TD_PU8 sizeof(uint8_t)
+#define TD_PSIZE_TD_PU16 sizeof(uint16_t)
+#define TD_PCHECK(id, signal, field, type, scale, lo, hi) \
+    typedef char td_pcheck_##signal[sizeof(((td_params_t *)0)->field) == TD_PSIZE_##type ? 1 : -1];
+TD_PARAM_TABLE(TD_PCHECK)
 
 /* Float rounding of a value that went through raw * scale stays well inside this many raw units. */
 #define TD_RAW_TOL 0.05f
 #define TD_FAN_RPM_FULL_MAX 60000.0f
 
-/* A configurable identifier must not be that of another frame of the protocol. */
+/* A configurable identifier (status, command) must not be that of another frame of the protocol. */
+#define TD_TAKEN(frame_id) (id != TD_ID_ECU_STATUS && id != TD_ID_PC_COMMAND && id == (frame_id)) ||
 static bool id_taken(uint32_t id) {
-    return id == TD_ID_ECU_DIAG || id == TD_ID_ECU_SPEEDS || id == TD_ID_ECU_TARGETS || id == TD_ID_PC_PARAM_SET ||
-           id == TD_ID_ECU_PARAM_ACK || id == TD_ID_PC_GNSS_TIME || id == TD_ID_ECU_FUSED ||
-           id == TD_ID_ECU_FUSED_AUX || id == TD_ID_ECU_GNSS_LAG || id == TD_ID_PC_CAL_COMMAND || id == TD_ID_ECU_CAL_STATUS;
+    return TD_FRAME_IDS(TD_TAKEN) false;
 }
 
 void td_params_default(td_params_t *p) {
@@ -123,16 +90,16 @@ void td_params_default(td_params_t *p) {
     p->gnss_lag_auto = 1u;
     p->fan_rpm_at_full_duty = 4000.0f;
     p->fan_spinup_ms = 3000u;
-    p->status_id = 0x185C6465u;
-    p->command_id = 0x0A5C6465u;
+    p->status_id = TD_ID_ECU_STATUS;
+    p->command_id = TD_ID_PC_COMMAND;
 }
 
 static float field_get(const td_params_t *p, const td_pdesc_t *d) {
     const unsigned char *base = (const unsigned char *)p + d->offset;
     switch (d->type) {
-    case U8:
+    case TD_PU8:
         return (float)*(const uint8_t *)(const void *)base;
-    case U16:
+    case TD_PU16:
         return (float)*(const uint16_t *)(const void *)base;
     default:
         return *(const float *)(const void *)base;
@@ -142,10 +109,10 @@ static float field_get(const td_params_t *p, const td_pdesc_t *d) {
 static void field_set(td_params_t *p, const td_pdesc_t *d, float value) {
     unsigned char *base = (unsigned char *)p + d->offset;
     switch (d->type) {
-    case U8:
+    case TD_PU8:
         *(uint8_t *)(void *)base = (uint8_t)(value + 0.5f);
         break;
-    case U16:
+    case TD_PU16:
         *(uint16_t *)(void *)base = (uint16_t)(value + 0.5f);
         break;
     default:

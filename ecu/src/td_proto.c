@@ -319,7 +319,7 @@ int td_proto_encode_gnss_lag(const td_gnss_lag_t *g, td_can_frame_t *f) {
     return TD_OK;
 }
 
-int td_proto_encode_ident(const td_ident_t *id, td_can_frame_t *f) {
+int td_proto_encode_ident(const td_ident_t *id, bool on_defaults, td_can_frame_t *f) {
     if (id == NULL || f == NULL || id->target > (uint8_t)TD_TARGET_STM32F4 ||
         id->transport > (uint8_t)TD_TRANSPORT_SLCAN_HIL || id->reset_cause > (uint8_t)TD_RESET_BROWN_OUT) {
         return TD_E_ARG;
@@ -334,6 +334,7 @@ int td_proto_encode_ident(const td_ident_t *id, td_can_frame_t *f) {
     m.transport = id->transport;
     m.reset_cause = id->reset_cause;
     m.clock_fallback = id->clock_fallback ? 1u : 0u;
+    m.on_defaults = on_defaults ? 1u : 0u;
     frame_head(f, TD_ID_ECU_IDENT);
     (void)td_can_ecu_ident_pack(f->data, &m, sizeof f->data);
     return TD_OK;

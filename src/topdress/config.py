@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from topdress.errors import ConfigError
-from topdress.protocol.model import Compare, SpeedMode
+from topdress.protocol.model import DEFAULT_IDS, Compare, SpeedMode
 from topdress.protocol.params import ParamSpec, param, params
 
 # Numeric fields carry metadata {"range": (lo, hi)}; str fields may carry {"choices": (...)}.
@@ -177,6 +177,20 @@ CAN_ID_NAMES = (
 )
 
 
+#: The frames whose identifiers `[can.ids]` may set (the others keep the DBC's).
+CONFIGURABLE_IDS = (
+    "status",
+    "command",
+    "diag",
+    "speeds",
+    "targets",
+    "param_set",
+    "param_ack",
+    "cal_command",
+    "cal_status",
+)
+
+
 @dataclass(frozen=True)
 class CanConfig:
     interface: str = "virtual"
@@ -186,18 +200,9 @@ class CanConfig:
     send_on_gnss: bool = False
     send_on_rate: bool = False
     ecu_timeout_s: float = _num(0.5, 0.05, 60.0)
+    # the DBC's identifiers of the frames a [can.ids] table may move
     ids: Mapping[str, int] = field(
-        default_factory=lambda: {
-            "status": 0x185C6465,
-            "command": 0x0A5C6465,
-            "diag": 0x185D6465,
-            "speeds": 0x185E6465,
-            "targets": 0x185F6465,
-            "param_set": 0x0A606465,
-            "param_ack": 0x18616465,
-            "cal_command": 0x0A646465,
-            "cal_status": 0x18656465,
-        }
+        default_factory=lambda: {k: getattr(DEFAULT_IDS, k) for k in CONFIGURABLE_IDS}
     )
     # The adapter's own options, passed to python-can as keyword arguments (slcan's
     # tty_baudrate, pcan's fd, ...): [can.options] in the file.
@@ -705,7 +710,17 @@ def _check_timing(cfg: TerminalConfig) -> None:
         )
 
 
-DEFAULT_TOML = """\
+def _ids_toml() -> str:
+    """The [can.ids] lines of the default file: the DBC's identifiers."""
+    notes = {"cal_command": "   # calibration (catch test) command and its status"}
+    return "".join(
+        f"{k} = 0x{getattr(DEFAULT_IDS, k):08X}{notes.get(k, '')}\n" for k in CONFIGURABLE_IDS
+    )
+
+
+_IDS_TOML = _ids_toml()
+DEFAULT_TOML = (
+    """\
 # topdress terminal configuration. Every key is optional; shown here with its default.
 
 [machine]
@@ -808,16 +823,9 @@ send_on_rate = false       # also send it at once when a rate changes (at most e
 ecu_timeout_s = 0.5        # no ECU status for this long = ECU lost
 
 [can.ids]
-status = 0x185C6465
-command = 0x0A5C6465
-diag = 0x185D6465
-speeds = 0x185E6465
-targets = 0x185F6465
-param_set = 0x0A606465
-param_ack = 0x18616465
-cal_command = 0x0A646465   # calibration (catch test) command and its status
-cal_status = 0x18656465
-
+"""
+    + _IDS_TOML
+    + """
 [can.options]              # the adapter's own python-can options, e.g. for slcan:
 # tty_baudrate = 115200
 
@@ -868,3 +876,4 @@ meter_ms = 0               # meter response; also the ECU's LeadMeter
 airline_ms = 0             # air-line transport; also the ECU's LeadAirLine
 stop_ms = 0                # the ECU's look-ahead while the speed falls (LeadStop); 0 = as rising
 """
+)

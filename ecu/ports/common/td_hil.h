@@ -24,13 +24,15 @@
 #include <stdbool.h>
 #include <stdint.h>
 #include "td_capture.h"
+#include "td_hilcan.h"
 #include "td_port.h"
 
-#define TD_HIL_ID_WHEEL_EDGE 0x0A716465u
-#define TD_HIL_ID_SENSORS 0x0A706465u
-#define TD_HIL_ID_CLOCK 0x0A726465u
-#define TD_HIL_ID_ACTUATORS 0x18706465u
-#define TD_HIL_ID_STEP 0x18716465u
+/* The HIL frames' identifiers: the codec generated from protocol/topdress_hil.dbc. */
+#define TD_HIL_ID_WHEEL_EDGE TD_HILCAN_HIL_WHEEL_EDGE_FRAME_ID
+#define TD_HIL_ID_SENSORS TD_HILCAN_HIL_SENSORS_FRAME_ID
+#define TD_HIL_ID_CLOCK TD_HILCAN_HIL_CLOCK_FRAME_ID
+#define TD_HIL_ID_ACTUATORS TD_HILCAN_HIL_ACTUATORS_FRAME_ID
+#define TD_HIL_ID_STEP TD_HILCAN_HIL_STEP_FRAME_ID
 
 /** Where the port's step tick comes from (the first HilClock says). */
 typedef enum {

@@ -181,8 +181,10 @@ unsigned td_slcan_reply(td_slcan_event_t ev, char *buf, unsigned size) {
     case TD_SLCAN_ERROR:
         s = "\a";
         break;
+    case TD_SLCAN_NONE:
+    case TD_SLCAN_FRAME:
     default:
-        return 0u;
+        return 0u; /* a frame or nothing: no reply */
     }
     const unsigned n = (unsigned)strlen(s);
     if (buf == NULL || size < n) {

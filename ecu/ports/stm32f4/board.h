@@ -1,63 +1,104 @@
 /**
  * @file board.h
- * @brief The pin map and the board's numbers: the one place to change for another STM32F405/407
- *        board. docs/firmware.md has the same as a wiring table (keep both in step).
+ * @brief The board's numbers: the board header (boards/<name>.h, chosen with `make firmware
+ *        BOARD=<name>`) gives the crystal and the pin map; this file derives the clock tree from
+ *        the crystal and checks every PLL and bus limit at compile time (RM0090 6.3.2 RCC_PLLCFGR,
+ *        6.3.3 RCC_CFGR; datasheet DS8626 table 17). Every default is guarded (#ifndef), so
+ *        `make firmware FW_CFLAGS=-DBOARD_CAN_BITRATE=500000` overrides it.
  *
- * | function                    | pin  | peripheral        | AF | electrical                         |
- * |-----------------------------|------|-------------------|----|------------------------------------|
- * | CAN1 RX                     | PB8  | CAN1_RX           | 9  | to the transceiver's RXD           |
- * | CAN1 TX                     | PB9  | CAN1_TX           | 9  | to the transceiver's TXD           |
- * | ground wheel encoder, A     | PA15 | TIM2_CH1 capture  | 1  | NPN open collector, pull-up        |
- * | upper meter encoder A / B   | PA6 / PA7 | TIM3_CH1/2 encoder | 2 | push-pull or open collector, pull-up |
- * | lower meter encoder A / B   | PB6 / PB7 | TIM4_CH1/2 encoder | 2 | same                          |
- * | upper fan tachometer        | PA2  | TIM9_CH1 ext. clock | 3 | open collector, pull-up          |
- * | lower fan tachometer        | PB14 | TIM12_CH1 ext. clock | 9 | same                            |
- * | upper meter motor PWM       | PC6  | TIM8_CH1          | 3  | to the driver's PWM input; pull-down on the board |
- * | lower meter motor PWM       | PC7  | TIM8_CH2          | 3  | same                               |
- * | upper fan PWM               | PC8  | TIM8_CH3          | 3  | same                               |
- * | lower fan PWM               | PC9  | TIM8_CH4          | 3  | same                               |
- * | SLCAN serial (emulator/HIL) | PA9 / PA10 | USART1 TX / RX | 7 | 3.3 V UART, 921600 8N1          |
- * | debug                       | PA13 / PA14 | SWDIO / SWCLK | 0 | ST-LINK                         |
+ * Clock tree: SYSCLK 160 MHz (not the chip's 168): APB1 = 160 / 4 = 40 MHz gives the CAN bit
+ * timing 16 quanta per bit with the sample point at 14/16 = 87.5 % (ISO 11783-2, SAE J1939-11)
+ * at 250 and 500 kbit/s; 42 MHz reaches 85.7 % at best. APB2 = 80 MHz, its timers 160 MHz.
  */
 #ifndef TD_BOARD_H
 #define TD_BOARD_H
 
 #include <stdint.h>
 
-#define BOARD_HSE_HZ 8000000u          /* crystal (most F405/F407 boards); PLL: /8 x336 /2 = 168 MHz */
-#define BOARD_PLL_M 8u
-#define BOARD_PLL_N 336u
-#define BOARD_PLL_Q 7u                 /* 48 MHz for USB (unused) */
-#define BOARD_CORE_HZ 168000000u
+#ifndef BOARD_HEADER
+#define BOARD_HEADER "boards/generic8.h"
+#endif
+#include BOARD_HEADER
+
+#ifndef BOARD_HSE_HZ
+#error "the board header names its crystal (BOARD_HSE_HZ)"
+#endif
+#ifndef BOARD_CORE_HZ
+#define BOARD_CORE_HZ 160000000u
+#endif
 #define BOARD_HSI_HZ 16000000u
-#define BOARD_CAN_BITRATE 250000u      /* ISO 11783 / J1939; configurable at build: -DBOARD_CAN_BITRATE=500000 */
-#define BOARD_CAN_SAMPLE_PERMILLE 875u
+/* PLL input 2 MHz when the crystal divides to it (less jitter, RM0090 6.3.2), else 1 MHz */
+#define BOARD_PLL_IN_HZ (BOARD_HSE_HZ % 2000000u == 0u ? 2000000u : 1000000u)
+#define BOARD_PLL_M (BOARD_HSE_HZ / BOARD_PLL_IN_HZ)
+#define BOARD_PLL_P 2u
+#define BOARD_PLL_N (BOARD_CORE_HZ * BOARD_PLL_P / BOARD_PLL_IN_HZ)
+#define BOARD_VCO_HZ (BOARD_PLL_IN_HZ * BOARD_PLL_N)
+/* the 48 MHz domain (USB, SDIO, RNG; none used): Q keeps it at or below 48 MHz */
+#define BOARD_PLL_Q ((BOARD_VCO_HZ + 47999999u) / 48000000u)
+#define BOARD_AHB_HZ BOARD_CORE_HZ
+#define BOARD_APB1_HZ (BOARD_AHB_HZ / 4u) /* RCC_CFGR.PPRE1 = /4 */
+#define BOARD_APB2_HZ (BOARD_AHB_HZ / 2u) /* RCC_CFGR.PPRE2 = /2 */
+/* flash wait states at 2.7-3.6 V (RM0090 3.5.1, table 10): one per started 30 MHz */
+#define BOARD_FLASH_WS ((BOARD_CORE_HZ - 1u) / 30000000u)
+
+/* C11's _Static_assert; __extension__ keeps -std=c99 -pedantic quiet about it */
+#define BOARD_ASSERT(cond, msg) __extension__ _Static_assert(cond, msg)
+
+BOARD_ASSERT(BOARD_HSE_HZ >= 4000000u && BOARD_HSE_HZ <= 26000000u, "HSE crystal 4-26 MHz");
+BOARD_ASSERT(BOARD_HSE_HZ % BOARD_PLL_IN_HZ == 0u, "the crystal divides to the PLL input");
+BOARD_ASSERT(BOARD_PLL_M >= 2u && BOARD_PLL_M <= 63u, "PLLM 2..63");
+BOARD_ASSERT(BOARD_PLL_IN_HZ >= 1000000u && BOARD_PLL_IN_HZ <= 2000000u, "VCO input 1-2 MHz");
+BOARD_ASSERT(BOARD_PLL_N >= 50u && BOARD_PLL_N <= 432u, "PLLN 50..432");
+BOARD_ASSERT(BOARD_VCO_HZ >= 100000000u && BOARD_VCO_HZ <= 432000000u, "VCO 100-432 MHz");
+BOARD_ASSERT(BOARD_VCO_HZ / BOARD_PLL_P == BOARD_CORE_HZ, "SYSCLK is exactly VCO / P");
+BOARD_ASSERT(BOARD_CORE_HZ <= 168000000u, "SYSCLK at most 168 MHz");
+BOARD_ASSERT(BOARD_PLL_Q >= 2u && BOARD_PLL_Q <= 15u, "PLLQ 2..15");
+BOARD_ASSERT(BOARD_VCO_HZ / BOARD_PLL_Q <= 48000000u, "48 MHz domain at most 48 MHz");
+BOARD_ASSERT(BOARD_APB1_HZ <= 42000000u, "APB1 at most 42 MHz");
+BOARD_ASSERT(BOARD_APB2_HZ <= 84000000u, "APB2 at most 84 MHz");
+BOARD_ASSERT(BOARD_FLASH_WS <= 7u, "flash latency 0..7 wait states");
+
+#ifndef BOARD_CAN_BITRATE
+#define BOARD_CAN_BITRATE 250000u /* ISO 11783 / J1939 */
+#endif
+/* Bit timing (RM0090 32.7.7): 16 quanta, TS1 = 13, TS2 = 2, SJW = 2: sample point 87.5 %.
+ * The prescaler is the only variable: the bit rate must divide APB1 / 16 exactly, on the PLL
+ * and on the internal oscillator (the silent fallback). td_bxcan_timing() finds the same. */
+#define BOARD_CAN_TQ 16u
+#define BOARD_CAN_TS1 13u
+#define BOARD_CAN_TS2 2u
+#define BOARD_CAN_SJW 2u
+#define BOARD_CAN_BTR_FOR(pclk_hz)                                                           \
+    (((BOARD_CAN_SJW - 1u) << 24) | ((BOARD_CAN_TS2 - 1u) << 20) | ((BOARD_CAN_TS1 - 1u) << 16) | \
+     ((pclk_hz) / (BOARD_CAN_BITRATE * BOARD_CAN_TQ) - 1u))
+BOARD_ASSERT(1u + BOARD_CAN_TS1 + BOARD_CAN_TS2 == BOARD_CAN_TQ, "16 quanta per bit");
+BOARD_ASSERT(BOARD_APB1_HZ % (BOARD_CAN_BITRATE * BOARD_CAN_TQ) == 0u,
+               "BOARD_CAN_BITRATE must divide APB1 / 16 (40 MHz: 500, 250, 125, 100, 50 kbit/s)");
+BOARD_ASSERT(BOARD_APB1_HZ / (BOARD_CAN_BITRATE * BOARD_CAN_TQ) <= 1024u, "BRP 1..1024");
+BOARD_ASSERT(BOARD_HSI_HZ % (BOARD_CAN_BITRATE * BOARD_CAN_TQ) == 0u,
+               "BOARD_CAN_BITRATE must divide the 16 MHz internal oscillator / 16 too");
+
+#ifndef BOARD_SLCAN_BAUD
 #define BOARD_SLCAN_BAUD 921600u
-#define BOARD_PWM_HZ 20000u            /* above hearing; the motor drivers take up to 20-25 kHz */
-#define BOARD_STEP_HZ 100u             /* the 10 ms control step */
+#endif
+#ifndef BOARD_PWM_HZ
+#define BOARD_PWM_HZ 20000u /* above hearing; the motor drivers take up to 20-25 kHz */
+#endif
+#ifndef BOARD_STEP_HZ
+#define BOARD_STEP_HZ 100u /* the 10 ms control step */
+#endif
 /* Encoder direction: 1 inverts a meter encoder's count direction (CCxP of TI1), for a shaft
  * whose encoder counts down when the meter turns forward (bring-up checklist). */
+#ifndef BOARD_METER_UPPER_INVERT
 #define BOARD_METER_UPPER_INVERT 0u
+#endif
+#ifndef BOARD_METER_LOWER_INVERT
 #define BOARD_METER_LOWER_INVERT 0u
-/* Input filters (RM0090 18.4.7 ICxF): 0xF = f_DTS/32, 8 samples: ~3 us at 84 MHz, well under
+#endif
+/* Input filters (RM0090 18.4.7 ICxF): 0xF = f_DTS/32, 8 samples: ~3 us at 80 MHz, well under
  * the 110 us period of the wheel at 25 km/h and the meters' ~50 us at full speed. */
+#ifndef BOARD_INPUT_FILTER
 #define BOARD_INPUT_FILTER 0xFu
-
-/* Pins: port letter index (A = 0), pin number, alternate function. */
-#define PIN_CAN_RX 1u, 8u, 9u
-#define PIN_CAN_TX 1u, 9u, 9u
-#define PIN_WHEEL 0u, 15u, 1u
-#define PIN_METER_UP_A 0u, 6u, 2u
-#define PIN_METER_UP_B 0u, 7u, 2u
-#define PIN_METER_LO_A 1u, 6u, 2u
-#define PIN_METER_LO_B 1u, 7u, 2u
-#define PIN_FAN_UP_TACH 0u, 2u, 3u
-#define PIN_FAN_LO_TACH 1u, 14u, 9u
-#define PIN_PWM_METER_UP 2u, 6u, 3u
-#define PIN_PWM_METER_LO 2u, 7u, 3u
-#define PIN_PWM_FAN_UP 2u, 8u, 3u
-#define PIN_PWM_FAN_LO 2u, 9u, 3u
-#define PIN_SLCAN_TX 0u, 9u, 7u
-#define PIN_SLCAN_RX 0u, 10u, 7u
+#endif
 
 #endif /* TD_BOARD_H */

@@ -13,10 +13,10 @@
 
 /* ---- fw_clock.c: clock tree, microsecond clock, step tick -------------------------------- */
 typedef enum {
-    FW_CLOCK_PLL_HSE = 0,      /**< 168 MHz from the crystal, as designed */
-    FW_CLOCK_HSI = 1,          /**< the crystal or the PLL did not start: 16 MHz internal RC */
-    FW_CLOCK_UNMODELLED = 2    /**< the clock controller does not answer at all (an emulator):
-                                    the core runs at what the machine gives, taken as 168 MHz */
+    FW_CLOCK_PLL_HSE = 0,      /**< BOARD_CORE_HZ from the crystal, as designed */
+    FW_CLOCK_HSI = 1,          /**< the crystal or the PLL did not start: 16 MHz internal RC;
+                                    the ECU stays silent on the bus, outputs off */
+    FW_CLOCK_EMULATOR = 2      /**< the emulator build (FW_QEMU): QEMU's fixed 168 MHz */
 } fw_clock_source_t;
 
 typedef struct {
@@ -28,7 +28,8 @@ typedef struct {
     uint8_t source;            /**< fw_clock_source_t */
 } fw_clock_t;
 
-/** Clock tree: HSE + PLL to 168 MHz, with time-outs on every ready flag. */
+/** Clock tree from its reset state: HSE + PLL to BOARD_CORE_HZ, with time-outs on every ready
+ *  flag, and the clock security system on. */
 void fw_clock_init(fw_clock_t *c);
 /** TIM2 as the free-running 32-bit microsecond clock (prescaler from its measured clock). */
 void fw_time_init(fw_clock_t *c);
@@ -39,6 +40,15 @@ void fw_tick_start(const fw_clock_t *c);
 void fw_wait_step(void);
 
 /* ---- fw_io.c: encoders, capture, tachometers, PWM, safe state ---------------------------- */
+/** A pin (port A = 0 .. E = 4) to its alternate function `af` with `pull` (GPIO_PULL_*);
+ *  PIN_AF(PIN_x, pull) takes the board header's triple. */
+void fw_pin_af(uint32_t port, uint32_t pin, uint32_t af, uint32_t pull);
+#define PIN_AF(p, pull) FW_PIN_AF_(p, pull)
+#define FW_PIN_AF_(port, pin, af, pull) fw_pin_af(port, pin, af, pull)
+/** The PWM outputs driven low with MOE off, frozen under a debugger: the first thing main does,
+ *  on the reset clock, before the clock start. */
+void fw_io_outputs_off(void);
+/** Inputs, counters and the PWM period on the running clock. */
 void fw_io_init(const fw_clock_t *c);
 /** The counters and the wheel's edge as td_io_in_t (capture read with its interrupt masked). */
 void fw_io_read(td_io_in_t *in);
@@ -50,15 +60,22 @@ void fw_io_enable(bool on);
 void fw_io_safe(void);
 
 /* ---- fw_can.c: bxCAN CAN1 --------------------------------------------------------------- */
-/** Initialise CAN1 at `bitrate` with filters for `ids` (29-bit). false: the controller never
- *  acknowledged its initialisation request (absent, as in an emulator) or no timing fits. */
-bool fw_can_init(const fw_clock_t *c, uint32_t bitrate, const uint32_t *ids, unsigned n);
+/** Initialise CAN1 at BOARD_CAN_BITRATE with filters for `ids` (29-bit); silent (receive only)
+ *  unless the clock is the crystal's. false: the controller never acknowledged its
+ *  initialisation request, or too many ids. */
+bool fw_can_init(const fw_clock_t *c, const uint32_t *ids, unsigned n);
+/** CAN_BTR on the PLL's APB1 [0] and on the internal oscillator [1] (board.h). */
+extern const volatile uint32_t fw_can_btr[2];
 bool fw_can_read(td_can_frame_t *f);
 /** Queue a frame for transmission; false when the queue is full (counted). */
 bool fw_can_write(const td_can_frame_t *f);
 
 typedef struct {
-    uint32_t rx_frames, rx_overruns, rx_ring_dropped, tx_frames, tx_dropped, bus_off;
+    uint32_t rx_frames, rx_overruns, rx_ring_dropped, tx_frames, tx_dropped;
+    uint32_t error_passive;    /**< entries into error-passive (SCE interrupt) */
+    uint32_t bus_off;          /**< entries into bus-off */
+    uint8_t tec, rec;          /**< transmit / receive error counters now (CAN_ESR) */
+    uint8_t state;             /**< 0 error-active, 1 error-passive, 2 bus-off */
 } fw_can_stats_t;
 void fw_can_stats(fw_can_stats_t *s);
 
@@ -73,10 +90,29 @@ bool fw_uart_write(const uint8_t *b, uint32_t n);
 void fw_uart_pump(void);
 
 /* ---- fw_sys.c: watchdog, reset cause ------------------------------------------------------ */
-/** The cause of the last reset (RCC_CSR, and the hard-fault mark), flags cleared. */
+typedef enum {
+    FW_FAULT_NONE = 0,
+    FW_FAULT_HARD = 1,         /**< a hard fault (or any unexpected exception) */
+    FW_FAULT_CRYSTAL = 2       /**< the crystal stopped while running (the clock security
+                                    system) or did not start at an earlier start */
+} fw_fault_kind_t;
+
+/** What the fault handler kept across its reset (zero when the last reset was not a fault). */
+typedef struct {
+    uint32_t cfsr, hfsr, mmfar, bfar; /**< SCB fault status and address registers */
+    uint32_t pc, lr;                  /**< stacked by the faulting code (0: the frame was not in RAM) */
+    uint8_t kind;                     /**< fw_fault_kind_t */
+} fw_fault_record_t;
+
+/** The cause of the last reset (RCC_CSR, and the fault record), flags cleared; call once, first. */
 td_reset_cause_t fw_reset_cause(void);
 /** Independent watchdog, ~100 ms (LSI 32 kHz / 32, reload 100; 68..188 ms over LSI's spread). */
 void fw_watchdog_start(void);
 void fw_watchdog_feed(void);
+/** The record the last reset left (from fw_reset_cause()). */
+void fw_fault_record(fw_fault_record_t *r);
+/** On the internal-oscillator fallback, where nothing can be sent: keep the record (or, with
+ *  none, a crystal failure) across the next reset for a start on the crystal to send. */
+void fw_fault_keep_for_next_start(void);
 
 #endif /* TD_FW_H */

@@ -4,6 +4,14 @@
  *        reception by interrupt into a lock-free ring, transmission in queue order
  *        (TXFP: mailboxes by request order) from a ring the transmit interrupt refills the
  *        mailboxes from. Automatic bus-off recovery (ABOM) and retransmission.
+ *
+ * Bit timing: fixed at compile time from the board's APB1 clock (board.h: 16 quanta, sample
+ * point 87.5 %), kept in fw_can_btr[] (the image's tests read it). On the internal-oscillator
+ * fallback the controller runs silent (BTR.SILM): it receives but never drives the bus, not
+ * even an acknowledge, since the oscillator's error is beyond what the bus tolerates.
+ *
+ * Health: the status-change/error interrupt (SCE) counts the entries into error-passive and
+ * bus-off; fw_can_stats() reads the transmit and receive error counters (CAN_ESR, 32.9.1).
  */
 #include "board.h"
 #include "fw.h"
@@ -17,6 +25,10 @@ static td_frame_ring_t rx_ring; /* producer: CAN1_RX0 interrupt; consumer: main 
 static td_frame_ring_t tx_ring; /* producer: main loop; consumer: CAN1_TX interrupt (or the
                                    main loop with that interrupt masked) */
 static fw_can_stats_t stats;
+static uint32_t esr_seen; /* the ESR flags the SCE interrupt saw last */
+
+/* [0] on the PLL's APB1, [1] on the internal oscillator; volatile: read from the image */
+const volatile uint32_t fw_can_btr[2] = { BOARD_CAN_BTR_FOR(BOARD_APB1_HZ), BOARD_CAN_BTR_FOR(BOARD_HSI_HZ) };
 
 static bool wait_msr(uint32_t mask, uint32_t want) {
     for (uint32_t i = 0u; i < INIT_SPINS; i++) {
@@ -27,11 +39,10 @@ static bool wait_msr(uint32_t mask, uint32_t want) {
     return false;
 }
 
-bool fw_can_init(const fw_clock_t *c, uint32_t bitrate, const uint32_t *ids, unsigned n) {
-    td_bxcan_timing_t t;
+bool fw_can_init(const fw_clock_t *c, const uint32_t *ids, unsigned n) {
     td_bxcan_bank_t banks[TD_BXCAN_BANKS];
     const int nb = td_bxcan_filters_ext(ids, n, banks, TD_BXCAN_BANKS);
-    if (td_bxcan_timing(c->apb1_hz, bitrate, BOARD_CAN_SAMPLE_PERMILLE, &t) != 0 || nb < 0) {
+    if (nb < 0) {
         return false;
     }
     td_frame_ring_init(&rx_ring);
@@ -44,16 +55,11 @@ bool fw_can_init(const fw_clock_t *c, uint32_t bitrate, const uint32_t *ids, uns
         RCC->APB1ENR &= ~RCC_APB1ENR_CAN1;
         return false;
     }
-    {
-        /* pins only once the controller is known to be there */
-        gpio_t *const b = GPIOB;
-        RCC->AHB1ENR |= RCC_AHB1ENR_GPIOB;
-        b->MODER = (b->MODER & ~(0xFu << 16)) | (GPIO_MODE_AF << 16) | (GPIO_MODE_AF << 18);
-        b->PUPDR = (b->PUPDR & ~(3u << 16)) | (GPIO_PULL_UP << 16); /* RX idles recessive */
-        b->AFR[1] = (b->AFR[1] & ~0xFFu) | 0x99u;                   /* PB8, PB9: AF9 */
-    }
+    /* pins only once the controller is known to be there (GPIO clocks: fw_io_outputs_off) */
+    PIN_AF(PIN_CAN_RX, GPIO_PULL_UP); /* RX idles recessive */
+    PIN_AF(PIN_CAN_TX, 0u);
     CAN1->MCR = CAN_MCR_INRQ | CAN_MCR_ABOM | CAN_MCR_TXFP;
-    CAN1->BTR = t.btr;
+    CAN1->BTR = c->source == (uint8_t)FW_CLOCK_PLL_HSE ? fw_can_btr[0] : (fw_can_btr[1] | CAN_BTR_SILM);
     /* filters (32.7.4): banks 0..nb-1 in 32-bit identifier-list mode, FIFO 0 */
     CAN1->FMR |= CAN_FMR_FINIT;
     CAN1->FA1R = 0u;
@@ -71,9 +77,10 @@ bool fw_can_init(const fw_clock_t *c, uint32_t bitrate, const uint32_t *ids, uns
      * the controller joins by itself when the bus frees */
     CAN1->MCR &= ~CAN_MCR_INRQ;
     (void)wait_msr(CAN_MSR_INAK, 0u);
-    CAN1->IER = CAN_IER_FMPIE0 | CAN_IER_TMEIE;
+    CAN1->IER = CAN_IER_FMPIE0 | CAN_IER_TMEIE | CAN_IER_EPVIE | CAN_IER_BOFIE | CAN_IER_ERRIE;
     nvic_enable(IRQ_CAN1_RX0, 2u);
     nvic_enable(IRQ_CAN1_TX, 2u);
+    nvic_enable(IRQ_CAN1_SCE, 2u);
     return true;
 }
 
@@ -121,10 +128,21 @@ static void fill_mailboxes(void) {
 
 void CAN1_TX_IRQHandler(void) {
     CAN1->TSR = 0x00010101u; /* RQCP0..2: acknowledge the completed requests */
-    if ((CAN1->ESR & CAN_ESR_BOFF) != 0u) {
+    fill_mailboxes();
+}
+
+/* Status change and error (32.8): count each entry into error-passive and bus-off. */
+void CAN1_SCE_IRQHandler(void) {
+    const uint32_t esr = CAN1->ESR;
+    const uint32_t entered = esr & ~esr_seen;
+    if ((entered & CAN_ESR_EPVF) != 0u) {
+        stats.error_passive++;
+    }
+    if ((entered & CAN_ESR_BOFF) != 0u) {
         stats.bus_off++;
     }
-    fill_mailboxes();
+    esr_seen = esr & (CAN_ESR_EPVF | CAN_ESR_BOFF);
+    CAN1->MSR = CAN_MSR_ERRI; /* rc_w1 */
 }
 
 bool fw_can_read(td_can_frame_t *f) {
@@ -143,4 +161,8 @@ void fw_can_stats(fw_can_stats_t *s) {
     *s = stats;
     s->rx_ring_dropped = rx_ring.dropped;
     s->tx_dropped = tx_ring.dropped;
+    const uint32_t esr = CAN1->ESR;
+    s->tec = (uint8_t)(esr >> CAN_ESR_TEC_SHIFT);
+    s->rec = (uint8_t)(esr >> CAN_ESR_REC_SHIFT);
+    s->state = (esr & CAN_ESR_BOFF) != 0u ? 2u : (esr & CAN_ESR_EPVF) != 0u ? 1u : 0u;
 }

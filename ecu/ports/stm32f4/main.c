@@ -2,11 +2,11 @@
  * @file main.c
  * @brief The topdress ECU on an STM32F405/407: the port contract of td_port.h on this chip.
  *
- * Transport, chosen at start: CAN1 when the bxCAN controller answers its initialisation
- * request; otherwise (an emulator, which has none) SLCAN on USART1 with the simulated machine
- * in the loop: its counters come in as HIL frames instead of from the timers and the duties go
- * out as HIL frames, the PWM pins staying off. Everything between (td_app_rx, td_app_step,
- * td_app_tx_pop) is the same code on the same path either way.
+ * Transport, chosen at build: CAN1 on a board; in the emulator build (`VARIANT=qemu`, FW_QEMU)
+ * SLCAN on USART1 with the simulated machine in the loop: its counters come in as HIL frames
+ * instead of from the timers and the duties go out as HIL frames, the PWM pins staying off.
+ * Everything between (td_app_rx, td_app_step, td_app_tx_pop) is the same code on the same path
+ * either way. Nothing in the board image guesses whether it runs in an emulator.
  *
  * The step's tick: SysTick every 10 ms on CAN. On the HIL link the simulator's first HilClock
  * chooses: lockstep (one step per HilSensors, at the simulator's time: the emulated ECU is then
@@ -14,16 +14,26 @@
  * watchdog) or SysTick as on the board.
  *
  * Safe state: at reset the PWM timer is stopped and its pins are inputs (pull-downs on the
- * driver board); after init the outputs are driven low (MOE = 0) until the first valid
- * PcCommand; a hard fault turns them off and resets; the independent watchdog resets a loop
- * that stops feeding it (~100 ms), which again starts with the outputs off.
+ * driver board); the first thing main does, before the clock start, is drive them low
+ * (MOE = 0); they stay low until the first valid PcCommand, and for good on the
+ * internal-oscillator fallback (the ECU is then silent on the bus). A hard fault or a lost
+ * crystal turns them off and resets; the independent watchdog resets a loop that stops feeding
+ * it (~100 ms), which again starts with the outputs off.
  */
 #include <stddef.h>
 #include "board.h"
 #include "fw.h"
 #include "td_app.h"
+#include "td_can.h"
 #include "td_hil.h"
 #include "td_slcan.h"
+#include "stm32f4_regs.h"
+
+#if defined(FW_QEMU)
+#define HIL_BUILD true
+#else
+#define HIL_BUILD false
+#endif
 
 static td_app_t app; /* the one instance (td_port.h) */
 static td_params_t params;
@@ -31,7 +41,7 @@ static fw_clock_t clk;
 static td_hil_t hil;
 static td_slcan_parser_t slcan;
 static bool slcan_open;
-static bool hil_mode;
+static const bool hil_mode = HIL_BUILD;
 static uint32_t slcan_tx_dropped;
 
 static void slcan_send(const td_can_frame_t *f) {
@@ -43,6 +53,40 @@ static void slcan_send(const td_can_frame_t *f) {
 }
 
 static td_ident_t ident;
+
+static uint16_t sat16(uint32_t v) {
+    return v > 0xFFFFu ? 0xFFFFu : (uint16_t)v;
+}
+
+/* Once a second on CAN: the controller's health (EcuCanHealth) and, after a fault reset, one
+ * register of what the fault handler kept (EcuFaultRecord), the next one each second. */
+static void send_diagnostics(void) {
+    static uint8_t fault_reg;
+    fw_can_stats_t st;
+    fw_can_stats(&st);
+    const struct td_can_ecu_can_health_t h = {
+        .tx_errors = st.tec,
+        .rx_errors = st.rec,
+        .bus_state = st.state,
+        .error_passive_count = sat16(st.error_passive),
+        .bus_off_count = sat16(st.bus_off),
+        .rx_overruns = st.rx_overruns > 0xFFu ? 0xFFu : (uint8_t)st.rx_overruns,
+    };
+    td_can_frame_t f = { .id = TD_CAN_ECU_CAN_HEALTH_FRAME_ID, .extended = 1u, .dlc = 8u };
+    (void)td_can_ecu_can_health_pack(f.data, &h, sizeof f.data);
+    (void)fw_can_write(&f);
+    fw_fault_record_t r;
+    fw_fault_record(&r);
+    if (r.kind == (uint8_t)FW_FAULT_NONE) {
+        return;
+    }
+    const uint32_t regs[6] = { r.cfsr, r.hfsr, r.mmfar, r.bfar, r.pc, r.lr };
+    const struct td_can_ecu_fault_record_t fr = { .register_id = fault_reg, .kind = r.kind, .value = regs[fault_reg] };
+    f.id = TD_CAN_ECU_FAULT_RECORD_FRAME_ID;
+    (void)td_can_ecu_fault_record_pack(f.data, &fr, sizeof f.data);
+    (void)fw_can_write(&f);
+    fault_reg = (uint8_t)((fault_reg + 1u) % 6u);
+}
 
 /* The first HilClock chose the step's tick. Lockstep: the core starts again on the simulator's
  * clock (nothing has stepped yet; its time base moves from the chip's TIM2 to the simulator's). */
@@ -112,6 +156,7 @@ static uint32_t hil_wait_step(void) {
 }
 
 int main(void) {
+    fw_io_outputs_off(); /* first: on the reset clock, before anything can take time */
     const td_reset_cause_t cause = fw_reset_cause();
     fw_clock_init(&clk);
     fw_time_init(&clk);
@@ -119,11 +164,19 @@ int main(void) {
     td_params_t *const p = &params;
     td_params_default(p); /* the terminal pushes its parameters over CAN at every connection */
     const uint32_t ids[] = { p->command_id, TD_ID_PC_PARAM_SET, TD_ID_PC_CAL_COMMAND, TD_ID_PC_GNSS_TIME };
-    hil_mode = !fw_can_init(&clk, BOARD_CAN_BITRATE, ids, sizeof ids / sizeof ids[0]);
     if (hil_mode) {
         td_hil_init(&hil);
         td_slcan_init(&slcan);
         fw_uart_init(&clk, BOARD_SLCAN_BAUD);
+    } else if (!fw_can_init(&clk, ids, sizeof ids / sizeof ids[0])) {
+        for (;;) { /* a CAN controller that never answers: a broken chip; outputs off, no watchdog */
+            wait_for_interrupt();
+        }
+    }
+    /* only a clock from the crystal drives the outputs (and the bus: fw_can_init) */
+    const bool on_crystal = clk.source == (uint8_t)FW_CLOCK_PLL_HSE;
+    if (!hil_mode && !on_crystal) {
+        fw_fault_keep_for_next_start(); /* said at the next start that can send it */
     }
     if (td_app_init(&app, p, fw_micros()) != TD_OK) {
         for (;;) { /* defaults that do not validate: no control, the watchdog is not started */
@@ -136,6 +189,7 @@ int main(void) {
     (void)td_app_set_ident(&app, &ident);
     fw_watchdog_start();
     fw_tick_start(&clk); /* on the HIL link in lockstep it only wakes the wait for the watchdog */
+    uint32_t steps = 0u;
     for (;;) {
         uint32_t now;
         td_can_frame_t f;
@@ -168,9 +222,14 @@ int main(void) {
             fw_uart_pump();
         } else {
             fw_io_write(&out);
-            fw_io_enable(app.have_cmd); /* outputs stay low until the first valid command */
+            fw_io_enable(app.have_cmd && on_crystal); /* low until the first valid command */
             while (td_app_tx_pop(&app, &f)) {
-                (void)fw_can_write(&f);
+                if (on_crystal) { /* silent on the fallback: nothing queued for the bus */
+                    (void)fw_can_write(&f);
+                }
+            }
+            if (on_crystal && ++steps % BOARD_STEP_HZ == 0u) {
+                send_diagnostics();
             }
         }
         fw_watchdog_feed();

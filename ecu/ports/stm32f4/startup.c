@@ -18,6 +18,8 @@ void TIM2_IRQHandler(void);
 void USART1_IRQHandler(void);
 void CAN1_TX_IRQHandler(void);
 void CAN1_RX0_IRQHandler(void);
+void CAN1_SCE_IRQHandler(void);
+void NMI_Handler(void);
 
 void Reset_Handler(void) {
     SCB_CPACR |= 0xFu << 20; /* CP10, CP11: full access to the FPU */
@@ -33,9 +35,10 @@ void Reset_Handler(void) {
     }
 }
 
-/* Anything unexpected: the hard-fault path (outputs off, marked, reset). */
-void Default_Handler(void) {
-    HardFault_Handler();
+/* Anything unexpected: the hard-fault path (outputs off, recorded, reset); a branch, not a
+ * call, so the hard-fault handler sees this exception's own EXC_RETURN and frame. */
+__attribute__((naked)) void Default_Handler(void) {
+    __asm__ volatile("b HardFault_Handler\n");
 }
 
 typedef void (*vector_t)(void);
@@ -45,7 +48,7 @@ typedef void (*vector_t)(void);
 __attribute__((section(".isr_vector"), used)) static const vector_t vectors[16u + IRQ_COUNT] = {
     [0] = (vector_t)(uintptr_t)&_estack,
     [1] = Reset_Handler,
-    [2] = Default_Handler,     /* NMI (also the clock security system) */
+    [2] = NMI_Handler,         /* the clock security system: the crystal lost (fw_sys.c) */
     [3] = HardFault_Handler,
     [4] = Default_Handler,     /* MemManage */
     [5] = Default_Handler,     /* BusFault */
@@ -55,7 +58,11 @@ __attribute__((section(".isr_vector"), used)) static const vector_t vectors[16u 
     [14] = Default_Handler,    /* PendSV */
     [15] = SysTick_Handler,
     IRQ(IRQ_TIM2) = TIM2_IRQHandler,
+#if defined(FW_QEMU) /* the emulator build's transport: SLCAN on USART1 */
     IRQ(IRQ_USART1) = USART1_IRQHandler,
+#else
     IRQ(IRQ_CAN1_TX) = CAN1_TX_IRQHandler,
     IRQ(IRQ_CAN1_RX0) = CAN1_RX0_IRQHandler,
+    IRQ(IRQ_CAN1_SCE) = CAN1_SCE_IRQHandler,
+#endif
 };

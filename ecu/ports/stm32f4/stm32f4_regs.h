@@ -25,14 +25,24 @@ typedef struct {
 #define RCC_CR_HSIRDY (1u << 1)
 #define RCC_CR_HSEON (1u << 16)
 #define RCC_CR_HSERDY (1u << 17)
+#define RCC_CR_HSEBYP (1u << 18)
+#define RCC_CR_CSSON (1u << 19)
 #define RCC_CR_PLLON (1u << 24)
 #define RCC_CR_PLLRDY (1u << 25)
+#define RCC_PLLCFGR_RESET 0x24003010u  /* the reset value (6.3.2) */
+#define RCC_PLLCFGR_N_SHIFT 6u
+#define RCC_PLLCFGR_P_SHIFT 16u
 #define RCC_PLLCFGR_SRC_HSE (1u << 22)
+#define RCC_PLLCFGR_Q_SHIFT 24u
 #define RCC_CFGR_SW_PLL 2u
 #define RCC_CFGR_SWS_MASK (3u << 2)
+#define RCC_CFGR_SWS_HSI (0u << 2)
 #define RCC_CFGR_SWS_PLL (2u << 2)
 #define RCC_CFGR_PPRE1_DIV4 (5u << 10)
 #define RCC_CFGR_PPRE2_DIV2 (4u << 13)
+#define RCC_CIR_CSSF (1u << 7)
+#define RCC_CIR_CLEAR_ALL 0x00BF0000u  /* LSIRDYC..PLLI2SRDYC and CSSC (6.3.4) */
+#define RCC_CIR_CSSC (1u << 23)
 #define RCC_CSR_LSION (1u << 0)
 #define RCC_CSR_RMVF (1u << 24)
 #define RCC_CSR_BORRSTF (1u << 25)
@@ -44,11 +54,14 @@ typedef struct {
 #define RCC_AHB1ENR_GPIOA (1u << 0)
 #define RCC_AHB1ENR_GPIOB (1u << 1)
 #define RCC_AHB1ENR_GPIOC (1u << 2)
+#define RCC_AHB1ENR_GPIOD (1u << 3)
+#define RCC_AHB1ENR_GPIOE (1u << 4)
 #define RCC_APB1ENR_TIM2 (1u << 0)
 #define RCC_APB1ENR_TIM3 (1u << 1)
 #define RCC_APB1ENR_TIM4 (1u << 2)
 #define RCC_APB1ENR_TIM12 (1u << 6)
 #define RCC_APB1ENR_CAN1 (1u << 25)
+#define RCC_APB2ENR_TIM1 (1u << 0)
 #define RCC_APB2ENR_TIM8 (1u << 1)
 #define RCC_APB2ENR_USART1 (1u << 4)
 #define RCC_APB2ENR_TIM9 (1u << 16)
@@ -58,7 +71,7 @@ typedef struct {
     REG ACR, KEYR, OPTKEYR, SR, CR, OPTCR;
 } flash_t;
 #define FLASH ((flash_t *)0x40023C00u)
-#define FLASH_ACR_LATENCY_5WS 5u
+#define FLASH_ACR_LATENCY_MASK 7u
 #define FLASH_ACR_PRFTEN (1u << 8)
 #define FLASH_ACR_ICEN (1u << 9)
 #define FLASH_ACR_DCEN (1u << 10)
@@ -70,6 +83,8 @@ typedef struct {
 #define GPIOA ((gpio_t *)0x40020000u)
 #define GPIOB ((gpio_t *)0x40020400u)
 #define GPIOC ((gpio_t *)0x40020800u)
+#define GPIOD ((gpio_t *)0x40020C00u)
+#define GPIOE ((gpio_t *)0x40021000u)
 #define GPIO_MODE_AF 2u
 #define GPIO_PULL_UP 1u
 #define GPIO_PULL_DOWN 2u
@@ -83,6 +98,7 @@ typedef struct {
 #define TIM3 ((tim_t *)0x40000400u)
 #define TIM4 ((tim_t *)0x40000800u)
 #define TIM12 ((tim_t *)0x40001800u)
+#define TIM1 ((tim_t *)0x40010000u)
 #define TIM8 ((tim_t *)0x40010400u)
 #define TIM9 ((tim_t *)0x40014000u)
 #define TIM_CR1_CEN (1u << 0)
@@ -108,8 +124,9 @@ typedef struct {
 #define TIM_CCER_CC2P (1u << 5)
 #define TIM_CCER_CC3E (1u << 8)
 #define TIM_CCER_CC4E (1u << 12)
-#define TIM_BDTR_MOE (1u << 15)
+#define TIM_BDTR_LOCK_2 (2u << 8)       /* lock level 2 (17.4.18): also OSSI, OSSR, CCxP frozen */
 #define TIM_BDTR_OSSI (1u << 10)
+#define TIM_BDTR_MOE (1u << 15)
 
 /* ---- bxCAN (32.9) ------------------------------------------------------------------------ */
 typedef struct {
@@ -133,10 +150,12 @@ typedef struct {
 } can_t;
 #define CAN1 ((can_t *)0x40006400u)
 #define CAN_MCR_INRQ (1u << 0)
+#define CAN_BTR_SILM (1u << 31)          /* silent: receives, never drives the bus (32.5.1) */
 #define CAN_MCR_SLEEP (1u << 1)
 #define CAN_MCR_TXFP (1u << 2)
 #define CAN_MCR_ABOM (1u << 6)
 #define CAN_MSR_INAK (1u << 0)
+#define CAN_MSR_ERRI (1u << 2)
 #define CAN_TSR_TME_SHIFT 26u
 #define CAN_TIR_TXRQ (1u << 0)
 #define CAN_RF0R_FMP0_MASK 3u
@@ -144,7 +163,13 @@ typedef struct {
 #define CAN_RF0R_RFOM0 (1u << 5)
 #define CAN_IER_TMEIE (1u << 0)
 #define CAN_IER_FMPIE0 (1u << 1)
+#define CAN_IER_EPVIE (1u << 9)
+#define CAN_IER_BOFIE (1u << 10)
+#define CAN_IER_ERRIE (1u << 15)
+#define CAN_ESR_EPVF (1u << 1)
 #define CAN_ESR_BOFF (1u << 2)
+#define CAN_ESR_TEC_SHIFT 16u
+#define CAN_ESR_REC_SHIFT 24u
 #define CAN_FMR_FINIT (1u << 0)
 
 /* ---- USART (30.6) ------------------------------------------------------------------------ */
@@ -173,6 +198,9 @@ typedef struct {
 /* ---- Debug support (38.16.4): stop the watchdog and the timers while halted --------------- */
 #define DBGMCU_APB1_FZ (*(REG *)0xE0042008u)
 #define DBGMCU_APB1_FZ_IWDG (1u << 12)
+#define DBGMCU_APB2_FZ (*(REG *)0xE004200Cu)
+#define DBGMCU_APB2_FZ_TIM1 (1u << 0)
+#define DBGMCU_APB2_FZ_TIM8 (1u << 1)
 
 /* ---- Cortex-M4 core peripherals (ARM v7-M ARM B3; PM0214 4.3-4.5) ------------------------- */
 typedef struct {
@@ -190,11 +218,16 @@ typedef struct {
 #define SCB_AIRCR (*(REG *)0xE000ED0Cu)
 #define SCB_AIRCR_RESET (0x05FA0000u | (1u << 2))
 #define SCB_SHPR3 (*(REG *)0xE000ED20u)
+#define SCB_CFSR (*(REG *)0xE000ED28u)
+#define SCB_HFSR (*(REG *)0xE000ED2Cu)
+#define SCB_MMFAR (*(REG *)0xE000ED34u)
+#define SCB_BFAR (*(REG *)0xE000ED38u)
 #define SCB_CPACR (*(REG *)0xE000ED88u)
 
 /* Interrupt numbers (RM0090 12.2, table 61) */
 #define IRQ_CAN1_TX 19u
 #define IRQ_CAN1_RX0 20u
+#define IRQ_CAN1_SCE 22u
 #define IRQ_TIM2 28u
 #define IRQ_USART1 37u
 #define IRQ_COUNT 82u
@@ -213,6 +246,7 @@ static inline void irq_off(void) {
 static inline void irq_on(void) {
     __asm__ volatile("cpsie i" ::: "memory");
 }
+/* PRIMASK set: WFI still wakes on a pending interrupt, which runs once PRIMASK is cleared */
 static inline void wait_for_interrupt(void) {
     __asm__ volatile("wfi" ::: "memory");
 }

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from topdress.errors import LogError, OutputError
 from topdress.outpath import check_output, is_stdout, open_text_output, write_output
+from topdress.protocol.model import SpeedMode
 
 
 def register(sub: Any) -> None:
@@ -90,8 +92,8 @@ def register(sub: Any) -> None:
     replay.add_argument("events", type=Path, metavar="EVENTS.ndjson")
     replay.add_argument(
         "--speed-mode",
-        choices=("paper", "gnss", "wheel", "fused"),
-        default="fused",
+        choices=[str(m) for m in SpeedMode],
+        default=str(SpeedMode.FUSED),
         help="fused = the fused estimate (default); paper = the dual speed mode; gnss / wheel = "
         "one source only",
     )
@@ -231,20 +233,27 @@ def _salvage(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from topdress import protocol
     from topdress.config import default_config, load_config
-    from topdress.log.events import read_file
-    from topdress.log.replay import MAX_IDLE_S, ReplayStats, kept, replay, write_csv
+    from topdress.log.events import Event, ReadResult, iter_file
+    from topdress.log.replay import MAX_IDLE_S, ReplayStats, kept, replay_stream, write_csv
 
     cfg = load_config(args.config) if args.config is not None else default_config()
     # with the configuration's frame ids: the ECU's learned lag is kept under its own id
-    read = read_file(args.events, *kept(protocol.FrameIds(**cfg.can.ids)))
+    keep, drop = kept(protocol.FrameIds(**cfg.can.ids))
+    reads: list[ReadResult] = []
+
+    def events() -> Iterator[Event]:
+        """The file read again (replay goes through it twice, never holding it)."""
+        reads.append(ReadResult())
+        return iter_file(args.events, reads[-1], keep, drop)
+
+    stats = ReplayStats()
+    with open_text_output(args.out, [args.events]) as out:
+        rows = write_csv(replay_stream(events, cfg, args.speed_mode, stats), out)
+    read = reads[0]
     for number, reason in read.bad:
         print(f"{args.events}:{number}: skipped: {reason}", file=sys.stderr)
-    stats = ReplayStats()
-    rows = replay(read.events, cfg, args.speed_mode, stats)
-    with open_text_output(args.out, [args.events]) as out:
-        write_csv(rows, out)
     print(
-        f"{args.out}: {len(rows)} speed updates from {read.parsed} events"
+        f"{args.out}: {rows} speed updates from {read.parsed} events"
         + (f" ({len(read.bad)} malformed lines skipped)" if read.bad else "")
         + (f", {stats.gaps_cut} pauses over {MAX_IDLE_S:g} s cut" if stats.gaps_cut else ""),
         file=sys.stderr if is_stdout(args.out) else sys.stdout,

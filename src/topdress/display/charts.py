@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from topdress.i18n import tr
+from topdress.protocol.model import Source
 from topdress.view.snapshot import Snapshot
 
 #: Every n-th snapshot of the history is charted (2.5 Hz of the loop's 10): over a minute the
@@ -12,6 +13,9 @@ from topdress.view.snapshot import Snapshot
 CHART_EVERY = 4
 
 SOURCE_COLOURS = {"gnss": "#1565c0", "wheel": "#ef6c00", "none": "#9e9e9e", "fused": "#6a1b9a"}
+
+# the sources a band is drawn for: a sensor (or both) feeds the speed
+_SENSED = frozenset(str(s) for s in Source if s is not Source.NONE)
 
 
 def _series(name: str, points: list[list[float | None]], colour: str) -> dict[str, Any]:
@@ -86,7 +90,7 @@ def _source_bands(history: list[Snapshot], marks: list[str]) -> list[list[dict[s
     for i in range(1, len(marks) + 1):
         if i == len(marks) or marks[i] != marks[start]:
             src = marks[start]
-            if src in ("gnss", "wheel", "fused"):
+            if src in _SENSED:
                 bands.append(
                     [
                         {

@@ -225,6 +225,8 @@ class CommunicationScreen:
             line = f"{tr('comm.state')}: {fmt.link_text(state)}"
             if section == "can" and s.ecu_ident is not None:  # who the ECU is (EcuIdent)
                 line += " · " + tr("comm.ecu", ecu=render(s.ecu_ident))
+            if section == "can" and s.ecu_can_health is not None:  # a firmware's controller
+                line += " · " + render(s.ecu_can_health)
             self.links[section].set_text(line)
 
 

@@ -2,16 +2,37 @@
 
 setup.py runs from the repository root (`cffi_modules=["src/topdress/ecu/_build.py:ffibuilder"]`).
 The cdef restates the public part of ecu/include/td_*.h; `...;` lets the C compiler supply
-struct layouts, so a changed header is caught at build time instead of corrupting memory.
+struct layouts, so a changed header is caught at build time instead of corrupting memory. The
+protocol's identifiers, value tables and parameter count are declared from the header generated
+from the DBC (ecu/src/gen/td_dbc.h), not restated.
 """
 
 from __future__ import annotations
 
+import re
 from glob import glob
+from pathlib import Path
 
 from cffi import FFI
 
-CDEF = r"""
+DBC_HEADER = Path("ecu/src/gen/td_dbc.h")  # setup.py runs from the repository root
+
+
+def dbc_cdef(header: str) -> str:
+    """The cdef of the generated header: its constants (values left to the compiler) and its
+    enums as they are; the X-macro tables are for C only."""
+    out = []
+    for line in header.splitlines():
+        if m := re.match(r"#define (TD_\w+) [^\\]+$", line):
+            out.append(f"#define {m[1]} ...")
+        elif line.startswith("typedef enum"):
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+CDEF = (
+    dbc_cdef(DBC_HEADER.read_text(encoding="utf-8"))
+    + r"""
 /* td_common.h */
 #define TD_OK ...
 #define TD_E_ARG ...
@@ -22,22 +43,9 @@ CDEF = r"""
 #define TD_E_UNKNOWN_PARAM ...
 #define TD_E_INCONSISTENT ...
 #define TD_E_FULL ...
-#define TD_FAULT_CMD_TIMEOUT ...
-#define TD_FAULT_GNSS_LOST ...
-#define TD_FAULT_WHEEL_ENCODER ...
-#define TD_FAULT_UPPER_BLOCKED ...
-#define TD_FAULT_LOWER_BLOCKED ...
-#define TD_FAULT_UPPER_FAN_LOW ...
-#define TD_FAULT_LOWER_FAN_LOW ...
-#define TD_FAULT_NO_SPEED ...
-#define TD_FAULT_GNSS_FROZEN ...
 #define TD_FAULT_LATCHED_MASK ...
 typedef enum { TD_UPPER = 0, TD_LOWER = 1, TD_LAYERS = 2 } td_layer_t;
-typedef enum { TD_SRC_WHEEL = 0, TD_SRC_GNSS = 1, TD_SRC_NONE = 2, TD_SRC_FUSED = 3 } td_source_t;
-typedef enum { TD_MODE_DUAL = 0, TD_MODE_WHEEL_ONLY = 1, TD_MODE_GNSS_ONLY = 2, TD_MODE_FUSED = 3 }
-    td_speed_mode_t;
 typedef enum { TD_SLIP_OFF = 0, TD_SLIP_LEARNED = 1, TD_SLIP_MODEL = 2 } td_slip_comp_t;
-typedef enum { TD_CMP_GNSS = 0, TD_CMP_WHEEL = 1 } td_compare_t;
 uint32_t td_elapsed_us(uint32_t now_us, uint32_t then_us);
 
 /* td_port.h */
@@ -94,7 +102,6 @@ typedef struct {
     uint32_t command_id;
     ...;
 } td_params_t;
-#define TD_PARAM_COUNT ...
 void td_params_default(td_params_t *p);
 int td_params_validate(const td_params_t *p);
 int td_params_set(td_params_t *p, uint8_t param_id, float value);
@@ -185,19 +192,6 @@ td_source_t td_speedsel_rule(td_speed_mode_t mode, td_compare_t compare, float c
                              float v_gnss_kmh, bool gnss_valid, bool wheel_valid);
 
 /* td_proto.h */
-#define TD_ID_ECU_STATUS ...
-#define TD_ID_PC_COMMAND ...
-#define TD_ID_ECU_DIAG ...
-#define TD_ID_ECU_SPEEDS ...
-#define TD_ID_ECU_TARGETS ...
-#define TD_ID_PC_PARAM_SET ...
-#define TD_ID_ECU_PARAM_ACK ...
-#define TD_ID_PC_GNSS_TIME ...
-#define TD_ID_ECU_FUSED ...
-#define TD_ID_ECU_FUSED_AUX ...
-#define TD_ID_ECU_GNSS_LAG ...
-#define TD_RUN_STOPPED ...
-#define TD_RUN_RUNNING ...
 typedef struct {
     bool start; float fan_rpm; float rate_kg_ha[2]; bool gnss_valid; float gnss_kmh; ...;
 } td_command_t;
@@ -396,6 +390,7 @@ uint32_t tdsim_world_wheel_edge(tdsim_world_t *w, uint32_t now_us, int64_t count
 int tdsim_world_step(tdsim_world_t *w, td_app_t *app, double t_s, uint32_t now_us,
                      double v_target_ms, double curvature);
 """
+)
 
 # Small C shims so that one Python call does one whole step, without filling structs field
 # by field from Python (the simulator calls step 360,000 times per simulated hour).

@@ -16,10 +16,11 @@ the speed source and the zone as codes, and the units in `NAME_units.txt` beside
 from __future__ import annotations
 
 import csv
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from importlib import resources
 from pathlib import Path
-from typing import Final, Protocol
+from typing import Final, Protocol, TextIO
 
 import numpy as np
 import numpy.typing as npt
@@ -182,7 +183,10 @@ def _write_batches(
     | None = None,
 ) -> list[str]:
     """A layer written a batch at a time (appended: a long day in bounded memory; CSV cannot
-    append, its batches are joined first); returns its columns' names."""
+    append, its batches are joined first; GeoJSON's batches are stitched, see
+    `_write_geojson`); returns its columns' names."""
+    if fmt == "geojson":
+        return _write_geojson(path, layer, batches, gtype, crs, columns)
     if fmt == "csv":
         got = list(batches)
         if got:
@@ -206,6 +210,68 @@ def _write_batches(
         append = fmt == "gpkg" and layer == SWATHS_LAYER
         _write_layer(path, layer, fmt, cols, np.empty(0, object), gtype, crs, append)
     return names
+
+
+def _write_geojson(
+    path: Path,
+    layer: str,
+    batches: Iterable[Batch],
+    gtype: str,
+    crs: CRS,
+    columns: Callable[[dict[str, npt.NDArray[np.generic]]], dict[str, npt.NDArray[np.generic]]]
+    | None,
+) -> list[str]:
+    """GeoJSON a batch at a time in linear time: GDAL appends to a GeoJSON file by reading it
+    whole again, so each batch is written to a file of its own and its features (GDAL writes
+    one a line) are copied into the output after the first batch's header."""
+    names: list[str] = []
+    out: TextIO | None = None
+    features = 0
+    try:
+        with tempfile.TemporaryDirectory(prefix="topdress-geojson-") as tmp:
+            part = Path(tmp) / "batch.geojson"
+            for cols, geom in batches:
+                if columns is not None:
+                    cols = columns(cols)
+                first = out is None
+                if out is None:
+                    names = list(cols)
+                    out = path.open("w", encoding="utf-8")
+                _write_layer(part, layer, "geojson", cols, _project(geom, crs), gtype, crs, False)
+                features = _copy_features(part, out, first, features)
+                part.unlink()
+            if out is not None:
+                out.write("\n]\n}\n")
+    except OSError as exc:
+        raise MapError(f"cannot write {path}: {exc}") from exc
+    finally:
+        if out is not None:
+            out.close()
+    if out is None:  # nothing: the layer is made empty
+        cols = {} if columns is None else columns({})
+        _write_layer(path, layer, "geojson", cols, np.empty(0, object), gtype, crs, False)
+    return names
+
+
+def _copy_features(part: Path, out: TextIO, header: bool, n: int) -> int:
+    """The features of one batch's file into `out` (with the file's header when `header`);
+    returns how many features `out` has now (`n` before)."""
+    with part.open(encoding="utf-8") as f:
+        for line in f:
+            if header:
+                out.write(line)
+            if line.rstrip("\n") == '"features": [':
+                break
+        else:
+            raise MapError(f"{part}: no features array where GDAL writes it")
+        for line in f:
+            feature = line.rstrip("\n").rstrip(",")
+            if feature == "]":
+                break
+            out.write(",\n" if n else "")
+            out.write(feature)
+            n += 1
+    return n
 
 
 def fmis_columns(

@@ -264,6 +264,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",
     ),
     "event.ecu_back": ("ECU back", "控制器已恢复"),
+    "event.ecu_restarted": (
+        "ECU restarted on its defaults: its parameters are sent again",
+        "控制器已重启并使用默认参数：重新发送参数",
+    ),
     "event.ecu_ident": ("ECU: {ecu} ({transport})", "控制器：{ecu}（{transport}）"),
     "event.ecu_protocol": (
         "warning: the ECU speaks protocol {ecu}, this terminal {terminal}: frames may be "
@@ -273,6 +277,20 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "view.ecu_ident": (
         "{target} firmware {firmware}, protocol {protocol}",
         "{target} 固件 {firmware}，协议 {protocol}",
+    ),
+    "view.ecu_can_health": (
+        "CAN {state}, errors tx {tec} rx {rec}, error-passive {passive}x, bus-off {bus_off}x",
+        "CAN {state}，错误计数 发送 {tec} 接收 {rec}，被动错误 {passive} 次，总线关闭 {bus_off} 次",
+    ),
+    "event.ecu_can_health": ("ECU CAN controller: {health}", "控制器 CAN：{health}"),
+    "event.ecu_fault_record": (
+        "ECU reset after a {kind}; it kept {registers} (find the PC in the firmware's map file)",
+        "控制器因{kind}复位；保留的寄存器 {registers}（在固件的 map 文件中查找 PC）",
+    ),
+    "event.ecu_crystal_failure": (
+        "ECU crystal failure before this start: it ran on its internal oscillator, off the bus "
+        "with its outputs off (check the crystal and its load capacitors)",
+        "控制器本次启动前晶振故障：曾以内部振荡器运行，未上总线且输出关闭（请检查晶振及其负载电容）",
     ),
     "event.ecu_lost": ("ECU lost: no status for {s:.1f} s", "控制器丢失：{s:.1f} 秒无状态帧"),
     "event.ecu_wait_silent": (

@@ -13,7 +13,7 @@ import json
 import logging
 import math
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, TextIO
@@ -223,14 +223,15 @@ class Drop:
         return False
 
 
-def read_lines(
-    lines: Iterable[str], keep: Callable[[Event], bool] | None = None, drop: Drop | None = None
-) -> ReadResult:
-    """Parse NDJSON lines; blank lines are skipped. `keep`: only the events it accepts are
-    kept (every line is still checked), so a reader that needs few holds only those; `drop`:
-    the same told from the line, before an event is built (it must drop only what `keep`
-    drops)."""
-    result = ReadResult()
+def iter_lines(
+    lines: Iterable[str],
+    result: ReadResult,
+    keep: Callable[[Event], bool] | None = None,
+    drop: Drop | None = None,
+) -> Iterator[Event]:
+    """The events of NDJSON lines one at a time, as `read_lines` keeps them; the well-formed
+    and malformed lines are counted in `result` (its `events` stay empty), so a reader that
+    goes through a long day need not hold it."""
     match = _FAST.match
     for number, line in enumerate(lines, start=1):
         m = match(line)
@@ -242,19 +243,46 @@ def read_lines(
             if event is not None:
                 result.parsed += 1
                 if keep is None or keep(event):
-                    result.events.append(event)
+                    yield event
                 continue
         if not line.strip():
             continue
         try:
             event = _parse_json(line)
-            result.parsed += 1
-            if keep is None or keep(event):
-                result.events.append(event)
         except EventLineError as exc:
             result.bad.append((number, str(exc)))
             _log.debug("events line %d skipped: %s", number, exc)
+            continue
+        result.parsed += 1
+        if keep is None or keep(event):
+            yield event
+
+
+def read_lines(
+    lines: Iterable[str], keep: Callable[[Event], bool] | None = None, drop: Drop | None = None
+) -> ReadResult:
+    """Parse NDJSON lines; blank lines are skipped. `keep`: only the events it accepts are
+    kept (every line is still checked), so a reader that needs few holds only those; `drop`:
+    the same told from the line, before an event is built (it must drop only what `keep`
+    drops)."""
+    result = ReadResult()
+    result.events.extend(iter_lines(lines, result, keep, drop))
     return result
+
+
+def iter_file(
+    path: str | Path,
+    result: ReadResult,
+    keep: Callable[[Event], bool] | None = None,
+    drop: Drop | None = None,
+) -> Iterator[Event]:
+    """`iter_lines` of a file: its events one at a time, the lines counted in `result`."""
+    try:
+        # utf-8-sig: a file saved by an editor that puts a byte order mark first
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
+            yield from iter_lines(f, result, keep, drop)
+    except OSError as exc:
+        raise LogError(f"cannot read events {path}: {exc}") from exc
 
 
 def read_file(

@@ -7,12 +7,15 @@ from dataclasses import dataclass, field, fields
 from operator import attrgetter
 from typing import Any, Final
 
+from topdress.protocol.model import Source
+
 # Raw input kinds. "can_rx" = ECU -> terminal, "can_tx" = terminal -> ECU (the terminal's view).
 RAW_KINDS: Final = ("nmea", "crop", "can_rx", "can_tx")
 LINE_KINDS: Final = frozenset({"nmea", "crop"})
 CAN_KINDS: Final = frozenset({"can_rx", "can_tx"})
 
-SOURCES: Final = ("wheel", "gnss", "none")
+#: The speed sources a state row names (the DBC's EcuDiag.SpeedSource, in code order).
+SOURCES: Final = tuple(str(s) for s in Source)
 
 
 @dataclass(frozen=True, slots=True)

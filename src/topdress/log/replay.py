@@ -30,9 +30,7 @@ from __future__ import annotations
 import bisect
 import csv
 import logging
-import math
-from array import array
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Final, TextIO
 
@@ -44,6 +42,7 @@ from topdress.gnss.nmea import NmeaDecoder
 from topdress.gnss.tracker import GnssSpeedTracker
 from topdress.log.events import CanEvent, CropEvent, Drop, Event, NmeaEvent, WheelEvent
 from topdress.protocol.frames import GNSS_MAX_KMH
+from topdress.protocol.model import SpeedMode
 
 _log = logging.getLogger(__name__)
 
@@ -167,74 +166,152 @@ def kept(ids: protocol.FrameIds = protocol.DEFAULT_IDS) -> tuple[Callable[[Event
 needed, DROP = kept()
 
 
-def learned_lag_ms(events: Sequence[Event], ids: protocol.FrameIds) -> int | None:
-    """The last GNSS lag the ECU reported as learned in recorded EcuGnssLag frames, or None."""
-    for e in reversed(events):  # the ECU reports it at 10 Hz: the last one is enough
-        if isinstance(e, CanEvent) and e.dir != "tx" and e.can_id == ids.gnss_lag:
-            try:
-                frame = protocol.decode((e.can_id, e.data), ids)
-            except ProtocolError:
-                continue
-            if isinstance(frame, protocol.EcuGnssLag) and frame.learned_ms is not None:
-                return frame.learned_ms
-    return None
+def _learned(e: CanEvent, ids: protocol.FrameIds) -> int | None:
+    try:
+        frame = protocol.decode((e.can_id, e.data), ids)
+    except ProtocolError:
+        return None
+    return frame.learned_ms if isinstance(frame, protocol.EcuGnssLag) else None
 
 
 def _us(t: float, t0: float) -> int:
     return round((t - t0) * 1e6)
 
 
+#: The events again from the start, each time it is called (replay goes through them twice).
+Source = Callable[[], Iterable[Event]]
+
+
 def replay(
     events: Sequence[Event],
     cfg: TerminalConfig,
-    speed_mode: str = "fused",
+    speed_mode: str = SpeedMode.FUSED,
     stats: ReplayStats | None = None,
 ) -> list[ReplayRow]:
     """Run `events` through a fresh ECU core; rows at each speed update. Events are taken in
     time order (a stable sort: equal times keep their order)."""
-    if not events:
-        return []
-    # An exported file is in time order already: no sorted copy of a long day (its keys alone
-    # are 64 MB for 12 h).
-    ordered = events if _in_time_order(events) else sorted(events, key=lambda e: e.t)
-    return _Replayer(ordered, cfg, speed_mode, stats or ReplayStats()).run()
+    return list(replay_stream(lambda: events, cfg, speed_mode, stats))
 
 
-def _in_time_order(events: Sequence[Event]) -> bool:
-    prev = -math.inf
-    for e in events:
-        if e.t < prev:
-            return False
-        prev = e.t
-    return True
+def replay_stream(
+    source: Source,
+    cfg: TerminalConfig,
+    speed_mode: str = SpeedMode.FUSED,
+    stats: ReplayStats | None = None,
+) -> Iterator[ReplayRow]:
+    """`replay` of events in time order that are read twice and never held: a first pass
+    finds the start, the pauses to cut, the wheel counts and the ECU's learned lag; the second
+    runs the ECU and yields each row as it is made. A long day's events read from a file this
+    way cost the wheel counts' memory, not the events'. Events out of time order are sorted
+    (a stable sort: equal times keep their order), in memory."""
+    stats = stats or ReplayStats()
+    ids = protocol.FrameIds(**cfg.can.ids)
+    survey = _Survey(source(), ids)
+    if not survey.ordered:  # not as an export writes them: sorted (stable), in memory
+        ordered = sorted(source(), key=lambda e: e.t)
+        source = lambda: ordered  # noqa: E731
+        survey = _Survey(ordered, ids)
+    if survey.t0 is None:
+        return
+    stats.gaps_cut += survey.gaps
+    replayer = _Replayer(survey, cfg, speed_mode, stats)
+    yield from replayer.run(source())
+
+
+class _Clock:
+    """The events' times on the replay clock: each pause longer than MAX_IDLE_S cut to it,
+    times never going back; `cuts`: (replay time, offset to the events' clock from there on)."""
+
+    def __init__(self, t0: float) -> None:
+        self.t0 = t0
+        self.cuts: list[tuple[float, float]] = [(t0, 0.0)]
+        self.gaps = 0
+        self._offset = 0.0
+        self._prev = t0  # the last event's own time
+        self._last: float | None = None  # the last event's replay time
+
+    @property
+    def t_in(self) -> float:
+        """The own time of the last event taken."""
+        return self._prev
+
+    @property
+    def last(self) -> float:
+        """The replay time of the last event taken."""
+        return self._last if self._last is not None else self.t0
+
+    def take(self, t: float) -> float:
+        """The replay time of the next event, whose own time is `t`."""
+        if t - self._prev > MAX_IDLE_S:
+            # Whole steps cut, so the events keep their place on the 10 ms grid.
+            self._offset += (_us(t, self._prev) - _MAX_IDLE_US) // STEP_US * STEP_US / 1e6
+            last = self._last if self._last is not None else t
+            self.cuts.append((max(t - self._offset, last), self._offset))
+            self.gaps += 1
+        at = max(t - self._offset, self._last) if self._last is not None else t
+        self._last, self._prev = at, t
+        return at
+
+
+class _Survey:
+    """The first pass: where the events start and end on the replay clock, the wheel input,
+    and the last GNSS lag the ECU reported as learned (None: none)."""
+
+    def __init__(self, events: Iterable[Event], ids: protocol.FrameIds) -> None:
+        self.t0: float | None = None
+        self.end: float = 0.0
+        self.wheel = _WheelInput()
+        self.learned_ms: int | None = None
+        self.gaps = 0
+        self.ordered = True  # the events' own times never go back
+        clock: _Clock | None = None
+        times, counts = self.wheel.times_us, self.wheel.counts
+        lag_data: bytes | None = None  # the ECU repeats its lag report: decoded when it changes
+        for e in events:
+            if clock is None:
+                clock = _Clock(e.t)
+                self.t0 = e.t
+            self.ordered &= e.t >= clock.t_in
+            t = clock.take(e.t)
+            if isinstance(e, WheelEvent):
+                times.append(_us(t, clock.t0))
+                counts.append(e.wheel_count)
+            elif (
+                isinstance(e, CanEvent)
+                and e.dir != "tx"
+                and e.can_id == ids.gnss_lag
+                and e.data != lag_data
+            ):
+                lag_data = e.data
+                learned = _learned(e, ids)
+                self.learned_ms = learned if learned is not None else self.learned_ms
+        if clock is not None:
+            self.end, self.gaps = clock.last, clock.gaps
 
 
 class _Replayer:
     """The terminal's side (GNSS forwarding, commands) and the ECU, on the 10 ms grid."""
 
     def __init__(
-        self, events: Sequence[Event], cfg: TerminalConfig, speed_mode: str, stats: ReplayStats
+        self, survey: _Survey, cfg: TerminalConfig, speed_mode: str, stats: ReplayStats
     ) -> None:
-        self.events = events
+        assert survey.t0 is not None
         self.cfg = cfg
         self.stats = stats
-        self.t0 = events[0].t
-        self._cut_gaps()
+        self.t0 = survey.t0
+        self.clock = _Clock(self.t0)
         self.ids = protocol.FrameIds(**cfg.can.ids)
         if self.ids == protocol.DEFAULT_IDS:  # its decoders are found without hashing the ids
             self.ids = protocol.DEFAULT_IDS
         # The lag learned in the recorded session is where this run's learning starts (the
         # terminal would have pushed it for the next session with the same receiver).
-        self.lag_start_ms = learned_lag_ms(events, self.ids)
+        self.lag_start_ms = survey.learned_ms
         stats.lag_start_ms = self.lag_start_ms
         # Initialised one period before its first step, as a port's ECU is.
         params = ecu_params(cfg, speed_mode, self.lag_start_ms)
         self.ecu = Ecu(params, now_us=-STEP_US & 0xFFFFFFFF)
-        self.wheel = _WheelInput()
-        for e, t in zip(events, self.times, strict=True):
-            if isinstance(e, WheelEvent):
-                self.wheel.times_us.append(_us(t, self.t0))
-                self.wheel.counts.append(e.wheel_count)
+        self.wheel = survey.wheel
+        self.end_us = _us(survey.end, self.t0)
         self.decoder = NmeaDecoder()
         self.tracker = GnssSpeedTracker(cfg.gnss.rmc_timeout_s, cfg.gnss.stale_s)
         self.command = _Command(start=True, fan_rpm=float(cfg.machine.fan_rpm))
@@ -244,44 +321,28 @@ class _Replayer:
         self.gnss_seq = 0
         self.fix_us = 0  # replay time of the last sentence that gave a new speed
 
-    def _cut_gaps(self) -> None:
-        """`times`: the events' times on the replay clock, each pause cut to MAX_IDLE_S;
-        `cuts`: (replay time, offset to the events' clock from there on)."""
-        self.times = array("d")  # 8 bytes an event: a long day has millions
-        self.cuts: list[tuple[float, float]] = [(self.t0, 0.0)]
-        offset, prev = 0.0, self.t0
-        for e in self.events:
-            if e.t - prev > MAX_IDLE_S:
-                # Whole steps cut, so the events keep their place on the 10 ms grid.
-                offset += (_us(e.t, prev) - _MAX_IDLE_US) // STEP_US * STEP_US / 1e6
-                self.cuts.append((max(e.t - offset, self.times[-1]), offset))
-                self.stats.gaps_cut += 1
-            self.times.append(max(e.t - offset, self.times[-1]) if self.times else e.t)
-            prev = e.t
-
     def _event_t(self, now_us: int) -> float:
-        """The events' clock at replay time `now_us`."""
+        """The events' clock at replay time `now_us` (the cuts read so far reach past it)."""
         t = self.t0 + now_us / 1e6
-        i = bisect.bisect_right(self.cuts, t, key=lambda c: c[0]) - 1
-        return t + self.cuts[max(i, 0)][1]
+        cuts = self.clock.cuts
+        i = bisect.bisect_right(cuts, t, key=lambda c: c[0]) - 1
+        return t + cuts[max(i, 0)][1]
 
-    def run(self) -> list[ReplayRow]:
+    def run(self, events: Iterable[Event]) -> Iterator[ReplayRow]:
         # Each period: the ECU steps on the counters of that instant, then the terminal takes
         # the inputs that arrived by then and sends its command, which the ECU acts on from
         # its next step (the order of a port's main loop and of the simulator).
-        rows: list[ReplayRow] = []
         ecu = self.ecu
         step, discard = ecu.step_raw, ecu.tx_discard
         updates = ecu.wheel_updates
-        end_us = _us(self.times[-1], self.t0)
-        try:
-            due_us: Sequence[int] = array("q", (_us(t, self.t0) for t in self.times))
-        except OverflowError:  # a bogus time far out: Python integers
-            due_us = [_us(t, self.t0) for t in self.times]
         wheel = self.wheel.walker()
-        events, n_events = self.events, len(self.events)
-        next_event = 0
-        next_due = due_us[0]
+        # One event ahead: its time on the replay clock is read (and a pause before it cut)
+        # before the steps reach it.
+        ahead = iter(events)
+        clock, t0 = self.clock, self.t0
+        nxt = next(ahead, None)
+        next_due = _us(clock.take(nxt.t), t0) if nxt is not None else 0
+        end_us = self.end_us
         now_us = 0
         steps = 0
         while now_us <= end_us:
@@ -292,14 +353,15 @@ class _Replayer:
             if ecu.wheel_updates != updates:
                 state = ecu.state
                 updates = state.wheel_updates
-                rows.append(_row(self._event_t(now_us), state))
+                yield _row(self._event_t(now_us), state)
             new_fix = False
-            while next_due <= now_us:
-                if self._take(events[next_event]):
+            while nxt is not None and next_due <= now_us:
+                if self._take(nxt):
                     new_fix = True
                     self.fix_us = next_due
-                next_event += 1
-                next_due = due_us[next_event] if next_event < n_events else end_us + 1
+                nxt = next(ahead, None)
+                if nxt is not None:
+                    next_due = _us(clock.take(nxt.t), t0)
             if new_fix:
                 self._send_gnss_time(now_us)
             due = self.last_cmd_us is None or now_us - self.last_cmd_us >= self.period_us
@@ -308,7 +370,6 @@ class _Replayer:
             now_us += STEP_US
         self.stats.steps += steps
         self.stats.lag_learned_ms = self.ecu.state.lag_learned_ms
-        return rows
 
     def _take(self, e: Event) -> bool:
         """Apply one event; True when it gave a new GNSS speed sample."""
@@ -386,11 +447,14 @@ def _fmt(value: float | None) -> str:
     return "" if value is None else f"{value:.3f}"
 
 
-def write_csv(rows: Sequence[ReplayRow], out: TextIO) -> None:
-    """Columns t,v_wheel_kmh,v_gnss_kmh,v_kmh,source,cv_pct; empty = not available."""
+def write_csv(rows: Iterable[ReplayRow], out: TextIO) -> int:
+    """Columns t,v_wheel_kmh,v_gnss_kmh,v_kmh,source,cv_pct; empty = not available. Returns
+    how many rows were written (they may come as they are made)."""
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(COLUMNS)
+    n = 0
     for r in rows:
+        n += 1
         writer.writerow(
             (
                 f"{r.t:.3f}",
@@ -401,3 +465,4 @@ def write_csv(rows: Sequence[ReplayRow], out: TextIO) -> None:
                 _fmt(r.cv_pct),
             )
         )
+    return n

@@ -28,13 +28,18 @@ from topdress.protocol.params import ParamSpec, param, param_name, params
 if TYPE_CHECKING:
     from topdress.protocol.dbc import database, dbc_text, protocol_version
     from topdress.protocol.frames import (
+        BUS_STATES,
         CAL_REASONS,
         CAL_STATES,
+        FAULT_KINDS,
+        FAULT_REGISTERS,
         RESET_CAUSES,
         TARGETS,
         TRANSPORTS,
         EcuCalStatus,
+        EcuCanHealth,
         EcuDiag,
+        EcuFaultRecord,
         EcuFused,
         EcuFusedAux,
         EcuGnssLag,
@@ -71,10 +76,13 @@ def __getattr__(name: str) -> Any:
 
 
 __all__ = [
+    "BUS_STATES",
     "CAL_REASONS",
     "CAL_STATES",
     "DEFAULT_IDS",
+    "FAULT_KINDS",
     "FAULT_NAMES",
+    "FAULT_REGISTERS",
     "LATCHED_FAULTS",
     "RESET_CAUSES",
     "TARGETS",
@@ -83,7 +91,9 @@ __all__ = [
     "CanFrame",
     "Compare",
     "EcuCalStatus",
+    "EcuCanHealth",
     "EcuDiag",
+    "EcuFaultRecord",
     "EcuFused",
     "EcuFusedAux",
     "EcuGnssLag",

@@ -7,6 +7,7 @@ package reads the same text.
 
 from __future__ import annotations
 
+import re
 from functools import cache
 from importlib import resources
 from typing import Any
@@ -17,6 +18,48 @@ from topdress.errors import ProtocolError
 def dbc_text() -> str:
     """The DBC file as text."""
     return (resources.files("topdress.protocol") / "topdress.dbc").read_text(encoding="utf-8")
+
+
+# Read from the DBC's text, not through cantools, so that the codes and ids are there without
+# loading cantools and python-can (tests hold this reading to cantools').
+_FRAME = re.compile(r"^BO_ (\d+) (\w+) *:", re.M)
+_VALUES = re.compile(r"^VAL_ (\d+) (\w+) ((?:\d+ \"[^\"]*\" *)+);", re.M)
+_VALUE = re.compile(r"(\d+) \"([^\"]*)\"")
+_EXTENDED = 0x80000000  # the DBC's flag of a 29-bit identifier
+
+
+@cache
+def frame_ids() -> dict[str, int]:
+    """Every frame's 29-bit identifier by the frame's name, as the DBC gives them."""
+    return {name: int(raw) & ~_EXTENDED for raw, name in _FRAME.findall(dbc_text())}
+
+
+@cache
+def value_table(frame: str, signal: str) -> dict[int, str]:
+    """The DBC's value table (VAL_) of a signal: code -> name, in code order."""
+    ident = frame_ids().get(frame)
+    if ident is None:
+        raise ProtocolError(f"no frame named {frame!r} in the protocol")
+    for raw, name, values in _VALUES.findall(dbc_text()):
+        if int(raw) & ~_EXTENDED == ident and name == signal:
+            return dict(sorted((int(k), v) for k, v in _VALUE.findall(values)))
+    raise ProtocolError(f"{frame}.{signal} has no value table in the protocol")
+
+
+@cache
+def bit_names(frame: str, signal: str) -> tuple[str, ...]:
+    """The names of a bit word's bits, lowest first (the signal's TdBits attribute)."""
+    ident = frame_ids().get(frame)
+    pattern = rf'^BA_ "TdBits" SG_ (\d+) {signal} "([^"]*)";'
+    for raw, names in re.findall(pattern, dbc_text(), re.M):
+        if int(raw) & ~_EXTENDED == ident:
+            return tuple(names.split())
+    raise ProtocolError(f"{frame}.{signal} has no TdBits attribute in the protocol")
+
+
+def snake(name: str) -> str:
+    """A DBC name in snake case: "GnssLagAuto" -> "gnss_lag_auto", "Stm32f4" -> "stm32f4"."""
+    return re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
 
 
 @cache

@@ -16,7 +16,7 @@ import can
 import cantools
 
 from topdress.errors import ProtocolError
-from topdress.protocol.dbc import message
+from topdress.protocol.dbc import message, snake, value_table
 from topdress.protocol.layout import FrameLayout, checks, encoder, layout
 from topdress.protocol.model import (
     DEFAULT_IDS,
@@ -33,7 +33,16 @@ from topdress.protocol.params import ParamSpec, param
 GNSS_NA_RAW = 0xFF  # PcCommand.GnssSpeed: "not available"
 GNSS_MAX_KMH = 25.0  # raw 251..254 are out of range
 NA_RAW_16 = 0xFFFF  # EcuDiag.Cv undefined, EcuSpeeds.GnssSpeedFine not valid
-_RUN = 0x0A
+_RUN = next(k for k, v in value_table("PcCommand", "StartStop").items() if v == "Start")
+
+
+def _words(frame: str, signal: str, sep: str = " ") -> tuple[str, ...]:
+    """The names of a DBC value table in code order, in lower-case words: "BadValue" ->
+    "bad value" (`sep` between the words)."""
+    table = value_table(frame, signal)
+    if list(table) != list(range(len(table))):
+        raise ProtocolError(f"{frame}.{signal}: the codes are not 0..{len(table) - 1}")
+    return tuple(snake(name).replace("_", sep) for name in table.values())
 
 
 @dataclass(frozen=True)
@@ -136,8 +145,8 @@ class PcCalCommand:
 
 
 #: EcuCalStatus.CalState and CalReason (DBC value tables).
-CAL_STATES = ("idle", "running", "done", "aborted")
-CAL_REASONS = ("none", "reset", "running", "moving", "blocked", "timeout", "bad value", "fans off")
+CAL_STATES = _words("EcuCalStatus", "CalState")
+CAL_REASONS = _words("EcuCalStatus", "CalReason")
 
 
 @dataclass(frozen=True)
@@ -209,16 +218,17 @@ class EcuGnssLag:
 
 
 #: EcuIdent's value tables (DBC): the target, the transport, the cause of the last reset.
-TARGETS = ("host", "stm32f4")
-TRANSPORTS = ("in-process", "can", "slcan-hil")
-RESET_CAUSES = ("unknown", "power-on", "pin", "watchdog", "hard fault", "software", "brown-out")
+TARGETS = _words("EcuIdent", "Target")
+TRANSPORTS = _words("EcuIdent", "Transport", "-")
+RESET_CAUSES = _words("EcuIdent", "ResetCause", "-")
 
 
 @dataclass(frozen=True)
 class EcuIdent:
     """Who the ECU is: target, firmware version, the protocol (DBC) version it was built with,
-    its transport, the cause of its last reset and whether its clock fell back to the internal
-    oscillator."""
+    its transport, the cause of its last reset, whether its clock fell back to the internal
+    oscillator, and whether it runs on its firmware defaults (no parameter taken since
+    power-up: it restarted)."""
 
     target: str  # TARGETS
     firmware: tuple[int, int, int]
@@ -226,6 +236,7 @@ class EcuIdent:
     transport: str  # TRANSPORTS
     reset_cause: str  # RESET_CAUSES
     clock_fallback: bool
+    on_defaults: bool = False
 
     @property
     def firmware_version(self) -> str:
@@ -234,6 +245,36 @@ class EcuIdent:
     @property
     def protocol_version(self) -> str:
         return f"{self.protocol[0]}.{self.protocol[1]}"
+
+
+#: EcuCanHealth's bus states and EcuFaultRecord's registers and kinds (DBC value tables).
+BUS_STATES = ("error-active", "error-passive", "bus-off")
+FAULT_REGISTERS = ("CFSR", "HFSR", "MMFAR", "BFAR", "PC", "LR")
+FAULT_KINDS = ("none", "hard fault", "crystal failure")
+
+
+@dataclass(frozen=True)
+class EcuCanHealth:
+    """The firmware's CAN controller, once a second: its transmit and receive error counters
+    (0..255), its state (BUS_STATES), the entries into error-passive and bus-off since it
+    started and the receive FIFO overruns (each saturating at its field's maximum)."""
+
+    tx_errors: int
+    rx_errors: int
+    bus_state: str  # BUS_STATES
+    error_passive_count: int
+    bus_off_count: int
+    rx_overruns: int
+
+
+@dataclass(frozen=True)
+class EcuFaultRecord:
+    """One register of what the firmware's fault handler kept across its reset: the register
+    (FAULT_REGISTERS), the kind of fault (FAULT_KINDS) and its value."""
+
+    register: str  # FAULT_REGISTERS
+    kind: str  # FAULT_KINDS
+    value: int
 
 
 Frame = (
@@ -251,6 +292,8 @@ Frame = (
     | EcuFusedAux
     | EcuGnssLag
     | EcuIdent
+    | EcuCanHealth
+    | EcuFaultRecord
 )
 
 
@@ -506,6 +549,7 @@ def _decode_ident(data: bytes) -> EcuIdent:
         "Transport",
         "ResetCause",
         "ClockFallback",
+        "OnDefaults",
     ).decode(data)
     return EcuIdent(
         target=TARGETS[raw[0]],
@@ -514,7 +558,30 @@ def _decode_ident(data: bytes) -> EcuIdent:
         transport=TRANSPORTS[raw[6]],
         reset_cause=RESET_CAUSES[raw[7]],
         clock_fallback=bool(raw[8]),
+        on_defaults=bool(raw[9]),
     )
+
+
+def _decode_can_health(data: bytes) -> EcuCanHealth:
+    raw, _ = _plain(
+        "EcuCanHealth",
+        "TxErrors",
+        "RxErrors",
+        "BusState",
+        "ErrorPassiveCount",
+        "BusOffCount",
+        "RxOverruns",
+    ).decode(data)
+    if raw[2] >= len(BUS_STATES):
+        raise ProtocolError(f"EcuCanHealth: BusState {raw[2]} is not a state")
+    return EcuCanHealth(raw[0], raw[1], BUS_STATES[raw[2]], raw[3], raw[4], raw[5])
+
+
+def _decode_fault_record(data: bytes) -> EcuFaultRecord:
+    raw, _ = _plain("EcuFaultRecord", "RegisterId", "Kind", "Value").decode(data)
+    if raw[0] >= len(FAULT_REGISTERS) or raw[1] >= len(FAULT_KINDS):
+        raise ProtocolError(f"EcuFaultRecord: register {raw[0]}, kind {raw[1]} out of range")
+    return EcuFaultRecord(FAULT_REGISTERS[raw[0]], FAULT_KINDS[raw[1]], raw[2])
 
 
 def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
@@ -534,6 +601,8 @@ def is_known_id(frame_id: int, ids: FrameIds = DEFAULT_IDS) -> bool:
         ids.fused_aux,
         ids.gnss_lag,
         ids.ident,
+        ids.can_health,
+        ids.fault_record,
     )
 
 
@@ -566,6 +635,8 @@ def _decoders(ids: FrameIds) -> dict[int, Callable[[bytes], Frame]]:
         ids.fused_aux: _decode_fused_aux,
         ids.gnss_lag: _decode_gnss_lag,
         ids.ident: _decode_ident,
+        ids.can_health: _decode_can_health,
+        ids.fault_record: _decode_fault_record,
     }
 
 

@@ -18,55 +18,59 @@ from topdress.errors import ProtocolError
 from topdress.protocol.dbc import dbc_text
 
 # The one table of ECU parameters. Id, resolution, unit and range come from the DBC
-# (PcParamSet, multiplexed by ParamId); only what the DBC cannot say is written here:
-# DBC signal -> (EcuParams field, index into an array field or None, the terminal's
-# configuration key, the ECU's default (td_params_defaults; a test holds it to the C core)).
-# The configuration key is also the display's field and where a refusal is shown.
-_TABLE: dict[str, tuple[str, int | None, str, float]] = {
-    "WorkingWidth": ("working_width_m", None, "machine.width_m", 3.6),
-    "UpperKgPerRev": ("kg_per_rev", 0, "machine.kg_per_rev_upper", 0.3),
-    "LowerKgPerRev": ("kg_per_rev", 1, "machine.kg_per_rev_lower", 0.3),
-    "WheelRadius": ("wheel_radius_m", None, "machine.wheel_radius_m", 0.0615),
-    "WheelPulsesPerRev": ("wheel_ppr", None, "machine.wheel_ppr", 500),
-    "QueueLength": ("queue_len", None, "speed.queue_len", 5),
-    "CvWindow": ("cv_window", None, "speed.cv_window", 5),
-    "CvThreshold": ("cv_threshold_pct", None, "speed.cv_threshold_pct", 4.2),
-    "SwitchSpeed": ("switch_speed_kmh", None, "speed.switch_speed_kmh", 6.0),
-    "SpeedMode": ("speed_mode", None, "speed.mode", 0),
-    "SwitchCompare": ("switch_compare", None, "speed.switch_compare", 0),
-    "PidKp": ("pid_kp", None, "ecu.pid_kp", 0.015),
-    "PidKi": ("pid_ki", None, "ecu.pid_ki", 0.01),
-    "PidKd": ("pid_kd", None, "ecu.pid_kd", 0.0),
-    "PidKff": ("pid_kff", None, "ecu.pid_kff", 0.01666667),
-    "CmdTimeout": ("cmd_timeout_ms", None, "ecu.cmd_timeout_ms", 1500),
-    "GnssTimeout": ("gnss_timeout_ms", None, "ecu.gnss_timeout_ms", 1200),
-    "MinWorkSpeed": ("min_work_speed_kmh", None, "speed.min_work_speed_kmh", 0.5),
-    "WheelUpdatePeriod": ("wheel_update_ms", None, "ecu.wheel_update_ms", 500),
-    "WheelSamples": ("wheel_samples", None, "ecu.wheel_samples", 4),
-    "MeterCountsPerRev": ("meter_counts_per_rev", None, "ecu.meter_counts_per_rev", 6400),
-    "FanMinSpeed": ("fan_min_rpm", None, "ecu.fan_min_rpm", 2000),
-    "FanPulsesPerRev": ("fan_ppr", None, "ecu.fan_ppr", 30),
-    "EncFaultGnssSpeed": ("enc_fault_gnss_kmh", None, "ecu.enc_fault_gnss_kmh", 2.0),
-    "EncFaultTime": ("enc_fault_time_ms", None, "ecu.enc_fault_time_ms", 2000),
-    "BlockedTime": ("blocked_time_ms", None, "ecu.blocked_time_ms", 1000),
-    "StatusPeriod": ("status_period_ms", None, "ecu.status_period_ms", 100),
-    "SlipComp": ("slip_comp", None, "ecu.slip_comp", 0),
-    "GnssLag": ("gnss_lag_ms", None, "ecu.gnss_lag_ms", 0),
-    "LeadMeter": ("lead_meter_ms", None, "lookahead.meter_ms", 0),
-    "LeadAirLine": ("lead_air_ms", None, "lookahead.airline_ms", 0),
-    "FusedJerk": ("fused_jerk_ms3", None, "ecu.fused_jerk_ms3", 0.3),
-    "FusedGnssStd": ("fused_gnss_std_kmh", None, "ecu.fused_gnss_std_kmh", 0.2),
-    "FusedWheelNoise": ("fused_wheel_noise_pct", None, "ecu.fused_wheel_noise_pct", 15.0),
-    "WheelStopTime": ("wheel_stop_ms", None, "ecu.wheel_stop_ms", 300),
-    "DriveAdapt": ("drive_adapt", None, "ecu.drive_adapt", 1),
-    "MeterTau": ("meter_tau_ms", None, "ecu.meter_tau_ms", 200),
-    "LeadStop": ("lead_stop_ms", None, "lookahead.stop_ms", 0),
-    "GnssLagAuto": ("gnss_lag_auto", None, "ecu.gnss_lag_auto", 1),
+# (PcParamSet, multiplexed by ParamId), and so does the td_params_t / EcuParams field each sets
+# (the signal's TdField attribute, which the C core's table is generated from); only what the
+# DBC cannot say is written here: DBC signal -> (the terminal's configuration key, the ECU's
+# default (td_params_defaults; a test holds it to the C core)). The configuration key is also
+# the display's field and where a refusal is shown.
+_TABLE: dict[str, tuple[str, float]] = {
+    "WorkingWidth": ("machine.width_m", 3.6),
+    "UpperKgPerRev": ("machine.kg_per_rev_upper", 0.3),
+    "LowerKgPerRev": ("machine.kg_per_rev_lower", 0.3),
+    "WheelRadius": ("machine.wheel_radius_m", 0.0615),
+    "WheelPulsesPerRev": ("machine.wheel_ppr", 500),
+    "QueueLength": ("speed.queue_len", 5),
+    "CvWindow": ("speed.cv_window", 5),
+    "CvThreshold": ("speed.cv_threshold_pct", 4.2),
+    "SwitchSpeed": ("speed.switch_speed_kmh", 6.0),
+    "SpeedMode": ("speed.mode", 0),
+    "SwitchCompare": ("speed.switch_compare", 0),
+    "PidKp": ("ecu.pid_kp", 0.015),
+    "PidKi": ("ecu.pid_ki", 0.01),
+    "PidKd": ("ecu.pid_kd", 0.0),
+    "PidKff": ("ecu.pid_kff", 0.01666667),
+    "CmdTimeout": ("ecu.cmd_timeout_ms", 1500),
+    "GnssTimeout": ("ecu.gnss_timeout_ms", 1200),
+    "MinWorkSpeed": ("speed.min_work_speed_kmh", 0.5),
+    "WheelUpdatePeriod": ("ecu.wheel_update_ms", 500),
+    "WheelSamples": ("ecu.wheel_samples", 4),
+    "MeterCountsPerRev": ("ecu.meter_counts_per_rev", 6400),
+    "FanMinSpeed": ("ecu.fan_min_rpm", 2000),
+    "FanPulsesPerRev": ("ecu.fan_ppr", 30),
+    "EncFaultGnssSpeed": ("ecu.enc_fault_gnss_kmh", 2.0),
+    "EncFaultTime": ("ecu.enc_fault_time_ms", 2000),
+    "BlockedTime": ("ecu.blocked_time_ms", 1000),
+    "StatusPeriod": ("ecu.status_period_ms", 100),
+    "SlipComp": ("ecu.slip_comp", 0),
+    "GnssLag": ("ecu.gnss_lag_ms", 0),
+    "LeadMeter": ("lookahead.meter_ms", 0),
+    "LeadAirLine": ("lookahead.airline_ms", 0),
+    "FusedJerk": ("ecu.fused_jerk_ms3", 0.3),
+    "FusedGnssStd": ("ecu.fused_gnss_std_kmh", 0.2),
+    "FusedWheelNoise": ("ecu.fused_wheel_noise_pct", 15.0),
+    "WheelStopTime": ("ecu.wheel_stop_ms", 300),
+    "DriveAdapt": ("ecu.drive_adapt", 1),
+    "MeterTau": ("ecu.meter_tau_ms", 200),
+    "LeadStop": ("lookahead.stop_ms", 0),
+    "GnssLagAuto": ("ecu.gnss_lag_auto", 1),
 }
 
 # A multiplexed signal of PcParamSet: ` SG_ Name m12 : 32|32@1+ (0.01,0) [0|25] "km/h" ECU`.
 # Read from the DBC's text, not through cantools, so that a screen can have the table without
 # loading cantools and python-can (a test holds this reading to cantools').
+_FIELD = re.compile(
+    r'^BA_ "TdField" SG_ \d+ (?P<name>\w+) "(?P<field>\w+)(?:\[(?P<index>\d+)\])?";', re.M
+)
 _SIGNAL = re.compile(
     r"^ SG_ (?P<name>\w+) m(?P<id>\d+) : \d+\|\d+@[01][+-] "
     r"\((?P<scale>[^,]+),[^)]+\) \[(?P<lo>[^|]+)\|(?P<hi>[^\]]+)\] \"(?P<unit>[^\"]*)\""
@@ -140,7 +144,8 @@ def params() -> tuple[ParamSpec, ...]:
         m = _SIGNAL.match(line)
         if m is None:
             raise ProtocolError(f"PcParamSet: cannot read the DBC line {line.strip()!r}")
-        field, index, config_key, default = _TABLE[m["name"]]
+        field, index = _fields()[m["name"]]
+        config_key, default = _TABLE[m["name"]]
         specs.append(
             ParamSpec(
                 id=int(m["id"]),
@@ -156,6 +161,16 @@ def params() -> tuple[ParamSpec, ...]:
             )
         )
     return tuple(sorted(specs, key=lambda s: s.id))
+
+
+@cache
+def _fields() -> dict[str, tuple[str, int | None]]:
+    """The td_params_t field each PcParamSet signal sets (its TdField attribute in the DBC):
+    signal -> (field, index into an array field or None)."""
+    out = {}
+    for m in _FIELD.finditer(dbc_text()):
+        out[m["name"]] = (m["field"], None if m["index"] is None else int(m["index"]))
+    return out
 
 
 def _param_set_lines() -> list[str]:

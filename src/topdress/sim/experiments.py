@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from topdress.ecu import EcuParams, cv_pct, meter_target_rpm, slip_measured_pct
-from topdress.protocol import SpeedMode
-from topdress.sim.sil import COLUMNS, PHASES, SOURCES, PcParams, Sil
+from topdress.protocol import Source, SpeedMode
+from topdress.sim.sil import COLUMNS, PHASES, PcParams, Sil
 from topdress.sim.tractor import Drive
 from topdress.sim.world import SimConfig, World
 
@@ -30,8 +30,8 @@ TABLE5_JUMPS_RPM = (6.6, 7.0, 7.4, 7.6, 6.8)
 EcuSettings = tuple[tuple[str, float], ...]
 UNIFORM = float(PHASES.index("uniform"))
 DECEL = float(PHASES.index("decel"))
-GNSS = float(SOURCES.index("gnss"))
-WHEEL = float(SOURCES.index("wheel"))
+GNSS = float(Source.GNSS.code)
+WHEEL = float(Source.WHEEL.code)
 
 # The paper's numbers, side by side with ours in the reports.
 PAPER_TABLE2 = {

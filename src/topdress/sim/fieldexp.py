@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from topdress.protocol import SpeedMode
 from topdress.sim.experiments import FUSED
 from topdress.sim.sil import NdviRate, PcParams, Sil
 from topdress.sim.tractor import Drive, Segment
@@ -31,14 +32,14 @@ AFTER_M = 2.0  # after a stop: whatever lands before the machine has moved this 
 FINE_BIN_M = 0.05
 
 # the fused mode with the parameters tuned on the simulator (experiments.FUSED)
-FUSED_SETTINGS: EcuSettings = (("SpeedMode", 3.0), *FUSED)
+FUSED_SETTINGS: EcuSettings = (("SpeedMode", float(SpeedMode.FUSED.code)), *FUSED)
 # The metering loop of the paper's ECU (the plain PID, before the learned drive slope).
 PAPER_DRIVE: EcuSettings = (("DriveAdapt", 0.0), ("MeterTau", 0.0))
 MODES: dict[str, EcuSettings] = {
-    "paper": (),
-    "gnss": (("SpeedMode", 2.0),),
-    "wheel": (("SpeedMode", 1.0),),
-    "fused": FUSED_SETTINGS,
+    SpeedMode.PAPER: (),
+    SpeedMode.GNSS_ONLY: (("SpeedMode", float(SpeedMode.GNSS_ONLY.code)),),
+    SpeedMode.WHEEL_ONLY: (("SpeedMode", float(SpeedMode.WHEEL_ONLY.code)),),
+    SpeedMode.FUSED: FUSED_SETTINGS,
 }
 # the terminal's look-ahead for the rate: half the 323 ms program cycle + half the 500 ms
 # command period + the ECU's lead (meter + air line)
@@ -342,7 +343,9 @@ def write_field(
     if baseline:
         bplan = dataclasses.replace(BASELINE.plan, passes=plan.passes, length_m=plan.length_m)
         base = field_experiment(
-            dataclasses.replace(BASELINE, plan=bplan), seeds, ("paper", "gnss", "wheel")
+            dataclasses.replace(BASELINE, plan=bplan),
+            seeds,
+            (SpeedMode.PAPER, SpeedMode.GNSS_ONLY, SpeedMode.WHEEL_ONLY),
         )
         doc["baseline"] = metrics_json(base)
         md += (

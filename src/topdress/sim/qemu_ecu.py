@@ -49,9 +49,10 @@ from topdress.sim.world import SimConfig, World
 
 _U32 = 0xFFFFFFFF
 IMAGE_NAME = "topdress-ecu-stm32f4.elf"
-# the repository's build output (make firmware); an installed package names it by TOPDRESS_ECU_IMAGE
+# the repository's emulator build (`make -f ecu/ports/stm32f4/firmware.mk VARIANT=qemu`: SLCAN
+# and HIL on USART1, no clock set-up); an installed package names it by TOPDRESS_ECU_IMAGE
 _REPO = Path(__file__).resolve().parents[3]
-_REPO_IMAGE = _REPO / "build" / "fw" / IMAGE_NAME
+_REPO_IMAGE = _REPO / "build" / "fw-qemu" / IMAGE_NAME
 
 
 def default_image() -> Path:
@@ -71,7 +72,14 @@ def ensure_image(image: Path | None = None) -> Path:
     repo_build = image == _REPO_IMAGE and _FIRMWARE_MK.is_file()
     if repo_build and shutil.which("arm-none-eabi-gcc") is not None:
         done = subprocess.run(
-            ["make", "--no-print-directory", "-s", "-f", str(_FIRMWARE_MK.relative_to(_REPO))],
+            [
+                "make",
+                "--no-print-directory",
+                "-s",
+                "-f",
+                str(_FIRMWARE_MK.relative_to(_REPO)),
+                "VARIANT=qemu",
+            ],
             cwd=_REPO,
             capture_output=True,
             text=True,
@@ -81,9 +89,9 @@ def ensure_image(image: Path | None = None) -> Path:
             raise DeviceError(f"make firmware failed:\n{done.stderr.strip()}")
     if not image.is_file():
         how = (
-            "run `make firmware` (it installs arm-none-eabi-gcc as root)"
+            "run `make firmware` (it installs arm-none-eabi-gcc as root, builds the emulator image)"
             if repo_build
-            else "set TOPDRESS_ECU_IMAGE to a built topdress-ecu-stm32f4.elf"
+            else "set TOPDRESS_ECU_IMAGE to an emulator build (VARIANT=qemu) of the firmware"
         )
         raise DeviceError(f"no firmware image at {image}: {how}")
     return image

@@ -47,7 +47,6 @@ COLUMNS = (
     "wheel_pulses",
 )
 PHASES = ("rest", "accel", "uniform", "decel", "turn", "run")
-SOURCES = ("wheel", "gnss", "none", "fused")
 
 
 @dataclass(frozen=True)
@@ -302,7 +301,7 @@ class Sil:
                 sp.wheel_kmh,
                 math.nan if sp.gnss_kmh is None else sp.gnss_kmh,
                 sp.selected_kmh,
-                float(SOURCES.index(str(dg.source))),
+                float(protocol.Source(dg.source).code),
                 math.nan if dg.cv_pct is None else dg.cv_pct,
                 float(int(dg.faults)),
                 float(w.ecu.wheel_updates),

@@ -18,31 +18,45 @@ seconds on any monotonic clock (virtual in tests). It
   who the ECU is when that changes, warns when its protocol version is not the terminal's own
   (the DBC's VERSION), and hands it to `on_ident` (the terminal logs it);
 - tracks ECU liveness: no EcuStatus for `ecu_timeout_s` reports "ECU lost", the next one "ECU back"
-  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults), with
+  and pushes the parameters again (an ECU that rebooted meanwhile runs on its defaults); an ECU
+  that rebooted faster than that says so in its EcuIdent (`OnDefaults`), and is pushed them
+  again too; both with
   the values the terminal `renew`ed meanwhile (the GNSS lag learned so far), and tells
   `on_again` once they are in force. A running ECU that answers Busy to a `GnssLag` while it
   reports a lag learned since it was heard again is not stopped for it: that value is only where
   learning starts, and it has learned.
   An ECU never heard is waited for ("wait"), not lost.
 
-It sends on anything with python-can's `send`: the terminal's `devices.can.CanPort`, which
+The parameter push is terminal.parampush's `ParamPusher`; what the link knows of the ECU
+(its frames as last heard, the counters, who it is) terminal.ecuview's. It sends on anything
+with python-can's `send`: the terminal's `devices.can.CanPort`, which
 keeps the adapter open (and reopens it) in its own thread, or a bus itself in tests.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping
+from dataclasses import replace
 from typing import Protocol
 
 import can
 
 from topdress import protocol
 from topdress.config import CanConfig
-from topdress.errors import DeviceError, EcuParamError, ProtocolError
+from topdress.errors import DeviceError, ProtocolError
 from topdress.i18n import Text, text
-from topdress.protocol import AckResult, FrameIds
+from topdress.terminal.ecuhealth import FaultRecord, health_event
+from topdress.terminal.ecuview import (
+    Command,
+    EcuView,
+    LinkCounters,
+    frame_ids,
+    ident_mismatch,
+    ident_text,
+    terminal_protocol,
+)
+from topdress.terminal.parampush import PARAM_BACKOFF_S, ParamPusher
 
 log = logging.getLogger(__name__)
 
@@ -50,11 +64,6 @@ log = logging.getLogger(__name__)
 MAX_GNSS_KMH = 25.0
 MAX_RATE_KG_HA = 600.0
 MAX_FAN_RPM = 6000.0
-#: Waits between parameter tries once the fast retries went unanswered (the ECU is not on the
-#: bus yet): every 1 s for 5 s, then every 2 s; the last repeats.
-PARAM_BACKOFF_S = (1.0, 1.0, 1.0, 1.0, 1.0, 2.0)
-GNSS_LAG_ID = protocol.param("GnssLag").id
-GNSS_LAG_AUTO_ID = protocol.param("GnssLagAuto").id
 # Tolerance of time comparisons: a deadline met to the microsecond counts as met.
 _EPS_S = 1e-6
 
@@ -63,105 +72,6 @@ class Sender(Protocol):
     """What the link sends on: python-can's `send` (a bus, or devices.can.CanPort)."""
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
-
-
-def frame_ids(cfg: CanConfig) -> FrameIds:
-    """The identifiers of the `[can.ids]` table."""
-    return FrameIds(**cfg.ids)
-
-
-@dataclass(frozen=True)
-class Command:
-    """What the terminal asks of the ECU (the content of PcCommand)."""
-
-    start: bool = False
-    fan_rpm: float = 0.0
-    rate_upper_kg_ha: float = 0.0
-    rate_lower_kg_ha: float = 0.0
-    gnss_kmh: float | None = None
-
-
-@dataclass
-class LinkCounters:
-    rx_frames: int = 0
-    rx_foreign: int = 0
-    rx_malformed: int = 0
-    rx_implausible: int = 0  # well-formed frames impossible in the current state: ignored
-    tx_commands: int = 0
-    tx_params: int = 0
-    tx_errors: int = 0
-    param_retries: int = 0
-    ecu_lost: int = 0
-    clamped: int = 0
-
-
-@dataclass(frozen=True)
-class EcuView:
-    """The latest of each ECU frame, decoded (None until first received)."""
-
-    status: protocol.EcuStatus | None = None
-    diag: protocol.EcuDiag | None = None
-    speeds: protocol.EcuSpeeds | None = None
-    targets: protocol.EcuTargets | None = None
-    status_t: float | None = None
-    cal: protocol.EcuCalStatus | None = None  # the catch test's status (calibration)
-    cal_t: float | None = None  # when that status arrived (the terminal's clock)
-    lag: protocol.EcuGnssLag | None = None  # the GNSS lag in use and learned
-    ident: protocol.EcuIdent | None = None  # who the ECU says it is (EcuIdent)
-
-
-def ident_mismatch(ident: protocol.EcuIdent) -> bool:
-    """The ECU was built from another version of the protocol than this terminal's."""
-    return ident.protocol != protocol.protocol_version()
-
-
-def terminal_protocol() -> str:
-    """This terminal's protocol version, "1.1" (the DBC's VERSION)."""
-    return "{}.{}".format(*protocol.protocol_version())
-
-
-def ident_text(ident: protocol.EcuIdent) -> Text:
-    """ "stm32f4 firmware 0.1.0, protocol 1.1" (the console, the screens, the event)."""
-    return text(
-        "view.ecu_ident",
-        target=ident.target,
-        firmware=ident.firmware_version,
-        protocol=ident.protocol_version,
-    )
-
-
-@dataclass
-class _ParamPush:
-    items: list[tuple[int, float]]
-    index: int = 0
-    tries: int = 0
-    sent_t: float | None = None
-    waiting: bool = False  # the fast retries of this parameter went unanswered
-    deferred: set[int] = field(default_factory=set)  # ids moved to the end once (inconsistent)
-    # A settings push (push_params): told the outcome instead of raising on a refusal.
-    on_done: Callable[[str | None, list[int]], None] | None = None
-    again: bool = False  # the parameters in force, pushed again to an ECU back from a loss
-
-    @property
-    def done(self) -> bool:
-        return self.index >= len(self.items)
-
-
-def _impossible_ack(
-    ack: protocol.EcuParamAck, param_id: int, value: float, push: _ParamPush
-) -> str | None:
-    """Why an answer to `param_id` cannot have come from the ECU, or None when it can."""
-    if push.sent_t is None:
-        return "no PcParamSet was sent yet"
-    spec = protocol.param(param_id)
-    raw = spec.to_raw(value)
-    if ack.result is AckResult.OK and ack.raw != raw:
-        return f"ok, but in force {ack.raw} is not the {raw} sent"  # ok means the value took
-    in_force = ack.raw * spec.scale
-    if not spec.minimum - spec.scale <= in_force <= spec.maximum + spec.scale:
-        # AckRaw is the value the ECU now holds, and it never holds one outside the range
-        return f"the value in force {in_force:g} is outside {spec.minimum:g}..{spec.maximum:g}"
-    return None
 
 
 def _clamp(value: float, hi: float) -> float:
@@ -203,15 +113,23 @@ class CanLink:
         self.counters = LinkCounters()
         self.command = command
         self.ecu = EcuView()
-        self._push: _ParamPush | None = None
-        self._params: list[tuple[int, float]] = []
+        self._fault_record = FaultRecord()  # a firmware's EcuFaultRecord round
+        self._params = ParamPusher(
+            self._send,
+            self.ids,
+            self.where,
+            self.counters,
+            lambda: self.ecu,
+            self._event,
+            self._on_again,
+            self._ack_timeout_s,
+            self._retries,
+            self._backoff_s,
+        )
         self._next_cmd_t: float | None = None
         self._alive = False
         self._lost = False
-        self._begin_t = 0.0
         self._warned_open_bus = False
-        self._waited = False  # the push had to wait for a silent ECU
-        self._ready = False  # every parameter acknowledged once: the ECU works for us
         self._send_failing = False
         self._gnss_seq = 0  # PcGnssTime: one number per new fix
         # start, fan, rates of the last command sent (send_on_rate compares against them)
@@ -228,32 +146,24 @@ class CanLink:
         self._start(bus, cfg, self.command)
         self.begin(params, now)
 
-    # ---- start-up: parameters -------------------------------------------------------------
+    # ---- start-up: parameters (terminal.parampush) ---------------------------------------
     def begin(self, params: Mapping[int, float], now: float) -> None:
         """Start pushing `params` (PcParamSet id -> physical value); see `params_done`.
 
         Raises ProtocolError at once for a value the frame cannot carry."""
-        for param_id, value in params.items():
-            protocol.param(param_id).check(value)
         if self.cfg.interface == "udp_multicast" and not self._warned_open_bus:
             self._warned_open_bus = True
             self._event(text("event.udp_multicast"))
-        self._begin_t = now
-        self._params = sorted(params.items())
-        self._push = _ParamPush(list(self._params))
-        if self._push.done:
-            self._on_push_done(now)
-        else:
-            self._send_param(now)
+        self._params.begin(params, now)
 
     @property
     def params_done(self) -> bool:
-        return self._push is not None and self._push.done
+        return self._params.done
 
     @property
     def ready(self) -> bool:
         """Every parameter was acknowledged once: the ECU has worked for this terminal."""
-        return self._ready
+        return self._params.ready
 
     @property
     def state(self) -> str:
@@ -261,90 +171,12 @@ class CanLink:
         came back from a loss), then `ok`; `lost` while it is not heard."""
         if self._lost:
             return "lost"
-        return "ok" if self._ready and self._alive and self.params_done else "wait"
+        return "ok" if self.ready and self._alive and self.params_done else "wait"
 
     @property
     def where(self) -> str:
         """The interface and channel the link listens on, e.g. `socketcan:can0`."""
         return f"{self.cfg.interface}:{self.cfg.channel}"
-
-    def _send_param(self, now: float) -> None:
-        push = self._push
-        if push is None or push.done:
-            return
-        param_id, value = push.items[push.index]
-        push.tries += 1
-        push.sent_t = now
-        self._send(protocol.encode_param_set(param_id, value, ids=self.ids))
-        self.counters.tx_params += 1
-
-    def _on_ack(self, ack: protocol.EcuParamAck, now: float) -> None:
-        push = self._push
-        if push is None or push.done:
-            return
-        param_id, value = push.items[push.index]
-        if ack.param_id != param_id:
-            return  # a late answer to an earlier parameter
-        if (why := _impossible_ack(ack, param_id, value, push)) is not None:
-            # On a bus anyone can write to (udp_multicast on a LAN), a forged refusal would stop
-            # the terminal: an answer the ECU cannot give is counted and ignored instead.
-            self.counters.rx_implausible += 1
-            log.warning("ignored EcuParamAck for %s: %s", protocol.param_name(param_id), why)
-            return
-        busy_other = ack.raw != protocol.param(param_id).to_raw(value)
-        if ack.result is AckResult.BUSY and busy_other and not self._lag_learned(param_id, push):
-            # Running with another value (the terminal restarted mid-field with a new file):
-            # stop it, then write again. Busy with the value already in force is as good as Ok.
-            self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
-            push.tries = 0
-            self._send_param(now)
-            return
-        if ack.result is AckResult.INCONSISTENT and self._defer(push, now):
-            return
-        if ack.result not in (AckResult.OK, AckResult.BUSY):
-            reason = ack.result.name.lower().replace("_", " ")
-            if push.on_done is not None:
-                accepted = [pid for pid, _ in push.items[: push.index]]
-                self._push = _ParamPush([])  # nothing pending: commands go on
-                name = protocol.param_name(param_id)
-                push.on_done(f"{name} = {value:g}: refused by the ECU: {reason}", accepted)
-                return
-            raise EcuParamError(
-                protocol.param_name(param_id), value, f"refused by the ECU: {reason}"
-            )
-        push.index += 1
-        push.tries = 0
-        push.waiting = False
-        if push.done:
-            self._on_push_done(now)
-        else:
-            self._send_param(now)
-
-    def _lag_learned(self, param_id: int, push: _ParamPush) -> bool:
-        """`GnssLag` is only where the ECU's learning starts: not worth a stop while it reports
-        a lag it learned since it was last heard again, learning on in it and in this push (a
-        push that turns learning off makes `GnssLag` the lag in use: written as any other)."""
-        lag = self.ecu.lag
-        return (
-            param_id == GNSS_LAG_ID
-            and lag is not None
-            and lag.automatic
-            and lag.learned_ms is not None
-            and dict(push.items).get(GNSS_LAG_AUTO_ID) == 1
-        )
-
-    def _defer(self, push: _ParamPush, now: float) -> bool:
-        """Move a parameter the ECU finds inconsistent with a value it still holds to the end,
-        once: the file's queue_len 3 and cv_window 3 reach an ECU holding cv_window 5 in id
-        order, and queue_len 3 is accepted only after cv_window 3."""
-        item = push.items[push.index]
-        if item[0] in push.deferred or push.index == len(push.items) - 1:
-            return False
-        push.deferred.add(item[0])
-        push.items.append(push.items.pop(push.index))
-        push.tries = 0
-        self._send_param(now)
-        return True
 
     def push_params(
         self,
@@ -357,75 +189,17 @@ class CanLink:
         the first refusal (nothing raised: the caller puts the accepted ones back). The ECU
         takes parameters only while stopped. ProtocolError at once for a value the frame
         cannot carry."""
-        for param_id, value in params.items():
-            protocol.param(param_id).check(value)
-        self._push = _ParamPush(sorted(params.items()), on_done=on_done)
-        if self._push.done:
-            self._on_push_done(now)
-        else:
-            self._send_param(now)
+        self._params.push_params(params, now, on_done)
 
     def renew(self, params: Mapping[int, float]) -> None:
         """Values to push again, in place of those in force, when the ECU comes back from a loss
         (it may have restarted on its defaults); nothing is sent now. ProtocolError for a value
         the frame cannot carry."""
-        for param_id, value in params.items():
-            protocol.param(param_id).check(value)
-        self._keep(params.items())
-
-    def _keep(self, params: Iterable[tuple[int, float]]) -> None:
-        """These values replace those kept for the push after the ECU comes back."""
-        merged = dict(self._params)
-        merged.update(params)
-        self._params = sorted(merged.items())
+        self._params.renew(params)
 
     def send(self, msg: can.Message) -> bool:
         """Send one frame now (calibration commands); a failure is counted as for commands."""
         return self._send(msg)
-
-    def _on_push_done(self, now: float) -> None:
-        push = self._push
-        if push is not None and push.on_done is not None:
-            # In force now: what is pushed again after the ECU comes back.
-            self._keep(push.items)
-            push.on_done(None, [pid for pid, _ in push.items])
-            push.on_done = None
-        if push is not None and push.again:
-            push.again = False
-            if self._on_again is not None:
-                self._on_again(dict(push.items), now)
-        self._ready = True
-        if self._waited:
-            self._waited = False
-            since = now - self._begin_t
-            self._event(text("event.ecu_ready", s=since))
-
-    def _poll_params(self, now: float) -> None:
-        push = self._push
-        if push is None or push.done or push.sent_t is None:
-            return
-        waited = now - push.sent_t + _EPS_S
-        if push.tries > self._retries and not push.waiting and waited >= self._ack_timeout_s:
-            push.waiting = True
-            self._waited = True
-            self._event(self._wait_text(push))
-        if waited >= self._retry_gap_s(push.tries):
-            self.counters.param_retries += 1
-            self._send_param(now)
-
-    def _retry_gap_s(self, tries: int) -> float:
-        # A present ECU answers within milliseconds: fast retries, then the backoff.
-        if tries <= self._retries:
-            return self._ack_timeout_s
-        return self._backoff_s[min(tries - self._retries - 1, len(self._backoff_s) - 1)]
-
-    def _wait_text(self, push: _ParamPush) -> Text:
-        name = protocol.param_name(push.items[push.index][0])
-        head = dict(name=name, tries=push.tries, where=self.where)
-        if self.ecu.status_t is None:
-            return text("event.ecu_wait_silent", **head)
-        # It talks but does not answer: other frame identifiers, or a firmware without them.
-        return text("event.ecu_wait_deaf", **head)
 
     # ---- running --------------------------------------------------------------------------
     def set_command(
@@ -475,7 +249,7 @@ class CanLink:
         """Periodic work: parameter retries, the command period, ECU liveness.
 
         Raises EcuParamError when a parameter is refused."""
-        self._poll_params(now)
+        self._params.poll(now)
         if self.params_done and (self._next_cmd_t is None or now >= self._next_cmd_t - _EPS_S):
             # On a fixed grid, so send-on-GNSS frames in between do not shift the period;
             # after a stall the grid restarts from now.
@@ -545,13 +319,22 @@ class CanLink:
         elif isinstance(decoded, protocol.EcuTargets):
             self.ecu = replace(self.ecu, targets=decoded)
         elif isinstance(decoded, protocol.EcuParamAck):
-            self._on_ack(decoded, now)
+            self._params.on_ack(decoded, now)
         elif isinstance(decoded, protocol.EcuCalStatus):
             self.ecu = replace(self.ecu, cal=decoded, cal_t=now)
         elif isinstance(decoded, protocol.EcuGnssLag):
             self.ecu = replace(self.ecu, lag=decoded)
         elif isinstance(decoded, protocol.EcuIdent):
             self._take_ident(decoded, now)
+        elif isinstance(decoded, protocol.EcuCanHealth):
+            said = health_event(self.ecu.can_health, decoded)
+            self.ecu = replace(self.ecu, can_health=decoded)
+            if said is not None:
+                self._event(said)
+        elif isinstance(decoded, protocol.EcuFaultRecord):
+            said = self._fault_record.take(decoded)
+            if said is not None:
+                self._event(said)
         # PC frames (another PC on the bus, or our own echo) are not for us.
 
     def _take_ident(self, ident: protocol.EcuIdent, now: float) -> None:
@@ -565,6 +348,9 @@ class CanLink:
         if ident_mismatch(ident) and (before is None or before.protocol != ident.protocol):
             ours = terminal_protocol()
             self._event(text("event.ecu_protocol", ecu=ident.protocol_version, terminal=ours))
+        if ident.on_defaults:
+            had = before is not None and not before.on_defaults
+            self._params.restarted(now, had, self._lost)
         if self._on_ident is not None:
             self._on_ident(ident, now)
 
@@ -573,18 +359,7 @@ class CanLink:
         if back:
             self._lost = False
             self._event(text("event.ecu_back"))
-        push = self._push
-        if push is None:
-            return
-        if push.done:
-            if back:  # an ECU that rebooted meanwhile runs on its defaults
-                self._push = _ParamPush(list(self._params), again=True)
-                self._send_param(now)
-        elif push.waiting:
-            # It has just been powered: go on at once, not at the end of the backoff.
-            push.tries = 0
-            push.waiting = False
-            self._send_param(now)
+        self._params.heard(now, back)
 
     def _poll_liveness(self, now: float) -> None:
         # An ECU never heard is waited for (see `state`), not lost.

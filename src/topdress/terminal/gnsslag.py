@@ -9,12 +9,15 @@ The ECU learns the lag of the GNSS speed behind the wheel and reports it in `Ecu
   is first learned, and warned when the data overrule a fixed lag for `WARN_S` (the learner's
   first estimate, after 1.5 s of speed change, can still be far from where it settles: it
   overruled a right 1.3 s for 5 s on the simulated machine; the session log has it at once);
-- **keeps** it (`LagStore`): the last learned lag per receiver (topdress.terminal.receiver) in a
-  small JSON file beside the session logs, `STORE_FILE`, written atomically whenever the learned
-  lag changes (a background thread: the write ends in an fsync) and at the end of the session; the
-  next session pushes the lag kept for its GNSS input as `GnssLag`, the start of the learning.
-  Within a session the last learned lag is the start value an ECU that restarted is pushed
-  again (topdress.terminal.app), so a reboot does not send it back to the session's start.
+- **keeps** it (`LagStore`, terminal.lagstore): the last learned lag per receiver
+  (topdress.terminal.receiver) in a small JSON file beside the session logs, `STORE_FILE`,
+  written atomically whenever the learned lag changes (a background thread: the write ends in an
+  fsync) and at the end of the session; the next session pushes the lag kept for its GNSS input
+  as `GnssLag`, the start of the learning. Within a session the last learned lag is the start
+  value an ECU that restarted is pushed again, so a reboot does not send it back to the
+  session's start;
+- and `LagKeeper` does all of this for the terminal loop: the receiver on the GNSS input, the
+  start value pushed, the watch, the store, the learned lag renewed in the link.
 
 A file that cannot be read or parsed is an error told to the operator and logged, never a crash:
 a damaged one is moved aside (`.damaged`) and the lags are learned anew.
@@ -22,153 +25,26 @@ a damaged one is moved aside (`.damaged`) and the lags are learned anew.
 
 from __future__ import annotations
 
-import datetime as dt
-import json
 import logging
-import os
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from topdress import protocol
+from topdress.gnss.nmea import GnssFix
 from topdress.i18n import Text, text
-from topdress.outpath import atomic_write
-from topdress.terminal.receiver import ReceiverId
+from topdress.terminal.canlink import CanLink
+from topdress.terminal.journal import Journal, Settings
+from topdress.terminal.lagstore import MAX_LAG_MS, STORE_FILE, LagStore
+from topdress.terminal.parampush import GNSS_LAG_ID
+from topdress.terminal.receiver import ReceiverWatch, input_key
 from topdress.view.snapshot import LagView
 
 log = logging.getLogger(__name__)
 
-STORE_FILE = "gnss-lag.json"
-STORE_VERSION = 1
-MAX_RECEIVERS = 32  # the file keeps the receivers used most recently
-MAX_LAG_MS = 3000  # GnssLag's range (DBC)
 MOVE_MS = 100  # a learned lag that moves by more than this is an event (and kept)
 WARN_S = 10.0  # a fixed lag overruled this long is a warning to the operator
-
-
-@dataclass(frozen=True)
-class KeptLag:
-    """The lag learned with one receiver, and when (local ISO time)."""
-
-    receiver: ReceiverId
-    lag_ms: int
-    updated: str
-
-
-def _now_iso() -> str:
-    return dt.datetime.now().astimezone().isoformat(timespec="seconds")
-
-
-def _strings(raw: Any, name: str) -> tuple[str, ...]:
-    if not isinstance(raw, list) or not all(isinstance(x, str) for x in raw):
-        raise ValueError(f"{name} is not a list of strings")
-    return tuple(raw)
-
-
-def _entry(raw: Any) -> KeptLag:
-    if not isinstance(raw, dict):
-        raise ValueError("a receiver is not an object")
-    lag = raw.get("lag_ms")
-    if type(lag) is not int or not 0 <= lag <= MAX_LAG_MS:
-        raise ValueError(f"lag_ms {lag!r} is not a whole number of ms in 0..{MAX_LAG_MS}")
-    where = raw.get("input")
-    if not isinstance(where, str) or not where:
-        raise ValueError("a receiver has no input")
-    receiver = ReceiverId(
-        where,
-        tuple(sorted(_strings(raw.get("sentences", []), "sentences"))),
-        _strings(raw.get("versions", []), "versions"),
-    )
-    return KeptLag(receiver, lag, str(raw.get("updated", "")))
-
-
-def _as_json(k: KeptLag) -> dict[str, Any]:
-    r = k.receiver
-    return {
-        "input": r.input,
-        "sentences": list(r.sentences),
-        "versions": list(r.versions),
-        "lag_ms": k.lag_ms,
-        "updated": k.updated,
-    }
-
-
-class LagStore:
-    """The lags kept per receiver, in `path` (None: in memory only)."""
-
-    def __init__(self, path: Path | None) -> None:
-        self.path = path
-        self.error: str | None = None  # the last load/save problem, for the operator
-        self.kept: list[KeptLag] = []  # oldest first: the last is the most recent
-        self._writer: ThreadPoolExecutor | None = None
-        if path is not None:
-            self._load(path)
-
-    def _load(self, path: Path) -> None:
-        try:
-            raw = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            return
-        except (OSError, UnicodeDecodeError) as exc:
-            self.error = f"cannot read {path}: {exc}"
-            log.warning("%s", self.error)
-            return
-        try:
-            doc = json.loads(raw)
-            if not isinstance(doc, dict) or not isinstance(doc.get("receivers"), list):
-                raise ValueError("not an object with a list of receivers")
-            self.kept = [_entry(x) for x in doc["receivers"]]
-        except (ValueError, RecursionError) as exc:
-            aside = path.with_name(path.name + ".damaged")
-            try:
-                os.replace(path, aside)
-                where = f"moved to {aside}"
-            except OSError as err:
-                where = f"not moved aside ({err})"
-            self.kept = []
-            self.error = f"{path} damaged ({exc}): {where}; the lag is learned anew"
-            log.warning("%s", self.error)
-
-    def for_input(self, where: str) -> KeptLag | None:
-        """The lag kept most recently for a receiver on this input."""
-        return next((k for k in reversed(self.kept) if k.receiver.input == where), None)
-
-    def for_receiver(self, receiver: ReceiverId) -> KeptLag | None:
-        """The lag kept for this receiver (topdress.terminal.receiver.ReceiverId.same)."""
-        return next((k for k in reversed(self.kept) if k.receiver.same(receiver)), None)
-
-    def keep(self, receiver: ReceiverId, lag_ms: int, wait: bool = True) -> None:
-        """Keep `lag_ms` for `receiver` (it becomes the most recent) and write the file; with
-        `wait` False in the background. The lag is bounded to GnssLag's 0..3000 ms."""
-        lag = min(max(int(lag_ms), 0), MAX_LAG_MS)
-        others = [k for k in self.kept if not k.receiver.same(receiver)]
-        self.kept = [*others, KeptLag(receiver, lag, _now_iso())][-MAX_RECEIVERS:]
-        if self.path is None:
-            return
-        doc = {"version": STORE_VERSION, "receivers": [_as_json(k) for k in self.kept]}
-        body = json.dumps(doc, indent=2) + "\n"
-        if wait:
-            self.wait()
-            self._write(body)
-            return
-        if self._writer is None:
-            self._writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnss-lag")
-        self._writer.submit(self._write, body)  # one worker: the newest text lands last
-
-    def wait(self) -> None:
-        """Until the background writes are done."""
-        if self._writer is not None:
-            self._writer.shutdown(wait=True)
-            self._writer = None
-
-    def _write(self, body: str) -> None:
-        assert self.path is not None
-        try:
-            atomic_write(self.path, body)
-        except OSError as exc:
-            self.error = f"cannot save {self.path}: {exc}"
-            log.warning("%s", self.error)
 
 
 @dataclass(frozen=True)
@@ -276,3 +152,133 @@ class LagWatch:
         self.state = view.state
         self._told_ms = frame.learned_ms
         return LagChange(view, was, frame.evidence_s, frame.fit, moved, warned)
+
+
+class LagKeeper:
+    """The terminal's side of the GNSS lag: the receiver on the GNSS input, the lag kept for it
+    (the start value pushed), the ECU's reports watched, the learned lag kept and renewed."""
+
+    def __init__(self, settings: Settings, journal: Journal, where: Path | None) -> None:
+        """`where`: the folder of the session logs (None: kept in memory only)."""
+        self._settings = settings
+        self._journal = journal
+        self.receiver = ReceiverWatch(input_key(settings.cfg.gnss))
+        self.store = LagStore(where / STORE_FILE if where is not None else None)
+        self.watch = LagWatch()
+        self.start = self.store.for_input(self.receiver.input)
+        self._renewed_ms: int | None = None  # the learned lag an ECU back is pushed
+        if self.store.error:
+            journal.event(text("event.gnss_lag_store", error=self.store.error))
+
+    def start_ms(self) -> int | None:
+        """Where the ECU's learning starts: the lag learned so far in this session, else the
+        one kept for this receiver's input (a fixed gnss_lag_ms overrides both)."""
+        if self.watch.learned_ms is not None:
+            return self.watch.learned_ms
+        return self.start.lag_ms if self.start is not None else None
+
+    def opened(self, now: float) -> None:
+        """The `gnss_lag.start` event at open."""
+        start = self.start
+        self._journal.log_event(
+            now,
+            "gnss_lag.start",
+            input=self.receiver.input,
+            kept_ms=start.lag_ms if start is not None else None,
+            fixed_ms=self._settings.fixed_lag_ms(),
+            error=self.store.error,
+        )
+
+    def see(self, t: float, fix: GnssFix, line: bytes) -> None:
+        """A decoded line: the receiver's identity, said once it settles, and told when the
+        lag pushed at start was kept for another receiver on this input."""
+        if not self.receiver.see(t, fix, line):
+            return
+        rid = self.receiver.receiver
+        start = self.start
+        same = start.receiver.same(rid) if start is not None else None
+        self._journal.log_event(
+            t,
+            "gnss_lag.receiver",
+            input=rid.input,
+            sentences=list(rid.sentences),
+            versions=list(rid.versions),
+            start_ms=start.lag_ms if start is not None else None,
+            same_receiver=same,
+        )
+        if same is False:
+            self._journal.event(text("event.gnss_lag_other", input=rid.input))
+
+    def track(self, now: float, link: CanLink) -> LagView | None:
+        """The tick's turn: the ECU's last EcuGnssLag watched, the learned lag kept; the lag as
+        shown (None while the ECU is not heard or has not said)."""
+        frame = link.ecu.lag
+        if frame is None or not link.ecu_alive:
+            return None
+        change = self.watch.update(now, frame, self._settings.fixed_lag_ms())
+        self._renew(link)
+        if change is not None:
+            self._journal.log_event(now, "gnss_lag.changed", **change.detail())
+            if change.tell():
+                self._journal.event(change.message())
+            else:
+                log.info("%s", change.message())
+            if frame.learned_ms is not None:
+                self.keep(now, final=False)
+        warning = self.watch.warning(now)
+        if warning is not None:
+            log.warning("%s", warning)
+            self._journal.event(warning)
+        return LagView.of(frame, self._settings.fixed_lag_ms())
+
+    def _renew(self, link: CanLink) -> None:
+        """The lag learned so far becomes the start value an ECU back from a loss is pushed, as
+        the session's start value was at open; a number in gnss_lag_ms stays the one pushed."""
+        learned = self.watch.learned_ms
+        if self._settings.fixed_lag_ms() is not None:
+            self._renewed_ms = None  # set to "auto" again later: renewed then
+            return
+        if learned is None or learned == self._renewed_ms:
+            return
+        link.renew({GNSS_LAG_ID: float(min(max(learned, 0), MAX_LAG_MS))})
+        self._renewed_ms = learned
+
+    def again(self, params: Mapping[int, float], now: float, link: CanLink) -> None:
+        """The parameters are in force again in an ECU back from a loss: when they carried the
+        lag learned so far and the ECU has reported no learned lag of its own since (it
+        restarted), that lag is where its learning starts again: logged and told."""
+        learned = self._renewed_ms
+        if learned is None or params.get(GNSS_LAG_ID) != learned:
+            return
+        frame = link.ecu.lag
+        if self._settings.fixed_lag_ms() is not None:
+            return
+        if frame is not None and frame.learned_ms is not None:
+            return  # it kept what it learned: nothing was restored
+        start = self.start
+        self._journal.log_event(
+            now,
+            "gnss_lag.restored",
+            input=self.receiver.input,
+            lag_ms=learned,
+            start_ms=start.lag_ms if start is not None else None,
+        )
+        self._journal.event(text("event.gnss_lag_restored", s=learned / 1000))
+
+    def keep(self, now: float, final: bool) -> None:
+        """Keep the learned lag for this receiver (in the background while running); at the end
+        of the session also the `gnss_lag.kept` event, saying what was kept."""
+        rid = self.receiver.receiver
+        learned = self.watch.learned_ms
+        if learned is not None and rid.known:
+            self.store.keep(rid, learned, wait=final)
+        if final:
+            self.store.wait()
+            self._journal.log_event(
+                now,
+                "gnss_lag.kept",
+                input=rid.input,
+                sentences=list(rid.sentences),
+                lag_ms=learned if rid.known else None,
+                error=self.store.error,
+            )

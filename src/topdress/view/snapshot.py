@@ -131,6 +131,7 @@ class Snapshot:
     ecu_where: str = ""  # the CAN interface:channel the terminal listens on
     ecu_ident: Text | None = None  # "stm32f4 firmware 0.1.0, protocol 1.1" (EcuIdent)
     ecu_protocol: tuple[str, str] | None = None  # (the ECU's, the terminal's) when they differ
+    ecu_can_health: Text | None = None  # a firmware's CAN controller (EcuCanHealth)
     gnss_link: str = "wait"  # wait, ok, no fix, lost
     crop_link: str = "wait"  # wait, ok, "3/4" (fresh of configured), silent, lost
     lat: float | None = None
