@@ -61,7 +61,7 @@ def test_default_machine_reads_back_as_configured() -> None:
     for number in (3, 4):
         b = _ddis(_element(device, number), objects)
         assert set(b) == {6, 7, 8, 9, 10, 75, 81}
-        assert b[6].property == 7  # default set, settable, control source
+        assert b[6].property == 3  # default set, settable (not both settable and control source)
         assert b[7].trigger_methods == 15  # time, distance, threshold, on change
         assert (b[8].value, b[9].value, b[10].value) == (0, 0, 60000)  # mg/m^2: 600 kg/ha max
     ys = [_ddis(_element(device, 5 + i), objects)[135].value for i in range(6)]

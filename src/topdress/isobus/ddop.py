@@ -24,7 +24,7 @@ from topdress.protocol.dbc import message
 # Element types (ISO 11783-10 DET)
 DEVICE, FUNCTION, BIN, SECTION, CONNECTOR = 1, 2, 3, 4, 6
 # DPD properties and trigger methods
-PROP_DEFAULT_SET, PROP_SETTABLE, PROP_CONTROL_SOURCE = 1, 2, 4
+PROP_DEFAULT_SET, PROP_SETTABLE = 1, 2  # (4, control source, excludes settable)
 TRIG_TIME, TRIG_DISTANCE, TRIG_THRESHOLD, TRIG_CHANGE, TRIG_TOTAL = 1, 2, 4, 8, 16
 NO_DVP = 0xFFFF
 
@@ -236,7 +236,7 @@ def build(m: Machine, structure_label: bytes | None = None) -> tuple[bytes, Layo
         kids = [
             p.dpd(
                 DDI_SETPOINT_RATE,
-                PROP_DEFAULT_SET | PROP_SETTABLE | PROP_CONTROL_SOURCE,
+                PROP_DEFAULT_SET | PROP_SETTABLE,  # control source excludes settable
                 TRIG_CHANGE,
                 "Setpoint rate",
                 v_rate,
