@@ -4,9 +4,9 @@ virtual time: the TC's kg/ha metered within 3 % in steady state, sections switch
 
 from __future__ import annotations
 
-from isobus_tc import MiniTc
 from topdress.isobus.node import Frame, IsobusNode, topdress_name
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
+from topdress.sim.tc import MiniTc
 from topdress.sim.tractor import Drive
 from topdress.sim.world import World
 

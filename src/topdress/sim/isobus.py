@@ -36,6 +36,7 @@ class IsobusMachine:
         self.sections = sections
         self.fan_rpm = fan_rpm
         self.running = False
+        self.actual_kg_ha = (0.0, 0.0)  # what the meters apply, as reported to the TC (DDI 7)
         node.start(world.now_us)
 
     def rates_kg_ha(self) -> tuple[float, float]:
@@ -57,12 +58,15 @@ class IsobusMachine:
                                      min(truth.v_kmh, 25.0)))  # fmt: skip
         w.step()
         truth = w.truth
+        actual = [0.0, 0.0]
         for layer, element in enumerate(ELEMENT_BINS):
             rate = 0.0
             if truth.v_kmh > 0.5:
                 rate = (truth.meter_rpm[layer] * w.cfg.kg_per_rev[layer] * KG_HA_PER_RPM_KG
                         / (truth.v_kmh * self.width_m))  # fmt: skip
             n.set_actual(element, DDI_ACTUAL_RATE, round(rate * 100))
+            actual[layer] = rate
+        self.actual_kg_ha = (actual[0], actual[1])
         n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
         n.step(w.now_us, round(truth.odometer_m * 1000))
         return n.tx()

@@ -1,11 +1,13 @@
-"""A minimal Task Controller for the tests (until the terminal has its own): status every 2 s,
-answers the client's version, language and label requests, takes the pool (the layer's C TP),
-accepts and activates it, then sets rates and sections as told."""
+"""The simulated Task Controller (the farm terminal's twin, until the terminal has its own TC):
+status every 2 s, answers the client's version, language and label requests, takes the pool
+(the layer's C TP), accepts and activates it, then sets rates and sections as told; `silent`
+is its fault knob (the TC gone)."""
 
 from __future__ import annotations
 
 import struct
 
+from topdress.errors import ProtocolError
 from topdress.isobus.node import Frame, TpEndpoint, split_id
 
 TC = 0xF7
@@ -36,7 +38,9 @@ class MiniTc:
         self._out.append(Frame(_id(0xCB00, da), data))
 
     def command(self, element: int, ddi: int, value: int) -> None:
-        assert self.client is not None
+        """Set Value and Acknowledge to the client (ProtocolError before one connected)."""
+        if self.client is None:
+            raise ProtocolError("the simulated TC has no client yet")
         self._to(self.client, pd(10, element, ddi, value))
 
     def step(self, now_us: int, frames_in: list[Frame]) -> list[Frame]:
