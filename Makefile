@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps browser qemu screenshots clean firmware interop
+.PHONY: demo test ctest pytest lint bench sysdeps browser qemu office screenshots clean firmware interop
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -28,6 +28,10 @@ browser:
 # the emulated firmware's tests (tests/test_ecu_qemu.py): qemu-system-arm and the firmware's compiler
 qemu:
 	bash scripts/sysdeps.sh qemu
+
+# the farm office's tests and bench (tests/test_office*.py): PostgreSQL and PostGIS
+office:
+	bash scripts/sysdeps.sh office
 
 # The ECU firmware for the STM32F405/407 (docs/firmware.md): an image per board header
 # (build/fw/topdress-ecu-stm32f4.elf for the generic 8 MHz board, build/fw-BOARD/ for the others)
@@ -51,7 +55,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
 
-pytest: $(STAMP) browser qemu
+pytest: $(STAMP) browser qemu office
 	$(BIN)/python -m pytest -q
 
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
@@ -64,9 +68,10 @@ interop: $(STAMP)
 
 test: ctest lint pytest
 
-bench: $(STAMP) browser
+bench: $(STAMP) browser office
 	$(BIN)/python bench/ecu_bench.py
 	$(BIN)/python bench/fused_lag_bench.py
+	$(BIN)/python bench/field_speed_bench.py
 	$(BIN)/python bench/fw_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
@@ -74,6 +79,7 @@ bench: $(STAMP) browser
 	$(BIN)/python bench/maps_bench.py
 	$(BIN)/python bench/display_bench.py
 	$(BIN)/python bench/longday_bench.py
+	$(BIN)/python bench/office_bench.py
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c src/topdress/isobus/_isobus*.so src/topdress/isobus/_isobus.c

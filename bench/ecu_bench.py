@@ -15,6 +15,9 @@ Prints exactly:
     cortex_m4_text_bytes: N    text of a linked Cortex-M4 image (bench/ecu_cm4_main.c + the core +
     cortex_m4_ram_bytes: N     what it needs of newlib-nano/libgcc; --gc-sections, nosys specs),
                                data + bss including the one static td_app_t a port owns
+    budget NAME: N of LIMIT (within|OVER)   the four budgeted figures against the core's budget:
+                               mean step <= 3,000 and worst step <= 6,000 instructions, text
+                               <= 20 KiB, RAM <= 2.5 KiB; exit status 1 when one is over
 Details go to stderr. Missing tools are installed with apt-get (as root).
 """
 
@@ -53,6 +56,14 @@ CM4 = [
     "-fdata-sections",
 ]
 COLLECT = ("td_app_step", "td_app_rx", "td_app_tx_pop")
+# The core's budget: the mean step (the launch-and-brake drive, every step) and the worst step (a
+# period that takes a fix while the speed changes), Cortex-M4 text and RAM.
+BUDGET = {
+    "instructions_per_step_launch_brake": 3_000,
+    "instructions_per_fix_step_max": 6_000,
+    "cortex_m4_text_bytes": 20 * 1024,
+    "cortex_m4_ram_bytes": 2_560,
+}
 
 
 def log(msg: str) -> None:
@@ -237,12 +248,21 @@ def main() -> int:
     text, ram = cortex_m4_sizes()
     print(f"instructions_per_step: {ips}")
     print(f"instructions_per_step_fused: {ips_fused}")
-    print(f"instructions_per_fix_step_mean: {fix_mean}")
-    print(f"instructions_per_fix_step_max: {fix_max}")
-    print(f"instructions_per_step_launch_brake: {round(drive_total / DRIVE_STEPS)}")
-    print(f"cortex_m4_text_bytes: {text}")
-    print(f"cortex_m4_ram_bytes: {ram}")
-    return 0
+    figures = {
+        "instructions_per_fix_step_mean": fix_mean,
+        "instructions_per_fix_step_max": fix_max,
+        "instructions_per_step_launch_brake": round(drive_total / DRIVE_STEPS),
+        "cortex_m4_text_bytes": text,
+        "cortex_m4_ram_bytes": ram,
+    }
+    for name, value in figures.items():
+        print(f"{name}: {value}")
+    over = 0
+    for name, limit in BUDGET.items():
+        within = figures[name] <= limit
+        over += not within
+        print(f"budget {name}: {figures[name]} of {limit} ({'within' if within else 'OVER'})")
+    return 1 if over else 0
 
 
 if __name__ == "__main__":

@@ -6,6 +6,8 @@
 #   sysdeps.sh qemu     - what the emulated firmware's tests need: qemu-system-arm (and the firmware's)
 #   sysdeps.sh browser  - what the display's end-to-end test needs: Debian's Chromium and its
 #                         chromedriver (nothing downloads a browser), a CJK font for Chinese
+#   sysdeps.sh office   - what the farm office's tests need: PostgreSQL (initdb, pg_ctl) and
+#                         PostGIS for it
 set -euo pipefail
 what=${1:-ctest}
 python=${PYTHON:-python3}
@@ -40,8 +42,18 @@ browser)
         missing+=(fonts-wqy-zenhei)
     fi
     ;;
+office)
+    initdb=$(ls /usr/lib/postgresql/*/bin/initdb 2>/dev/null | sort -V | tail -n 1 || true)
+    if [ -z "$initdb" ]; then
+        missing+=(postgresql postgis)
+    else
+        major=$(basename "$(dirname "$(dirname "$initdb")")")
+        ls /usr/share/postgresql/"$major"/extension/postgis.control >/dev/null 2>&1 \
+            || missing+=("postgresql-$major-postgis-3")
+    fi
+    ;;
 *)
-    echo "usage: $0 python|ctest|firmware|qemu|browser" >&2
+    echo "usage: $0 python|ctest|firmware|qemu|browser|office" >&2
     exit 2
     ;;
 esac

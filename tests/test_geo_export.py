@@ -162,7 +162,11 @@ def test_isoxml_task_data_reads_back(session: Path, tmp_path: Path) -> None:
     assert actual_upper == pytest.approx(pts["AppRateUp"], abs=0.01)
     speed = np.array([r[(397, "DET1")] for r in records]) * 0.0036  # mm/s -> km/h
     assert speed == pytest.approx(pts["SPEED"], abs=0.002)
-    assert {r[(400, "DET1")] for r in records} <= {0, 1, 3}
+    # DDI 400 as the vector exports code the same points: the default (fused) mode is 4, blended
+    codes = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
+    sources = [r[(400, "DET1")] for r in records]
+    assert sources == [codes[str(s)] for s in pts["SpeedSrc"]]
+    assert 4 in sources
     assert {r[(141, "DET1")] for r in records} == {0, 1}
 
 

@@ -15,7 +15,10 @@
  * Wheel (every step):   z_w = s * g(v) * v + noise,  H = [s (g + v g'), 0, g v], with g = 1 the
  *   scale is a constant; with the slip shape on, g(v) = 1 - eq. 5 slip(v) / 100 and s learns how
  *   far this soil is from the paper's wheat stubble (the slip then follows the speed at once),
- *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports).
+ *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports); 30 times that in
+ *   flat motion (jerk share < 0.3) while GNSS backs the estimate and the wheel is within 5 % of
+ *   it: the bounce wanders over seconds, no white noise, so GNSS holds the level; a wheel beyond
+ *   5 % (a brake, a launch) weighs in full at once.
  * GNSS (delayed by d = age + lag) enters twice:
  *   1. the scale, against the wheel's own history at the fix's time of validity (100 ms means
  *      kept for 3.6 s in mm/s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
@@ -30,6 +33,12 @@
  *      now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 + (0.2 m/s^2 d)^2
  *      (an acceleration the wheel may not show yet): through v - a d, an acceleration left by
  *      the wheel's bounce took up GNSS's difference and held v 2-5 % off for seconds.
+ *   4. a speed change GNSS does not show: the estimate's acceleration went beyond 0.1 m/s^2
+ *      longer than d + 0.2 s ago, its speed has moved by more than 0.1 m/s since, GNSS's 1 s mean
+ *      has not (within 0.1 m/s), and GNSS stands apart from the wheel at the fix's time against
+ *      the change by 3 GNSS sigmas: the wheel's scale stepped (a wet patch). The scale is set
+ *      from the wheel's last 0.5 s against GNSS (its variance at least (2 %)^2), v = GNSS, a = 0.
+ *      A change GNSS's mean follows by 0.1 m/s is a real one and is no longer checked.
  * The scale is learned only while the caller says (`learn`: GNSS good, motion steady) or while
  * re-opened, and kept through GNSS outages.
  * Scale random walk 2e-5/s; its variance never grows beyond the initial (10 %)^2.
@@ -49,7 +58,7 @@
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 164 bytes (80 of state, 84 of wheel history). No heap,
+ * Costs per step: ~120 float operations; 176 bytes (92 of state, 84 of wheel history). No heap,
  * no globals.
  */
 #ifndef TD_FUSED_H
@@ -83,6 +92,9 @@ typedef struct {
     int8_t run_sign;           /**< their sign (0: none) */
     float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
     float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
+    float ramp_s;              /**< time since the estimate's acceleration went beyond 0.1 m/s^2, s (0: none) */
+    float ramp_v0_ms;          /**< the estimate's speed then, m/s */
+    float ramp_z0_ms;          /**< and GNSS's 1 s mean, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */

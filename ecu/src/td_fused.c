@@ -51,7 +51,17 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_MIN_MS 0.5f  /* below this speed the whole jerk */
 #define Q_FLAT_A_MS2 0.2f   /* the wheel's own acceleration at which the whole jerk is back */
 #define Q_FLAT_SHARE 0.05f  /* the least share */
-#define CRUISE_SHARE 0.3f   /* flat: a fix corrects v itself while the jerk's share is below this */
+#define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
+#define WHEEL_FLAT_GAIN 30.0f /* and weighs this much less */
+#define CRUISE_SHARE 0.3f
+/* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
+#define RAMP_A_MS2 0.1f     /* the estimate's acceleration beyond this is a ramp it believes in */
+#define RAMP_MARGIN_S 0.2f   /* GNSS shows a change this long after the delay, or it was none */
+#define RAMP_MAX_S 5.0f      /* a change is checked this long after it began */
+#define RAMP_P_S 0.0004f     /* the scale's variance after the step, (2 %)^2 */
+#define RAMP_P_A 0.01f       /* and the acceleration's, (0.1 m/s^2)^2 */
+#define RAMP_SIGMA2 9.0f     /* GNSS apart from the scaled wheel by 3 GNSS sigmas */
+#define RAMP_W_S 0.5f        /* the wheel's mean over its last this long */   /* flat: a fix corrects v itself while the jerk's share is below this */
 #define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
@@ -78,6 +88,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->run_sign = 0;
     f->quiet_s = 0.0f;
     f->gnss_avg_ms = 0.0f;
+    f->ramp_s = 0.0f;
     f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
@@ -120,6 +131,15 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     }
     if (f->since_gnss_s < 60.0f) {
         f->since_gnss_s += dt_s;
+    }
+    /* a speed change the estimate believes in: from where a went beyond RAMP_A_MS2, for at most
+     * RAMP_MAX_S (td_fused_gnss checks it against GNSS) */
+    if (f->ramp_s > 0.0f) {
+        f->ramp_s = f->ramp_s + dt_s < RAMP_MAX_S ? f->ramp_s + dt_s : 0.0f;
+    } else if (fabsf(f->a_ms2) > RAMP_A_MS2) {
+        f->ramp_s = dt_s;
+        f->ramp_v0_ms = f->v_ms;
+        f->ramp_z0_ms = f->gnss_avg_ms;
     }
 }
 
@@ -192,8 +212,13 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     /* z = s * g(v) * v: dz/dv = s * (g + v * g'), dz/ds = g * v */
     const float h[3] = { f->scale * (g + f->v_ms * dg), 0.0f, g * f->v_ms };
     const float sd = f->wheel_rel * z_ms;
-    const float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
     const float y = z_ms - f->scale * g * f->v_ms;
+    float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
+    if (gnss_backs && f->q_share < CRUISE_SHARE && fabsf(y) < WHEEL_FLAT_REL * z_ms) {
+        /* flat motion, the wheel within its bounce: the bounce wanders over seconds and is no
+         * white noise, so GNSS holds the level; a wheel beyond it weighs in full at once */
+        r *= WHEEL_FLAT_GAIN;
+    }
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
      * again, not because the estimate grew uncertain without it */
     const bool held = f->wheel_rejects > 0u && gnss_backs && fabsf(y) > GATE_MIN_MS + 3.0f * sqrtf(r);
@@ -350,6 +375,30 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
     f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
     f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
+    /* a speed change GNSS should show by now (it began longer than the delay ago): GNSS moved,
+     * it was one; GNSS held still and stands apart from the wheel at the fix's time against it,
+     * the wheel's scale stepped (a wet patch) and the speed did not. The scale then takes the
+     * step at once from the wheel's last half second against GNSS, and the change is undone */
+    const float dv = f->v_ms - f->ramp_v0_ms;
+    float w_now = 0.0f;
+    if (f->ramp_s > 0.0f && fabsf(f->gnss_avg_ms - f->ramp_z0_ms) > GNSS_MOVES_MS) {
+        f->ramp_s = 0.0f;
+    } else if (have_w && f->ramp_s > d + RAMP_MARGIN_S && fabsf(dv) > GNSS_MOVES_MS && z_ms > SCALE_MIN_MS &&
+               ys * dv < 0.0f && ys * ys > RAMP_SIGMA2 * f->r_gnss && wheel_over(f, RAMP_W_S, RAMP_W_S, &w_now)) {
+        const float s_new = w_now / (g * z_ms);
+        f->scale = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
+        f->v_ms = z_ms;
+        f->a_ms2 = 0.0f;
+        f->p[VV] = f->r_gnss;
+        f->p[VA] = 0.0f;
+        f->p[VS] = 0.0f;
+        f->p[AA] = RAMP_P_A;
+        f->p[AS] = 0.0f;
+        f->p[SS] = f->p[SS] > RAMP_P_S ? f->p[SS] : RAMP_P_S;
+        f->ramp_s = 0.0f;
+        f->since_gnss_s = 0.0f;
+        return TD_FUSED_ACCEPTED;
+    }
     const bool settled = steady && f->quiet_s >= d + SETTLE_S;
     const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
     if (sign != 0 && sign == f->run_sign && settled) {
@@ -406,6 +455,7 @@ void td_fused_standstill(td_fused_t *f) {
     f->run_s = 0.0f;
     f->run_sum = 0.0f;
     f->run_sign = 0;
+    f->ramp_s = 0.0f;
 }
 
 float td_fused_lead_ms(const td_fused_t *f, float lead_s) {

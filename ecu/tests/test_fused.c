@@ -69,7 +69,8 @@ static void test_constant_speed_learns_the_slip(void **state) {
     assert_float_equal(r.f.v_ms, 2.0, 0.02);
     assert_float_equal(r.f.a_ms2, 0.0, 0.05);
     assert_float_equal(r.f.scale, 0.92, 0.005);
-    assert_true(td_fused_speed_std_ms(&r.f) < 0.06f);
+    /* 0.076: in flat motion the wheel within its bounce weighs a thirtieth (td_fused_wheel) */
+    assert_true(td_fused_speed_std_ms(&r.f) < 0.08f);
 }
 
 /* Without learning the scale stays where it is: the speed is then the wheel's, slip and all. */
@@ -192,8 +193,7 @@ static void test_init_rejects_bad_tuning(void **state) {
 }
 
 /* Loose ground without the caller's learning (the wheel's CV rises there): a slip step from 5 %
- * to 15 % makes the GNSS innovations one-signed; learning re-opens after 1 s of them and the
- * scale moves towards the new slip; before the step, with the scale right, it stays closed. */
+ * to 15 % is followed; before the step, with the scale right, learning stays closed. */
 static void test_slip_step_reopens_learning(void **state) {
     (void)state;
     run_t r;
@@ -215,12 +215,81 @@ static void test_slip_step_reopens_learning(void **state) {
             half_at = (k + 1) * DT;
         }
     }
-    assert_true(opened_at >= 1.0 && opened_at <= 2.0);
-    assert_true(half_at > 0.0 && half_at <= 3.0);
+    /* the wheel's drop is a speed change GNSS does not show 0.3 s + 0.2 s after it began: the
+     * scale takes the step, halfway after 0.94 s (up to 3 s through the re-opening alone, 1 s
+     * of one-signed innovations first), and no re-opening is needed */
+    assert_true(opened_at < 0.0);
+    assert_true(half_at > 0.0 && half_at <= 1.5);
+    assert_float_equal(r.f.scale, 0.85, 0.01);
+    assert_float_equal(r.f.scale, 0.85, 0.01);
     assert_float_equal(r.f.v_ms, 2.0, 0.1);
     /* back on firm ground: re-opened the other way, the scale returns */
     run(&r, 8.0, v_const, 0.95, true, 0.3, 0.3, false);
     assert_true(r.f.scale > 0.92f);
+}
+
+static double v_pass(double t) { /* a pass at 8.5 km/h */
+    (void)t;
+    return 8.5 / 3.6;
+}
+
+/* A wet patch at 8.5 km/h with GNSS 1.3 s late and the slip shape on: the wheel slips 10 % more
+ * for 17 s and then grips again. The wheel's drop is a speed change of the estimate that GNSS
+ * has not shown 1.3 s + 0.2 s after it began: the scale takes the step. Measured: the mean
+ * error from 3 s after entering to the exit -0.5 %, the scale 3 s in 0.985 against the
+ * patch's 0.981, the worst error (entering, before GNSS can tell) -16.1 %. Without that check
+ * (the re-opening alone): mean -2.1 %, the scale 3 s in still 1.023. */
+static void test_a_wet_patch_is_followed_within_seconds(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f); /* the defaults of td_params.h */
+    r.f.slip_shape = true;
+    const double firm = 0.98;
+    run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
+    const float s_firm = r.f.scale;
+    double sum = 0.0;
+    double worst = 0.0;
+    int n = 0;
+    float s_3s = 0.0f;
+    for (int k = 0; k < 1700; k++) {
+        run(&r, DT, v_pass, firm - 0.1, true, 1.3, 1.3, false);
+        const double err = (r.f.v_ms - v_pass(0.0)) / v_pass(0.0);
+        worst = fabs(err) > fabs(worst) ? err : worst;
+        if (k == 300) {
+            s_3s = r.f.scale;
+        }
+        if (k >= 300) {
+            sum += err;
+            n++;
+        }
+    }
+    assert_true(fabs(sum / n) < 0.01);
+    assert_true(worst > -0.2);
+    /* the scale moved by the patch's share of the wheel's speed (0.1 / 0.98 of eq. 5's shape) */
+    assert_float_equal(s_3s, s_firm * (1.0 - 0.1 / firm), 0.008);
+    run(&r, 5.0, v_pass, firm, true, 1.3, 1.3, false);
+    assert_float_equal(r.f.scale, s_firm, 0.015);
+    assert_float_equal(r.f.v_ms, v_pass(0.0), 0.03 * v_pass(0.0));
+}
+
+/* A true brake is not taken for a slip step: GNSS shows it after its delay. */
+static double v_brake(double t) { /* 2.36 m/s, braking at 0.5 m/s^2 from t = 41 s to a stop */
+    const double v = 8.5 / 3.6 - (t > 41.0 ? 0.5 * (t - 41.0) : 0.0);
+    return v > 0.0 ? v : 0.0;
+}
+
+static void test_a_brake_is_no_slip_step(void **state) {
+    (void)state;
+    run_t r;
+    run_init(&r);
+    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
+    r.f.slip_shape = true;
+    run(&r, 41.0, v_brake, 0.98, true, 1.3, 1.3, true);
+    const float s0 = r.f.scale;
+    run(&r, 3.0, v_brake, 0.98, true, 1.3, 1.3, false);
+    assert_float_equal(r.f.scale, s0, 0.005);
+    assert_float_equal(r.f.v_ms, v_brake(r.t), 0.15);
 }
 
 /* The wheel's history: 100 ms means, read back at a delay between bucket centres, nothing beyond
@@ -548,6 +617,8 @@ int main(void) {
         cmocka_unit_test(test_gates),
         cmocka_unit_test(test_init_rejects_bad_tuning),
         cmocka_unit_test(test_slip_step_reopens_learning),
+        cmocka_unit_test(test_a_wet_patch_is_followed_within_seconds),
+        cmocka_unit_test(test_a_brake_is_no_slip_step),
         cmocka_unit_test(test_lead_acceleration_shrink),
         cmocka_unit_test(test_wheel_history),
         cmocka_unit_test(test_slip_step_with_the_receivers_lag),

@@ -304,6 +304,17 @@ class OperatorConfig:
 
 
 @dataclass(frozen=True)
+class OfficeConfig:
+    # The farm office's database (docs/office.md): a PostgreSQL URL ("" = no office; the cab
+    # works alone). The cab sends its sessions there by itself, off the control loop.
+    url: str = ""
+    interval_s: float = _num(300.0, 10.0, 86_400.0)  # between two syncs
+    machine: str = ""  # this machine's id in the office ("" = the host's name)
+    farm: str = ""  # the farm the office database belongs to ("" = not checked)
+    product: str = "fertilizer"  # what the machine spreads, as the office's swaths name it
+
+
+@dataclass(frozen=True)
 class TerminalConfig:
     machine: MachineConfig = field(default_factory=MachineConfig)
     speed: SpeedConfig = field(default_factory=SpeedConfig)
@@ -318,6 +329,7 @@ class TerminalConfig:
     prescription: PrescriptionConfig = field(default_factory=PrescriptionConfig)
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
     lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
+    office: OfficeConfig = field(default_factory=OfficeConfig)
 
     def ecu_params(self, lag_start_ms: int | None = None) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start, by the table
@@ -875,5 +887,12 @@ command_ms = 0             # the terminal's command path (program cycle + comman
 meter_ms = 0               # meter response; also the ECU's LeadMeter
 airline_ms = 0             # air-line transport; also the ECU's LeadAirLine
 stop_ms = 0                # the ECU's look-ahead while the speed falls (LeadStop); 0 = as rising
+
+[office]                   # the farm office's database (docs/office.md); url = "" works alone
+url = ""                   # e.g. "postgresql://cab@office.lan/topdress" (passwords: ~/.pgpass)
+interval_s = 300.0         # between two syncs of the log directory (a thread of its own)
+machine = ""               # this machine's id in the office; "" = the host's name
+farm = ""                  # refuse an office database of another farm; "" = not checked
+product = "fertilizer"     # what the machine spreads, as the office's swaths name it
 """
 )

@@ -60,3 +60,20 @@ class MapError(TopdressError):
 
 class OutputError(TopdressError):
     """An output file that would destroy an input, or cannot be written."""
+
+
+class OfficeError(TopdressError):
+    """The farm office's database refused or could not be reached; `exit_code` tells a cron
+    job which (see docs/office.md)."""
+
+    #: exit codes: 2 bad input or setting, 3 the office cannot be reached or is not writable
+    #: now (try again later), 4 a session that conflicts with the office's copy
+    exit_code = 2
+
+
+class OfficeUnavailable(OfficeError):
+    exit_code = 3
+
+
+class OfficeConflict(OfficeError):
+    exit_code = 4

@@ -175,6 +175,12 @@ def run_terminal(
         config_path=config_path,
         maps=maps,
     )
+    office = None
+    if cfg.office.url:  # the cab sends its sessions to the farm office by itself
+        from topdress.office.autosync import OfficeSync
+
+        office = OfficeSync(cfg.office, cfg.log.dir, on_message=console.message)
+        office.start()
     shown = None
     if display is not None:  # the web display beside the console (topdress.display)
         from topdress.cli.display import serve_display
@@ -208,6 +214,8 @@ def run_terminal(
         # Also after an error: the operator needs to know where the data went.
         if shown is not None:
             shown.stop()
+        if office is not None:
+            office.stop()
         term.port.stop()  # the bus in use (after a [can] change, not the one opened here)
         console.draw(term.snapshot)
         if not term.link.ready:

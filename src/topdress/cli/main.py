@@ -21,6 +21,7 @@ REGISTRARS = (
     "topdress.cli.experiment",
     "topdress.cli.log",
     "topdress.cli.sim",
+    "topdress.cli.office",
 )
 
 
@@ -60,7 +61,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         code: int = args.func(args)
     except TopdressError as exc:
         print(f"topdress: error: {exc}", file=sys.stderr)
-        return 2
+        return int(getattr(exc, "exit_code", 2))
     except KeyboardInterrupt:
         print("topdress: interrupted", file=sys.stderr)
         return 130

@@ -47,6 +47,8 @@ _log = logging.getLogger(__name__)
 
 MAX_GAP_S: Final = 1.0  # as the summary: a longer interval is a gap in the log, not integrated
 WGS84: Final = CRS.from_epsg(4326)
+#: The speed source as ISO 11783-11 DDI 400 codes it (4: blended), one table for every export.
+SPEED_SOURCE_CODES: Final = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
 
 FloatArray = npt.NDArray[np.float64]
 ObjArray = npt.NDArray[np.object_]

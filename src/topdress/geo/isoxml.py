@@ -19,7 +19,7 @@ DDIs, from the ISO 11783-11 data dictionary:
 | 352 | 0160 | Application Total Mass in gram (in the task's TIM) | g |
 | 141 | 008D | Actual Work State | 1 on, 0 off |
 | 397 | 018D | Actual Speed | mm/s |
-| 400 | 0190 | Speed Source | 1 wheel-based, 3 navigation-based (GNSS), 0 unknown |
+| 400 | 0190 | Speed Source | 1 wheel, 3 navigation-based (GNSS), 4 blended (fused), 0 unknown |
 
 Binary record layout (ISO 11783-10, time log binary file, little-endian): TimeStart as
 uint32 milliseconds since midnight and uint16 days since 1980-01-01; then the position values
@@ -51,7 +51,7 @@ import shapely
 
 from topdress import __version__
 from topdress.errors import MapError
-from topdress.geo.asapplied import AsApplied, AsAppliedStream
+from topdress.geo.asapplied import SPEED_SOURCE_CODES, AsApplied, AsAppliedStream
 
 DDI_SETPOINT_MASS_PER_AREA: Final = 6
 DDI_ACTUAL_MASS_PER_AREA: Final = 7
@@ -63,7 +63,6 @@ DDI_TOTAL_MASS_G: Final = 352  # g: a small plot's 3.56 kg stay 3.56 kg, not 4
 DDI_WORK_STATE: Final = 141
 DDI_ACTUAL_SPEED: Final = 397
 DDI_SPEED_SOURCE: Final = 400
-SPEED_SOURCE: Final = {"wheel": 1, "gnss": 3, "none": 0}
 MG_M2_PER_KG_HA: Final = 100.0
 EPOCH_1980: Final = datetime(1980, 1, 1, tzinfo=UTC)
 TLG: Final = "TLG00001"
@@ -230,7 +229,7 @@ def _records(
     width_mm = np.round(np.asarray(p["SWATHWIDTH"], float) * 1000.0)
     cols = {
         (DDI_ACTUAL_SPEED, "DET1"): speed_mm_s,
-        (DDI_SPEED_SOURCE, "DET1"): np.array([SPEED_SOURCE.get(s, 0) for s in p["SpeedSrc"]]),
+        (DDI_SPEED_SOURCE, "DET1"): np.array([SPEED_SOURCE_CODES.get(s, 0) for s in p["SpeedSrc"]]),
         (DDI_WORK_STATE, "DET1"): np.asarray(p["WorkState"]),
         (DDI_WORKING_WIDTH, "DET1"): width_mm,
     }

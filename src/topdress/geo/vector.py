@@ -31,7 +31,7 @@ from pyogrio.errors import DataSourceError, FieldError, GeometryError
 from pyproj import CRS, Transformer
 
 from topdress.errors import MapError
-from topdress.geo.asapplied import WGS84, Batch
+from topdress.geo.asapplied import SPEED_SOURCE_CODES, WGS84, Batch
 
 FORMATS: Final = ("gpkg", "shp", "geojson", "csv")
 DRIVERS: Final = {"gpkg": "GPKG", "shp": "ESRI Shapefile", "geojson": "GeoJSON", "csv": "CSV"}
@@ -65,8 +65,6 @@ FMIS_POINTS: Final = (
     "PrescRate",
 )
 FMIS_MAX_FIELDS: Final = 20
-#: Codes of the text columns (the speed source as ISO 11783-11 DDI 400 has it).
-SPEED_SOURCE_CODES: Final = {"wheel": 1, "gnss": 3, "fused": 4, "none": 0}
 ZONE_CODES: Final = {"": 0, "field": 1, "headland": 2, "outside": 3}
 FMIS_FIELDS: Final = {
     "UnixTime": ("s", "UTC, seconds since 1970-01-01 (POSIX)"),

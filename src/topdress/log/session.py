@@ -22,8 +22,9 @@ import os
 import sqlite3
 import threading
 import time
+import uuid
 from collections import Counter, deque
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from enum import StrEnum
@@ -583,6 +584,8 @@ def _event_record(ev: LogEvent) -> _EventRec | None:
 
 def _init_schema(conn: sqlite3.Connection, config_toml: str) -> None:
     meta = {
+        # the session's stable id, made at its start: the office keys its copy by it
+        "session_id": str(uuid.uuid4()),
         "config_toml": config_toml,
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "software": f"topdress {__version__}",
@@ -678,6 +681,16 @@ class SessionReader:
         return self.meta.get("config_toml", "")
 
     @property
+    def session_id(self) -> str:
+        """The id made at the session's start; for a file written before sessions had one, an
+        id made from what the file recorded at its start (the same for every copy of it)."""
+        sid = self.meta.get("session_id")
+        if sid:
+            return sid
+        start = "\n".join(self.meta.get(k, "") for k in ("created_utc", "software", "config_toml"))
+        return str(uuid.uuid5(_OLD_SESSIONS, start))
+
+    @property
     def damaged(self) -> dict[str, int]:
         """Damaged rows skipped so far, by table (each row counted once)."""
         return {table: len(ids) for table, ids in self._bad.items() if ids}
@@ -730,13 +743,29 @@ class SessionReader:
             yield StateRow(**dict(zip(cols, values, strict=True)))
 
     def _state_rows(self, cols: tuple[str, ...]) -> Iterator[tuple[Any, ...]]:
+        for row in self.numbered_states(cols):
+            yield row[1:]
+
+    def numbered_states(self, cols: tuple[str, ...]) -> Generator[tuple[Any, ...], None, None]:
+        """The sound state rows as (id, *cols), in logged order: the id is the row's sequence
+        number in the session, which never changes once written."""
         bad = self._bad["state"]
         for row in self._select(f"SELECT id, {', '.join(cols)} FROM state ORDER BY id"):
-            values = row[1:]
-            if state_ok(cols, values):
-                yield values
+            if state_ok(cols, row[1:]):
+                yield row
             else:
                 bad.add(row[0])
+
+    def numbered_events(self) -> Generator[tuple[int, float, str, str], None, None]:
+        """The sound events as (id, t, kind, detail as JSON text), in logged order."""
+        if self.version < 2:
+            return
+        bad = self._bad["event"]
+        for rid, t, kind, text in self._select("SELECT id, t, kind, detail FROM event ORDER BY id"):
+            if event_detail(t, kind, text) is None:
+                bad.add(rid)
+            else:
+                yield int(rid), float(t), str(kind), str(text)
 
     def events(self) -> Iterator[LogEvent]:
         """The events in time order (none in a version-1 file)."""
@@ -816,6 +845,7 @@ class SessionReader:
         self.close()
 
 
+_OLD_SESSIONS: Final = uuid.UUID("5f1c2a52-8e0b-4f55-9a43-7d1c3b6e2a10")
 _SALVAGE: Final = "`topdress log salvage {path} --out NEW.sqlite` saves what is left"
 
 
