@@ -73,6 +73,7 @@ bench: $(STAMP) browser office
 	$(BIN)/python bench/fused_lag_bench.py
 	$(BIN)/python bench/field_speed_bench.py
 	$(BIN)/python bench/fw_bench.py
+	$(BIN)/python bench/isobus_bench.py
 	$(BIN)/python bench/sim_bench.py
 	$(BIN)/python bench/terminal_bench.py
 	$(BIN)/python bench/can_bench.py
