@@ -1,5 +1,6 @@
 # topdress: the two commands of the README are `make demo` and `make test`.
-# Both create .venv and install what they need on first use.
+# Both create .venv and install what they need on first use. `make check` is the fast tier:
+# lint, types, the C tests and every test that needs no browser, no QEMU and no wall-clock demo.
 
 PYTHON ?= python3
 VENV := .venv
@@ -8,7 +9,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
-.PHONY: demo test ctest pytest lint bench sysdeps browser qemu office screenshots clean firmware interop
+.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu office screenshots clean firmware interop
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -42,21 +43,39 @@ firmware:
 	for b in $(FW_BOARDS); do $(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk BOARD=$$b || exit 1; done
 	$(MAKE) --no-print-directory -f ecu/ports/stm32f4/firmware.mk VARIANT=qemu
 
+# The C tests, instrumented for line coverage (printed; at least 90 % of the core's and the
+# ports' lines).
 ctest: sysdeps
-	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug >/dev/null
+	cmake -S ecu -B build/ecu -DCMAKE_BUILD_TYPE=Debug -DTD_COVERAGE=ON >/dev/null
 	cmake --build build/ecu -j2
+	find build/ecu -name '*.gcda' -delete
 	ctest --test-dir build/ecu --output-on-failure
+	gcovr -r ecu build/ecu -e 'ecu/tests/' -e 'ecu/.*/tests/' -e '.*/gen/.*' \
+	    -o build/ecu/coverage.txt --print-summary --fail-under-line 90
+
+# The same tests under ASan+UBSan (make test only).
+ctest-san: sysdeps
 	cmake -S ecu -B build/ecu-san -DCMAKE_BUILD_TYPE=Debug -DTD_SANITIZE=ON >/dev/null
 	cmake --build build/ecu-san -j2
 	ctest --test-dir build/ecu-san --output-on-failure
 
-lint: $(STAMP)
+# cppcheck and clang-tidy (.clang-tidy) on the C code: a finding fails the build.
+lint-c: sysdeps
+	bash scripts/lint_c.sh
+
+lint: $(STAMP) lint-c
 	$(BIN)/ruff check src tests bench
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
 
+# The whole suite with Python line coverage (printed; at least 85 %) and the slowest 15 tests.
 pytest: $(STAMP) browser qemu office
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=15 --cov=topdress --cov-report=term:skip-covered \
+	    --cov-fail-under=85 -n 2
+
+# The fast tier's tests: no browser, no QEMU, no wall-clock demo (markers in pyproject.toml).
+pytest-fast: $(STAMP) office
+	$(BIN)/python -m pytest -q --durations=15 -m "not browser and not qemu and not wallclock" -n 2
 
 # The display's screenshots in docs/ (both languages), from its end-to-end test.
 screenshots: $(STAMP) browser
@@ -66,21 +85,17 @@ screenshots: $(STAMP) browser
 interop: $(STAMP)
 	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py tests/test_isobus_agiso_replay.py
 
-test: ctest lint pytest
+test: ctest ctest-san lint pytest
 
+check: ctest lint pytest-fast
+
+# Every script's figures also go to bench/figures.json and docs/figures.md (bench/figures.py).
+BENCHES := ecu_bench.py fused_lag_bench.py field_speed_bench.py fw_bench.py isobus_bench.py sim_bench.py terminal_bench.py \
+           can_bench.py maps_bench.py display_bench.py longday_bench.py office_bench.py
+bench: SHELL := /bin/bash
 bench: $(STAMP) browser office
-	$(BIN)/python bench/ecu_bench.py
-	$(BIN)/python bench/fused_lag_bench.py
-	$(BIN)/python bench/field_speed_bench.py
-	$(BIN)/python bench/fw_bench.py
-	$(BIN)/python bench/isobus_bench.py
-	$(BIN)/python bench/sim_bench.py
-	$(BIN)/python bench/terminal_bench.py
-	$(BIN)/python bench/can_bench.py
-	$(BIN)/python bench/maps_bench.py
-	$(BIN)/python bench/display_bench.py
-	$(BIN)/python bench/longday_bench.py
-	$(BIN)/python bench/office_bench.py
+	set -o pipefail; for b in $(BENCHES); do \
+	    $(BIN)/python bench/$$b | $(BIN)/python bench/figures.py $$b || exit 1; done
 
 clean:
 	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c src/topdress/isobus/_isobus*.so src/topdress/isobus/_isobus.c

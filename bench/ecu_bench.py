@@ -223,7 +223,7 @@ def stats(name: str, fixes: list[Part]) -> tuple[int, int]:
     return mean, worst.total
 
 
-def cortex_m4_sizes() -> tuple[int, int]:
+def cortex_m4_sizes() -> tuple[int, int, int]:
     elf = BUILD / "ecu_cm4.elf"
     src = [str(p) for p in [*CORE, REPO / "bench" / "ecu_cm4_main.c"]]
     link = ["-Wl,--gc-sections", "--specs=nosys.specs", "--specs=nano.specs", "-lm"]
@@ -233,7 +233,7 @@ def cortex_m4_sizes() -> tuple[int, int]:
     symbols = run(["arm-none-eabi-nm", "-S", "--size-sort", str(elf)]).splitlines()
     app = next((int(s.split()[1], 16) for s in symbols if s.endswith(" app")), 0)
     log(f"cortex-m4 image: text {text}, data {data}, bss {bss} (td_app_t {app} bytes)")
-    return text, data + bss
+    return text, data + bss, app
 
 
 def main() -> int:
@@ -245,7 +245,7 @@ def main() -> int:
     change, steady, drive_total = fix_steps(exe)
     fix_mean, fix_max = stats("while the speed changes", change)
     stats("otherwise (cruise, standing)", steady)
-    text, ram = cortex_m4_sizes()
+    text, ram, app = cortex_m4_sizes()
     print(f"instructions_per_step: {ips}")
     print(f"instructions_per_step_fused: {ips_fused}")
     figures = {
@@ -254,6 +254,7 @@ def main() -> int:
         "instructions_per_step_launch_brake": round(drive_total / DRIVE_STEPS),
         "cortex_m4_text_bytes": text,
         "cortex_m4_ram_bytes": ram,
+        "td_app_t_bytes": app,
     }
     for name, value in figures.items():
         print(f"{name}: {value}")

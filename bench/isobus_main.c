@@ -83,7 +83,7 @@ int main(void) {
     printf("isobus_host_period_mean_us: %.2f\n", sum / PERIODS);
     printf("isobus_host_period_p99_us: %.2f\n", cost[PERIODS * 99u / 100u]);
     printf("isobus_host_period_max_us: %.2f\n", cost[PERIODS - 1u]);
-    printf("isobus_connected: %d  pdacks: %u  values_set: %u\n", n.tc.state == TD_TC_CONNECTED,
-           n.tc.pdacks_sent, n.tc.values_set);
+    printf("isobus_host_connected: %d\n", n.tc.state == TD_TC_CONNECTED);
+    printf("isobus_host_values_set: %u\n", (unsigned)n.tc.values_set);
     return 0;
 }

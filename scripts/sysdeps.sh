@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # System packages topdress needs, installed with apt-get when missing (as root).
 #   sysdeps.sh python   - what building the venv needs: venv/ensurepip and Python headers (cffi)
-#   sysdeps.sh ctest    - what the C tests need: cmocka and pkg-config
+#   sysdeps.sh ctest    - what the C tests and their gates need: cmocka, pkg-config, gcovr
+#                         (line coverage), cppcheck and clang-tidy (make lint-c)
 #   sysdeps.sh firmware - what the ECU firmware needs: Debian's arm-none-eabi-gcc with newlib-nano
 #   sysdeps.sh qemu     - what the emulated firmware's tests need: qemu-system-arm (and the firmware's)
 #   sysdeps.sh browser  - what the display's end-to-end test needs: Debian's Chromium and its
@@ -27,6 +28,9 @@ ctest)
     [ -f /usr/include/cmocka.h ] || missing+=(libcmocka-dev)
     command -v pkg-config >/dev/null || missing+=(pkg-config)
     command -v cmake >/dev/null || missing+=(cmake)
+    command -v gcovr >/dev/null || missing+=(gcovr)
+    command -v cppcheck >/dev/null || missing+=(cppcheck)
+    command -v clang-tidy >/dev/null || missing+=(clang-tidy)
     ;;
 firmware | qemu)
     command -v arm-none-eabi-gcc >/dev/null || missing+=(gcc-arm-none-eabi)

@@ -51,6 +51,7 @@ def _periods(times: list[float]) -> list[float]:
     return [b - a for a, b in itertools.pairwise(times)]
 
 
+@pytest.mark.wallclock
 def test_usb_can_adapter_pulled_for_5_s_is_back_within_2_s_of_returning(
     tmp_path: Path,
 ) -> None:
@@ -95,6 +96,7 @@ def test_usb_can_adapter_pulled_for_5_s_is_back_within_2_s_of_returning(
     assert ("link.lost", "can") in kinds and ("link.restored", "can") in kinds
 
 
+@pytest.mark.wallclock
 def test_applying_can_settings_keeps_every_command_period(tmp_path: Path) -> None:
     """Before: slcan's open (it sleeps 2 s) ran inside the loop: no command for 2.09 s, the
     ECU stopped the meters by its command timeout."""

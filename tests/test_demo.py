@@ -29,6 +29,7 @@ from topdress.protocol import AckResult
 from topdress.sim.live import PtyPort
 
 
+@pytest.mark.wallclock
 def test_demo_runs_meters_at_eq4_targets_and_logs(tmp_path: Path) -> None:
     out = io.StringIO()
     assert run_demo(11.0, tmp_path, out=out) == 0
@@ -73,6 +74,7 @@ def test_run_with_an_invalid_config_names_the_key(
     assert "can.command_period_s" in capsys.readouterr().err
 
 
+@pytest.mark.wallclock
 def test_run_without_an_ecu_waits_for_it_for_the_whole_run_and_exits_3(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -203,6 +205,7 @@ def test_run_with_a_device_that_cannot_open_names_it_and_leaves_no_session(
     assert not list(tmp_path.glob("logs/*"))
 
 
+@pytest.mark.wallclock
 def test_sigterm_stops_the_demo_cleanly(tmp_path: Path) -> None:
     # A service stop or the cab PC shutting down: the same clean end as Ctrl-C.
     proc = subprocess.Popen(
@@ -297,6 +300,7 @@ def test_demo_log_directory_with_a_non_utf8_byte_is_a_clear_error(
     assert "not UTF-8" in err and "Traceback" not in err and "RuntimeError" not in err
 
 
+@pytest.mark.wallclock
 def test_demo_with_a_users_file_runs_its_settings_on_its_machines_geometry(
     tmp_path: Path,
 ) -> None:
@@ -383,6 +387,7 @@ def _kg_applied(text: str) -> float:
     return float(line.split(" kg applied")[0].rsplit(" ", 1)[1])
 
 
+@pytest.mark.wallclock
 def test_make_demo_starts_the_meters_and_reports_the_kg_applied(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
@@ -401,6 +406,7 @@ def test_make_demo_starts_the_meters_and_reports_the_kg_applied(
     assert _kg_applied(plain) == 0.0
 
 
+@pytest.mark.wallclock
 def test_the_log_disks_free_space_margin_is_a_setting(tmp_path: Path) -> None:
     """`[log] min_free_mib`: a margin larger than the disk's free space is the log_low_space
     alarm from the start (the margin was fixed at 50 MiB in the code)."""

@@ -18,7 +18,10 @@ import pytest
 
 from browser import DemoProcess, chromium, missing_browser, until
 
-pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser())),
+]
 
 SCREENS = {"main": "/", "communication": "/communication", "control": "/control",
            "calibration": "/calibration"}  # fmt: skip

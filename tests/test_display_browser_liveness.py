@@ -18,7 +18,10 @@ import pytest
 
 from browser import STALE_JS, DemoProcess, chromium, display_pid, missing_browser, until
 
-pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser())),
+]
 
 
 def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:

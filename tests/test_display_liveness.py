@@ -180,6 +180,7 @@ def test_a_killed_display_is_started_again_counted_and_logged(
     assert "display down (killed by signal 9); starting it again in 0.5 s" in messages
 
 
+@pytest.mark.wallclock
 def test_a_display_that_cannot_start_is_said_and_tried_again(
     served: tuple[DisplayLink, RecordingTerminal, list[str]],
 ) -> None:

@@ -47,7 +47,10 @@ REPO = Path(__file__).resolve().parents[1]
 SILENT_S, RESUME_S, JAM_S, ENCODER_DEAD_S, END_S = 12.0, 14.5, 18.0, 22.0, 28.0
 PUSH = (("working_width_m", 4.0), ("blocked_time_ms", 1000.0))
 
-pytestmark = pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing()))
+pytestmark = [
+    pytest.mark.qemu,
+    pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing())),
+]
 
 
 @dataclass

@@ -6,9 +6,13 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
+import pytest
+
 from topdress.cli.isobus_demo import run_isobus_demo
 from topdress.config import default_config
 from topdress.isobus.node import split_id
+
+pytestmark = pytest.mark.wallclock  # paced to the wall clock: 3 s
 
 
 def test_demo_isobus_claims_connects_and_applies(tmp_path: Path) -> None:

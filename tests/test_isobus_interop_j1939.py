@@ -14,7 +14,7 @@ import pytest
 from isobus_rig import Wire, udp_bus, udp_group
 from topdress.isobus.node import ClaimNode, TpEndpoint, split_id
 
-pytestmark = pytest.mark.interop
+pytestmark = [pytest.mark.interop, pytest.mark.wallclock]
 
 OURS = 0xA00A820000012345  # self-configurable, industry group 2
 LOWER = OURS - 0x1000  # wins against ours

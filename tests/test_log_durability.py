@@ -13,6 +13,8 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 from topdress.log.model import StateRow
 from topdress.log.session import SessionLog
 
@@ -61,6 +63,7 @@ def run_and_kill(directory: Path, after_s: float) -> tuple[list[tuple[float, int
     return markers, killed_at
 
 
+@pytest.mark.wallclock
 def test_sigkill_never_corrupts_and_loses_at_most_one_second(tmp_path: Path) -> None:
     rng = random.Random(20)
     checked = 0

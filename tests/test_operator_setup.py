@@ -348,6 +348,7 @@ def _udp_or_skip(group: str) -> None:
     a.shutdown()
 
 
+@pytest.mark.wallclock
 def test_sim_ecu_alone_on_a_bus_answers_a_real_terminal_and_says_what_to_weigh(
     tmp_path: Path,
 ) -> None:

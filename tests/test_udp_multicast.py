@@ -45,6 +45,7 @@ def _multicast_or_skip(group: str) -> None:
         b.shutdown()
 
 
+@pytest.mark.wallclock
 def test_terminal_process_drives_the_machine_over_udp_multicast(tmp_path: Path) -> None:
     group = f"239.74.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
     _multicast_or_skip(group)

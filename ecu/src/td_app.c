@@ -118,6 +118,8 @@ static void choose_lag(td_app_t *app) {
     td_state_t *st = &app->st;
     const td_lag_t *l = &app->lag;
     const float learned_ms = l->lag_s * 1000.0f;
+    /* the lag is never negative, so adding a half rounds it */
+    /* NOLINTNEXTLINE(bugprone-incorrect-roundings) */
     st->lag_learned_ms = l->learned ? (uint16_t)(learned_ms + 0.5f) : (uint16_t)TD_LAG_NONE;
     st->lag_evidence_s = l->evidence_s;
     st->lag_fit = l->fit;

@@ -400,7 +400,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
         return TD_FUSED_ACCEPTED;
     }
     const bool settled = steady && f->quiet_s >= d + SETTLE_S;
-    const int8_t sign = ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0);
+    const int8_t sign = (int8_t)(ys > REOPEN_MIN_MS ? 1 : (ys < -REOPEN_MIN_MS ? -1 : 0));
     if (sign != 0 && sign == f->run_sign && settled) {
         f->run_s += f->since_gnss_s;
         f->run_sum += ys * f->since_gnss_s;

@@ -79,7 +79,7 @@ static void test_counts_only_port(void **state) {
             n++;
         }
     }
-    assert_float_equal(sum / n, v_ms, 0.01 * v_ms);
+    assert_float_equal(sum / (float)n, v_ms, 0.01 * v_ms);
 }
 
 /* Slowing to a stop: bounded by one pulse over the time since the last, then 0 after stop_ms. */

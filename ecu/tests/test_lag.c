@@ -77,7 +77,7 @@ static int sim_run(sim_t *s, const rx_t *rx, const change_t *c, double t_end) {
     s->f.slip_shape = rx->slip_shape;
     while (s->t < t_end - 0.5 * DT) {
         const long step = lround(s->t / DT) + 1;
-        s->t = step * DT;
+        s->t = (double)step * DT;
         if (step % 10 == 0) {
             s->bounce_now = rx->bounce * noise(&s->seed);
         }

@@ -290,11 +290,10 @@ static void on_connected_pd(td_tc_t *tc, const uint8_t *d, uint8_t da, uint8_t m
     const uint16_t element = (uint16_t)((d[0] >> 4) | ((unsigned)d[1] << 4));
     const uint16_t ddi = (uint16_t)(d[2] | ((unsigned)d[3] << 8));
     const int32_t value = (int32_t)td_ib_get_u32(&d[4]);
-    unsigned i;
     switch (cmd) {
     case PD_REQ_VALUE:
         if (ddi == DDI_REQUEST_DEFAULT) {
-            for (i = 0u; i < TD_TC_VARS; i++) {
+            for (unsigned i = 0u; i < TD_TC_VARS; i++) {
                 tc->vars[i].sent_once = false; /* the step sends them as the queue allows */
             }
         } else {

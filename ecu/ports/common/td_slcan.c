@@ -64,13 +64,13 @@ static td_slcan_event_t parse_frame(const char *s, unsigned len, td_can_frame_t 
     memset(f->data, 0, sizeof f->data);
     for (unsigned i = 0u; i < dlc; i++) {
         uint32_t b;
-        if (!hexn(s + data_at + 2u * i, 2u, &b)) {
+        if (!hexn(s + data_at + (size_t)2u * i, 2u, &b)) {
             return TD_SLCAN_ERROR;
         }
         f->data[i] = (uint8_t)b;
     }
     uint32_t stamp;
-    if (rest == 2u * dlc + 4u && !hexn(s + data_at + 2u * dlc, 4u, &stamp)) {
+    if (rest == 2u * dlc + 4u && !hexn(s + data_at + (size_t)2u * dlc, 4u, &stamp)) {
         return TD_SLCAN_ERROR;
     }
     f->id = id;
@@ -190,6 +190,7 @@ unsigned td_slcan_reply(td_slcan_event_t ev, char *buf, unsigned size) {
     if (buf == NULL || size < n) {
         return 0u;
     }
-    memcpy(buf, s, n);
+    /* an SLCAN reply is bytes on a line, not a C string: no terminator is sent */
+    memcpy(buf, s, n); /* NOLINT(bugprone-not-null-terminated-result) */
     return n;
 }

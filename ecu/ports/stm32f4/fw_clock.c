@@ -39,7 +39,7 @@ void fw_clock_init(fw_clock_t *c) {
 
 #else
 
-static bool wait_set(REG *reg, uint32_t mask, uint32_t want) {
+static bool wait_set(const REG *reg, uint32_t mask, uint32_t want) {
     for (uint32_t i = 0u; i < READY_SPINS; i++) {
         if ((*reg & mask) == want) {
             return true;
@@ -72,6 +72,8 @@ void fw_clock_init(fw_clock_t *c) {
         return;
     }
     FLASH->ACR = BOARD_FLASH_WS | FLASH_ACR_PRFTEN | FLASH_ACR_ICEN | FLASH_ACR_DCEN;
+    /* the P field is 0 for P = 2: kept in the sum so every board's divider is written the same way */
+    /* cppcheck-suppress badBitmaskCheck */
     RCC->PLLCFGR = BOARD_PLL_M | (BOARD_PLL_N << RCC_PLLCFGR_N_SHIFT) |
                    ((BOARD_PLL_P / 2u - 1u) << RCC_PLLCFGR_P_SHIFT) | RCC_PLLCFGR_SRC_HSE |
                    (BOARD_PLL_Q << RCC_PLLCFGR_Q_SHIFT);
@@ -103,6 +105,8 @@ static void read_pair(uint32_t close, uint32_t *systick_val, uint32_t *tim2_cnt)
         const uint32_t a = SYSTICK->VAL;
         const uint32_t t = TIM2->CNT;
         const uint32_t b = SYSTICK->VAL;
+        /* a and b are two reads of a volatile counter, not one value twice */
+        /* cppcheck-suppress [knownConditionTrueFalse, unsignedPositive] */
         if (b <= a && a - b <= close) { /* SysTick counts down */
             *systick_val = a - (a - b) / 2u;
             *tim2_cnt = t;

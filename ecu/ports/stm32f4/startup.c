@@ -27,6 +27,8 @@ void Reset_Handler(void) {
     for (uint32_t *s = &_sidata, *d = &_sdata; d < &_edata;) {
         *d++ = *s++;
     }
+    /* the linker's bounds of one section, not two objects */
+    /* cppcheck-suppress comparePointers */
     for (uint32_t *d = &_sbss; d < &_ebss;) {
         *d++ = 0u;
     }
