@@ -6,10 +6,10 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/*) src/topdress/ecu/_build.py
+CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
-.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu office screenshots clean firmware
+.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu office screenshots clean firmware interop
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -81,12 +81,16 @@ pytest-fast: $(STAMP) office
 screenshots: $(STAMP) browser
 	TOPDRESS_SCREENSHOTS=docs $(BIN)/python -m pytest -q tests/test_display_browser.py tests/test_display_cab.py
 
+# the ISOBUS layer against stacks nobody here wrote (can-j1939, isoxml), alone (docs/isobus.md)
+interop: $(STAMP)
+	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py tests/test_isobus_agiso_replay.py
+
 test: ctest ctest-san lint pytest
 
 check: ctest lint pytest-fast
 
 # Every script's figures also go to bench/figures.json and docs/figures.md (bench/figures.py).
-BENCHES := ecu_bench.py fused_lag_bench.py field_speed_bench.py fw_bench.py sim_bench.py terminal_bench.py \
+BENCHES := ecu_bench.py fused_lag_bench.py field_speed_bench.py fw_bench.py isobus_bench.py sim_bench.py terminal_bench.py \
            can_bench.py maps_bench.py display_bench.py longday_bench.py office_bench.py
 bench: SHELL := /bin/bash
 bench: $(STAMP) browser office
@@ -94,4 +98,4 @@ bench: $(STAMP) browser office
 	    $(BIN)/python bench/$$b | $(BIN)/python bench/figures.py $$b || exit 1; done
 
 clean:
-	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c
+	rm -rf build $(VENV) src/topdress/ecu/_core*.so src/topdress/ecu/_core.c src/topdress/isobus/_isobus*.so src/topdress/isobus/_isobus.c

@@ -2,4 +2,9 @@
 
 from setuptools import setup
 
-setup(cffi_modules=["src/topdress/ecu/_build.py:ffibuilder"])
+setup(
+    cffi_modules=[
+        "src/topdress/ecu/_build.py:ffibuilder",
+        "src/topdress/isobus/_build.py:ffibuilder",
+    ]
+)

@@ -13,6 +13,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("topdress.cli", "topdress.__main__"),
     ("topdress.display", "topdress.terminal", "topdress.sim"),
+    ("topdress.office",),
     ("topdress.geo",),
     ("topdress.log",),
     ("topdress.crop", "topdress.devices", "topdress.config_edit"),

@@ -19,6 +19,7 @@ from office_rig import needs_postgres, session
 from topdress.office.push import push
 
 pytestmark = [
+    pytest.mark.browser,
     needs_postgres,
     pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser())),
 ]

@@ -60,6 +60,11 @@ def register(sub: Any) -> None:
         action="store_true",
         help="start the meters at once (default: the operator's start)",
     )
+    demo.add_argument(
+        "--isobus",
+        action="store_true",
+        help="the ECU on ISOBUS, commanded by a simulated Task Controller (docs/isobus.md)",
+    )
     demo.set_defaults(func=_demo)
 
     run = sub.add_parser(
@@ -141,6 +146,11 @@ def _demo(args: argparse.Namespace) -> int:
     if args.config is not None:
         cfg = load_config(args.config)  # a bad file stops here, naming the file
         user_text = read_config_text(args.config)
+    if args.isobus:
+        from topdress.cli.isobus_demo import run_isobus_demo
+
+        with _sigterm_stops():
+            return run_isobus_demo(cfg, args.duration or 40.0, args.out, args.seed, sys.stdout)
     display = display_options(cfg, args.display, args.host, args.port)
     with _sigterm_stops():
         return run_demo(

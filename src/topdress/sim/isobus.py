@@ -1,0 +1,72 @@
+"""The simulated machine with its ECU on ISOBUS: the node (ecu/isobus through cffi) takes the
+Task Controller's rates and sections, and hands them to the control core each control period
+as the core's own command, beside it behind the same port (the core stays as it is).
+
+Sections: the meters run at the TC's rate times the share of the width switched on (row
+shut-offs at the outlets close the rows switched off), and stop with every section off or no TC
+(the node's fail-safe after the cab PC's command timeout).
+"""
+
+from __future__ import annotations
+
+from topdress.isobus.ddop import DDI_ACTUAL_RATE, DDI_ACTUAL_WORK_STATE
+from topdress.isobus.node import Frame, IsobusNode
+from topdress.protocol.frames import encode_command
+from topdress.sim.world import World
+
+ELEMENT_DEVICE, ELEMENT_BINS = 0, (3, 4)
+TC_STATUS_PERIOD_MS = 2000  # a TC proves itself alive only this often (ISO 11783-10)
+KG_HA_PER_RPM_KG = 600.0  # kg/ha = rpm * kg/rev * 600 / (km/h * m)
+
+
+def tc_timeout_ms(cmd_timeout_ms: int) -> int:
+    """The node's TC timeout: the cab PC's command timeout counted from the first status
+    message missed, so a TC that merely waits for its next status is never taken for lost."""
+    return cmd_timeout_ms + TC_STATUS_PERIOD_MS
+
+
+class IsobusMachine:
+    """A World whose ECU is commanded over ISOBUS by a Task Controller."""
+
+    def __init__(self, world: World, node: IsobusNode, width_m: float, sections: int,
+                 fan_rpm: float = 3000.0) -> None:  # fmt: skip
+        self.world = world
+        self.node = node
+        self.width_m = width_m
+        self.sections = sections
+        self.fan_rpm = fan_rpm
+        self.running = False
+        self.actual_kg_ha = (0.0, 0.0)  # what the meters apply, as reported to the TC (DDI 7)
+        node.start(world.now_us)
+
+    def rates_kg_ha(self) -> tuple[float, float]:
+        """The rates the core is told: the TC's, times the share of the width switched on."""
+        share = bin(self.node.sections_on).count("1") / self.sections
+        return self.node.rate_kg_ha(0) * share, self.node.rate_kg_ha(1) * share
+
+    def step(self, frames_in: list[Frame]) -> list[Frame]:
+        """One control period: the bus's frames to the node, the node's setpoints to the core,
+        the plant and core one step, the actual values back to the node; the node's frames."""
+        w, n = self.world, self.node
+        now = w.now_us
+        for f in frames_in:
+            n.rx(f.can_id, f.data, now)
+        upper, lower = self.rates_kg_ha()
+        self.running = upper > 0.0 or lower > 0.0
+        truth = w.truth
+        w.deliver_can(encode_command(self.running, self.fan_rpm, upper, lower,
+                                     min(truth.v_kmh, 25.0)))  # fmt: skip
+        w.step()
+        truth = w.truth
+        actual = [0.0, 0.0]
+        for layer, element in enumerate(ELEMENT_BINS):
+            rate = 0.0
+            if truth.v_kmh > 0.5:
+                rate = (truth.meter_rpm[layer] * w.cfg.kg_per_rev[layer] * KG_HA_PER_RPM_KG
+                        / (truth.v_kmh * self.width_m))  # fmt: skip
+            n.set_actual(element, DDI_ACTUAL_RATE, round(rate * 100))
+            actual[layer] = rate
+        self.actual_kg_ha = (actual[0], actual[1])
+        n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
+        n.step(w.now_us, round(truth.odometer_m * 1000))
+        return n.tx()
