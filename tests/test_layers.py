@@ -17,7 +17,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("topdress.geo",),
     ("topdress.log",),
     ("topdress.crop", "topdress.devices", "topdress.config_edit"),
-    ("topdress.config", "topdress.ecu", "topdress.view", "topdress.outpath"),
+    ("topdress.config", "topdress.ecu", "topdress.isobus", "topdress.view", "topdress.outpath"),
     ("topdress.protocol", "topdress.gnss", "topdress.i18n", "topdress.errors", "topdress"),
 )
 #: Siblings of one layer that must not import one another.

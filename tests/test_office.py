@@ -406,3 +406,34 @@ def test_local_cluster_runs_unprivileged_with_its_socket_in_the_directory(
     with psycopg.connect(office_cluster.conninfo) as conn:
         row = conn.execute("SELECT extversion FROM pg_extension WHERE extname = 'postgis'")
         assert row.fetchone() is not None
+
+
+def test_a_full_database_is_exit_3_and_loses_nothing(
+    office_db: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The server's own answer when its disk is full (SQLSTATE 53100), made by a trigger: the
+    push says so with the cron exit code 3, the cab's file is untouched, and once there is room
+    the same push sends the session once."""
+    good = session(tmp_path, "m1", seconds=5)
+    before = hashlib.sha256(good.read_bytes()).hexdigest()
+    with psycopg.connect(office_db, autocommit=True) as conn:
+        conn.execute(
+            "CREATE FUNCTION td_full() RETURNS trigger LANGUAGE plpgsql AS $$ BEGIN"
+            " RAISE EXCEPTION 'could not extend file: No space left on device'"
+            " USING ERRCODE = 'disk_full'; END $$"
+        )
+        conn.execute(
+            "CREATE TRIGGER td_full BEFORE INSERT ON session"
+            " FOR EACH ROW EXECUTE FUNCTION td_full()"
+        )
+    assert main(["office", "push", str(good), "--db", office_db, "--retries", "0"]) == 3
+    err = capsys.readouterr().err
+    assert "the office database is full" in err and "Traceback" not in err
+    assert hashlib.sha256(good.read_bytes()).hexdigest() == before
+    with psycopg.connect(office_db, autocommit=True) as conn:
+        assert conn.execute("SELECT count(*) FROM session").fetchone() == (0,)
+        conn.execute("DROP TRIGGER td_full ON session")
+    assert main(["office", "push", str(good), "--db", office_db, "--retries", "0"]) == 0
+    assert main(["office", "push", str(good), "--db", office_db, "--retries", "0"]) == 0
+    with psycopg.connect(office_db) as conn:
+        assert conn.execute("SELECT count(*) FROM session").fetchone() == (1,)
