@@ -19,7 +19,10 @@ import pytest
 
 from browser import DemoProcess, chromium, missing_browser, until, viewport
 
-pytestmark = pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser()))
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.skipif(missing_browser() is not None, reason=str(missing_browser())),
+]
 
 W, H = 800, 480
 PIN = "4321"
