@@ -54,13 +54,15 @@ def served(office_db: str, tmp_path: Path) -> Iterator[str]:
 
 
 def test_the_season_map_and_report_in_a_browser(served: str, tmp_path: Path) -> None:
+    from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
     driver = chromium(tmp_path / "profile")
     try:
         driver.get(served)
-        wait = WebDriverWait(driver, 30)
+        # the report is rebuilt when a filter changes: a row read mid-rebuild is stale, not wrong
+        wait = WebDriverWait(driver, 30, ignored_exceptions=(StaleElementReferenceException,))
 
         def rows() -> list[str]:
             return [
