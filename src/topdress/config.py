@@ -282,6 +282,9 @@ class DisplayConfig:
     # A file holding the token the cab's kiosk browser opens the display with (created, mode
     # 0600, when missing); set: only that browser operates without the PIN.
     kiosk_token_file: str = ""
+    # The local user the cab's kiosk browser runs as: its direct loopback connections operate
+    # without the PIN, recognised by the kernel's socket table (no secret anywhere).
+    kiosk_user: str = ""
     # Metering with no operator display (its process down, or no page since one was open) for
     # longer than this pauses the meters; 0: never (the alarm only).
     lost_pause_s: float = _num(10.0, 0.0, 600.0)
@@ -863,6 +866,7 @@ language = "en"            # en | zh
 allowed_hosts = []         # names it answers to besides IP addresses and localhost
 trusted_proxies = []       # proxies whose X-Forwarded-For is believed, e.g. ["127.0.0.1"]
 kiosk_token_file = ""      # the cab's browser opens /?kiosk=<the file's token>: no PIN for it only
+kiosk_user = ""            # or: the cab's browser runs as this local user, no token needed
 lost_pause_s = 10.0        # no operator display this long while metering: pause (0: alarm only)
 
 [operator]

@@ -38,6 +38,7 @@ from topdress import i18n
 from topdress.config import TerminalConfig
 from topdress.display.guard import printable
 from topdress.display.options import DisplayError, DisplayOptions, check_security, port_free
+from topdress.display.peercred import kiosk_uid
 from topdress.display.process import Hello
 from topdress.terminal.app import Terminal
 from topdress.view import commands as op
@@ -210,6 +211,8 @@ class DisplayLink:
                 "(another topdress? choose another with --port or display.port)"
             )
         self._kiosk = kiosk_token(self.term.cfg.display.kiosk_token_file)
+        if self.term.cfg.display.kiosk_user:
+            kiosk_uid(self.term.cfg.display.kiosk_user)  # a wrong name is said now, not served
         self.keep_prefs_in(Path(self.term.cfg.log.dir) / PREFS_FILE)
         self._cfg = self.term.cfg
         self._spawn()

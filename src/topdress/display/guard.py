@@ -12,7 +12,10 @@ Pure Python (no NiceGUI, no Starlette): the display process wraps its web app in
   in the cab's browser cannot connect.
 - **The client's address**: the peer's, unless the peer is one of `display.trusted_proxies`;
   only then is `X-Forwarded-For` read (its rightmost address that is not a trusted proxy).
-- **The cab's own browser** (no PIN): with `display.kiosk_token_file`, the browser that opened
+- **The cab's own browser** (no PIN): with `display.kiosk_user`, a direct loopback connection
+  whose socket belongs to that local user (the kernel's socket table, `peercred`): no secret on
+  the browser's command line or in its history, nothing a page or another user can guess;
+  with `display.kiosk_token_file`, the browser that opened
   `/?kiosk=TOKEN` once (kept as an HttpOnly, SameSite=Strict cookie) and no other; without it, a
   direct loopback connection that carries no forwarding header (a proxy on the cab PC would make
   every client loopback: it must be declared, and the kiosk token used).
@@ -27,6 +30,8 @@ from collections.abc import Awaitable, Callable, Iterable, MutableMapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 from urllib.parse import parse_qsl, urlencode, urlsplit
+
+from topdress.display.peercred import socket_owner
 
 Address = ipaddress.IPv4Address | ipaddress.IPv6Address
 Network = ipaddress.IPv4Network | ipaddress.IPv6Network
@@ -81,13 +86,22 @@ class Guard:
     allowed_hosts: frozenset[str] = frozenset()
     trusted_proxies: tuple[Network, ...] = ()
     kiosk_token: str = ""  # "": the cab's browser is a direct loopback connection
+    kiosk_uid: int | None = None  # the cab's browser runs as this local user (display.kiosk_user)
+    owner: Callable[[str, int, str, int], int | None] = socket_owner
 
     @classmethod
-    def of(cls, allowed_hosts: Iterable[str], proxies: Iterable[str], kiosk: str) -> Guard:
+    def of(
+        cls,
+        allowed_hosts: Iterable[str],
+        proxies: Iterable[str],
+        kiosk: str,
+        kiosk_uid: int | None = None,
+    ) -> Guard:
         return cls(
             frozenset(split_host(h)[0] for h in allowed_hosts),
             tuple(ipaddress.ip_network(p, strict=False) for p in proxies),
             kiosk,
+            kiosk_uid,
         )
 
     # ---- Host and Origin --------------------------------------------------------------------
@@ -121,9 +135,16 @@ class Guard:
         ip = _ip(address)
         return ip is not None and any(ip in net for net in self.trusted_proxies)
 
-    def client(self, peer: str, headers: dict[bytes, str], cookie_token: str) -> ClientInfo:
+    def client(
+        self,
+        peer: str,
+        headers: dict[bytes, str],
+        cookie_token: str,
+        ports: tuple[str, int, int] = ("", 0, 0),
+    ) -> ClientInfo:
         """Who sent a request: `peer` the socket's address, `headers` lower-case names,
-        `cookie_token` the kiosk cookie's value ("" when none)."""
+        `cookie_token` the kiosk cookie's value ("" when none), `ports` the connection's
+        (server address, peer port, server port) for `kiosk_uid`."""
         forwarded = any(h in headers for h in FORWARDING_HEADERS)
         address = peer
         if self.trusted(peer):
@@ -132,13 +153,17 @@ class Guard:
                 address = hop
                 if not self.trusted(hop):
                     break
-        if self.kiosk_token:
-            cab = bool(cookie_token) and hmac.compare_digest(
+        ip = _ip(peer)
+        direct = ip is not None and ip.is_loopback and not forwarded and not self.trusted(peer)
+        if self.kiosk_token or self.kiosk_uid is not None:
+            cab = bool(self.kiosk_token and cookie_token) and hmac.compare_digest(
                 cookie_token.encode(), self.kiosk_token.encode()
             )
+            if not cab and direct and self.kiosk_uid is not None and ports[1]:
+                server, peer_port, server_port = ports
+                cab = self.owner(peer, peer_port, server, server_port) == self.kiosk_uid
         else:
-            ip = _ip(peer)
-            cab = ip is not None and ip.is_loopback and not forwarded and not self.trusted(peer)
+            cab = direct
         return ClientInfo(printable(address, 64), cab)
 
     def kiosk_ok(self, given: str) -> bool:
@@ -255,8 +280,10 @@ class GuardMiddleware:
             await _refuse(scope, send, 403, "cross-origin request refused\n")
             return
         peer = scope.get("client")
+        server = scope.get("server") or ("", 0)
         cookie = _cookie(headers.get(b"cookie", ""), KIOSK_COOKIE)
-        info = self.guard.client(str(peer[0]) if peer else "", headers, cookie)
+        ports = (str(server[0]), int(peer[1]), int(server[1] or 0)) if peer else ("", 0, 0)
+        info = self.guard.client(str(peer[0]) if peer else "", headers, cookie, ports)
         scope[SCOPE_KEY] = info
         if cookie and self.guard.kiosk_token and not info.cab and self.attempts is not None:
             self.attempts.failed(info.address, "kiosk_cookie")  # a guess too: counted, logged

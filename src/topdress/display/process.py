@@ -32,6 +32,7 @@ from topdress.config import TerminalConfig
 from topdress.display.cpu import yield_to_the_terminal
 from topdress.display.guard import printable
 from topdress.display.options import DisplayOptions
+from topdress.display.peercred import kiosk_uid
 from topdress.view.commands import CommandResult
 
 log = logging.getLogger(__name__)
@@ -112,7 +113,12 @@ def _serve(conn: Connection) -> int:
     # or a terminal started again, shows what the operator chose.
     hub.on_prefs = lambda p: remote.send("prefs", p.night, p.units)
     dc = hello.cfg.display
-    guard = Guard.of(dc.allowed_hosts, dc.trusted_proxies, hello.kiosk_token)
+    guard = Guard.of(
+        dc.allowed_hosts,
+        dc.trusted_proxies,
+        hello.kiosk_token,
+        kiosk_uid(dc.kiosk_user) if dc.kiosk_user else None,
+    )
 
     def read() -> None:
         try:
