@@ -184,11 +184,7 @@ class CanLink:
         now: float,
         on_done: Callable[[str | None, list[int]], None],
     ) -> None:
-        """Push changed parameters later in the run (settings), acknowledged one by one as at
-        start; `on_done(None, ids)` once all are in force, or `on_done(reason, accepted_ids)` at
-        the first refusal (nothing raised: the caller puts the accepted ones back). The ECU
-        takes parameters only while stopped. ProtocolError at once for a value the frame
-        cannot carry."""
+        """The settings' parameter push (`ParamPush.push_params`)."""
         self._params.push_params(params, now, on_done)
 
     def renew(self, params: Mapping[int, float]) -> None:
