@@ -16,7 +16,7 @@ cppcheck --quiet --error-exitcode=1 --std=c99 --inline-suppr \
     --enable=warning,style,performance,portability --suppress=missingIncludeSystem \
     "${inc[@]}" "${host[@]}"
 fw=(ecu/ports/stm32f4/*.c)
-for variant in "" "-DFW_QEMU=1"; do
+for variant in "" "-DFW_QEMU=1" "-DFW_ISOBUS=1" "-DFW_QEMU=1 -DFW_ISOBUS=1"; do
     cppcheck --quiet --error-exitcode=1 --std=c99 --inline-suppr \
         --enable=warning,style,performance,portability --suppress=missingIncludeSystem \
         "${inc[@]}" -Iecu/ports/stm32f4 $variant "${fw[@]}"

@@ -5,6 +5,9 @@
 #   VARIANT=board (default) | qemu                         qemu: the emulator build (SLCAN/HIL on
 #                                                          USART1, no clock set-up, the generic
 #                                                          board), never flashed
+#   FW_ISOBUS=1                                            the ISOBUS node (ecu/isobus) beside the
+#                                                          core: the TC commands it (docs/isobus.md);
+#                                                          out: build/fw-isobus/, build/fw-qemu-isobus/
 #   FW_CFLAGS=-DBOARD_CAN_BITRATE=500000                   a board header's guarded default
 # Out: build/fw/topdress-ecu-stm32f4.{elf,bin,hex,map} for the default board, build/fw-$(BOARD)/
 # for another, build/fw-qemu/ for the emulator build; the flash, RAM and stack figures.
@@ -24,11 +27,20 @@ VARIANT_FLAGS :=
 else
 $(error VARIANT=$(VARIANT): board or qemu)
 endif
+FW_ISOBUS ?= 0
+ifeq ($(FW_ISOBUS),1)
+OUT := $(if $(filter qemu,$(VARIANT)),build/fw-qemu-isobus,$(if $(filter generic8,$(BOARD)),build/fw-isobus,build/fw-isobus-$(BOARD)))
+VARIANT_FLAGS += -DFW_ISOBUS=1
+ISOBUS_SRC := $(wildcard ecu/isobus/src/*.c) ecu/isobus/src/gen/td_ddop_gen.c
+ISOBUS_INC := -Iecu/isobus/include -Iecu/isobus/src/gen
+else ifneq ($(FW_ISOBUS),0)
+$(error FW_ISOBUS=$(FW_ISOBUS): 0 or 1)
+endif
 ifeq ($(wildcard $(PORT)/boards/$(BOARD).h),)
 $(error BOARD=$(BOARD): no $(PORT)/boards/$(BOARD).h (docs/firmware.md, adding a board))
 endif
 SRC := $(wildcard ecu/src/*.c) ecu/src/gen/td_can.c $(wildcard ecu/ports/common/*.c) \
-       ecu/ports/common/gen/td_hilcan.c $(wildcard $(PORT)/*.c)
+       ecu/ports/common/gen/td_hilcan.c $(wildcard $(PORT)/*.c) $(ISOBUS_SRC)
 OBJ := $(patsubst %.c,$(OUT)/obj/%.o,$(SRC))
 CPU := -mcpu=cortex-m4 -mthumb -mfloat-abi=hard -mfpu=fpv4-sp-d16
 # -fno-math-errno: sqrtf is the FPU's VSQRT (the core never reads errno)
@@ -37,7 +49,7 @@ CFLAGS := $(CPU) -std=c99 -Os -g -fno-math-errno -ffunction-sections -fdata-sect
           -Wcast-align -Wshadow -Wundef -Wdouble-promotion \
           -fstack-usage -fcallgraph-info=su \
           -DBOARD_HEADER='"boards/$(BOARD).h"' $(VARIANT_FLAGS) \
-          -Iecu/include -Iecu/src/gen -Iecu/ports/common -Iecu/ports/common/gen -I$(PORT) $(FW_CFLAGS)
+          -Iecu/include -Iecu/src/gen -Iecu/ports/common -Iecu/ports/common/gen -I$(PORT) $(ISOBUS_INC) $(FW_CFLAGS)
 LDFLAGS := $(CPU) -nostartfiles --specs=nano.specs --specs=nosys.specs -Wl,--gc-sections \
            -T$(PORT)/stm32f405.ld -Wl,-Map=$(OUT)/$(NAME).map
 
@@ -64,6 +76,6 @@ $(OUT)/%.hex: $(OUT)/%.elf
 $(OUT)/obj/%/gen/td_can.o $(OUT)/obj/%/gen/td_hilcan.o: CFLAGS += -Wno-double-promotion
 
 $(OUT)/obj/%.o: %.c $(wildcard ecu/include/*.h ecu/src/gen/*.h ecu/ports/common/*.h ecu/ports/common/gen/*.h \
-                  $(PORT)/*.h $(PORT)/boards/*.h) $(MAKEFILE_LIST) $(FLAGS_STAMP)
+                  $(PORT)/*.h $(PORT)/boards/*.h ecu/isobus/include/*.h ecu/isobus/src/gen/*.h) $(MAKEFILE_LIST) $(FLAGS_STAMP)
 	@mkdir -p $(dir $@)
 	$(CC) $(CFLAGS) -c $< -o $@

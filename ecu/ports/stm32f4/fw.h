@@ -8,6 +8,7 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include "td_app.h"
 #include "td_port.h"
 #include "td_proto.h"
 
@@ -60,7 +61,8 @@ void fw_io_enable(bool on);
 void fw_io_safe(void);
 
 /* ---- fw_can.c: bxCAN CAN1 --------------------------------------------------------------- */
-/** Initialise CAN1 at BOARD_CAN_BITRATE with filters for `ids` (29-bit); silent (receive only)
+/** Initialise CAN1 at BOARD_CAN_BITRATE with filters for `ids` (29-bit; n == 0: every frame,
+ *  as the ISOBUS build needs); silent (receive only)
  *  unless the clock is the crystal's. false: the controller never acknowledged its
  *  initialisation request, or too many ids. */
 bool fw_can_init(const fw_clock_t *c, const uint32_t *ids, unsigned n);
@@ -88,6 +90,22 @@ void fw_uart_wait(void);
 bool fw_uart_write(const uint8_t *b, uint32_t n);
 /** Move queued bytes to the transmitter while it takes them (the interrupt does the rest). */
 void fw_uart_pump(void);
+
+/* ---- fw_isobus.c: the ISOBUS node beside the core (FW_ISOBUS builds only) ---------------- */
+#if defined(FW_ISOBUS)
+/** The node with its NAME from the chip's unique ID; starts the address claim. false: no NAME. */
+bool fw_isobus_init(const td_params_t *p, uint32_t now_us);
+/** A received frame (29-bit ones only) to the node. */
+void fw_isobus_rx(const td_can_frame_t *f, uint32_t now_us);
+/** The core's PcCommand from the TC's rates and sections (stop without a TC). */
+void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd);
+/** After the core's step: actual rates and work state to the TC, the node's period. */
+void fw_isobus_step(const td_app_t *app, uint32_t now_us);
+/** The node's next frame to send; false when none. */
+bool fw_isobus_tx(td_can_frame_t *f);
+/** The claimed address (0xFE: none). */
+uint8_t fw_isobus_address(void);
+#endif
 
 /* ---- fw_sys.c: watchdog, reset cause ------------------------------------------------------ */
 typedef enum {

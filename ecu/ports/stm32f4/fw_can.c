@@ -41,7 +41,7 @@ static bool wait_msr(uint32_t mask, uint32_t want) {
 
 bool fw_can_init(const fw_clock_t *c, const uint32_t *ids, unsigned n) {
     td_bxcan_bank_t banks[TD_BXCAN_BANKS];
-    const int nb = td_bxcan_filters_ext(ids, n, banks, TD_BXCAN_BANKS);
+    const int nb = n == 0u ? 1 : td_bxcan_filters_ext(ids, n, banks, TD_BXCAN_BANKS);
     if (nb < 0) {
         return false;
     }
@@ -63,12 +63,16 @@ bool fw_can_init(const fw_clock_t *c, const uint32_t *ids, unsigned n) {
     /* filters (32.7.4): banks 0..nb-1 in 32-bit identifier-list mode, FIFO 0 */
     CAN1->FMR |= CAN_FMR_FINIT;
     CAN1->FA1R = 0u;
+    if (n == 0u) { /* bank 0 in mask mode with a zero mask: every frame */
+        banks[0].fr1 = 0u;
+        banks[0].fr2 = 0u;
+    }
     for (int i = 0; i < nb; i++) {
         CAN1->FB[i].FR1 = banks[i].fr1;
         CAN1->FB[i].FR2 = banks[i].fr2;
     }
     const uint32_t used = (1u << (uint32_t)nb) - 1u;
-    CAN1->FM1R = used;
+    CAN1->FM1R = n == 0u ? 0u : used;
     CAN1->FS1R = used;
     CAN1->FFA1R = 0u;
     CAN1->FA1R = used;

@@ -29,6 +29,13 @@
 #include "td_slcan.h"
 #include "stm32f4_regs.h"
 
+#if defined(FW_ISOBUS)
+/* the ISOBUS build: the node beside the core, every 29-bit frame to both */
+#define ISOBUS_BUILD true
+#else
+#define ISOBUS_BUILD false
+#endif
+
 #if defined(FW_QEMU)
 #define HIL_BUILD true
 #else
@@ -88,6 +95,54 @@ static void send_diagnostics(void) {
     fault_reg = (uint8_t)((fault_reg + 1u) % 6u);
 }
 
+/* The node (re)started: at power-up and when lockstep moves the time base. */
+static void isobus_start(uint32_t now_us) {
+#if defined(FW_ISOBUS)
+    (void)fw_isobus_init(&params, now_us);
+#else
+    (void)now_us;
+#endif
+}
+
+/* The ISOBUS build's hooks; nothing in the default build. */
+static void isobus_rx(const td_can_frame_t *f, uint32_t now_us) {
+#if defined(FW_ISOBUS)
+    fw_isobus_rx(f, now_us);
+#else
+    (void)f;
+    (void)now_us;
+#endif
+}
+
+/* Before the core's step: the TC's command as the core's own PcCommand. */
+static void isobus_before_step(uint32_t now_us) {
+#if defined(FW_ISOBUS)
+    td_can_frame_t cmd;
+    fw_isobus_command(&app, &cmd);
+    (void)td_app_rx(&app, &cmd, now_us);
+#else
+    (void)now_us;
+#endif
+}
+
+/* After it: the actual values to the TC, the node's period; its frames to `send`. */
+static void isobus_after_step(uint32_t now_us, void (*send)(const td_can_frame_t *f)) {
+#if defined(FW_ISOBUS)
+    fw_isobus_step(&app, now_us);
+    td_can_frame_t f;
+    while (fw_isobus_tx(&f)) {
+        send(&f);
+    }
+#else
+    (void)now_us;
+    (void)send;
+#endif
+}
+
+static void can_send(const td_can_frame_t *f) {
+    (void)fw_can_write(f);
+}
+
 /* The first HilClock chose the step's tick. Lockstep: the core starts again on the simulator's
  * clock (nothing has stepped yet; its time base moves from the chip's TIM2 to the simulator's). */
 static void hil_tick_chosen(void) {
@@ -96,6 +151,7 @@ static void hil_tick_chosen(void) {
     }
     (void)td_app_init(&app, &params, hil.clock_us);
     (void)td_app_set_ident(&app, &ident);
+    isobus_start(hil.clock_us);
 }
 
 /* Serial bytes to SLCAN lines: commands answered, HIL frames to the link, the rest to the core.
@@ -112,7 +168,9 @@ static void slcan_receive(uint32_t now_us) {
         if (ev == TD_SLCAN_FRAME) {
             const uint8_t tick = hil.tick;
             if (td_hil_rx(&hil, &f) == 0) {
-                (void)td_app_rx(&app, &f, tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? hil.clock_us : now_us);
+                const uint32_t t_us = tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? hil.clock_us : now_us;
+                (void)td_app_rx(&app, &f, t_us);
+                isobus_rx(&f, t_us);
             } else if (hil.tick != tick) {
                 hil_tick_chosen();
             }
@@ -168,7 +226,7 @@ int main(void) {
         td_hil_init(&hil);
         td_slcan_init(&slcan);
         fw_uart_init(&clk, BOARD_SLCAN_BAUD);
-    } else if (!fw_can_init(&clk, ids, sizeof ids / sizeof ids[0])) {
+    } else if (!fw_can_init(&clk, ids, ISOBUS_BUILD ? 0u : sizeof ids / sizeof ids[0])) {
         for (;;) { /* a CAN controller that never answers: a broken chip; outputs off, no watchdog */
             wait_for_interrupt();
         }
@@ -187,6 +245,7 @@ int main(void) {
     ident.reset_cause = (uint8_t)cause;
     ident.clock_fallback = clk.source == (uint8_t)FW_CLOCK_HSI;
     (void)td_app_set_ident(&app, &ident);
+    isobus_start(fw_micros());
     fw_watchdog_start();
     fw_tick_start(&clk); /* on the HIL link in lockstep it only wakes the wait for the watchdog */
     uint32_t steps = 0u;
@@ -202,18 +261,21 @@ int main(void) {
             now = fw_micros();
             while (fw_can_read(&f)) {
                 (void)td_app_rx(&app, &f, now);
+                isobus_rx(&f, now);
             }
             fw_io_read(&in);
         }
         /* the step's cost: receive and core on the board, the core alone in lockstep */
         const uint32_t t_start = hil_mode && hil.tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? fw_micros() : now;
         td_io_out_t out;
+        isobus_before_step(now);
         (void)td_app_step(&app, now, &in, &out);
         if (hil_mode) {
             /* the step's bus frames, then its duties and HilStep: the simulator's end of it */
             while (td_app_tx_pop(&app, &f)) {
                 slcan_send(&f);
             }
+            isobus_after_step(now, slcan_send);
             const uint32_t cost_us = fw_micros() - t_start;
             td_can_frame_t step_frames[2];
             td_hil_outputs(&hil, now, &out, cost_us, step_frames);
@@ -227,6 +289,9 @@ int main(void) {
                 if (on_crystal) { /* silent on the fallback: nothing queued for the bus */
                     (void)fw_can_write(&f);
                 }
+            }
+            if (on_crystal) {
+                isobus_after_step(now, can_send);
             }
             if (on_crystal && ++steps % BOARD_STEP_HZ == 0u) {
                 send_diagnostics();
