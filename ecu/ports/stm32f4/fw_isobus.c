@@ -7,7 +7,8 @@
  *        go back to the TC. No TC, or every section off: the command stops the meters.
  *
  * NAME: identity number from the chip's 96-bit unique ID (RM0090 39.1, 0x1FFF7A10), so two
- * ECUs on one bus never claim with the same NAME.
+ * ECUs on one bus never claim with the same NAME. The emulator build has no such memory and
+ * takes a fixed ID.
  */
 #if defined(FW_ISOBUS)
 #include <stddef.h>
@@ -50,10 +51,18 @@ static unsigned bits_set(uint16_t v) {
 
 bool fw_isobus_init(const td_params_t *p, uint32_t now_us) {
     uint8_t uid[UID_LEN];
+#if defined(FW_QEMU)
+    /* the emulated chip has no system memory there (a read faults): a fixed ID */
+    static const uint8_t emulator_uid[UID_LEN] = { 'q', 'e', 'm', 'u', '-', 't', 'o', 'p', 'd', 'r', 's', 's' };
+    for (unsigned i = 0u; i < UID_LEN; i++) {
+        uid[i] = emulator_uid[i];
+    }
+#else
     const volatile uint8_t *const src = (const volatile uint8_t *)UID_ADDR;
     for (unsigned i = 0u; i < UID_LEN; i++) {
         uid[i] = src[i];
     }
+#endif
     td_ibname_t n;
     uint64_t name;
     if (td_ibname_topdress(FW_ISOBUS_MANUFACTURER, uid, sizeof uid, &n) != TD_IB_OK ||
