@@ -5,8 +5,9 @@ Prints exactly:
     fw_ram_bytes: N            data + bss + the stack reservation (budget 16384)
     fw_stack_worst_bytes: N    deepest thread path + one handler per preemption level with
                                exception frames (scripts/fw_report.py)
-  the same three for every board header (ecu/ports/stm32f4/boards/BOARD.h) and the emulator
-  build (BOARD = qemu):
+  the same three for every board header (ecu/ports/stm32f4/boards/BOARD.h), the emulator
+  build (BOARD = qemu) and the ISOBUS builds (FW_ISOBUS=1: BOARD = isobus on the generic
+  board, qemu_isobus in the emulator):
     fw_BOARD_flash_bytes: N
     fw_BOARD_ram_bytes: N
     fw_BOARD_stack_worst_bytes: N
@@ -84,7 +85,11 @@ def main() -> int:
     print(f"fw_ram_bytes: {f['ram_bytes']}")
     print(f"fw_stack_worst_bytes: {f['stack_worst_bytes']}")
     boards = sorted(p.stem for p in (REPO / "ecu" / "ports" / "stm32f4" / "boards").glob("*.h"))
-    for name, args in [(b, (f"BOARD={b}",)) for b in boards] + [("qemu", ("VARIANT=qemu",))]:
+    for name, args in [(b, (f"BOARD={b}",)) for b in boards] + [
+        ("qemu", ("VARIANT=qemu",)),
+        ("isobus", ("FW_ISOBUS=1",)),
+        ("qemu_isobus", ("FW_ISOBUS=1", "VARIANT=qemu")),
+    ]:
         f = footprint(*args)
         for key in ("flash_bytes", "ram_bytes", "stack_worst_bytes"):
             print(f"fw_{name}_{key}: {f[key]}")
