@@ -67,6 +67,7 @@ def test_agiso_client_pool_accepted_activated_and_measured() -> None:
     mine = [f.data for f in sent if split_id(f.can_id)[3] == CLIENT]
     assert bytes([0x10, 4, 0xFF, 0x11, 0, 1, 16, 2]) in mine  # version: TC-BAS + TC-SC
     assert bytes([0x11]) + b"\xff" * 7 in mine  # no structure label stored
+    assert any(split_id(f.can_id)[1] == 0xFE0F and f.data[:2] == b"en" for f in sent)  # language
     assert any(d[:2] == b"\x71\x00" for d in mine)  # transfer response: OK
     assert bytes([0x91, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0, 0xFF]) in mine  # activated
     # the client's values (its answers and time-interval measurements, as recorded): bin 3's

@@ -193,7 +193,12 @@ class TcServer:
         self._claim.rx(f.can_id, f.data, now_us)
         _, pgn, sa, da = split_id(f.can_id)
         me = self.address
-        if me is None or da != me:
+        if me is None or da not in (me, 0xFF):
+            return
+        if pgn == 0xEA00 and f.data[:3] == b"\x0f\xfe\x00":  # request for the language command
+            self._out.append(Frame(6 << 26 | 0xFE0F << 8 | me, b"en\x50\x00\x00\x00\xff\xff"))
+            return
+        if da != me:
             return
         if pgn in (0xEC00, 0xEB00, 0xC800, 0xC700) and self._tp is not None:
             n = len(self._tp.received)
