@@ -53,6 +53,7 @@ def _replay(until_us: int | None = None) -> tuple[TcServer, list[Frame]]:
     return tc, sent
 
 
+@pytest.mark.interop
 def test_agiso_client_pool_accepted_activated_and_measured() -> None:
     tc, sent = _replay()
     assert tc.address == TC
@@ -77,6 +78,7 @@ def test_agiso_client_pool_accepted_activated_and_measured() -> None:
     assert (2, 160, 0xFF) in c.pdacks
 
 
+@pytest.mark.interop
 def test_rate_and_sections_commanded_after_activation() -> None:
     tc, _ = _replay()
     tc.set_value(3, 6, 15000)  # 150 kg/ha in the DDOP's mg/m^2
@@ -115,6 +117,7 @@ def test_tc_name_fields() -> None:
     assert f["self_configurable"] == 1
 
 
+@pytest.mark.interop
 def test_ddop_mutations_give_clear_errors_only() -> None:
     """Random byte flips, cuts and splices of the AgIsoStack++ pool: mapped or ProtocolError."""
     pool = DDOP.read_bytes()

@@ -45,6 +45,8 @@ def test_ecu_node_served_by_the_terminal_tc() -> None:
     actual = c.values[(3, 7)] / 100  # kg/ha
     print(f"actual rate read back by the TC: {actual:.1f} kg/ha (set 150)")
     assert abs(actual - 150.0) <= 0.05 * 150.0
+    print(f"measurements of the actual rate in 20 s: {c.heard[(3, 7)]}")
+    assert 20 <= c.heard[(3, 7)] <= 22  # one at once, then every 1000 ms over 20 s
     tc.set_value(2, 290, -4096)  # all sections off
     _run(m, tc, 0.5, pending)
     assert not m.running

@@ -116,7 +116,8 @@ class Client:
     device: Device | None = None
     active: bool = False
     lost: bool = False
-    values: dict[tuple[int, int], int] = field(default_factory=dict)
+    values: dict[tuple[int, int], int] = field(default_factory=dict)  # the last, by (element, DDI)
+    heard: dict[tuple[int, int], int] = field(default_factory=dict)  # how many values came
     pdacks: list[tuple[int, int, int]] = field(default_factory=list)  # element, DDI, errors
 
 
@@ -292,6 +293,7 @@ class TcServer:
     def _value(self, c: Client, d: bytes) -> None:
         element, ddi, value = self._unpack(d)
         c.values[(element, ddi)] = value
+        c.heard[(element, ddi)] = c.heard.get((element, ddi), 0) + 1
 
     def _pdack(self, c: Client, d: bytes) -> None:
         # bytes 4.. are error codes and the command; AgIsoStack++ leaves 5..7 at 0xFF
