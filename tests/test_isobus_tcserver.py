@@ -23,10 +23,10 @@ CLIENT, TC = 0x80, 0xF7
 LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-F]{8})#([0-9A-F]*)")
 
 
-def _client_frames() -> list[tuple[int, Frame]]:
+def _client_frames(trace: Path = TRACE) -> list[tuple[int, Frame]]:
     out = []
     t0 = None
-    for line in TRACE.read_text(encoding="ascii").splitlines():
+    for line in trace.read_text(encoding="ascii").splitlines():
         m = LINE.match(line)
         if not m:
             continue
@@ -38,14 +38,12 @@ def _client_frames() -> list[tuple[int, Frame]]:
     return out
 
 
-def _replay(until_us: int | None = None) -> tuple[TcServer, list[Frame]]:
+def _replay(trace: Path = TRACE) -> tuple[TcServer, list[Frame]]:
     tc = TcServer(tc_name(7))
     tc.start(0)
     sent: list[Frame] = []
     now = 0
-    for t, f in _client_frames():
-        if until_us is not None and t > until_us:
-            break
+    for t, f in _client_frames(trace):
         while now + 10_000 <= t:
             now += 10_000
             sent += tc.step(now, [])
@@ -76,6 +74,17 @@ def test_agiso_client_pool_accepted_activated_and_measured() -> None:
     assert c.values[(3, 8)] == 15000 and c.values[(3, 7)] == 0xAB
     # its PDACKs carry 0xFFFFFFFF after the DDI: taken, the error byte read as it stands
     assert (2, 160, 0xFF) in c.pdacks
+
+
+@pytest.mark.interop
+def test_agiso_client_pool_over_etp() -> None:
+    """2 bins, 16 sections: a 2667-byte pool, over the 1785 bytes of TP, so ETP."""
+    tc, sent = _replay(DATA / "agiso_tc_session_etp_agiso_client.log")
+    c = tc.client
+    assert c is not None and c.active and tc.errors == []
+    assert c.pool == (DATA / "agiso_spreader_ddop_2bins_16sections.bin").read_bytes()
+    assert c.device is not None and len(c.device.sections) == 16
+    assert any(split_id(f.can_id)[1] == 0xC800 for f in sent)  # the server's ETP CTS
 
 
 @pytest.mark.interop
