@@ -87,6 +87,16 @@ def test_agiso_client_pool_over_etp() -> None:
     assert any(split_id(f.can_id)[1] == 0xC800 for f in sent)  # the server's ETP CTS
 
 
+def test_bad_values_refused_before_the_bus() -> None:
+    """The values AgIsoStack++'s client acknowledged alike in a recorded run (agiso_tc_bad_values):
+    not settable, no such element, no such DDI, negative rate; the topdress TC sends none."""
+    tc, _ = _replay()
+    for element, ddi, value in ((3, 7, 12345), (99, 6, 15000), (2, 65000, 1), (3, 6, -5000)):
+        with pytest.raises(ProtocolError):
+            tc.set_value(element, ddi, value)
+    assert not [f for f in tc.step(60_000_000, []) if f.data[0] & 0x0F == 10]
+
+
 @pytest.mark.interop
 def test_rate_and_sections_commanded_after_activation() -> None:
     tc, _ = _replay()

@@ -50,6 +50,7 @@ class Device:
     bins: dict[int, set[int]]  # element number -> DDIs it carries
     sections: list[int]  # element numbers of the sections, in pool order
     condensed: dict[int, int]  # DDI 161/290 -> element number that carries it
+    settable: frozenset[tuple[int, int]]  # (element, DDI) of the settable process data
     objects: int
 
 
@@ -72,6 +73,7 @@ def map_device(pool: bytes) -> Device:
     bins: dict[int, set[int]] = {}
     sections: list[int] = []
     condensed: dict[int, int] = {}
+    settable: set[tuple[int, int]] = set()
     for o in objs:
         if o.table != "DET":
             continue
@@ -82,6 +84,8 @@ def map_device(pool: bytes) -> Device:
                 raise ProtocolError(f"DDOP element {o.object_id} names missing object {child}")
             if c.table in ("DPD", "DPT"):
                 ddis.add(int(c.fields["ddi"]))
+            if c.table == "DPD" and c.fields["properties"] & 2:  # bit 1: settable
+                settable.add((int(o.fields["element"]), int(c.fields["ddi"])))
         if o.fields["parent"] not in by_id:
             raise ProtocolError(f"DDOP element {o.object_id} has missing parent")
         element = int(o.fields["element"])
@@ -94,7 +98,9 @@ def map_device(pool: bytes) -> Device:
         for ddi in (SETPOINT_CONDENSED, ACTUAL_CONDENSED):
             if ddi in ddis:
                 condensed[ddi] = element
-    return Device(str(dvcs[0].fields["designator"]), bins, sections, condensed, len(objs))
+    return Device(
+        str(dvcs[0].fields["designator"]), bins, sections, condensed, frozenset(settable), len(objs)
+    )
 
 
 def pd_frame(cmd: int, element: int, ddi: int, value: int) -> bytes:
@@ -149,8 +155,14 @@ class TcServer:
         self.errors.append(what)
 
     def set_value(self, element: int, ddi: int, value: int, ack: bool = True) -> None:
-        """Set Value (and Acknowledge) to the client; ProtocolError before a pool is active."""
+        """Set Value (and Acknowledge) to the client; ProtocolError before a pool is active, for
+        an element and DDI its pool does not name settable, or a negative rate. A client need not
+        check (AgIsoStack++'s acknowledges any value alike), so the TC does."""
         c = self._active_client()
+        if c.device is None or (element, ddi) not in c.device.settable:
+            raise ProtocolError(f"DDI {ddi} of element {element} is not settable in the DDOP")
+        if ddi == SETPOINT_MASS_HA and value < 0:
+            raise ProtocolError(f"rate {value} mg/m^2 below 0")
         self._send(c.address, pd_frame(SET_ACK if ack else VALUE, element, ddi, value))
 
     def measure_every(self, element: int, ddi: int, interval_ms: int) -> None:
