@@ -87,6 +87,21 @@ def test_agiso_client_pool_over_etp() -> None:
     assert any(split_id(f.can_id)[1] == 0xC800 for f in sent)  # the server's ETP CTS
 
 
+def test_second_client_refused_first_kept() -> None:
+    tc, _ = _replay()
+    ignored = tc.ignored
+    second = Frame(5 << 26 | 0xCB00 << 8 | TC << 8 | 0x81, bytes([0]) + b"\xff" * 7)  # version?
+    out = tc.step(60_000_000, [second, second])
+    assert not [f for f in out if split_id(f.can_id)[3] == 0x81]
+    assert tc.client is not None and tc.client.address == CLIENT and tc.client.active
+    assert tc.ignored == ignored + 2 and tc.errors == [
+        "client 0x81 refused: the TC serves 0x80, one at a time"
+    ]
+    tc.step(70_000_000, [])  # the first client silent past its timeout: the second is served
+    out = tc.step(70_000_000, [second])
+    assert [f.data for f in out if split_id(f.can_id)[3] == 0x81][0][:2] == b"\x10\x04"
+
+
 def test_bad_values_refused_before_the_bus() -> None:
     """The values AgIsoStack++'s client acknowledged alike in a recorded run (agiso_tc_bad_values):
     not settable, no such element, no such DDI, negative rate; the topdress TC sends none."""

@@ -137,7 +137,8 @@ class TcServer:
         self._next_status = 0
         self.client: Client | None = None
         self.errors: list[str] = []  # what went wrong, in words, oldest first
-        self.ignored = 0  # frames not understood, counted
+        self.ignored = 0  # frames not understood or from a client not served, counted
+        self._refused: set[int] = set()
 
     @property
     def address(self) -> int | None:
@@ -223,18 +224,24 @@ class TcServer:
         elif pgn == PD_PGN:
             self._message(sa, f.data, now_us)
 
-    def _client(self, sa: int, now_us: int) -> Client:
+    def _client(self, sa: int, now_us: int) -> Client | None:
+        """The client at sa; None (refused, reported once) while another one is served."""
         c = self.client
+        if c is not None and c.address != sa and not c.lost:
+            if sa not in self._refused:
+                self._refused.add(sa)
+                self._error(f"client {sa:#x} refused: the TC serves {c.address:#x}, one at a time")
+            return None
         if c is None or c.address != sa or c.lost:
             c = self.client = Client(sa, now_us)
         c.last_heard_us = now_us
         return c
 
     def _message(self, sa: int, d: bytes, now_us: int) -> None:
-        if len(d) < 8:
+        c = self._client(sa, now_us) if len(d) >= 8 else None
+        if c is None:
             self.ignored += 1
             return
-        c = self._client(sa, now_us)
         cmd = d[0] & 0x0F
         if cmd == TECH:
             self._technical(c, d)
