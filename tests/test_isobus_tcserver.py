@@ -99,7 +99,7 @@ def test_second_client_refused_first_kept() -> None:
     ]
     tc.step(70_000_000, [])  # the first client silent past its timeout: the second is served
     out = tc.step(70_000_000, [second])
-    assert [f.data for f in out if split_id(f.can_id)[3] == 0x81][0][:2] == b"\x10\x04"
+    assert next(f.data for f in out if split_id(f.can_id)[3] == 0x81)[:2] == b"\x10\x04"
 
 
 def test_bad_values_refused_before_the_bus() -> None:
