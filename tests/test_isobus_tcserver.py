@@ -217,3 +217,22 @@ def test_process_data_garbage_counted_never_raised() -> None:
         data = rng.randbytes(rng.randint(0, 8))
         tc.step(t, [Frame(5 << 26 | 0xCB00 << 8 | TC << 8 | CLIENT, data)])
     assert tc.ignored > 0
+
+
+def test_tc_address_taken_by_a_higher_priority_name_moves_on() -> None:
+    tc = TcServer(tc_name(7))
+    tc.start(0)
+    for t in range(0, 400_000, 10_000):
+        tc.step(t, [])
+    assert tc.address == TC
+    rival = Frame(6 << 26 | 0xEE00 << 8 | 0xFF << 8 | TC, (1).to_bytes(8, "little"))  # NAME 1
+    out: list[Frame] = []
+    for t in range(400_000, 1_200_000, 10_000):
+        out += tc.step(t, [rival] if t == 400_000 else [])
+    moved = tc.address
+    assert moved is not None and moved != TC and 128 <= moved <= 247
+    assert any(split_id(f.can_id)[1] == 0xEE00 and split_id(f.can_id)[2] == moved for f in out)
+    # the TC answers from its new address (its TP too)
+    ask = Frame(5 << 26 | 0xCB00 << 8 | moved << 8 | CLIENT, bytes([0]) + b"\xff" * 7)
+    answer = [f for f in tc.step(1_300_000, [ask]) if split_id(f.can_id)[3] == CLIENT]
+    assert answer and split_id(answer[0].can_id)[2] == moved

@@ -187,8 +187,8 @@ class TcServer:
         self._claim.step(now_us)
         self._out[:0] = self._claim.tx()
         sa = self.address
-        if sa is not None and self._tp is None:
-            self._tp = TpEndpoint(sa, MAX_POOL_BYTES + 1)
+        if sa is not None and (self._tp is None or self._tp.address != sa):
+            self._tp = TpEndpoint(sa, MAX_POOL_BYTES + 1)  # claimed, or moved by a contest
         c = self.client
         if c is not None and not c.lost and now_us - c.last_heard_us > CLIENT_TIMEOUT_US:
             c.lost = True
