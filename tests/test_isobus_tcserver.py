@@ -232,7 +232,7 @@ def test_tc_address_taken_by_a_higher_priority_name_moves_on() -> None:
     moved = tc.address
     assert moved is not None and moved != TC and 128 <= moved <= 247
     assert any(split_id(f.can_id)[1] == 0xEE00 and split_id(f.can_id)[2] == moved for f in out)
-    # the TC answers from its new address (its TP too)
+    # the TC answers from its new address
     ask = Frame(5 << 26 | 0xCB00 << 8 | moved << 8 | CLIENT, bytes([0]) + b"\xff" * 7)
     answer = [f for f in tc.step(1_300_000, [ask]) if split_id(f.can_id)[3] == CLIENT]
     assert answer and split_id(answer[0].can_id)[2] == moved
