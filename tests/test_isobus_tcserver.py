@@ -65,6 +65,8 @@ def test_agiso_client_pool_accepted_activated_and_measured() -> None:
     assert c.device.condensed == {290: 2, 161: 2}
     mine = [f.data for f in sent if split_id(f.can_id)[3] == CLIENT]
     assert bytes([0x10, 4, 0xFF, 0x11, 0, 1, 16, 2]) in mine  # version: TC-BAS + TC-SC
+    assert bytes([0x00]) + b"\xff" * 7 in mine  # its working-set master heard: version asked
+    assert c.version is not None and c.version[:2] == b"\x10\x04"  # it answered: version 4
     assert bytes([0x11]) + b"\xff" * 7 in mine  # no structure label stored
     assert any(split_id(f.can_id)[1] == 0xFE0F and f.data[:2] == b"en" for f in sent)  # language
     assert any(d[:2] == b"\x71\x00" for d in mine)  # transfer response: OK

@@ -212,6 +212,11 @@ class TcServer:
         if pgn == 0xEA00 and f.data[:3] == b"\x0f\xfe\x00":  # request for the language command
             self._out.append(Frame(6 << 26 | 0xFE0F << 8 | me, b"en\x50\x00\x00\x00\xff\xff"))
             return
+        if pgn == 0xFE0D:  # working-set master: a client announces itself; ask its version
+            c = self._client(sa, now_us)
+            if c is not None and c.version is None:
+                self._send(sa, bytes([0x00]) + b"\xff" * 7)
+            return
         if da != me:
             return
         if pgn in (0xEC00, 0xEB00, 0xC800, 0xC700) and self._tp is not None:
