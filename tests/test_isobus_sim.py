@@ -1,6 +1,6 @@
-"""The simulated machine with its ECU on ISOBUS, commanded by a minimal Task Controller in
-virtual time: the TC's kg/ha metered within 3 % in steady state, sections switched within
-0.2 s, a lost TC stops the meters."""
+"""The simulated machine with its ECU on ISOBUS, commanded by the terminal's Task Controller
+(tcserver) in virtual time: the TC's kg/ha metered within 3 % in steady state, sections
+switched within 0.2 s, a lost TC stops the meters."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def test_tc_rate_metered_sections_and_lost_tc() -> None:
     m, tc = _rig()
     pending = _run(m, tc, 4.0, [])
     assert tc.activated and m.node.tc_state == "connected"
-    assert tc.pool is not None and tc.pool[0] == 0x61
+    assert tc.pool is not None and tc.pool[:3] == b"DVC"
     for element, ddi, value in (
         (2, 160, 1),
         (2, 289, 1),

@@ -1,5 +1,5 @@
-"""`topdress demo --isobus`: the simulated machine with its ECU on ISOBUS and the simulated
-Task Controller as the farm's terminal, paced to the wall clock. The console says what the
+"""`topdress demo --isobus`: the simulated machine with its ECU on ISOBUS and the terminal's
+Task Controller (topdress.isobus.tcserver), paced to the wall clock. The console says what the
 bus does (address claimed, DDOP accepted, the rate the TC set, what is applied); every frame
 both ways goes into a candump log beside the session logs."""
 
