@@ -9,6 +9,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import can
 import pytest
 
 from topdress.sim.qemu_ecu import HilLink, QemuEcu, QemuOptions, qemu_missing
@@ -95,3 +96,33 @@ def test_emulated_isobus_ecu_claims_its_address() -> None:
     assert (name >> 49) & 0x7F == 5  # device class: fertilizers
     assert (name >> 60) & 0x7 == 2  # industry group: agriculture
     assert name & 0x1FFFFF != 0  # identity number from the unique ID
+
+
+@pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing()))
+def test_emulated_isobus_ecu_activates_its_pool_with_a_tc() -> None:
+    """A whole TC session with the firmware on its own tick: claim, pool by TP, activated."""
+    from topdress.isobus.node import Frame
+    from topdress.isobus.tcserver import TcServer, tc_name
+
+    out = REPO / "build" / "fw-qemu-isobus"
+    done = _make(out, "FW_ISOBUS=1", "VARIANT=qemu")
+    assert done.returncode == 0, done.stderr
+    tc = TcServer(tc_name(7))
+    with QemuEcu(QemuOptions(image=out / ELF)) as ecu:
+        HilLink(ecu.bus).send_clock(0, 0, free_run=True)
+        t0 = time.monotonic()
+        tc.start(0)
+        while time.monotonic() - t0 < 30.0:
+            heard: list[Frame] = []
+            msg = ecu.bus.recv(timeout=0.005)
+            while msg is not None:
+                heard.append(Frame(msg.arbitration_id, bytes(msg.data)))
+                msg = ecu.bus.recv(timeout=0.0)
+            now_us = int((time.monotonic() - t0) * 1e6)
+            for f in tc.step(now_us, heard):
+                ecu.bus.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
+            if tc.client is not None and tc.client.active:
+                break
+    assert tc.client is not None, tc.errors
+    assert tc.client.address == 0x84
+    assert tc.client.active, tc.errors

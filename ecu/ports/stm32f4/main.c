@@ -35,6 +35,10 @@
 #else
 #define ISOBUS_BUILD false
 #endif
+/* the node's frames per step: 8 SLCAN lines (27 bytes each) leave room in the 512-byte
+ * transmit buffer for the core's frames and the HIL pair; 16 on CAN, half its 32-frame ring */
+#define ISOBUS_SLCAN_FRAMES_PER_STEP 8u
+#define ISOBUS_CAN_FRAMES_PER_STEP 16u
 
 #if defined(FW_QEMU)
 #define HIL_BUILD true
@@ -125,17 +129,20 @@ static void isobus_before_step(uint32_t now_us) {
 #endif
 }
 
-/* After it: the actual values to the TC, the node's period; its frames to `send`. */
-static void isobus_after_step(uint32_t now_us, void (*send)(const td_can_frame_t *f)) {
+/* After it: the actual values to the TC, the node's period; at most `max` of its frames to
+ * `send` (the rest wait in the node's queue, whose TP sender refills it as it drains: a
+ * step's frames must fit the link's transmit buffer, 512 serial bytes on SLCAN). */
+static void isobus_after_step(uint32_t now_us, void (*send)(const td_can_frame_t *f), unsigned max) {
 #if defined(FW_ISOBUS)
     fw_isobus_step(&app, now_us);
     td_can_frame_t f;
-    while (fw_isobus_tx(&f)) {
+    for (unsigned i = 0u; i < max && fw_isobus_tx(&f); i++) {
         send(&f);
     }
 #else
     (void)now_us;
     (void)send;
+    (void)max;
 #endif
 }
 
@@ -275,7 +282,7 @@ int main(void) {
             while (td_app_tx_pop(&app, &f)) {
                 slcan_send(&f);
             }
-            isobus_after_step(now, slcan_send);
+            isobus_after_step(now, slcan_send, ISOBUS_SLCAN_FRAMES_PER_STEP);
             const uint32_t cost_us = fw_micros() - t_start;
             td_can_frame_t step_frames[2];
             td_hil_outputs(&hil, now, &out, cost_us, step_frames);
@@ -291,7 +298,7 @@ int main(void) {
                 }
             }
             if (on_crystal) {
-                isobus_after_step(now, can_send);
+                isobus_after_step(now, can_send, ISOBUS_CAN_FRAMES_PER_STEP);
             }
             if (on_crystal && ++steps % BOARD_STEP_HZ == 0u) {
                 send_diagnostics();
