@@ -74,6 +74,7 @@ def test_a_bad_setting_is_a_clear_error(tmp_path: Path) -> None:
     assert "FW_ISOBUS=yes: 0 or 1" in done.stderr
 
 
+@pytest.mark.qemu
 @pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing()))
 def test_emulated_isobus_ecu_claims_its_address() -> None:
     out = REPO / "build" / "fw-qemu-isobus"
@@ -98,6 +99,7 @@ def test_emulated_isobus_ecu_claims_its_address() -> None:
     assert name & 0x1FFFFF != 0  # identity number from the unique ID
 
 
+@pytest.mark.qemu
 @pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing()))
 def test_emulated_isobus_ecu_activates_its_pool_with_a_tc() -> None:
     """A whole TC session with the firmware on its own tick: claim, pool by TP, activated."""
