@@ -170,19 +170,6 @@ class RateConfig:
     sufficiency: SufficiencyRateConfig = field(default_factory=SufficiencyRateConfig)
 
 
-CAN_ID_NAMES = (
-    "status",
-    "command",
-    "diag",
-    "speeds",
-    "targets",
-    "param_set",
-    "param_ack",
-    "cal_command",
-    "cal_status",
-)
-
-
 #: The frames whose identifiers `[can.ids]` may set (the others keep the DBC's).
 CONFIGURABLE_IDS = (
     "status",
@@ -571,7 +558,7 @@ def _columns(raw: Any, key: str) -> dict[str, int]:
 
 def _can_ids(raw: Any, key: str) -> dict[str, int]:
     table = _table(raw, key)
-    _reject_unknown(table, dict.fromkeys(CAN_ID_NAMES), f"{key}.")
+    _reject_unknown(table, dict.fromkeys(CONFIGURABLE_IDS), f"{key}.")
     ids = dict(CanConfig().ids)
     for name, v in table.items():
         ids[name] = _number(v, f"{key}.{name}", 0, 0x1FFFFFFF, integer=True)
