@@ -16,6 +16,7 @@
 #include <stdint.h>
 
 #include "td_claim.h"
+#include "td_prop.h"
 #include "td_tc.h"
 #include "td_tp.h"
 
@@ -31,6 +32,8 @@ typedef struct {
     uint8_t bam_buf[TD_ISOB_BAM_BUF];
     uint32_t rx_frames; /**< frames taken */
     uint32_t rx_errors; /**< malformed frames (counted, dropped) */
+    uint32_t prop_rx;           /**< the terminal's private frames taken (td_isob_prop_rx) */
+    uint32_t prop_wrong_source; /**< private frames from an address not our TC's (dropped) */
 } td_isob_t;
 
 /** `name` from td_ibname_encode(); the preferred address and fallback range as td_claim_init;
@@ -43,6 +46,19 @@ int td_isob_start(td_isob_t *n, uint32_t now_us);
 int td_isob_rx(td_isob_t *n, const td_can_frame_t *f, uint32_t now_us);
 /** The control period's work. */
 void td_isob_step(td_isob_t *n, uint32_t now_us, uint32_t distance_mm);
+/**
+ * A received frame that is one of the terminal's private frames (td_prop.h) from the address
+ * of our Task Controller (the terminal): 1, `core` then holds it with the paper's fixed
+ * identifier for the control core; 0 for other traffic; TD_IB_E_SOURCE when it came from
+ * another address or no TC is known: dropped and counted in `prop_wrong_source`.
+ */
+int td_isob_prop_rx(td_isob_t *n, const td_can_frame_t *f, td_can_frame_t *core);
+/**
+ * A frame of the control core as it goes on the ISOBUS: from our claimed address (to the TC
+ * for Proprietary A). TD_IB_E_NO_ADDRESS before the claim or, for Proprietary A, without a TC;
+ * TD_IB_E_FRAME for a frame with no ISOBUS form. Either way nothing is to be sent.
+ */
+int td_isob_prop_tx(const td_isob_t *n, const td_can_frame_t *core, td_can_frame_t *out);
 /** The next frame to send; false when none. */
 bool td_isob_tx(td_isob_t *n, td_can_frame_t *out);
 

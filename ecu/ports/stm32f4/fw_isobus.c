@@ -81,10 +81,20 @@ bool fw_isobus_init(const td_params_t *p, uint32_t now_us) {
     return true;
 }
 
-void fw_isobus_rx(const td_can_frame_t *f, uint32_t now_us) {
+void fw_isobus_rx(td_app_t *app, const td_can_frame_t *f, uint32_t now_us) {
+    td_can_frame_t core;
     if (started && f->extended != 0u) {
         (void)td_isob_rx(&node, f, now_us); /* malformed frames are counted by the node */
+        /* the terminal's private frames reach the core only from the TC's address (the rest
+         * counted by the node); a fixed paper identifier on an ISOBUS is another node's PGN */
+        if (td_isob_prop_rx(&node, f, &core) == 1) {
+            (void)td_app_rx(app, &core, now_us);
+        }
     }
+}
+
+bool fw_isobus_to_bus(const td_can_frame_t *core, td_can_frame_t *out) {
+    return started && td_isob_prop_tx(&node, core, out) == TD_IB_OK;
 }
 
 void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd) {
