@@ -98,6 +98,10 @@ EVENT_KINDS: Final = (
     "counter.reset",
     "counter.undo",
     "tank.filled",
+    "isobus.claimed",
+    "isobus.ddop",
+    "isobus.set",
+    "isobus.tc_lost",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (
