@@ -142,7 +142,7 @@ static void core_can_write(const td_can_frame_t *core) {
 static void isobus_before_step(uint32_t now_us) {
 #if defined(FW_ISOBUS)
     td_can_frame_t cmd;
-    fw_isobus_command(&app, &cmd);
+    fw_isobus_command(&app, &cmd, now_us);
     (void)td_app_rx(&app, &cmd, now_us);
 #else
     (void)now_us;
