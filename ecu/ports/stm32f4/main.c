@@ -54,6 +54,7 @@ static td_slcan_parser_t slcan;
 static bool slcan_open;
 static const bool hil_mode = HIL_BUILD;
 static uint32_t slcan_tx_dropped;
+static uint32_t rx_cost_us; /* lockstep: the time the step's bus frames took to take in */
 
 static void slcan_send(const td_can_frame_t *f) {
     char line[TD_SLCAN_FRAME_MAX];
@@ -196,7 +197,9 @@ static void slcan_receive(uint32_t now_us) {
             const uint8_t tick = hil.tick;
             if (td_hil_rx(&hil, &f) == 0) {
                 const uint32_t t_us = tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? hil.clock_us : now_us;
+                const uint32_t t0 = fw_micros();
                 bus_rx(&f, t_us);
+                rx_cost_us += fw_micros() - t0;
             } else if (hil.tick != tick) {
                 hil_tick_chosen();
             }
@@ -290,7 +293,8 @@ int main(void) {
             }
             fw_io_read(&in);
         }
-        /* the step's cost: receive and core on the board, the core alone in lockstep */
+        /* the step's cost: receive and core on the board; in lockstep the core and the time
+         * its frames took to take in (not the wait for the simulator's bytes between them) */
         const uint32_t t_start = hil_mode && hil.tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? fw_micros() : now;
         td_io_out_t out;
         isobus_before_step(now);
@@ -304,7 +308,8 @@ int main(void) {
                 }
             }
             isobus_after_step(now, slcan_send, ISOBUS_SLCAN_FRAMES_PER_STEP);
-            const uint32_t cost_us = fw_micros() - t_start;
+            const uint32_t cost_us = fw_micros() - t_start + (t_start == now ? 0u : rx_cost_us);
+            rx_cost_us = 0u;
             td_can_frame_t step_frames[2];
             td_hil_outputs(&hil, now, &out, cost_us, step_frames);
             slcan_send(&step_frames[0]);
