@@ -15,6 +15,7 @@ from topdress.config import TerminalConfig, redacted_text
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, topdress_name
 from topdress.isobus.watch import IsobusWatch
+from topdress.log.model import LogEvent
 from topdress.log.session import SessionLog
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tc import MiniTc
@@ -63,11 +64,25 @@ def run_isobus_demo(
             _record(log, "can_rx", world.t_s, frames)
             for ev in watch.events(world.t_s):
                 log.event(ev)
+                _warn(out, ev)
             pending = tc.step(world.now_us, frames)
             _record(log, "can_tx", world.t_s, pending)
             _say(out, said, sim, tc, n)
             time.sleep(max(0.0, t0 + world.t_s - time.monotonic()))
     return 0
+
+
+def _warn(out: TextIO, ev: LogEvent) -> None:
+    """The node's faults on the console (the session log has every event)."""
+    d = ev.detail
+    if ev.kind == "isobus.tc_lost":
+        print(f"{ev.t:6.2f} s  ALARM: Task Controller lost, meters stopped", file=out)
+    elif ev.kind == "isobus.ddop" and not d["accepted"]:
+        print(f"{ev.t:6.2f} s  ALARM: TC 0x{d['tc'] or 0:02X} refused the DDOP "
+              f"(code 0x{d['code']:02X}), meters stopped", file=out)  # fmt: skip
+    elif ev.kind == "isobus.bus_load":
+        state = "overloaded" if d["overloaded"] else "back to normal"
+        print(f"{ev.t:6.2f} s  ISOBUS {state}: {d['load_pct']:.0f} % of the bus", file=out)
 
 
 def _say(out: TextIO, said: set[str], sim: IsobusMachine, tc: MiniTc, n: int) -> None:

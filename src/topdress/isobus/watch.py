@@ -1,13 +1,20 @@
 """What the implement's ISOBUS node did, as session-log events: its address claimed (or lost),
 the DDOP accepted or refused by the Task Controller, the rates and sections the TC set, the TC
-lost. Compares the node's state between control periods; no I/O."""
+lost, the bus loaded to its limit (and back). Compares the node's state between control
+periods; no I/O."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 
 from topdress.isobus.node import IsobusNode
 from topdress.log.model import LogEvent
+
+BUS_FRAMES_PER_S: Final = 250_000 / 135  # 250 kbit/s, 29-bit 8-byte frames of ~135 bits
+LOAD_HIGH: Final = 0.9  # a second of frames heard at 90 % of the bus or more: overloaded
+LOAD_LOW: Final = 0.7  # below 70 % again: back to normal
+LOAD_WINDOW_S: Final = 1.0
 
 
 @dataclass
@@ -16,6 +23,9 @@ class _Seen:
     tc_state: str = "no address"
     setting: tuple[float, float, int] = (0.0, 0.0, 0)
     alarm: bool = False
+    window_t: float | None = None
+    window_frames: int = 0
+    overloaded: bool = False
 
 
 class IsobusWatch:
@@ -59,4 +69,24 @@ class IsobusWatch:
         if n.alarm and not seen.alarm and state != "refused":
             out.append(LogEvent(t, "isobus.tc_lost", {"tc_state": state}))
         seen.alarm = n.alarm
+        out += self._load(t)
         return out
+
+    def _load(self, t: float) -> list[LogEvent]:
+        """The frames heard per second over windows of LOAD_WINDOW_S: an `isobus.bus_load`
+        event when the bus is at its limit (the Task Controller's frames and ours then get
+        through late or not at all) and when it is back."""
+        seen, frames = self._seen, self.node.counters["rx_frames"]
+        if seen.window_t is None:
+            seen.window_t, seen.window_frames = t, frames
+            return []
+        span = t - seen.window_t
+        if span < LOAD_WINDOW_S:
+            return []
+        load = (frames - seen.window_frames) / span / BUS_FRAMES_PER_S
+        seen.window_t, seen.window_frames = t, frames
+        if (load >= LOAD_HIGH) == seen.overloaded or LOAD_LOW < load < LOAD_HIGH:
+            return []
+        seen.overloaded = load >= LOAD_HIGH
+        detail = {"overloaded": seen.overloaded, "load_pct": round(100.0 * load, 1)}
+        return [LogEvent(t, "isobus.bus_load", detail)]

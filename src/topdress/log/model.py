@@ -102,6 +102,7 @@ EVENT_KINDS: Final = (
     "isobus.ddop",
     "isobus.set",
     "isobus.tc_lost",
+    "isobus.bus_load",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (
