@@ -8,7 +8,7 @@ meters run at its rate."""
 from __future__ import annotations
 
 from topdress.isobus.node import Frame, IsobusNode, split_id, topdress_name
-from topdress.isobus.watch import BUS_FRAMES_PER_S, IsobusWatch
+from topdress.log.isobus import BUS_FRAMES_PER_S, IsobusWatch
 from topdress.log.model import LogEvent
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tc import MiniTc

@@ -1,4 +1,4 @@
-"""The ISOBUS node's events in the session log (topdress.isobus.watch), in virtual time: a TC
+"""The ISOBUS node's events in the session log (topdress.log.isobus), in virtual time: a TC
 that connects, sets rates and falls silent; a TC that refuses the DDOP. Written to a session
 file and read back by the log's export, with the meters' state at each."""
 
@@ -13,8 +13,8 @@ import pytest
 
 from topdress.isobus import tcserver
 from topdress.isobus.node import Frame, IsobusNode, topdress_name
-from topdress.isobus.watch import IsobusWatch
 from topdress.log.export import write_log_events
+from topdress.log.isobus import IsobusWatch
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tc import MiniTc

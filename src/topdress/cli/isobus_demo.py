@@ -14,7 +14,7 @@ from typing import TextIO
 from topdress.config import TerminalConfig, redacted_text
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, topdress_name
-from topdress.isobus.watch import IsobusWatch
+from topdress.log.isobus import IsobusWatch
 from topdress.log.model import LogEvent
 from topdress.log.session import SessionLog
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
@@ -40,6 +40,8 @@ def run_isobus_demo(
     seed: int,
     out: TextIO,
     config_toml: str = "",
+    *,
+    pace: bool = True,
 ) -> int:
     world = World(SimConfig.of_machine(cfg), seed=seed, drive=Drive.field_passes(30, 40.0, 7.0))
     machine = Machine.from_config(cfg.machine)
@@ -64,25 +66,39 @@ def run_isobus_demo(
             _record(log, "can_rx", world.t_s, frames)
             for ev in watch.events(world.t_s):
                 log.event(ev)
-                _warn(out, ev)
+                line = console_line(ev)
+                if line is not None:
+                    print(line, file=out)
             pending = tc.step(world.now_us, frames)
             _record(log, "can_tx", world.t_s, pending)
             _say(out, said, sim, tc, n)
-            time.sleep(max(0.0, t0 + world.t_s - time.monotonic()))
+            if pace:
+                time.sleep(max(0.0, t0 + world.t_s - time.monotonic()))
     return 0
 
 
-def _warn(out: TextIO, ev: LogEvent) -> None:
-    """The node's faults on the console (the session log has every event)."""
-    d = ev.detail
+def console_line(ev: LogEvent) -> str | None:
+    """The console's line for one of the node's faults (the session log has every event)."""
+    d, t = ev.detail, f"{ev.t:6.2f} s  "
     if ev.kind == "isobus.tc_lost":
-        print(f"{ev.t:6.2f} s  ALARM: Task Controller lost, meters stopped", file=out)
-    elif ev.kind == "isobus.ddop" and not d["accepted"]:
-        print(f"{ev.t:6.2f} s  ALARM: TC 0x{d['tc'] or 0:02X} refused the DDOP "
-              f"(code 0x{d['code']:02X}), meters stopped", file=out)  # fmt: skip
-    elif ev.kind == "isobus.bus_load":
+        return t + "ALARM: Task Controller lost, meters stopped"
+    if ev.kind == "isobus.ddop" and not d["accepted"]:
+        return t + (f"ALARM: TC 0x{d['tc'] or 0:02X} refused the DDOP (code 0x{d['code']:02X}), "
+                    "meters stopped")  # fmt: skip
+    if ev.kind == "isobus.claimed" and d["address"] is None:
+        return t + f"ALARM: no ISOBUS address ({d['state']}), meters stopped"
+    if ev.kind == "isobus.claimed" and "moved" in d:
+        now = f"0x{d['address']:02X}"
+        return t + f"address 0x{d['moved']:02X} taken by a higher-priority NAME: now {now}"
+    if ev.kind == "isobus.value_refused":
+        return t + (f"TC values refused: {d['refused']} ({d['total']} so far), out of range or "
+                    "for no element of the DDOP; the rate in force kept")  # fmt: skip
+    if ev.kind == "isobus.tp_aborted":
+        return t + f"DDOP transfer {d['state']} (reason {d['reason']}), sent again in 2 s"
+    if ev.kind == "isobus.bus_load":
         state = "overloaded" if d["overloaded"] else "back to normal"
-        print(f"{ev.t:6.2f} s  ISOBUS {state}: {d['load_pct']:.0f} % of the bus", file=out)
+        return t + f"ISOBUS {state}: {d['load_pct']:.0f} % of the bus"
+    return None
 
 
 def _say(out: TextIO, said: set[str], sim: IsobusMachine, tc: MiniTc, n: int) -> None:

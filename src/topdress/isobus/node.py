@@ -178,6 +178,13 @@ class IsobusNode:
         return bool(self._n.tc.alarm)
 
     @property
+    def tp_send(self) -> tuple[str, int]:
+        """The state of the node's last TP/ETP send (idle, busy, done, aborted, timeout) and
+        the abort reason it got (ISO 11783-3; 0: none)."""
+        tx = self._n.tp.tx
+        return ("idle", "busy", "done", "aborted", "timeout")[int(tx.state)], int(tx.abort_reason)
+
+    @property
     def refuse_code(self) -> int:
         return int(self._n.tc.refuse_code)
 
@@ -199,6 +206,7 @@ class IsobusNode:
             "tp_done": int(tp.rx_done), "tp_aborts": int(tp.rx_aborts),
             "pdacks": int(tc.pdacks_sent), "values_set": int(tc.values_set),
             "values_refused": int(tc.values_refused), "connects": int(tc.connects),
+            "tx_dropped": int(self._n.q.dropped),
             "contests_won": int(self._n.claim.contests_won),
             "contests_lost": int(self._n.claim.contests_lost),
         }  # fmt: skip

@@ -1,5 +1,6 @@
 """What the implement's ISOBUS node did, as session-log events: its address claimed (or lost),
-the DDOP accepted or refused by the Task Controller, the rates and sections the TC set, the TC
+the DDOP accepted or refused by the Task Controller, the rates and sections the TC set, values
+the node refused (out of range, unknown element or DDI), a transfer of the DDOP aborted, the TC
 lost, the bus loaded to its limit (and back). Compares the node's state between control
 periods; no I/O."""
 
@@ -20,12 +21,15 @@ LOAD_WINDOW_S: Final = 1.0
 @dataclass
 class _Seen:
     address: int | None = None
+    claim_state: str = "idle"
     tc_state: str = "no address"
     setting: tuple[float, float, int] = (0.0, 0.0, 0)
     alarm: bool = False
     window_t: float | None = None
     window_frames: int = 0
     overloaded: bool = False
+    refused: int = 0
+    tp_send: str = "idle"
 
 
 class IsobusWatch:
@@ -37,14 +41,15 @@ class IsobusWatch:
 
     def events(self, t: float) -> list[LogEvent]:
         n, seen, out = self.node, self._seen, []
-        if n.address != seen.address:
-            out.append(
-                LogEvent(
-                    t,
-                    "isobus.claimed",
-                    {"address": n.address, "name": f"{n.name:016X}", "state": n.claim_state},
-                )
-            )
+        failed = n.claim_state == "cannot claim" != seen.claim_state
+        seen.claim_state = n.claim_state
+        if (n.address is not None and n.address != seen.address) or failed:
+            # between losing an address and claiming the next the node has none for 250 ms:
+            # one event for the move, naming the address taken from it
+            detail = {"address": n.address, "name": f"{n.name:016X}", "state": n.claim_state}
+            if seen.address is not None and n.address is not None:
+                detail["moved"] = seen.address
+            out.append(LogEvent(t, "isobus.claimed", detail))
             seen.address = n.address
         state = n.tc_state
         if state != seen.tc_state and state in ("connected", "refused"):
@@ -69,6 +74,16 @@ class IsobusWatch:
         if n.alarm and not seen.alarm and state != "refused":
             out.append(LogEvent(t, "isobus.tc_lost", {"tc_state": state}))
         seen.alarm = n.alarm
+        refused = n.counters["values_refused"]
+        if refused != seen.refused:
+            out.append(LogEvent(t, "isobus.value_refused", {"refused": refused - seen.refused,
+                                                            "total": refused}))  # fmt: skip
+            seen.refused = refused
+        tp, reason = n.tp_send
+        if tp != seen.tp_send and tp in ("aborted", "timeout"):
+            out.append(LogEvent(t, "isobus.tp_aborted", {"state": tp, "reason": reason,
+                                                         "tc_state": state}))  # fmt: skip
+        seen.tp_send = tp
         out += self._load(t)
         return out
 
