@@ -387,7 +387,7 @@ class MainScreen:
         if self.source.props.get("color") != colour:
             self.source.props["color"] = colour
             self.source.update()
-        self.why.set_text(render(s.speed_why) if live else "")
+        self.why.set_text(render(u.shown(s.speed_why)) if live else "")
         for i, layer in enumerate(op.LAYERS):
             self.rate[layer].set_text(fmt.num(u.rate(s.rate_kg_ha[i]), ".1f"))
             self.applied[layer].set_text(fmt.ecu(s, u.rate(s.applied_kg_ha[i]), ".1f"))
