@@ -754,22 +754,25 @@ def test_a_taken_port_is_said_before_anything_starts() -> None:
         assert link.pid is None  # no display process was started
 
 
-async def test_main_screen_shows_the_gnss_lag_one_touch_away(user: User) -> None:
+async def test_main_screen_shows_the_gnss_lag(user: User) -> None:
     hub = DisplayHub(default_config)
     hub.publish(working(gnss_lag=LagView(950, 950, "learned")))
     register_pages(hub)
     await user.open("/")
-    panel(user, "crop")
+    assert text_of(user, "gnss_lag_short") == "lag 0.95 s"  # on the speed card, no touch
+    panel(user, "crop")  # where it comes from: one touch away
     assert text_of(user, "gnss_lag") == "GNSS lag 0.95 s (learned)"
     hub.publish(working(t_s=12.1, gnss_lag=LagView(500, 500, "overruled", fixed_ms=1800.0)))
     await shows(user, "gnss_lag", "GNSS lag 0.50 s (learned, not the set 1.80 s)")
     hub.publish(working(t_s=12.2, ecu_live=False, gnss_lag=LagView(950, 950, "learned")))
     await shows(user, "gnss_lag", "")  # not while the ECU is not heard
+    assert text_of(user, "gnss_lag_short") == ""
     i18n.set_language("zh")
     hub.publish(working(t_s=12.3, gnss_lag=LagView(1300, None, "start")))
     await user.open("/")
     panel(user, "crop")
     assert text_of(user, "gnss_lag") == "GNSS 滞后 1.30 秒（学习中）"
+    assert text_of(user, "gnss_lag_short") == "滞后 1.30 秒"
 
 
 # ---- the cab: Stop on every screen, never redrawn; states never silent ----------------------

@@ -58,6 +58,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     ),
     "why.no_gnss": ("{source}: no valid GNSS speed", "{source}：无有效 GNSS 速度"),
     # the GNSS lag in use and where it comes from (EcuGnssLag)
+    "main.lag": ("lag {s:.2f} s", "滞后 {s:.2f} 秒"),
     "lag.start": ("GNSS lag {s:.2f} s (learning)", "GNSS 滞后 {s:.2f} 秒（学习中）"),
     "lag.learned": ("GNSS lag {s:.2f} s (learned)", "GNSS 滞后 {s:.2f} 秒（已学习）"),
     "lag.fixed": ("GNSS lag {s:.2f} s (fixed)", "GNSS 滞后 {s:.2f} 秒（固定）"),
