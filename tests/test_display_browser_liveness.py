@@ -68,8 +68,8 @@ def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:
             return True
 
         # (each a toggle: touched again only if the page did not take it)
-        until("night chosen", lambda: night() or choose("night") and until("night", night, 3.0))
-        until("US units chosen", lambda: mph() or choose("units") and until("mph", mph, 3.0))
+        until("night chosen", lambda: night() or (choose("night") and until("night", night, 3.0)))
+        until("US units chosen", lambda: mph() or (choose("units") and until("mph", mph, 3.0)))
         until("night and mph", lambda: night() and mph())
         first = display_pid(demo.proc.pid)
         assert first is not None
