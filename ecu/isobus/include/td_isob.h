@@ -6,8 +6,9 @@
  *
  * Port contract: call td_isob_rx() for every extended frame received, td_isob_step() every
  * control period (10 ms) with the time and the implement's odometer, and send what
- * td_isob_tx() hands out until it returns false. No heap, no globals; 2,888 B of state on a
- * Cortex-M4 (1,516 B of it the DDOP copy with our NAME).
+ * td_isob_tx() hands out until it returns false. No heap, no globals; the state's size on a
+ * Cortex-M4 is isobus_cm4_state_bytes of docs/figures.md (most of it the DDOP copy with our
+ * NAME).
  */
 #ifndef TD_ISOB_H
 #define TD_ISOB_H
