@@ -4,7 +4,8 @@
 process: the page goes to its full-screen stale state (no green RUNNING, the values greyed under
 it); the terminal starts a new display process and the page comes back by itself, live. Then
 SIGTERM of the terminal: the stale state again. Night mode and the units chosen before the kill
-are what the new display shows. The times are printed (bench/display_bench.py
+are what the new display shows. A terminal stopped for 5 s (SIGSTOP) leaves the healthy display
+running and reported up. The times are printed (bench/display_bench.py
 measures them against their targets); the test checks what is shown.
 """
 
@@ -97,6 +98,18 @@ def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:
         clock = text("clock")
         until("the values moving", lambda: text("clock") != clock)
         assert night() and mph()  # the operator's view, not the defaults
+        # the terminal stalled 5 s (SIGSTOP): a stall of the terminal, not a hang of the
+        # display, so the healthy display is neither killed nor reported down
+        second = display_pid(demo.proc.pid)
+        downs = demo.output().count("display down")
+        demo.proc.send_signal(signal.SIGSTOP)
+        time.sleep(5.0)
+        demo.proc.send_signal(signal.SIGCONT)
+        clock = text("clock")
+        until("the page live after the stall", lambda: not stale() and text("clock") != clock)
+        time.sleep(2.0)  # the terminal's watch has looked again
+        assert display_pid(demo.proc.pid) == second
+        assert demo.output().count("display down") == downs, demo.output()
         print(f"\nstale shown {shown_s:.2f} s after kill -9; live again after {back_s:.2f} s")
         assert "display down (killed by signal 9)" in demo.output()
         assert "display started again (1 restarts)" in demo.output()
