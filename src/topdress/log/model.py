@@ -98,6 +98,10 @@ EVENT_KINDS: Final = (
     "counter.reset",
     "counter.undo",
     "tank.filled",
+    "isobus.implement",
+    "isobus.connected",
+    "isobus.refused",
+    "isobus.problem",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

@@ -12,9 +12,10 @@ from __future__ import annotations
 from topdress.isobus.ddop import DDI_ACTUAL_RATE, DDI_ACTUAL_WORK_STATE
 from topdress.isobus.node import Frame, IsobusNode
 from topdress.protocol.frames import encode_command
-from topdress.sim.world import World
+from topdress.sim.world import StepOutput, World
 
-ELEMENT_DEVICE, ELEMENT_BINS = 0, (3, 4)
+ELEMENT_DEVICE, ELEMENT_BOOM, ELEMENT_BINS = 0, 2, (3, 4)
+DDI_ACTUAL_CONDENSED_1_16 = 161
 TC_STATUS_PERIOD_MS = 2000  # a TC proves itself alive only this often (ISO 11783-10)
 KG_HA_PER_RPM_KG = 600.0  # kg/ha = rpm * kg/rev * 600 / (km/h * m)
 
@@ -37,12 +38,19 @@ class IsobusMachine:
         self.fan_rpm = fan_rpm
         self.running = False
         self.actual_kg_ha = (0.0, 0.0)  # what the meters apply, as reported to the TC (DDI 7)
+        self.out: StepOutput | None = None  # the World's last step: its NMEA and crop lines
         node.start(world.now_us)
 
     def rates_kg_ha(self) -> tuple[float, float]:
         """The rates the core is told: the TC's, times the share of the width switched on."""
         share = bin(self.node.sections_on).count("1") / self.sections
         return self.node.rate_kg_ha(0) * share, self.node.rate_kg_ha(1) * share
+
+    def _condensed(self) -> int:
+        """The sections as switched (DDI 161): 01 on, 00 off, 11 not installed; signed 32 bit."""
+        on = self.node.sections_on
+        v = sum(((on >> i & 1) if i < self.sections else 3) << 2 * i for i in range(16))
+        return v - (1 << 32) if v >= 1 << 31 else v
 
     def step(self, frames_in: list[Frame]) -> list[Frame]:
         """One control period: the bus's frames to the node, the node's setpoints to the core,
@@ -56,7 +64,7 @@ class IsobusMachine:
         truth = w.truth
         w.deliver_can(encode_command(self.running, self.fan_rpm, upper, lower,
                                      min(truth.v_kmh, 25.0)))  # fmt: skip
-        w.step()
+        self.out = w.step()
         truth = w.truth
         actual = [0.0, 0.0]
         for layer, element in enumerate(ELEMENT_BINS):
@@ -68,5 +76,6 @@ class IsobusMachine:
             actual[layer] = rate
         self.actual_kg_ha = (actual[0], actual[1])
         n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
+        n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, self._condensed())
         n.step(w.now_us, round(truth.odometer_m * 1000))
         return n.tx()

@@ -292,6 +292,11 @@ class OperatorDesk:
             display_lost=self.display.lost,
             operating=self.op.state in (op.RUNNING, op.PAUSED),
             position_lost=snap.zone == UNKNOWN,
+            isobus=(
+                None
+                if snap.isobus is None
+                else (snap.isobus.state, snap.isobus.implement, snap.isobus.problem)
+            ),
             tank_low=(
                 text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0)) if low else None
             ),

@@ -1,0 +1,219 @@
+"""The terminal as the Task Controller of an ISOBUS implement (`[can] implement = "isobus"`), in
+virtual time: the topdress ECU on ISOBUS (the C node and core, topdress.sim.isobus) is the
+implement; the crop-sensor rate must reach its setpoint DDI and what it reports must come back
+into the Snapshot, the alarms and the session log."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import replace
+from pathlib import Path
+
+import can
+import pytest
+
+from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
+from topdress.devices.can import open_bus
+from topdress.devices.lines import FakeLineSource
+from topdress.errors import ConfigError
+from topdress.isobus.ddop import Machine
+from topdress.isobus.node import Frame, IsobusNode, topdress_name
+from topdress.log.session import SessionLog, SessionReader
+from topdress.log.summary import summarise
+from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
+from topdress.sim.tractor import Drive, Segment
+from topdress.sim.world import SimConfig, World
+from topdress.terminal.app import Terminal
+from topdress.terminal.tclink import condensed, sections_of
+from topdress.view.commands import Stop
+from topdress.view.snapshot import Snapshot
+
+_channels = itertools.count()
+
+
+class IsobusRig:
+    """Terminal (the TC) + the ECU on ISOBUS + the plant, on one virtual clock (10 ms steps,
+    the terminal's tick every 100 ms)."""
+
+    def __init__(self, cfg: TerminalConfig, drive: Drive, session: SessionLog | None = None):
+        channel = f"test-isobus-{next(_channels)}"
+        self.cfg = replace(cfg, can=replace(cfg.can, channel=channel, implement="isobus"))
+        self.world = World(SimConfig.of_machine(self.cfg), seed=3, drive=drive)
+        node = IsobusNode(
+            topdress_name(0, b"rig"),
+            tc_timeout_ms=tc_timeout_ms(self.world.ecu.params.cmd_timeout_ms),
+        )
+        sections = Machine.from_config(self.cfg.machine).sections
+        m = self.cfg.machine
+        self.sim = IsobusMachine(self.world, node, m.width_m, sections, m.fan_rpm)
+        self.gnss = FakeLineSource()
+        self.crop = FakeLineSource()
+        self.pc_bus = open_bus(self.cfg.can)
+        self.ecu_bus = open_bus(self.cfg.can)
+        self.events: list[tuple[float, str]] = []
+        self.term = Terminal(
+            self.cfg,
+            self.gnss,
+            self.crop,
+            self.pc_bus,
+            session,
+            clock=lambda: self.world.t_s,
+            on_event=lambda e: self.events.append((self.world.t_s, str(e))),
+        )
+        self.term.open()
+        self.snapshots: list[tuple[float, Snapshot]] = []
+        self.node_rates: list[tuple[float, float, float]] = []  # t, what the node was set
+        self.implement_off = False  # the implement unplugged: hears nothing, says nothing
+
+    def run(self, until_s: float) -> None:
+        w, term = self.world, self.term
+        while w.t_s < until_s - 1e-9:
+            heard = []
+            while (msg := self.ecu_bus.recv(timeout=0)) is not None:
+                heard.append(Frame(msg.arbitration_id, bytes(msg.data)))
+            frames = self.sim.step([] if self.implement_off else heard)
+            out = self.sim.out
+            assert out is not None
+            t = out.t_s
+            for line in out.nmea:
+                self.gnss.emit(t, line.encode())
+            for line in out.crop:
+                self.crop.emit(t, line.encode())
+            if not self.implement_off:
+                for f in frames:
+                    msg = can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
+                    term.inbox.put(("can", t, msg))
+            while not term.inbox.empty():
+                term.handle(*term.inbox.get())
+            if round(t * 100) % 10 == 0:
+                term.tick(t)
+                self.snapshots.append((t, term.snapshot))
+                node = self.sim.node
+                self.node_rates.append((t, node.rate_kg_ha(0), node.rate_kg_ha(1)))
+
+    def close(self) -> None:
+        self.term.close()
+        self.pc_bus.shutdown()
+        self.ecu_bus.shutdown()
+
+
+def _drive(speed_kmh: float, length_m: float) -> Drive:
+    return Drive(
+        [
+            Segment("stop", duration_s=4.0),
+            Segment("straight", speed_kmh=speed_kmh, length_m=length_m, hold=True),
+            Segment("stop", duration_s=3.0),
+        ]
+    )
+
+
+def test_condensed_work_state_round_trip() -> None:
+    # 6 sections on, 7..16 not installed: the value the AgIsoStack++ examples send
+    assert condensed((True,) * 6) == -4096 + 0x555
+    assert condensed((False,) * 6) == -4096
+    assert sections_of(condensed((True, False, True)), 3) == (True, False, True)
+    assert sections_of(-4096 + 0x555, 6) == (True,) * 6
+
+
+def test_implement_is_a_checked_choice() -> None:
+    with pytest.raises(ConfigError, match=r"can\.implement"):
+        loads_config('[can]\nimplement = "isobsu"\n')
+    with pytest.raises(ConfigError, match=r"isobus\.tc_address"):
+        loads_config("[isobus]\ntc_address = 100\n")
+    assert loads_config('[can]\nimplement = "isobus"\n').can.implement == "isobus"
+
+
+def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
+    tmp_path: Path,
+) -> None:
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = IsobusRig(cfg, _drive(8.0, 60.0), session)
+    try:
+        rig.run(34.0)
+        last = rig.term.snapshot
+        rig.term.post(Stop())  # the operator stops: rates 0, work state and sections off
+        rig.run(36.0)
+        stopped = rig.term.snapshot
+    finally:
+        rig.close()
+    iso = last.isobus
+    assert iso is not None
+    assert iso.implement == "topdress"
+    assert iso.implement_address == 0x84
+    assert iso.tc_address == 0xF7
+    assert [(p.element, p.setpoint_ddi, p.unit) for p in iso.products] == [
+        (3, 6, "kg/ha"),
+        (4, 6, "kg/ha"),
+    ]
+    # who is on the bus, NAMEs decoded: the TC (function 130) and the implement
+    whats = {f.address: (f.function, f.what) for f in iso.functions}
+    assert whats[0xF7] == (130, "task controller (this terminal)")
+    assert whats[0x84][1] == "implement (served)"
+    # the rates set on the implement are the terminal's crop-sensor rates, tick by tick (the
+    # node holds what the last tick sent: compared with the tick before), to 0.01 kg/ha
+    working = [
+        (i, s)
+        for i, (_, s) in enumerate(rig.snapshots)
+        if i > 0 and s.running and s.v_kmh > 7.5 and s.ndvi is not None
+    ]
+    assert len(working) > 150
+    rates = {round(s.rate_kg_ha[0], 1) for _, s in working}
+    assert len(rates) > 10  # the NDVI model's rate moves with the crop
+    for i, _ in working:
+        _, upper, lower = rig.node_rates[i]
+        sent = rig.snapshots[i - 1][1]
+        assert (upper, lower) == pytest.approx(sent.rate_kg_ha, abs=0.011)
+    # the implement meters at the terminal's rate: what it reports (DDI 7) within 3 % in
+    # steady state (the second half of the pass), both layers
+    steady = [s for _, s in working[len(working) // 2 :]]
+    for layer in (0, 1):
+        err = sum(abs(s.isobus.products[layer].actual - s.rate_kg_ha[layer]) for s in steady)
+        want = sum(s.rate_kg_ha[layer] for s in steady)
+        assert err / want < 0.03
+    # sections: all six on while metering, reported back (DDI 161); work state on
+    mid = steady[len(steady) // 2].isobus
+    assert mid.sections == (True,) * 6
+    assert mid.work_state is True
+    # stopped by the operator: the implement says its work state and sections are off
+    assert stopped.isobus is not None
+    assert stopped.isobus.work_state is False and stopped.isobus.sections == (False,) * 6
+    assert [p.setpoint for p in stopped.isobus.products] == [0.0, 0.0]
+    assert rig.sim.node.rate_kg_ha(0) == 0.0
+    # the kg the session log integrates from the implement's reports is what the plant metered
+    path = session.path
+    with SessionReader(path) as reader:
+        summary = summarise(reader)
+        kinds = [e.kind for e in reader.events()]
+    truth_kg = sum(rig.world.truth.applied_kg)
+    assert truth_kg > 1.0
+    assert sum(x.applied_kg for x in summary.layers.values()) == pytest.approx(truth_kg, rel=0.05)
+    assert "isobus.implement" in kinds and "isobus.connected" in kinds
+    assert not [a for a in last.alarms if a.name in ("implement_lost", "ddop_refused")]
+
+
+def test_implement_lost_is_an_alarm_and_the_loop_goes_on(tmp_path: Path) -> None:
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = IsobusRig(cfg, _drive(8.0, 200.0), session)
+    try:
+        rig.run(12.0)
+        assert rig.term.snapshot.isobus is not None
+        assert rig.term.snapshot.isobus.state == "ok"
+        rig.implement_off = True
+        rig.run(22.0)
+        snap = rig.term.snapshot
+    finally:
+        rig.close()
+    assert snap.isobus is not None and snap.isobus.state == "lost"
+    assert snap.ecu_link == "lost"
+    names = [a.name for a in snap.alarms]
+    assert "implement_lost" in names and "ecu_lost" not in names
+    # the loop still decides rates and logs rows
+    assert snap.t_s > 21.0 and snap.gnss_link == "ok"
+    with SessionReader(session.path) as reader:
+        events = list(reader.events())
+    # the implement's link is the machine's link ("ecu"); why, in the TC's words
+    assert [e.detail["link"] for e in events if e.kind == "link.lost"] == ["ecu"]
+    (why,) = [e.detail["what"] for e in events if e.kind == "isobus.problem"]
+    assert why == "client 0x84 silent for 6000 ms"
