@@ -12,6 +12,7 @@ from pathlib import Path
 import can
 import pytest
 
+from topdress.cli.isobus_demo import DEMO_PASS_M, DEMO_PASSES, DEMO_SPEED_KMH
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
@@ -217,3 +218,24 @@ def test_implement_lost_is_an_alarm_and_the_loop_goes_on(tmp_path: Path) -> None
     assert [e.detail["link"] for e in events if e.kind == "link.lost"] == ["ecu"]
     (why,) = [e.detail["what"] for e in events if e.kind == "isobus.problem"]
     assert why == "client 0x84 silent for 6000 ms"
+
+
+def test_the_demos_40_s_apply_at_the_terminals_rate(tmp_path: Path) -> None:
+    """`topdress demo --isobus --duration 40`'s drive and machine, in virtual time: what the
+    implement reports it applied is within 3 % of what the terminal's setpoints asked for, and
+    of what the plant metered."""
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path, DEFAULT_TOML)
+    rig = IsobusRig(cfg, Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH), session)
+    try:
+        rig.run(40.0)
+    finally:
+        rig.close()
+    with SessionReader(session.path) as reader:
+        s = summarise(reader)
+    applied = sum(x.applied_kg for x in s.layers.values())
+    target = sum(x.target_kg for x in s.layers.values())
+    truth = sum(rig.world.truth.applied_kg)
+    assert applied > 2.0
+    assert applied == pytest.approx(target, rel=0.03)
+    assert applied == pytest.approx(truth, rel=0.03)

@@ -96,6 +96,12 @@ class BusSwitch:
             return state if state in ("ok", "lost") else "wait"
         return self.link.state
 
+    @property
+    def ready(self) -> bool:
+        """The machine has worked for this terminal: the ECU took every parameter, or an ISOBUS
+        implement activated its pool."""
+        return self.tc.connected_once if self.tc is not None else self.link.ready
+
     def params(self, cfg: TerminalConfig) -> dict[int, float]:
         """The ECU parameters pushed at start, the GNSS lag's start value included."""
         return cfg.ecu_params(self._start_ms())

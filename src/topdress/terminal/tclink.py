@@ -142,6 +142,8 @@ class TcLink:
         self.refused = False  # the last pool offered could not be activated
         self._was: str = "wait"
         self._failing = False
+        self._claimed: int | None = None  # the address told
+        self.connected_once = False  # a client's pool was active once
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -175,6 +177,9 @@ class TcLink:
             return
         for f in out:
             self._send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
+        if self._claimed is None and self.server.address is not None:
+            self._claimed = self.server.address
+            self._say(f"Task Controller at address 0x{self._claimed:02X}")
         errors = self.server.errors
         while self._errors < len(errors):
             self._tell(errors[self._errors])
@@ -197,9 +202,13 @@ class TcLink:
             self._on_tx(msg)
 
     def _tell(self, what: str) -> None:
+        """Something wrong: to the operator, the session log, and `problem`."""
         self.problem = what
         self._journal.event(text("event.isobus", what=what))
         self._journal.log_event(self._journal.clock(), "isobus.problem", what=what)
+
+    def _say(self, what: str) -> None:
+        self._journal.event(text("event.isobus", what=what))
 
     # ---- the tick ---------------------------------------------------------------------------
     def poll(self, now: float, command: tuple[bool, float, float, float]) -> None:
@@ -252,6 +261,7 @@ class TcLink:
         """A pool newly active: its products, sections, delays; the measurements asked for."""
         assert c.device is not None and c.pool is not None
         self._pool_key = (c.address, c.pool)
+        self.connected_once = True
         self._sent.clear()
         self._ddis, self.latency_ms = pool_ddis(c.pool)
         settable = c.device.settable
@@ -274,6 +284,11 @@ class TcLink:
         for ddi in (ACTUAL_WORK_STATE, ACTUAL_CONDENSED):
             for element in self._carrying(ddi):
                 self._measure(element, ddi, MEASURE_MS)
+        units = ", ".join(f"{p.unit} (element {p.element})" for p in products)
+        self._say(
+            f"implement {c.device.designator} at 0x{c.address:02X}: DDOP active, "
+            f"{len(products)} products in {units or 'none'}, {self.sections} sections"
+        )
         if not products:
             self._tell(f"{c.device.designator}: its DDOP has no settable rate (DDI 6 or 1)")
         self._journal.log_event(
