@@ -17,19 +17,22 @@ from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
 from topdress.errors import ConfigError
-from topdress.isobus.ddop import Machine
-from topdress.isobus.node import Frame, IsobusNode, topdress_name
+from topdress.isobus.ddop import Machine, build
+from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import summarise
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
+from topdress.terminal.alarms import AlarmBook, AlarmInputs
 from topdress.terminal.app import Terminal
-from topdress.terminal.tclink import condensed, sections_of
+from topdress.terminal.journal import Journal, Settings
+from topdress.terminal.tclink import TcLink, condensed, sections_of
 from topdress.view.commands import Stop
 from topdress.view.snapshot import Snapshot
 
 _channels = itertools.count()
+_QUIET = AlarmInputs(False, (0.0, 0.0), (0.0, 0.0), 0, "ok", "ok", "ok")
 
 
 class IsobusRig:
@@ -239,3 +242,72 @@ def test_the_demos_40_s_apply_at_the_terminals_rate(tmp_path: Path) -> None:
     assert applied > 2.0
     assert applied == pytest.approx(target, rel=0.03)
     assert applied == pytest.approx(truth, rel=0.03)
+
+
+class _Port:
+    """The TC's frames, kept for the scripted client."""
+
+    def __init__(self) -> None:
+        self.sent: list[can.Message] = []
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.sent.append(msg)
+
+
+def _client_session(pool: bytes) -> tuple[TcLink, list[str]]:
+    """A client at 0x90 that announces itself and uploads `pool` over TP, then activates it."""
+    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
+    said: list[str] = []
+    journal = Journal(None, lambda: 0.0, lambda e: said.append(str(e)))
+    port = _Port()
+    link = TcLink(port, settings, journal)
+    client = TpEndpoint(0x90, 4096)
+    t = 0.0
+
+    def exchange(frames: list[Frame], seconds: float) -> None:
+        nonlocal t
+        for f in frames:
+            link.on_frame(can.Message(arbitration_id=f.can_id, data=f.data), t)
+        end = t + seconds
+        while t < end:
+            t += 0.01
+            link.poll(t, (True, 0.0, 100.0, 100.0))
+            for m in port.sent:
+                client.rx(m.arbitration_id, bytes(m.data), round(t * 1e6))
+            port.sent.clear()
+            client.step(round(t * 1e6))
+            for f in client.tx():
+                link.on_frame(can.Message(arbitration_id=f.can_id, data=f.data), t)
+
+    def pd(data: bytes) -> Frame:
+        return Frame(5 << 26 | 0xCB00 << 8 | 0xF7 << 8 | 0x90, data)
+
+    exchange([], 0.4)  # the TC claims its address
+    exchange([Frame(6 << 26 | 0xFE0D << 8 | 0x90, bytes([0xF7]) + b"\xff" * 7)], 0.1)
+    exchange([pd(bytes([0x41]) + len(pool).to_bytes(4, "little") + b"\xff" * 3)], 0.1)
+    client.send(0xCB00, 0xF7, bytes([0x61]) + pool, round(t * 1e6))
+    exchange([], 0.5)
+    exchange([pd(bytes([0x81]) + b"\xff" * 7)], 0.2)
+    return link, said
+
+
+def test_a_malformed_ddop_is_refused_with_its_reason_and_an_alarm() -> None:
+    link, said = _client_session(b"DVC" + bytes(range(40)))
+    assert link.state == "refused"
+    view = link.view(0.0)
+    assert view.problem.startswith("DDOP malformed")
+    assert any("DDOP malformed" in s for s in said)
+    book = AlarmBook(10.0, 5.0)
+    new = book.update(1.0, replace(_QUIET, isobus=(view.state, view.implement, view.problem)))
+    ((name, what),) = new
+    assert name == "ddop_refused"
+    assert "DDOP malformed" in str(what)
+
+
+def test_a_good_ddop_from_a_scripted_client_is_served() -> None:
+    pool, _ = build(Machine.from_config(loads_config("").machine))
+    link, said = _client_session(pool)
+    assert link.state == "ok"
+    assert [p.element for p in link.products] == [3, 4]
+    assert link.setpoints == (100.0, 100.0)
+    assert any("implement topdress at 0x90: DDOP active" in s for s in said)

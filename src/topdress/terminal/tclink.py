@@ -32,7 +32,7 @@ from topdress.errors import DeviceError, ProtocolError
 from topdress.i18n import text
 from topdress.isobus.ddop import parse
 from topdress.isobus.node import Frame, name_fields, split_id
-from topdress.isobus.tcserver import Client, TcServer, tc_name
+from topdress.isobus.tcserver import Client, TcServer, map_device, tc_name
 from topdress.terminal.ecuview import LinkCounters
 from topdress.terminal.journal import Journal, Settings
 from topdress.view.snapshot import ControlFunctionView, IsobusView, ProductView
@@ -140,6 +140,7 @@ class TcLink:
         self.setpoints: tuple[float, ...] = ()  # per product, in its unit
         self.problem = ""
         self.refused = False  # the last pool offered could not be activated
+        self.refusal = ""  # why
         self._was: str = "wait"
         self._failing = False
         self._claimed: int | None = None  # the address told
@@ -243,6 +244,10 @@ class TcLink:
         sc = self.server.client
         if sc is not None and sc.device is None and sc.pool is not None and not self.refused:
             self.refused = True  # its pool failed to parse or map: the TC refuses to activate
+            try:
+                map_device(sc.pool)
+            except ProtocolError as exc:  # what is wrong with it, for the operator's alarm
+                self.refusal = str(exc)
         elif sc is not None and sc.active:
             self.refused = False
         state = self.state
@@ -254,7 +259,7 @@ class TcLink:
         elif state == "lost":  # logged as the ECU link's loss (terminal.linkwatch)
             self._pool_key = None  # a client back sends its pool again
         elif state == "refused":
-            j.log_event(now, "isobus.refused", why=self.problem)
+            j.log_event(now, "isobus.refused", why=self.refusal)
         self._was = state
 
     def _connect(self, c: Client, now: float) -> None:
@@ -394,7 +399,7 @@ class TcLink:
             actual_latency_ms=self.latency_ms.get(ACTUAL_LATENCY),
             lookahead_s=lookahead_s,
             functions=self._functions(c),
-            problem=self.problem,
+            problem=self.refusal if self.state == "refused" else self.problem,
         )
 
     def _sections(self) -> tuple[bool, ...]:
