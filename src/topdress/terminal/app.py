@@ -272,7 +272,10 @@ class Terminal:
         if kind == "op":
             self.desk.handle(t, payload)
         elif kind == "nmea":
+            command = self.link.command
             self.gnss_in.on_line(t, payload, self.link, self.ndvi.odometer.distance_m)
+            if self.link.command is not command:  # a new GNSS speed
+                self.can.on_gnss(t)
         elif kind == "crop":
             self.journal.raw("crop", t, payload.decode("latin-1"))
             reading = self.ndvi.sensors.feed(t, payload)

@@ -126,6 +126,12 @@ class BusSwitch:
         """The port's reader thread (a caller driving the loop itself hands frames in)."""
         self.port.start(self.sink(self.port))
 
+    def on_gnss(self, now: float) -> None:
+        """A new GNSS speed was set on the link (sent at once with send_on_gnss there): with
+        send_on_gnss an ISOBUS implement gets its setpoints at once too."""
+        if self.tc is not None and self._settings.cfg.can.send_on_gnss:
+            self.tc.send_now(now)
+
     def stop_implement(self, now: float) -> None:
         """The terminal closes: the stop command to whichever implement it commands."""
         self.link.set_command(False, 0.0, 0.0, 0.0)

@@ -145,6 +145,8 @@ class TcLink:
         self._failing = False
         self._claimed: int | None = None  # the address told
         self.connected_once = False  # a client's pool was active once
+        self._functions_key: object = None
+        self._functions_view: tuple[ControlFunctionView, ...] = ()
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -161,6 +163,10 @@ class TcLink:
             return
         data = bytes(msg.data)
         _, pgn, sa, _ = split_id(msg.arbitration_id)
+        if sa == self.server.address and pgn != ADDRESS_CLAIM_PGN:
+            # our own frame (udp_multicast echoes it) or a usurper's: only a claim of our
+            # address matters (the C claim defends it)
+            return
         if pgn == ADDRESS_CLAIM_PGN and len(data) == 8:
             name = int.from_bytes(data, "little")
             # a NAME claims one address: where it was before, it is no more (cannot claim: none)
@@ -359,6 +365,22 @@ class TcLink:
         self.counters.tx_commands += 1
         self._sent[(element, ddi)] = (value, now)
 
+    def send_now(self, now: float) -> None:
+        """The rates in force to the implement at once, off the tick (a new GNSS fix with
+        `send_on_gnss`: the setpoints leave within the fix's handling, as PcCommand does)."""
+        c = self._client()
+        if c is None or c.device is None:
+            return
+        for p, value in zip(self.products, self.setpoints, strict=True):
+            v = round(value * PER_HA)
+            try:
+                self.server.set_value(p.element, p.setpoint_ddi, v, ack=False)
+            except ProtocolError:
+                continue  # told when it was decided (`_set`)
+            self.counters.tx_commands += 1
+            self._sent[(p.element, p.setpoint_ddi)] = (v, now)
+        self._step(now, [])
+
     def send_stop(self, now: float) -> None:
         """The terminal closes: every rate 0 and the work state off, sent now."""
         c = self._client()
@@ -417,10 +439,18 @@ class TcLink:
         return None
 
     def _functions(self, c: Client | None) -> tuple[ControlFunctionView, ...]:
-        out = []
+        """Every control function heard, NAMEs decoded (again only when one changed)."""
         names = dict(self.names)
         if self.server.address is not None:  # its own claim is not heard back
             names[self.server.address] = self.name
+        key = (tuple(sorted(names.items())), None if c is None else c.address)
+        if key != self._functions_key:
+            self._functions_key = key
+            self._functions_view = self._decode(names, c)
+        return self._functions_view
+
+    def _decode(self, names: dict[int, int], c: Client | None) -> tuple[ControlFunctionView, ...]:
+        out = []
         for address, name in sorted(names.items()):
             f = name_fields(name)
             what = FUNCTIONS.get(f["function"], f"function {f['function']}")
