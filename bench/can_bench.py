@@ -93,7 +93,7 @@ def main() -> None:
         slow = pulled(Path(tmp), None)
         cmd, tick, timeouts, stalls = applied(Path(tmp))
     print(f"can_pulled_{PULLED_S:.0f}s_back_after_return_s (sleep_after_open 0.05): {fast:.2f}")
-    print(f"can_pulled_{PULLED_S:.0f}s_back_after_return_s (python-can default 2 s): {slow:.2f}")
+    print(f"can_pulled_{PULLED_S:.0f}s_back_default_sleep_s (python-can's 2 s): {slow:.2f}")
     print(f"can_apply_cmd_period_max_s: {cmd:.3f}  (target <= 0.6)")
     print(f"can_apply_tick_period_max_s: {tick:.3f}")
     print(f"can_apply_ecu_cmd_timeout_steps: {timeouts}")

@@ -29,6 +29,8 @@ def parse(lines: list[str]) -> tuple[dict[str, dict[str, str]], list[str]]:
     for line in lines:
         m = FIGURE.match(line)
         if m:
+            if m.group(1) in figures:  # the second would hide the first in the table
+                raise SystemExit(f"figures.py: the figure {m.group(1)} is printed twice")
             figures[m.group(1)] = {"value": m.group(2), "note": m.group(3).strip()}
         elif line.strip():
             text.append(line)

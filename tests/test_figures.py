@@ -9,6 +9,8 @@ import importlib.util
 import re
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [
     *(p for p in (ROOT / "docs").glob("*.md") if p.name != "figures.md"),
@@ -86,3 +88,13 @@ def test_the_check_finds_a_copied_figure() -> None:
     assert _spellings("27384") == ["27384", "27,384"]
     assert _distinctive("td_app_t_bytes", "1704")
     assert not _distinctive("sim_realtime_ratio", "1013")
+
+
+def test_a_figure_printed_twice_is_refused() -> None:
+    figures, _ = FIGURES.parse(["can_a_s (one): 1.0", "can_b_s: 2"])
+    assert figures == {
+        "can_a_s": {"value": "1.0", "note": ""},
+        "can_b_s": {"value": "2", "note": ""},
+    }
+    with pytest.raises(SystemExit, match="can_a_s is printed twice"):
+        FIGURES.parse(["can_a_s (one): 1.0", "can_a_s (two): 2.0"])

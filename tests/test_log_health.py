@@ -103,6 +103,29 @@ def test_a_capped_log_closes_cleanly_and_records_the_failure(
     assert f"lost {log.lost}" in text
 
 
+def test_a_row_that_squeezes_into_a_full_log_does_not_end_the_alarm(tmp_path: Path) -> None:
+    # Before: one small batch fitting into the rolled-back pages set the health back to OK,
+    # so the disk-full alarm blinked off while the log was still at its cap.
+    log = SessionLog.create(tmp_path, CONFIG, max_bytes=96 * 1024, commit_period_s=0.05)
+    line = RMC + "," * 300
+    i = 0
+    while not log.lost:
+        for _ in range(200):
+            log.raw("nmea", float(i), line)
+            i += 1
+        log.sync()
+    assert log.health == LogHealth.DISK_FULL and not log.ok
+    with SessionReader(log.path) as reader:
+        before = reader.count("raw")
+    log.raw("nmea", float(i), RMC)  # one short row: it fits
+    log.sync()
+    with SessionReader(log.path) as reader:
+        assert reader.count("raw") == before + 1
+    assert log.health == LogHealth.DISK_FULL and not log.ok
+    assert log.free_bytes is not None and log.free_bytes < log.min_free_bytes
+    log.close()
+
+
 def test_a_write_error_that_is_not_a_full_disk_is_write_failing(tmp_path: Path) -> None:
     log = SessionLog.create(tmp_path, CONFIG, commit_period_s=0.05)
     log.raw("nmea", 0.0, RMC)

@@ -228,7 +228,7 @@ class SessionLog:
         self._last_utc: float | None = None
         self._commit_failing = False
         self._health = LogHealth.OK if open_error is None else LogHealth.WRITE_FAILING
-        self.free_bytes: int | None = None  # on the log's disk, measured at each commit
+        self.free_bytes: int | None = None  # room on the disk (and under the cap), at each commit
         self.min_free_bytes = min_free_bytes
         self._reserve = reserve  # the reserve file's descriptor (locked), None: none
         self._max_pages = max_pages  # the max_bytes cap in pages
@@ -315,8 +315,10 @@ class SessionLog:
 
     @property
     def ok(self) -> bool:
-        """True while the log is open and its last write succeeded."""
-        return self._thread is not None and not self._closed and self.last_error is None
+        """True while the log is open and writing: its last write succeeded and its disk (or
+        cap) is not full."""
+        full = self._health in (LogHealth.DISK_FULL, LogHealth.WRITE_FAILING)
+        return self._thread is not None and not self._closed and not full
 
     def raw(self, kind: str, t: float, payload: str | tuple[int, bytes] | Any) -> None:
         """Enqueue one raw input: a line (kind nmea/crop) or a CAN frame (can_rx/can_tx) as
@@ -466,14 +468,25 @@ class SessionLog:
             self._check_space()
 
     def _check_space(self) -> None:
-        """Measure the free space (a statvfs, microseconds) and set the health from it."""
+        """Measure the room left (a statvfs and, under a max_bytes cap, the cap's free pages)
+        and set the health from it. A full disk stays DISK_FULL until the room is back above
+        the margin: a small batch that squeezes into the last pages does not end the alarm."""
         try:
             st = os.statvfs(self.path.parent)
         except OSError:
             return
-        self.free_bytes = st.f_bavail * st.f_frsize
-        low = self.free_bytes < self.min_free_bytes
-        self._health = LogHealth.LOW_SPACE if low else LogHealth.OK
+        room = st.f_bavail * st.f_frsize
+        if self._max_pages is not None and self._conn is not None:
+            pages, free, size = (
+                int(self._conn.execute(f"PRAGMA {p}").fetchone()[0])
+                for p in ("page_count", "freelist_count", "page_size")
+            )
+            room = min(room, (self._max_pages - pages + free) * size)
+        self.free_bytes = room
+        if room >= self.min_free_bytes:
+            self._health = LogHealth.OK
+        elif self._health != LogHealth.DISK_FULL:
+            self._health = LogHealth.LOW_SPACE
 
     def _record_failure(self, error: str, full: bool) -> None:
         """The first failure of a session goes into the file itself, so that `log summary`
