@@ -6,6 +6,7 @@ into the Snapshot, the alarms and the session log."""
 from __future__ import annotations
 
 import itertools
+import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
 from topdress.errors import ConfigError
+from topdress.geo.export import export_maps
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.log.session import SessionLog, SessionReader
@@ -193,6 +195,12 @@ def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
     assert truth_kg > 1.0
     assert sum(x.applied_kg for x in summary.layers.values()) == pytest.approx(truth_kg, rel=0.05)
     assert "isobus.implement" in kinds and "isobus.connected" in kinds
+    # the ISOXML export names the device from the implement's DDOP and its NAME
+    with SessionReader(path) as reader:
+        export_maps(reader, tmp_path / "taskdata", "isoxml", "EPSG:4326", None)
+    dvc = ET.parse(tmp_path / "taskdata" / "TASKDATA.XML").getroot().find("DVC")
+    assert dvc is not None
+    assert (dvc.get("B"), dvc.get("D")) == ("topdress", f"{rig.sim.node.name:016X}")
     assert not [a for a in last.alarms if a.name in ("implement_lost", "ddop_refused")]
 
 
