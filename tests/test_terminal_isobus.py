@@ -6,6 +6,7 @@ into the Snapshot, the alarms and the session log."""
 from __future__ import annotations
 
 import itertools
+import struct
 import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
@@ -19,6 +20,7 @@ from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
 from topdress.errors import ConfigError
 from topdress.geo.export import export_maps
+from topdress.gnss import sentences as nmea
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.log.session import SessionLog, SessionReader
@@ -257,14 +259,19 @@ class _Port:
 
     def __init__(self) -> None:
         self.sent: list[can.Message] = []
+        self.values: dict[tuple[int, int], int] = {}  # the last Set Value, by element and DDI
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self.sent.append(msg)
+        d = bytes(msg.data)
+        if (msg.arbitration_id >> 8) & 0x3FF00 == 0xCB00 and d[0] & 0x0F in (3, 10):
+            element, ddi = d[0] >> 4 | d[1] << 4, d[2] | d[3] << 8
+            self.values[(element, ddi)] = struct.unpack_from("<i", d, 4)[0]
 
 
-def _client_session(pool: bytes) -> tuple[TcLink, list[str]]:
+def _client_session(pool: bytes, toml: str = "") -> tuple[TcLink, list[str], _Port]:
     """A client at 0x90 that announces itself and uploads `pool` over TP, then activates it."""
-    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
+    settings = Settings(loads_config('[can]\nimplement = "isobus"\n' + toml))
     said: list[str] = []
     journal = Journal(None, lambda: 0.0, lambda e: said.append(str(e)))
     port = _Port()
@@ -296,11 +303,11 @@ def _client_session(pool: bytes) -> tuple[TcLink, list[str]]:
     client.send(0xCB00, 0xF7, bytes([0x61]) + pool, round(t * 1e6))
     exchange([], 0.5)
     exchange([pd(bytes([0x81]) + b"\xff" * 7)], 0.2)
-    return link, said
+    return link, said, port
 
 
 def test_a_malformed_ddop_is_refused_with_its_reason_and_an_alarm() -> None:
-    link, said = _client_session(b"DVC" + bytes(range(40)))
+    link, said, _ = _client_session(b"DVC" + bytes(range(40)))
     assert link.state == "refused"
     view = link.view(0.0)
     assert view.problem.startswith("DDOP malformed")
@@ -314,8 +321,112 @@ def test_a_malformed_ddop_is_refused_with_its_reason_and_an_alarm() -> None:
 
 def test_a_good_ddop_from_a_scripted_client_is_served() -> None:
     pool, _ = build(Machine.from_config(loads_config("").machine))
-    link, said = _client_session(pool)
+    link, said, _ = _client_session(pool)
     assert link.state == "ok"
     assert [p.element for p in link.products] == [3, 4]
     assert link.setpoints == (100.0, 100.0)
     assert any("implement topdress at 0x90: DDOP active" in s for s in said)
+
+
+def _text(s: str) -> bytes:
+    return bytes([len(s)]) + s.encode()
+
+
+def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
+    """A one-bin implement's pool written by hand (not by topdress's builder): a device with a
+    setpoint latency (DDI 142) when given, a bin set in mass (DDI 6) or volume (DDI 1) per area."""
+    actual = {6: 7, 1: 2}[setpoint_ddi]
+    total = {6: 81, 1: 80}[setpoint_ddi]
+    dvc = (
+        b"DVC"
+        + struct.pack("<H", 0)
+        + _text("Spreader 3000")
+        + _text("2.1")
+        + bytes(8)
+        + _text("SN1")
+        + b"ABCDEFG"
+        + b"en\x50\x00\x00\x00\xff"
+        + b"\x00"
+    )
+
+    def det(oid: int, kind: int, name: str, element: int, parent: int, kids: list[int]) -> bytes:
+        head = b"DET" + struct.pack("<HB", oid, kind) + _text(name)
+        return (
+            head
+            + struct.pack("<HHH", element, parent, len(kids))
+            + struct.pack(f"<{len(kids)}H", *kids)
+        )
+
+    def dpd(oid: int, ddi: int, props: int, trig: int) -> bytes:
+        return b"DPD" + struct.pack("<HHBB", oid, ddi, props, trig) + _text("pd") + b"\xff\xff"
+
+    device_kids = [11] + ([10] if latency_ms is not None else [])
+    objs = [
+        dvc,
+        det(1, 1, "Spreader", 0, 0, device_kids),
+        det(2, 3, "Hopper", 1, 1, [12, 13, 14]),
+        dpd(11, 141, 1, 8),
+        dpd(12, setpoint_ddi, 3, 8),
+        dpd(13, actual, 1, 1),
+        dpd(14, total, 1, 16),
+    ]
+    if latency_ms is not None:
+        objs.append(b"DPT" + struct.pack("<HHi", 10, 142, latency_ms) + _text("lat") + b"\xff\xff")
+    return b"".join(objs)
+
+
+def test_a_foreign_one_bin_pool_in_mass_takes_the_whole_rate_and_gives_its_delay() -> None:
+    link, _, port = _client_session(_spreader_pool(6, 800))
+    assert link.state == "ok"
+    (p,) = link.products
+    assert (p.element, p.setpoint_ddi, p.actual_ddi, p.total_ddi, p.unit) == (1, 6, 7, 81, "kg/ha")
+    assert link.setpoints == (200.0,)  # upper + lower: one product takes the whole rate
+    assert port.values[(1, 6)] == 20000  # mg/m^2
+    assert link.setpoint_latency_s() == 0.8
+    view = link.view(0.9)
+    assert (view.implement, view.setpoint_latency_ms, view.sections) == ("Spreader 3000", 800, ())
+
+
+def test_a_volume_per_area_product_is_set_in_litres_by_the_density() -> None:
+    link, _, port = _client_session(_spreader_pool(1, None), "[isobus]\ndensity_kg_l = 1.25\n")
+    (p,) = link.products
+    assert (p.setpoint_ddi, p.unit) == (1, "L/ha")
+    # 200 kg/ha of a product of 1.25 kg/L: 160 L/ha, 16000 mm^3/m^2
+    assert link.setpoints == (160.0,)
+    assert port.values[(1, 1)] == 16000
+    assert link.setpoint_latency_s() is None  # the configured look-ahead stays
+
+
+def test_the_look_ahead_is_the_implements_delay_where_it_gives_one() -> None:
+    cfg = loads_config("[lookahead]\ncommand_ms = 100\nmeter_ms = 400\nairline_ms = 600\n")
+    rig = IsobusRig(cfg, _drive(8.0, 100.0))
+    try:
+        rig.run(6.0)
+        tc = rig.term.can.tc
+        assert tc is not None and tc.state == "ok"
+        assert rig.term.ndvi.lookahead_s == pytest.approx(1.1)  # the pool gives none
+        tc.latency_ms[142] = 750  # as a pool's DPT 142 gives it (read at connection)
+        rig.run(6.2)
+        assert rig.term.ndvi.lookahead_s == pytest.approx(0.85)  # command time + its delay
+        assert rig.term.snapshot.isobus is not None
+        assert rig.term.snapshot.isobus.lookahead_s == pytest.approx(0.85)
+    finally:
+        rig.close()
+
+
+def test_with_send_on_gnss_a_fix_sends_the_rate_at_once() -> None:
+    for send_on_gnss, want in ((True, 2), (False, 0)):
+        cfg = loads_config(f"[can]\nsend_on_gnss = {str(send_on_gnss).lower()}\n")
+        rig = IsobusRig(cfg, _drive(8.0, 100.0))
+        try:
+            rig.run(8.0)
+            tc = rig.term.can.tc
+            assert tc is not None and tc.state == "ok"
+            sent = tc.counters.tx_commands
+            t = rig.world.t_s + 0.05  # between two ticks, after the last fix
+            line = nmea.rmc("GN", 36000.0 + t, True, 43.88, 125.32, 7.2 / 3.6, 90.0, "210526")
+            rig.term.handle("nmea", t, line.encode())
+            # both products' rates, in the handling of the line: no tick in between
+            assert tc.counters.tx_commands - sent == want
+        finally:
+            rig.close()
