@@ -32,7 +32,7 @@ from topdress.terminal.alarms import AlarmBook, AlarmInputs
 from topdress.terminal.app import Terminal
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.tclink import TcLink, condensed, sections_of
-from topdress.view.commands import Stop
+from topdress.view.commands import ApplySettings, Stop
 from topdress.view.snapshot import Snapshot
 
 _channels = itertools.count()
@@ -43,9 +43,15 @@ class IsobusRig:
     """Terminal (the TC) + the ECU on ISOBUS + the plant, on one virtual clock (10 ms steps,
     the terminal's tick every 100 ms)."""
 
-    def __init__(self, cfg: TerminalConfig, drive: Drive, session: SessionLog | None = None):
+    def __init__(
+        self,
+        cfg: TerminalConfig,
+        drive: Drive,
+        session: SessionLog | None = None,
+        implement: str = "isobus",
+    ):
         channel = f"test-isobus-{next(_channels)}"
-        self.cfg = replace(cfg, can=replace(cfg.can, channel=channel, implement="isobus"))
+        self.cfg = replace(cfg, can=replace(cfg.can, channel=channel, implement=implement))
         self.world = World(SimConfig.of_machine(self.cfg), seed=3, drive=drive)
         node = IsobusNode(
             topdress_name(0, b"rig"),
@@ -430,3 +436,30 @@ def test_with_send_on_gnss_a_fix_sends_the_rate_at_once() -> None:
             assert tc.counters.tx_commands - sent == want
         finally:
             rig.close()
+
+
+def test_a_can_change_to_isobus_while_running_serves_the_implement() -> None:
+    """The terminal started for the topdress ECU's frames on a bus where an ISOBUS implement
+    is: nothing works; `[can] implement = "isobus"` applied while running puts the TC on the
+    bus (opened anew in its thread), and the implement connects and is set the rate."""
+    import time as wall
+
+    rig = IsobusRig(loads_config(DEFAULT_TOML), _drive(8.0, 200.0), implement="topdress")
+    try:
+        rig.run(4.0)
+        assert rig.term.can.tc is None and rig.term.snapshot.isobus is None
+        assert rig.term.snapshot.ecu_link == "wait"
+        fut = rig.term.post(ApplySettings("can", {"implement": "isobus"}))
+        deadline = wall.monotonic() + 10.0
+        while not fut.done() and wall.monotonic() < deadline:
+            rig.run(rig.world.t_s + 0.1)
+            wall.sleep(0.005)
+        assert fut.done() and fut.result().ok, fut.result()
+        rig.run(rig.world.t_s + 6.0)
+        snap = rig.term.snapshot
+    finally:
+        rig.close()
+    assert snap.isobus is not None and snap.isobus.state == "ok"
+    assert snap.ecu_link == "ok"
+    assert rig.sim.node.rate_kg_ha(0) == pytest.approx(snap.rate_kg_ha[0], abs=2.0)
+    assert rig.sim.node.rate_kg_ha(0) > 50.0
