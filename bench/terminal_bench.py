@@ -302,6 +302,7 @@ class IsobusImplement:
         from topdress.isobus.node import IsobusNode, topdress_name
 
         self.bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
+        self.spy_bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
         self.node = IsobusNode(topdress_name(0, b"bench"), tc_timeout_ms=3000)
         self.stop = threading.Event()
         self.lock = threading.Lock()
@@ -329,7 +330,6 @@ class IsobusImplement:
                 if key in self.echo:
                     self.echo.remove(key)  # our own frame looped back
                 else:
-                    self._spy(msg, time.perf_counter())
                     self.node.rx(msg.arbitration_id, bytes(msg.data), round(now * 1e6) + 1)
             if now >= next_step:
                 next_step = now + 0.01
@@ -337,6 +337,17 @@ class IsobusImplement:
             for f in self.node.tx():
                 self.echo.append((f.can_id, f.data))
                 self.bus.send(can.Message(arbitration_id=f.can_id, data=f.data))
+
+    def run_spy(self) -> None:
+        """The TC's frames as they arrive, on a socket of its own (the node's thread steps
+        and sends besides: its receive times would be late)."""
+        while not self.stop.is_set():
+            try:
+                msg = self.spy_bus.recv(timeout=0.1)
+            except OSError:
+                return
+            if msg is not None:
+                self._spy(msg, time.perf_counter())
 
     def _spy(self, msg: can.Message, t: float) -> None:
         d = bytes(msg.data)
@@ -355,8 +366,9 @@ class IsobusImplement:
 
     def close(self) -> None:
         self.stop.set()
-        time.sleep(0.05)
+        time.sleep(0.15)
         self.bus.shutdown()
+        self.spy_bus.shutdown()
 
 
 def isobus(duration_s: float) -> int:
@@ -369,6 +381,7 @@ def isobus(duration_s: float) -> int:
         extra = 'send_on_gnss = true\nimplement = "isobus"\n'
         cfg.write_text(terminal_toml(m, group, tmp, extra))
         threading.Thread(target=implement.run, daemon=True).start()
+        threading.Thread(target=implement.run_spy, daemon=True).start()
         proc = subprocess.Popen(
             [sys.executable, __file__, "--child", str(cfg), "--duration", str(duration_s)],
             stdout=subprocess.PIPE,
