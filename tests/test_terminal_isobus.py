@@ -23,6 +23,7 @@ from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
+from topdress.isobus.tcserver import tc_name
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import summarise
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
@@ -463,3 +464,27 @@ def test_a_can_change_to_isobus_while_running_serves_the_implement() -> None:
     assert snap.ecu_link == "ok"
     assert rig.sim.node.rate_kg_ha(0) == pytest.approx(snap.rate_kg_ha[0], abs=2.0)
     assert rig.sim.node.rate_kg_ha(0) > 50.0
+
+
+def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -> None:
+    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
+    said: list[str] = []
+    link = TcLink(_Port(), settings, Journal(None, lambda: 0.0, lambda e: said.append(str(e))))
+    t = 0.0
+    for _ in range(40):  # the claim: 250 ms without a contest
+        t += 0.01
+        link.poll(t, (False, 0.0, 0.0, 0.0))
+    assert link.server.address == 0xF7
+    other = tc_name(99) & ~0x1FFFFF & ~(0x7FF << 21)  # a TC NAME of lower value: it wins
+    claim = can.Message(arbitration_id=6 << 26 | 0xEE00 << 8 | 0xFF << 8 | 0xF7)
+    claim.data = bytearray(other.to_bytes(8, "little"))
+    claim.dlc = 8
+    link.on_frame(claim, t)
+    for _ in range(40):
+        t += 0.01
+        link.poll(t, (False, 0.0, 0.0, 0.0))
+    assert link.server.address not in (None, 0xF7)
+    assert said[0] == "ISOBUS: Task Controller at address 0xF7"
+    assert f"ISOBUS: Task Controller moved from 0xF7 to 0x{link.server.address:02X}" in said[1]
+    whats = {f.address: f.what for f in link.view(0.0).functions}
+    assert whats[0xF7] == "task controller" and "this terminal" in whats[link.server.address]

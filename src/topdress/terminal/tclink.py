@@ -40,6 +40,7 @@ from topdress.view.snapshot import ControlFunctionView, IsobusView, ProductView
 MEASURE_MS = 200  # actual rates, work state and sections: five times a tick's 10 Hz / 2
 TOTAL_MS = 1000
 SETPOINT_REFRESH_S = 1.0
+CLAIM_S = 1.0  # an address claim takes 250 ms; none after this long is a loss
 ADDRESS_CLAIM_PGN = 0xEE00
 # DDIs (ISO 11783-11)
 SETPOINT_VOLUME_HA, ACTUAL_VOLUME_HA = 1, 2
@@ -144,6 +145,8 @@ class TcLink:
         self._was: str = "wait"
         self._failing = False
         self._claimed: int | None = None  # the address told
+        self._no_address_since: float | None = None
+        self._said_no_address = False
         self.connected_once = False  # a client's pool was active once
         self._functions_key: object = None
         self._functions_view: tuple[ControlFunctionView, ...] = ()
@@ -184,9 +187,7 @@ class TcLink:
             return
         for f in out:
             self._send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
-        if self._claimed is None and self.server.address is not None:
-            self._claimed = self.server.address
-            self._say(f"Task Controller at address 0x{self._claimed:02X}")
+        self._watch_address(now)
         errors = self.server.errors
         while self._errors < len(errors):
             self._tell(errors[self._errors])
@@ -213,6 +214,30 @@ class TcLink:
         self.problem = what
         self._journal.event(text("event.isobus", what=what))
         self._journal.log_event(self._journal.clock(), "isobus.problem", what=what)
+
+    def _watch_address(self, now: float) -> None:
+        """The TC's address: claimed, taken by a control function with a higher-priority NAME
+        (another TC on the bus: the TC claims a fallback address, which takes CLAIM_S), or
+        none left (no address for longer than that)."""
+        address, was = self.server.address, self._claimed
+        if address is None:
+            if self._no_address_since is None:
+                self._no_address_since = now
+            elif now - self._no_address_since > CLAIM_S and not self._said_no_address:
+                self._said_no_address = True
+                self._tell("the Task Controller has no address: every one it tried was taken")
+            return
+        self._no_address_since = None
+        self._said_no_address = False
+        if address == was:
+            return
+        self._claimed = address
+        if was is None:
+            self._say(f"Task Controller at address 0x{address:02X}")
+        else:
+            self._tell(
+                f"Task Controller moved from 0x{was:02X} to 0x{address:02X}: another took it"
+            )
 
     def _say(self, what: str) -> None:
         self._journal.event(text("event.isobus", what=what))
