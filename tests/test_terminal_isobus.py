@@ -26,7 +26,7 @@ from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.isobus.tcserver import tc_name
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import summarise
-from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
+from topdress.sim.isobus import ELEMENT_BINS, IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
@@ -86,6 +86,8 @@ class IsobusRig:
             heard = []
             while (msg := self.ecu_bus.recv(timeout=0)) is not None:
                 heard.append(Frame(msg.arbitration_id, bytes(msg.data)))
+            for layer, element in enumerate(ELEMENT_BINS):  # its totals: what it metered
+                self.sim.node.set_actual(element, 81, round(w.truth.applied_kg[layer]))
             frames = self.sim.step([] if self.implement_off else heard)
             out = self.sim.out
             assert out is not None
@@ -199,11 +201,15 @@ def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
     path = session.path
     with SessionReader(path) as reader:
         summary = summarise(reader)
-        kinds = [e.kind for e in reader.events()]
+        events = list(reader.events())
+    kinds = [e.kind for e in events]
     truth_kg = sum(rig.world.truth.applied_kg)
     assert truth_kg > 1.0
     assert sum(x.applied_kg for x in summary.layers.values()) == pytest.approx(truth_kg, rel=0.05)
     assert "isobus.implement" in kinds and "isobus.connected" in kinds
+    (totals,) = [e.detail for e in events if e.kind == "isobus.totals"]
+    assert totals["elements"] == [3, 4] and totals["units"] == ["kg", "kg"]
+    assert sum(totals["totals"]) == pytest.approx(truth_kg, abs=2.0)  # DDI 81: whole kg
     # the ISOXML export names the device from the implement's DDOP and its NAME
     with SessionReader(path) as reader:
         export_maps(reader, tmp_path / "taskdata", "isoxml", "EPSG:4326", None)

@@ -102,6 +102,7 @@ EVENT_KINDS: Final = (
     "isobus.connected",
     "isobus.refused",
     "isobus.problem",
+    "isobus.totals",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

@@ -407,11 +407,21 @@ class TcLink:
         self._step(now, [])
 
     def send_stop(self, now: float) -> None:
-        """The terminal closes: every rate 0 and the work state off, sent now."""
+        """The terminal closes: every rate 0 and the work state off, sent now; the totals the
+        implement reported last go to the session log (`isobus.totals`)."""
         c = self._client()
         if c is not None and c.device is not None:
             self._command(c, now, (False, 0.0, 0.0, 0.0))
             self._step(now, [])
+        reported = [p for p in self.view(0.0).products if p.total is not None]
+        if reported:
+            self._journal.log_event(
+                now,
+                "isobus.totals",
+                elements=[p.element for p in reported],
+                totals=[p.total for p in reported],
+                units=["kg" if p.setpoint_ddi == SETPOINT_MASS_HA else "L" for p in reported],
+            )
 
     # ---- what the implement reports ---------------------------------------------------------
     def _value(self, element: int, ddi: int) -> int | None:
