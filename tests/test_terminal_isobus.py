@@ -21,7 +21,7 @@ from topdress.devices.lines import FakeLineSource
 from topdress.errors import ConfigError
 from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
-from topdress.isobus.ddop import Machine, build
+from topdress.isobus.ddop import Machine, build, condensed, sections_of
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.isobus.tcserver import tc_name
 from topdress.log.session import SessionLog, SessionReader
@@ -32,7 +32,7 @@ from topdress.sim.world import SimConfig, World
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
 from topdress.terminal.app import Terminal
 from topdress.terminal.journal import Journal, Settings
-from topdress.terminal.tclink import TcLink, condensed, sections_of
+from topdress.terminal.tclink import TcLink
 from topdress.view.commands import ApplySettings, Stop
 from topdress.view.snapshot import Snapshot
 

@@ -9,13 +9,17 @@ shut-offs at the outlets close the rows switched off), and stop with every secti
 
 from __future__ import annotations
 
-from topdress.isobus.ddop import DDI_ACTUAL_RATE, DDI_ACTUAL_WORK_STATE
+from topdress.isobus.ddop import (
+    DDI_ACTUAL_CONDENSED_1_16,
+    DDI_ACTUAL_RATE,
+    DDI_ACTUAL_WORK_STATE,
+    condensed,
+)
 from topdress.isobus.node import Frame, IsobusNode
 from topdress.protocol.frames import encode_command
 from topdress.sim.world import StepOutput, World
 
 ELEMENT_DEVICE, ELEMENT_BOOM, ELEMENT_BINS = 0, 2, (3, 4)
-DDI_ACTUAL_CONDENSED_1_16 = 161
 TC_STATUS_PERIOD_MS = 2000  # a TC proves itself alive only this often (ISO 11783-10)
 KG_HA_PER_RPM_KG = 600.0  # kg/ha = rpm * kg/rev * 600 / (km/h * m)
 
@@ -46,12 +50,6 @@ class IsobusMachine:
         share = bin(self.node.sections_on).count("1") / self.sections
         return self.node.rate_kg_ha(0) * share, self.node.rate_kg_ha(1) * share
 
-    def _condensed(self) -> int:
-        """The sections as switched (DDI 161): 01 on, 00 off, 11 not installed; signed 32 bit."""
-        on = self.node.sections_on
-        v = sum(((on >> i & 1) if i < self.sections else 3) << 2 * i for i in range(16))
-        return v - (1 << 32) if v >= 1 << 31 else v
-
     def step(self, frames_in: list[Frame]) -> list[Frame]:
         """One control period: the bus's frames to the node, the node's setpoints to the core,
         the plant and core one step, the actual values back to the node; the node's frames."""
@@ -76,6 +74,7 @@ class IsobusMachine:
             actual[layer] = rate
         self.actual_kg_ha = (actual[0], actual[1])
         n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
-        n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, self._condensed())
+        on = tuple(bool(n.sections_on >> i & 1) for i in range(self.sections))
+        n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, condensed(on))
         n.step(w.now_us, round(truth.odometer_m * 1000))
         return n.tx()

@@ -13,7 +13,7 @@ blocks (the port sends from its own thread). Once a client's pool (DDOP) is acti
   operator's start and the site's rate (all sections on while there is a rate);
 - asks for the actual rates (DDI 7/2), the work state (141), the sections (161) every
   MEASURE_MS and the totals (DDI 81/80) every TOTAL_MS;
-- reads the implement's delays from its pool (DDI 142, 143), which set the look-ahead;
+- reads the implement's delays from its pool (DDI 142, 143): 142 sets the look-ahead;
 - keeps who is on the bus: every address claim heard, its NAME decoded.
 
 What goes wrong (a pool refused, the client silent, a value refused) becomes an event in the
@@ -30,14 +30,14 @@ import can
 
 from topdress.errors import DeviceError, ProtocolError
 from topdress.i18n import text
-from topdress.isobus.ddop import parse
+from topdress.isobus.ddop import condensed, parse, sections_of
 from topdress.isobus.node import Frame, name_fields, split_id
 from topdress.isobus.tcserver import Client, TcServer, map_device, tc_name
 from topdress.terminal.ecuview import LinkCounters
 from topdress.terminal.journal import Journal, Settings
 from topdress.view.snapshot import ControlFunctionView, IsobusView, ProductView
 
-MEASURE_MS = 200  # actual rates, work state and sections: five times a tick's 10 Hz / 2
+MEASURE_MS = 200  # actual rates, work state and sections: 5 Hz, every other tick
 TOTAL_MS = 1000
 SETPOINT_REFRESH_S = 1.0
 CLAIM_S = 1.0  # an address claim takes 250 ms; none after this long is a loss
@@ -73,20 +73,6 @@ class Product:
     @property
     def unit(self) -> str:
         return "kg/ha" if self.setpoint_ddi == SETPOINT_MASS_HA else "L/ha"
-
-
-def condensed(on: tuple[bool, ...]) -> int:
-    """DDI 290's value: 2 bits per section (01 on, 00 off, 11 not installed), signed 32 bit."""
-    v = 0
-    for i in range(16):
-        v |= (int(on[i]) if i < len(on) else 3) << 2 * i
-    return v - (1 << 32) if v >= 1 << 31 else v
-
-
-def sections_of(value: int, n: int) -> tuple[bool, ...]:
-    """The first `n` sections of a condensed work state (DDI 161): on where the bits are 01."""
-    u = value & 0xFFFFFFFF
-    return tuple((u >> 2 * i) & 3 == 1 for i in range(n))
 
 
 def pool_ddis(pool: bytes) -> tuple[dict[int, set[int]], dict[int, int]]:
