@@ -230,8 +230,16 @@ def test_implement_lost_is_an_alarm_and_the_loop_goes_on(tmp_path: Path) -> None
         rig.implement_off = True
         rig.run(22.0)
         snap = rig.term.snapshot
+        assert rig.sim.node.rate_kg_ha(0) == 0.0  # its own fail-safe: no TC, no rate
+        rig.implement_off = False  # plugged back: it connects again and is set the rate
+        rig.run(34.0)
+        back = rig.term.snapshot
     finally:
         rig.close()
+    assert back.isobus is not None and back.isobus.state == "ok"
+    assert rig.sim.node.rate_kg_ha(0) == pytest.approx(back.rate_kg_ha[0], abs=2.0)
+    lost_alarm = [a for a in back.alarms if a.name == "implement_lost"]
+    assert [a.state for a in lost_alarm] == ["cleared"]  # until the operator acknowledges
     assert snap.isobus is not None and snap.isobus.state == "lost"
     assert snap.ecu_link == "lost"
     names = [a.name for a in snap.alarms]
