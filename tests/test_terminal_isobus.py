@@ -502,3 +502,15 @@ def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -
     assert f"ISOBUS: Task Controller moved from 0xF7 to 0x{link.server.address:02X}" in said[1]
     whats = {f.address: f.what for f in link.view(0.0).functions}
     assert whats[0xF7] == "task controller" and "this terminal" in whats[link.server.address]
+
+
+def test_an_ecu_setting_changed_with_an_isobus_implement_is_taken_without_a_push() -> None:
+    rig = IsobusRig(loads_config(DEFAULT_TOML), _drive(0.0, 0.0))
+    try:
+        rig.run(3.0)
+        fut = rig.term.post(ApplySettings("speed", {"switch_speed_kmh": 7.0}))
+        rig.run(3.2)
+        assert fut.done() and fut.result().ok, fut.result()
+        assert rig.term.cfg.speed.switch_speed_kmh == 7.0
+    finally:
+        rig.close()
