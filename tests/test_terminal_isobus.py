@@ -150,6 +150,13 @@ def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
         rig.run(34.0)
         last = rig.term.snapshot
         rig.term.post(Stop())  # the operator stops: rates 0, work state and sections off
+        tc = rig.term.can.tc
+        assert tc is not None
+        sent = tc.counters.tx_commands
+        while not rig.term.inbox.empty():  # handled off the tick: it goes out at once
+            rig.term.handle(*rig.term.inbox.get())
+        assert tc.setpoints == (0.0, 0.0)
+        assert tc.counters.tx_commands - sent == 4  # 2 rates, work state, sections
         rig.run(36.0)
         stopped = rig.term.snapshot
     finally:
@@ -171,8 +178,8 @@ def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
     # node holds what the last tick sent: compared with the tick before), to 0.01 kg/ha
     working = [
         (i, s)
-        for i, (_, s) in enumerate(rig.snapshots)
-        if i > 0 and s.running and s.v_kmh > 7.5 and s.ndvi is not None
+        for i, (t, s) in enumerate(rig.snapshots)
+        if i > 0 and t < 34.0 and s.running and s.v_kmh > 7.5 and s.ndvi is not None
     ]
     assert len(working) > 150
     rates = {round(s.rate_kg_ha[0], 1) for _, s in working}

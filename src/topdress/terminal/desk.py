@@ -236,10 +236,13 @@ class OperatorDesk:
         return op.CommandResult(True, message)
 
     def _send_command_now(self) -> None:
-        link = self._parts.can.link
+        can = self._parts.can
         cmd = self.command()
-        if not link.set_command(cmd[0], cmd[1], cmd[2], cmd[3]):
-            link.send_now()
+        if can.tc is not None:  # an ISOBUS implement: its setpoints and work state now
+            can.tc.poll(self._journal.clock(), cmd)
+            return
+        if not can.link.set_command(cmd[0], cmd[1], cmd[2], cmd[3]):
+            can.link.send_now()
 
     # ---- the command and the tick ------------------------------------------------------------
     def command(self) -> tuple[bool, float, float, float]:
