@@ -15,6 +15,7 @@ import can
 import pytest
 
 from topdress.cli.isobus_demo import DEMO_PASS_M, DEMO_PASSES, DEMO_SPEED_KMH
+from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.devices.can import open_bus
 from topdress.devices.lines import FakeLineSource
@@ -521,3 +522,14 @@ def test_an_ecu_setting_changed_with_an_isobus_implement_is_taken_without_a_push
         assert rig.term.cfg.speed.switch_speed_kmh == 7.0
     finally:
         rig.close()
+
+
+def test_config_check_says_the_terminal_is_a_tc_and_warns_of_a_wrong_bitrate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "t.toml"
+    path.write_text('[can]\nimplement = "isobus"\nbitrate = 500000\n[isobus]\ntc_identity = 7\n')
+    assert main(["config", "check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "ISOBUS: the terminal is the Task Controller (address 0xF7, NAME identity 7)" in out
+    assert "warning: can.bitrate 500000: an ISOBUS runs at 250000 bit/s" in out
