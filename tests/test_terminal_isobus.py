@@ -24,7 +24,7 @@ from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
 from topdress.isobus.ddop import Machine, build, condensed, sections_of
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
-from topdress.isobus.tcserver import tc_name
+from topdress.isobus.tcserver import map_device, tc_name
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import summarise
 from topdress.sim.isobus import ELEMENT_BINS, IsobusMachine, tc_timeout_ms
@@ -33,7 +33,7 @@ from topdress.sim.world import SimConfig, World
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
 from topdress.terminal.app import Terminal
 from topdress.terminal.journal import Journal, Settings
-from topdress.terminal.tclink import TcLink
+from topdress.terminal.tclink import TcLink, known_ddis, pool_ddis
 from topdress.view.commands import ApplySettings, Stop
 from topdress.view.snapshot import Snapshot
 
@@ -533,3 +533,12 @@ def test_config_check_says_the_terminal_is_a_tc_and_warns_of_a_wrong_bitrate(
     out = capsys.readouterr().out
     assert "ISOBUS: the terminal is the Task Controller (address 0xF7, NAME identity 7)" in out
     assert "warning: can.bitrate 500000: an ISOBUS runs at 250000 bit/s" in out
+
+
+def test_a_stored_pools_mapping_gives_what_the_link_needs() -> None:
+    pool, _ = build(Machine.from_config(loads_config("").machine))
+    ddis = known_ddis(map_device(pool))
+    assert {6, 7, 81} <= ddis[3] and {6, 7, 81} <= ddis[4]
+    assert {160, 161, 289, 290} <= ddis[2]  # the boom: section control, work states
+    full, _ = pool_ddis(pool)
+    assert all(v <= full[e] for e, v in ddis.items())  # nothing the pool does not carry

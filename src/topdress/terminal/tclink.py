@@ -32,7 +32,7 @@ from topdress.errors import DeviceError, ProtocolError
 from topdress.i18n import text
 from topdress.isobus.ddop import condensed, parse, sections_of
 from topdress.isobus.node import Frame, name_fields, split_id
-from topdress.isobus.tcserver import Client, TcServer, map_device, tc_name
+from topdress.isobus.tcserver import Client, Device, TcServer, map_device, tc_name
 from topdress.terminal.ecuview import LinkCounters
 from topdress.terminal.journal import Journal, Settings
 from topdress.view.snapshot import ControlFunctionView, IsobusView, ProductView
@@ -73,6 +73,17 @@ class Product:
     @property
     def unit(self) -> str:
         return "kg/ha" if self.setpoint_ddi == SETPOINT_MASS_HA else "L/ha"
+
+
+def known_ddis(d: Device) -> dict[int, set[int]]:
+    """Per element, the DDIs a mapped device is known to carry (its bins, settable and
+    condensed process data), for a pool the TC did not get the bytes of."""
+    ddis: dict[int, set[int]] = {e: set(v) for e, v in d.bins.items()}
+    for element, ddi in d.settable:
+        ddis.setdefault(element, set()).add(ddi)
+    for ddi, element in d.condensed.items():
+        ddis.setdefault(element, set()).add(ddi)
+    return ddis
 
 
 def pool_ddis(pool: bytes) -> tuple[dict[int, set[int]], dict[int, int]]:
@@ -118,7 +129,7 @@ class TcLink:
         self._t0: float | None = None
         self.names: dict[int, int] = {}  # address -> NAME of every claim heard
         self._errors = 0  # of server.errors, those told
-        self._pool_key: tuple[int, bytes] | None = None  # the client and pool set up
+        self._served: tuple[int, Device] | None = None  # the client and pool set up
         self.products: tuple[Product, ...] = ()
         self.sections = 0
         self._ddis: dict[int, set[int]] = {}
@@ -235,9 +246,9 @@ class TcLink:
         self._step(now, [])
         c = self._client()
         self._watch_state(now, c)
-        if c is None or c.device is None or c.pool is None:
+        if c is None or c.device is None:
             return
-        if self._pool_key != (c.address, c.pool):
+        if self._served is None or self._served[0] != c.address or self._served[1] is not c.device:
             self._connect(c, now)
         self._command(c, now, command)
         self._step(now, [])  # what was set goes out this tick
@@ -274,18 +285,21 @@ class TcLink:
         if state == "ok" and sc is not None and sc.device is not None:
             j.log_event(now, "isobus.connected", address=sc.address, device=sc.device.designator)
         elif state == "lost":  # logged as the ECU link's loss (terminal.linkwatch)
-            self._pool_key = None  # a client back sends its pool again
+            self._served = None  # a client back is set up again
         elif state == "refused":
             j.log_event(now, "isobus.refused", why=self.refusal)
         self._was = state
 
     def _connect(self, c: Client, now: float) -> None:
         """A pool newly active: its products, sections, delays; the measurements asked for."""
-        assert c.device is not None and c.pool is not None
-        self._pool_key = (c.address, c.pool)
+        assert c.device is not None
+        self._served = (c.address, c.device)
         self.connected_once = True
         self._sent.clear()
-        self._ddis, self.latency_ms = pool_ddis(c.pool)
+        if c.pool is not None:
+            self._ddis, self.latency_ms = pool_ddis(c.pool)
+        else:  # a pool the TC had stored: what its mapping kept (no delays)
+            self._ddis, self.latency_ms = known_ddis(c.device), {}
         settable = c.device.settable
         products = []
         for element in sorted(self._ddis):
