@@ -336,6 +336,26 @@ def test_the_cab_screen_at_800x480(demo: DemoProcess, tmp_path: Path) -> None:
         assert driver.execute_script("return document.documentElement.scrollHeight") <= 600
         for tid in MAIN_IN_VIEW:
             assert in_view(tid, 1024, 600), (tid, "1024x600")
+
+        # resized to 1280×800 (no reload): the field fitted again, as a page opened at that size
+        sw, ne = rect(-8, -6, 16, 48)[0], rect(-8, -6, 16, 48)[2]
+        field = [[sw[1], sw[0]], [ne[1], ne[0]]]  # lat, lon
+        fit_js = (
+            "const m = getElement(document.querySelector('[data-testid=\"map\"]')).map;"
+            "const c = m.latLngToContainerPoint(m.getCenter()),"
+            " f = m.latLngToContainerPoint([(arguments[0][0][0] + arguments[0][1][0]) / 2,"
+            " (arguments[0][0][1] + arguments[0][1][1]) / 2]);"
+            "return [m.getZoom(), m.getBoundsZoom(arguments[0], false, [16, 16]),"
+            " Math.hypot(c.x - f.x, c.y - f.y)];"
+        )
+        zoom, fit, _ = driver.execute_script(fit_js, field)
+        assert zoom == fit, ("1024x600", zoom, fit)
+        viewport(driver, 1280, 800)
+        until(
+            "the field fitted at 1280x800", lambda: driver.execute_script(fit_js, field)[0] > zoom
+        )
+        zoom, fit, off_px = driver.execute_script(fit_js, field)
+        assert zoom == fit and off_px < 30, ("1280x800", zoom, fit, off_px)
     except Exception:
         driver.save_screenshot(str(tmp_path / "failed.png"))
         print("screenshot of the failure:", tmp_path / "failed.png")

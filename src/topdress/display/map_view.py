@@ -9,6 +9,7 @@ once when the display starts; nothing is imported for them when none is configur
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from collections import deque
@@ -162,6 +163,24 @@ def rate_colour(rate_kg_ha: float, max_kg_ha: float) -> str:
     return f"hsl({hue:.0f}, 80%, 45%)"
 
 
+# The field fitted again when the map's size changes (another screen size, a window resized,
+# the panel shown at another size): Leaflet keeps the zoom and only moves the centre.
+REFIT_JS = """(() => {
+  const c = getElement(%d); if (!c || !c.map) return;
+  const box = c.$el; box.tdFit = %s;
+  if (box.tdFitObserver) return;
+  let size = [box.clientWidth, box.clientHeight];
+  box.tdFitObserver = new ResizeObserver(() => {
+    const now = [box.clientWidth, box.clientHeight];
+    if (!now[0] || !now[1] || (now[0] === size[0] && now[1] === size[1])) return;
+    size = now;
+    c.map.invalidateSize({pan: false});
+    c.map.fitBounds(box.tdFit, {padding: [8, 8]});
+  });
+  box.tdFitObserver.observe(box);
+})();"""
+
+
 class LiveMap:
     """A Leaflet map fed from the hub's track; `update()` adds what was driven since."""
 
@@ -217,6 +236,7 @@ class LiveMap:
             lats, lons = [p[0] for p in outline], [p[1] for p in outline]
             bounds = [[min(lats), min(lons)], [max(lats), max(lons)]]
             self.map.run_map_method("fitBounds", bounds, {"padding": [8, 8]})
+            self.map.client.run_javascript(REFIT_JS % (self.map.id, json.dumps(bounds)))
             self._centred = True
 
     def update(self) -> None:
