@@ -26,7 +26,7 @@ from topdress.isobus.ddop import Machine, build, condensed, sections_of
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.isobus.tcserver import map_device, tc_name
 from topdress.log.session import SessionLog, SessionReader
-from topdress.log.summary import summarise
+from topdress.log.summary import format_text, summarise
 from topdress.sim.isobus import ELEMENT_BINS, IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
@@ -215,6 +215,7 @@ def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
     assert truth_kg > 1.0
     assert sum(x.applied_kg for x in summary.layers.values()) == pytest.approx(truth_kg, rel=0.05)
     assert "isobus.implement" in kinds and "isobus.connected" in kinds
+    assert "ISOBUS implement topdress at 0x84" in format_text(summary)
     (totals,) = [e.detail for e in events if e.kind == "isobus.totals"]
     assert totals["elements"] == [3, 4] and totals["units"] == ["kg", "kg"]
     assert sum(totals["totals"]) == pytest.approx(truth_kg, abs=2.0)  # DDI 81: whole kg
