@@ -105,7 +105,7 @@ class SnapshotBuilder:
             "nmea_bad": bad_nmea,
             "crop": crop["ok"],
             "crop_bad": sum(v for k, v in crop.items() if k not in ("ok", "stale")),
-            "can_rx": lc.rx_frames,  # the topdress ECU's link, or the ISOBUS TC's below
+            "can_rx": lc.rx_frames,  # the topdress ECU's link, or the ISOBUS TC's
             "can_bad": lc.rx_foreign + lc.rx_malformed + lc.rx_implausible,
             "cmd_tx": lc.tx_commands,
             "tx_err": lc.tx_errors,
