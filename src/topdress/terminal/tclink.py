@@ -394,8 +394,8 @@ class TcLink:
         """The rates in force to the implement at once, off the tick (a new GNSS fix with
         `send_on_gnss`: the setpoints leave within the fix's handling, as PcCommand does)."""
         c = self._client()
-        if c is None or c.device is None:
-            return
+        if c is None or self._served is None or self._served[1] is not c.device:
+            return  # no client, or its pool not set up yet (the next tick does)
         for p, value in zip(self.products, self.setpoints, strict=True):
             v = round(value * PER_HA)
             try:
