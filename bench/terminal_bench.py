@@ -62,6 +62,13 @@ GNSS_HZ = 10.0
 CROP_HZ = 10.0
 SENSORS = 4
 WARMUP_S = 3.0  # parameter push and first commands; latencies counted after it
+# A port of this run's own: on Linux a socket bound to a port hears every group joined on it
+# (IP_MULTICAST_ALL), so other udp_multicast buses on the machine would be heard at the default.
+UDP_PORT = random.randrange(40000, 50000)
+
+
+def udp_bus(group: str) -> can.BusABC:
+    return can.Bus(interface="udp_multicast", channel=group, port=UDP_PORT, fd=False)
 
 
 def child(config: Path, duration_s: float) -> None:
@@ -89,8 +96,8 @@ class Machine:
     def __init__(self, group: str) -> None:
         self.gnss = PtyPort()
         self.crop = PtyPort()
-        self.ecu_bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
-        self.spy = can.Bus(interface="udp_multicast", channel=group, fd=False)
+        self.ecu_bus = udp_bus(group)
+        self.spy = udp_bus(group)
         self.twin = SimulatedEcu(self.ecu_bus, now=time.monotonic())
         self.stop = threading.Event()
         self.written: dict[int, float] = {}  # speed in 0.1 km/h -> time its RMC was written
@@ -202,6 +209,7 @@ def terminal_toml(m: Machine, group: str, log_dir: str, can_extra: str = "") -> 
         f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
         f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
         f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\n{can_extra}'
+        f"[can.options]\nport = {UDP_PORT}\n"
         f'[log]\ndir = "{log_dir}"\n'
     )
 
@@ -301,8 +309,8 @@ class IsobusImplement:
     def __init__(self, group: str) -> None:
         from topdress.isobus.node import IsobusNode, topdress_name
 
-        self.bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
-        self.spy_bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
+        self.bus = udp_bus(group)
+        self.spy_bus = udp_bus(group)
         self.node = IsobusNode(topdress_name(0, b"bench"), tc_timeout_ms=3000)
         self.stop = threading.Event()
         self.lock = threading.Lock()
