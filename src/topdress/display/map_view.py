@@ -35,8 +35,9 @@ ARROW_FIX = {
     "fillColor": "#fdd835",
     "fillOpacity": 1,
 }
-#: The arrow while the position is dead reckoned past its limit: hollow, dashed, an estimate.
-ARROW_ESTIMATED = {"color": "#d50000", "weight": 3, "dashArray": "4 3", "fillOpacity": 0.2}
+#: The arrow while the position is dead reckoned past its limit: hollow, dashed, an estimate
+#: (its red 3.7:1 on the night map and 3.9:1 on the day one).
+ARROW_ESTIMATED = {"color": "#ff1744", "weight": 3, "dashArray": "4 3", "fillOpacity": 0.2}
 
 LatLon = tuple[float, float]
 Ring = list[LatLon]
@@ -218,16 +219,23 @@ class LiveMap:
         for z in m.zones:
             style = {
                 "color": "#37474f",
+                "className": "td-zone",  # lighter by night (style.py)
                 "weight": 1,
                 "fillColor": rate_colour(z.rate_kg_ha, self.max_kg_ha),
                 "fillOpacity": 0.18,
             }
             self.map.generic_layer(name="polygon", args=[z.rings, style])
         for ring in m.boundary:
-            style = {"color": "#000", "weight": 3, "fill": False}
+            style = {"color": "#000", "weight": 3, "fill": False, "className": "td-boundary"}
             self.map.generic_layer(name="polygon", args=[ring, style])
         for ring in m.headland:
-            style = {"color": "#000", "weight": 1, "dashArray": "6 4", "fill": False}
+            style = {
+                "color": "#000",
+                "weight": 1,
+                "dashArray": "6 4",
+                "fill": False,
+                "className": "td-boundary",
+            }
             self.map.generic_layer(name="polygon", args=[ring, style])
         outline = [p for ring in m.boundary for p in ring] or [
             p for z in m.zones for p in z.rings[0]

@@ -103,6 +103,13 @@ EVENT_KINDS: Final = (
     "isobus.refused",
     "isobus.problem",
     "isobus.totals",
+    "isobus.claimed",
+    "isobus.ddop",
+    "isobus.set",
+    "isobus.tc_lost",
+    "isobus.bus_load",
+    "isobus.value_refused",
+    "isobus.tp_aborted",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

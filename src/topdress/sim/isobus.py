@@ -2,6 +2,10 @@
 Task Controller's rates and sections, and hands them to the control core each control period
 as the core's own command, beside it behind the same port (the core stays as it is).
 
+On the bus the core's own frames go as the node maps them (docs/isobus.md, "The private
+frames on ISOBUS"): its broadcasts on Proprietary B from the claimed address, its answers on
+Proprietary A to the TC; the terminal's frames reach the core only from the TC's address.
+
 Sections: the meters run at the TC's rate times the share of the width switched on (row
 shut-offs at the outlets close the rows switched off), and stop with every section off or no TC
 (the node's fail-safe after the cab PC's command timeout).
@@ -57,12 +61,16 @@ class IsobusMachine:
         now = w.now_us
         for f in frames_in:
             n.rx(f.can_id, f.data, now)
+            core = n.prop_rx(f)
+            if core is not None:
+                w.deliver_can((core.can_id, core.data))
         upper, lower = self.rates_kg_ha()
         self.running = upper > 0.0 or lower > 0.0
         truth = w.truth
         w.deliver_can(encode_command(self.running, self.fan_rpm, upper, lower,
                                      min(truth.v_kmh, 25.0)))  # fmt: skip
         self.out = w.step()
+        core_out = self.out.can
         truth = w.truth
         actual = [0.0, 0.0]
         for layer, element in enumerate(ELEMENT_BINS):
@@ -77,4 +85,9 @@ class IsobusMachine:
         on = tuple(bool(n.sections_on >> i & 1) for i in range(self.sections))
         n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, condensed(on))
         n.step(w.now_us, round(truth.odometer_m * 1000))
-        return n.tx()
+        out = n.tx()
+        for can_id, data in core_out:
+            bus = n.prop_tx(Frame(can_id, data))
+            if bus is not None:
+                out.append(bus)
+        return out
