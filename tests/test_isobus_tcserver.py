@@ -94,7 +94,11 @@ def test_second_client_refused_first_kept() -> None:
     ignored = tc.ignored
     second = Frame(5 << 26 | 0xCB00 << 8 | TC << 8 | 0x81, bytes([0]) + b"\xff" * 7)  # version?
     out = tc.step(60_000_000, [second, second])
-    assert not [f for f in out if split_id(f.can_id)[3] == 0x81]
+    # one negative acknowledgement (J1939 ACK PGN, control 1, for PGN 0xCB00), nothing else
+    to_second = [f for f in out if split_id(f.can_id)[3] == 0x81]
+    assert [(split_id(f.can_id)[1], f.data) for f in to_second] == [
+        (0xE800, bytes([1, 0xFF, 0xFF, 0xFF, 0x81, 0x00, 0xCB, 0x00]))
+    ]
     assert tc.client is not None and tc.client.address == CLIENT and tc.client.active
     assert tc.ignored == ignored + 2 and tc.errors == [
         "client 0x81 refused: the TC serves 0x80, one at a time"
