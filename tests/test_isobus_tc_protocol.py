@@ -1,0 +1,248 @@
+"""The Task Controller's protocol features against the topdress ECU's C TC client (virtual time,
+one process) and the AgIsoStack++ client's recorded pool: known pools kept beside the session
+logs and offered back by their labels (a corrupt one set aside and asked for again), measurement
+commands by time, distance, threshold and change as the pool offers them, acknowledges awaited
+and their errors read, the client's options (TC-GEO) read from its version message."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from topdress.errors import ProtocolError
+from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_DISTANCE, TRIG_THRESHOLD, TRIG_TIME
+from topdress.isobus.node import Frame, IsobusNode, split_id, topdress_name
+from topdress.isobus.poolstore import PoolStore
+from topdress.isobus.tcserver import TcServer, pd_frame, pdack_errors, tc_name
+
+ECU_NAME = topdress_name(1407, bytes(range(12)))
+STEP_US = 10_000
+
+
+class Bus:
+    """The C client and the terminal's TC in virtual time, frames passed both ways each 10 ms;
+    `mm_per_step` is the distance the client is told it drove."""
+
+    def __init__(self, tc: TcServer, mm_per_step: int = 28) -> None:
+        self.node = IsobusNode(ECU_NAME, tc_timeout_ms=6000)
+        self.tc = tc
+        self.now = 0
+        self.mm = 0
+        self.mm_per_step = mm_per_step
+        self.from_node: list[Frame] = []
+        self.from_tc: list[Frame] = []
+        self._pending: list[Frame] = []
+        self.node.start(0)
+        tc.start(0)
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds * 1e6 / STEP_US)):
+            self.now += STEP_US
+            self.mm += self.mm_per_step
+            for f in self._pending:
+                self.node.rx(f.can_id, f.data, self.now)
+            self.node.step(self.now, self.mm)
+            out = self.node.tx()
+            self.from_node += out
+            self._pending = self.tc.step(self.now, out)
+            self.from_tc += self._pending
+
+    def uploads(self) -> int:
+        """Pool transfers the client started (its TP/ETP request to send)."""
+        return sum(
+            1
+            for f in self.from_node
+            if split_id(f.can_id)[1] in (0xEC00, 0xC800) and f.data[0] in (16, 20)
+        )
+
+
+def _connected(tc: TcServer) -> Bus:
+    bus = Bus(tc)
+    bus.run(4.0)
+    c = tc.client
+    assert c is not None and c.active and bus.node.tc_state == "connected", tc.errors
+    return bus
+
+
+def test_pool_kept_and_offered_back_by_its_labels(tmp_path: Path) -> None:
+    store = PoolStore.beside(tmp_path)
+    first = _connected(TcServer(tc_name(7), store=store))
+    assert first.uploads() == 1
+    c = first.tc.client
+    assert c is not None and c.name == ECU_NAME and c.device is not None and not c.from_store
+    files = list((tmp_path / "ddop").glob("*.ddop"))
+    label = c.device.structure_label
+    assert [f.name for f in files] == [
+        f"{ECU_NAME:016X}_{label.hex()}_{c.device.localization_label.hex()}.ddop"
+    ]
+    # the terminal restarted: a new server on the same folder; the client is told its labels
+    # match and activates the pool without sending it
+    again = _connected(TcServer(tc_name(7), store=PoolStore.beside(tmp_path)))
+    assert again.uploads() == 0
+    c2 = again.tc.client
+    assert c2 is not None and c2.from_store and c2.pool == c.pool
+    answers = [f.data for f in again.from_tc if split_id(f.can_id)[3] == 0x84]
+    assert bytes([0x11]) + label in answers
+    assert bytes([0x31]) + c.device.localization_label in answers
+    assert again.tc.counters["uploads_saved"] == 1 and again.tc.errors == []
+    again.tc.set_value(3, 6, 15000)  # and it is served as before
+    again.run(0.5)
+    assert again.node.rate_kg_ha(0) == 150.0
+
+
+def test_a_client_whose_pool_changed_uploads_the_new_one(tmp_path: Path) -> None:
+    """The folder holds another description for this NAME (the machine was reconfigured): the
+    TC offers that pool's structure label, the client's differs, so it uploads and the new pool
+    replaces the old."""
+    store = PoolStore.beside(tmp_path)
+    other = (
+        Path(__file__).parent / "data" / "agiso_spreader_ddop_2bins_6sections.bin"
+    ).read_bytes()
+    store.save(ECU_NAME, other, b"1234567", b"en\x50\x00\x00\x00\xff")
+    bus = _connected(TcServer(tc_name(7), store=store))
+    c = bus.tc.client
+    assert c is not None and c.device is not None
+    offered = [f.data for f in bus.from_tc if split_id(f.can_id)[3] == 0x84 and f.data[0] == 0x11]
+    assert offered and offered[0][1:] != c.device.structure_label  # the old pool's label
+    assert bus.uploads() == 1 and not c.from_store and c.device.designator == "topdress"
+    assert store.load(ECU_NAME) == c.pool
+    assert len(list((tmp_path / "ddop").glob("*.ddop"))) == 1
+
+
+@pytest.mark.parametrize("damage", ["flip", "cut", "garbage", "not_a_pool"])
+def test_corrupt_stored_pool_set_aside_and_asked_for_again(tmp_path: Path, damage: str) -> None:
+    store = PoolStore.beside(tmp_path)
+    _connected(TcServer(tc_name(7), store=store))
+    (path,) = (tmp_path / "ddop").glob("*.ddop")
+    raw = bytearray(path.read_bytes())
+    if damage == "flip":
+        raw[-100] ^= 0x40
+    elif damage == "cut":
+        del raw[len(raw) // 2 :]
+    elif damage == "garbage":
+        raw[:] = b"\x00" * 10
+    path.write_bytes(bytes(raw))
+    if damage == "not_a_pool":  # the checksum holds but the bytes are no DDOP
+        store.save(ECU_NAME, b"DVC\x00\x00junk", b"1234567", b"en\x50\x00\x00\x00\xff")
+    tc = TcServer(tc_name(7), store=store)
+    bus = _connected(tc)
+    assert bus.uploads() == 1  # asked for again, sent, activated
+    assert tc.counters["stored_pools_corrupt"] == 1
+    reason = "DDOP malformed" if damage == "not_a_pool" else "set aside"
+    assert any(reason in e and "asked for again" in e for e in tc.errors), tc.errors
+    assert list((tmp_path / "ddop").glob("*.corrupt"))  # kept for a look
+    assert store.load(ECU_NAME) == bus.tc.client.pool  # type: ignore[union-attr]
+
+
+def test_store_that_cannot_write_is_said_and_the_session_goes_on(tmp_path: Path) -> None:
+    blocker = tmp_path / "ddop"
+    blocker.write_text("a file where the folder should be")
+    tc = TcServer(tc_name(7), store=PoolStore(blocker))
+    _connected(tc)
+    assert tc.counters["store_errors"] == 1 and "not kept" in tc.errors[-1]
+
+
+def test_client_delete_forgets_the_kept_pool(tmp_path: Path) -> None:
+    store = PoolStore.beside(tmp_path)
+    bus = _connected(TcServer(tc_name(7), store=store))
+    delete = Frame(5 << 26 | 0xCB00 << 8 | 0xF7 << 8 | 0x84, bytes([0xA1]) + b"\xff" * 7)
+    out = bus.tc.step(bus.now + STEP_US, [delete])
+    assert any(f.data[:2] == b"\xb1\x00" for f in out)
+    assert store.load(ECU_NAME) is None
+
+
+def test_measurements_by_time_distance_and_change() -> None:
+    bus = _connected(TcServer(tc_name(7)))
+    tc, node = bus.tc, bus.node
+    c = tc.client
+    assert c is not None and c.device is not None
+    # the topdress pool: actual rate by time, distance, threshold and change; work state by
+    # change and threshold only
+    assert c.device.triggers[(3, 7)] == TRIG_TIME | TRIG_DISTANCE | TRIG_THRESHOLD | TRIG_CHANGE
+    assert c.device.measured(0, 141, TRIG_CHANGE) and not c.device.measured(0, 141, TRIG_TIME)
+    start = c.heard.get((3, 7), 0)
+    tc.measure_distance(3, 7, 5_000)  # every 5 m; the client drives 2.8 m/s
+    bus.run(18.0)
+    assert c.heard[(3, 7)] - start in (10, 11)  # one at once, then one per 5 m over 50.4 m
+    tc.measure_distance(3, 7, 0)
+    tc.measure_on_change(4, 7, 500)  # 5 kg/ha
+    bus.run(0.5)
+    before = c.heard.get((4, 7), 0)
+    for value in (1000, 1200, 1600, 1700, 2300):  # moves of 200, 400, 100, 600 from 1000
+        node.set_actual(4, 7, value)
+        bus.run(0.2)
+    assert c.values[(4, 7)] == 2300
+    # reported at once (1000 after 0), then at 1600 (600 from 1000) and 2300 (700 from 1600)
+    assert c.heard[(4, 7)] - before == 3
+    tc.measure_threshold(4, 75, maximum=500_000)  # content over 500 kg
+    sent = [f.data for f in tc.step(bus.now + STEP_US, [])]
+    assert pd_frame(7, 4, 75, 500_000) in sent
+
+
+def test_measurement_the_pool_does_not_offer_is_refused_before_the_bus() -> None:
+    bus = _connected(TcServer(tc_name(7)))
+    tc = bus.tc
+    with pytest.raises(ProtocolError, match="no time trigger for DDI 141 of element 0"):
+        tc.measure_every(0, 141, 1000)
+    with pytest.raises(ProtocolError, match="no distance trigger"):
+        tc.measure_distance(3, 75, 1000)
+    with pytest.raises(ProtocolError, match="no on-change trigger for DDI 7 of element 9"):
+        tc.measure_on_change(9, 7, 1)
+    with pytest.raises(ProtocolError, match="minimum or a maximum"):
+        tc.measure_threshold(3, 7)
+    with pytest.raises(ProtocolError, match="above maximum"):
+        tc.measure_threshold(3, 7, minimum=10, maximum=5)
+    with pytest.raises(ProtocolError, match="below 0"):
+        tc.measure_distance(3, 7, -1)
+    assert tc.counters["measurements_asked"] == 0
+
+
+def test_pdack_errors_read_and_a_missing_acknowledge_reported() -> None:
+    bus = _connected(TcServer(tc_name(7)))
+    tc = bus.tc
+    c = tc.client
+    assert c is not None
+    tc.set_value(3, 6, 1_000_000)  # 10,000 kg/ha: over the pool's maximum, the client refuses
+    bus.run(0.3)
+    assert c.pdacks[-1][:2] == (3, 6) and c.pdacks[-1][2] != 0
+    assert tc.counters["pdack_errors"] == 1
+    assert tc.errors[-1].startswith("client 0x84 refused DDI 6 of element 3: ")
+    assert "outside the operational range" in tc.errors[-1] or "conform" in tc.errors[-1]
+    tc.set_value(3, 6, 15000)
+    bus.run(0.3)
+    assert tc.counters["pdacks_ok"] >= 1 and not c.awaiting
+    # the client stops hearing us: the acknowledge never comes
+    tc.set_value(3, 6, 12000)
+    for _ in range(120):
+        bus.now += STEP_US
+        tc.step(bus.now, [])
+    assert tc.counters["pdacks_missing"] == 1
+    assert "did not acknowledge DDI 6 of element 3 within 1000 ms" in tc.errors[-1]
+
+
+def test_pdack_error_bits_in_words() -> None:
+    assert pdack_errors(0) == [] and pdack_errors(0xFF) == []  # AgIsoStack++: no code given
+    assert pdack_errors(0x04) == ["DDI not supported by the element"]
+    assert pdack_errors(0x90) == [
+        "process data not settable",
+        "value outside the operational range",
+    ]
+
+
+def test_client_options_read_from_its_version_message() -> None:
+    """AgIsoStack++'s client says 0x15 (documentation, TC-GEO with position-based control,
+    section control): the TC knows it can do TC-GEO; the topdress ECU says what it does."""
+    from test_isobus_tcserver import _replay
+
+    tc, _ = _replay()
+    c = tc.client
+    assert c is not None and c.options == 0x15 and c.geo and c.section_control
+    assert c.option_names == [
+        "documentation",
+        "TC-GEO with position-based control",
+        "implement section control",
+    ]
+    ecu = _connected(TcServer(tc_name(7))).tc.client
+    assert ecu is not None and ecu.version is not None
+    assert ecu.geo == bool(ecu.options & 0x06) and ecu.section_control
