@@ -10,64 +10,17 @@ from pathlib import Path
 
 import pytest
 
+from tc_rig import ECU_NAME, STEP_US, connected, replay_agiso
 from topdress.errors import ProtocolError
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_DISTANCE, TRIG_THRESHOLD, TRIG_TIME
-from topdress.isobus.node import Frame, IsobusNode, split_id, topdress_name
+from topdress.isobus.node import Frame, split_id
 from topdress.isobus.poolstore import PoolStore
 from topdress.isobus.tcserver import TcServer, pd_frame, pdack_errors, tc_name
-
-ECU_NAME = topdress_name(1407, bytes(range(12)))
-STEP_US = 10_000
-
-
-class Bus:
-    """The C client and the terminal's TC in virtual time, frames passed both ways each 10 ms;
-    `mm_per_step` is the distance the client is told it drove."""
-
-    def __init__(self, tc: TcServer, mm_per_step: int = 28) -> None:
-        self.node = IsobusNode(ECU_NAME, tc_timeout_ms=6000)
-        self.tc = tc
-        self.now = 0
-        self.mm = 0
-        self.mm_per_step = mm_per_step
-        self.from_node: list[Frame] = []
-        self.from_tc: list[Frame] = []
-        self._pending: list[Frame] = []
-        self.node.start(0)
-        tc.start(0)
-
-    def run(self, seconds: float) -> None:
-        for _ in range(round(seconds * 1e6 / STEP_US)):
-            self.now += STEP_US
-            self.mm += self.mm_per_step
-            for f in self._pending:
-                self.node.rx(f.can_id, f.data, self.now)
-            self.node.step(self.now, self.mm)
-            out = self.node.tx()
-            self.from_node += out
-            self._pending = self.tc.step(self.now, out)
-            self.from_tc += self._pending
-
-    def uploads(self) -> int:
-        """Pool transfers the client started (its TP/ETP request to send)."""
-        return sum(
-            1
-            for f in self.from_node
-            if split_id(f.can_id)[1] in (0xEC00, 0xC800) and f.data[0] in (16, 20)
-        )
-
-
-def _connected(tc: TcServer) -> Bus:
-    bus = Bus(tc)
-    bus.run(4.0)
-    c = tc.client
-    assert c is not None and c.active and bus.node.tc_state == "connected", tc.errors
-    return bus
 
 
 def test_pool_kept_and_offered_back_by_its_labels(tmp_path: Path) -> None:
     store = PoolStore.beside(tmp_path)
-    first = _connected(TcServer(tc_name(7), store=store))
+    first = connected(TcServer(tc_name(7), store=store))
     assert first.uploads() == 1
     c = first.tc.client
     assert c is not None and c.name == ECU_NAME and c.device is not None and not c.from_store
@@ -78,7 +31,7 @@ def test_pool_kept_and_offered_back_by_its_labels(tmp_path: Path) -> None:
     ]
     # the terminal restarted: a new server on the same folder; the client is told its labels
     # match and activates the pool without sending it
-    again = _connected(TcServer(tc_name(7), store=PoolStore.beside(tmp_path)))
+    again = connected(TcServer(tc_name(7), store=PoolStore.beside(tmp_path)))
     assert again.uploads() == 0
     c2 = again.tc.client
     assert c2 is not None and c2.from_store and c2.pool == c.pool
@@ -100,7 +53,7 @@ def test_a_client_whose_pool_changed_uploads_the_new_one(tmp_path: Path) -> None
         Path(__file__).parent / "data" / "agiso_spreader_ddop_2bins_6sections.bin"
     ).read_bytes()
     store.save(ECU_NAME, other, b"1234567", b"en\x50\x00\x00\x00\xff")
-    bus = _connected(TcServer(tc_name(7), store=store))
+    bus = connected(TcServer(tc_name(7), store=store))
     c = bus.tc.client
     assert c is not None and c.device is not None
     offered = [f.data for f in bus.from_tc if split_id(f.can_id)[3] == 0x84 and f.data[0] == 0x11]
@@ -113,7 +66,7 @@ def test_a_client_whose_pool_changed_uploads_the_new_one(tmp_path: Path) -> None
 @pytest.mark.parametrize("damage", ["flip", "cut", "garbage", "not_a_pool"])
 def test_corrupt_stored_pool_set_aside_and_asked_for_again(tmp_path: Path, damage: str) -> None:
     store = PoolStore.beside(tmp_path)
-    _connected(TcServer(tc_name(7), store=store))
+    connected(TcServer(tc_name(7), store=store))
     (path,) = (tmp_path / "ddop").glob("*.ddop")
     raw = bytearray(path.read_bytes())
     if damage == "flip":
@@ -126,7 +79,7 @@ def test_corrupt_stored_pool_set_aside_and_asked_for_again(tmp_path: Path, damag
     if damage == "not_a_pool":  # the checksum holds but the bytes are no DDOP
         store.save(ECU_NAME, b"DVC\x00\x00junk", b"1234567", b"en\x50\x00\x00\x00\xff")
     tc = TcServer(tc_name(7), store=store)
-    bus = _connected(tc)
+    bus = connected(tc)
     assert bus.uploads() == 1  # asked for again, sent, activated
     assert tc.counters["stored_pools_corrupt"] == 1
     reason = "DDOP malformed" if damage == "not_a_pool" else "set aside"
@@ -139,13 +92,13 @@ def test_store_that_cannot_write_is_said_and_the_session_goes_on(tmp_path: Path)
     blocker = tmp_path / "ddop"
     blocker.write_text("a file where the folder should be")
     tc = TcServer(tc_name(7), store=PoolStore(blocker))
-    _connected(tc)
+    connected(tc)
     assert tc.counters["store_errors"] == 1 and "not kept" in tc.errors[-1]
 
 
 def test_client_delete_forgets_the_kept_pool(tmp_path: Path) -> None:
     store = PoolStore.beside(tmp_path)
-    bus = _connected(TcServer(tc_name(7), store=store))
+    bus = connected(TcServer(tc_name(7), store=store))
     delete = Frame(5 << 26 | 0xCB00 << 8 | 0xF7 << 8 | 0x84, bytes([0xA1]) + b"\xff" * 7)
     out = bus.tc.step(bus.now + STEP_US, [delete])
     assert any(f.data[:2] == b"\xb1\x00" for f in out)
@@ -153,7 +106,7 @@ def test_client_delete_forgets_the_kept_pool(tmp_path: Path) -> None:
 
 
 def test_measurements_by_time_distance_and_change() -> None:
-    bus = _connected(TcServer(tc_name(7)))
+    bus = connected(TcServer(tc_name(7)))
     tc, node = bus.tc, bus.node
     c = tc.client
     assert c is not None and c.device is not None
@@ -181,7 +134,7 @@ def test_measurements_by_time_distance_and_change() -> None:
 
 
 def test_measurement_the_pool_does_not_offer_is_refused_before_the_bus() -> None:
-    bus = _connected(TcServer(tc_name(7)))
+    bus = connected(TcServer(tc_name(7)))
     tc = bus.tc
     with pytest.raises(ProtocolError, match="no time trigger for DDI 141 of element 0"):
         tc.measure_every(0, 141, 1000)
@@ -199,7 +152,7 @@ def test_measurement_the_pool_does_not_offer_is_refused_before_the_bus() -> None
 
 
 def test_pdack_errors_read_and_a_missing_acknowledge_reported() -> None:
-    bus = _connected(TcServer(tc_name(7)))
+    bus = connected(TcServer(tc_name(7)))
     tc = bus.tc
     c = tc.client
     assert c is not None
@@ -233,9 +186,7 @@ def test_pdack_error_bits_in_words() -> None:
 def test_client_options_read_from_its_version_message() -> None:
     """AgIsoStack++'s client says 0x15 (documentation, TC-GEO with position-based control,
     section control): the TC knows it can do TC-GEO; the topdress ECU says what it does."""
-    from test_isobus_tcserver import _replay
-
-    tc, _ = _replay()
+    tc, _ = replay_agiso()
     c = tc.client
     assert c is not None and c.options == 0x15 and c.geo and c.section_control
     assert c.option_names == [
@@ -243,6 +194,6 @@ def test_client_options_read_from_its_version_message() -> None:
         "TC-GEO with position-based control",
         "implement section control",
     ]
-    ecu = _connected(TcServer(tc_name(7))).tc.client
+    ecu = connected(TcServer(tc_name(7))).tc.client
     assert ecu is not None and ecu.version is not None
     assert ecu.geo == bool(ecu.options & 0x06) and ecu.section_control

@@ -373,6 +373,7 @@ class TcServer:
         old = self.names.get(sa)
         self.names[sa] = name
         if sa == self.address or sa == 0xFE:
+            self.other_tcs.pop(sa, None)  # that one lost the address to us, or gave it up
             return
         if is_tc(name) and name != self.name:
             self._other_tc(sa, name)
@@ -392,12 +393,17 @@ class TcServer:
                         "it must connect again")  # fmt: skip
 
     def _other_tc(self, sa: int, name: int | None) -> None:
-        if self.other_tcs.get(sa) == name and sa in self.other_tcs:
+        if sa in self.other_tcs and self.other_tcs[sa] == name:
             return
+        for a in [a for a, n in self.other_tcs.items() if name is not None and n == name]:
+            del self.other_tcs[a]  # the same TC moved (an address contest)
         self.other_tcs[sa] = name
+        key = f"tc:{sa}" if name is None else f"tc:{name}"
+        if key in self._said:
+            return
         self.counters["other_tcs"] += 1
         inst = "" if name is None else f", TC number {name_fields(name)['function_instance'] + 1}"
-        self._error(f"another Task Controller at {sa:#x}{inst}", key=f"tc:{sa}:{name}")
+        self._error(f"another Task Controller at {sa:#x}{inst}", key=key)
 
     def _flooding(self, sa: int, now_us: int) -> bool:
         second = now_us // 1_000_000
