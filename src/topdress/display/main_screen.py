@@ -203,12 +203,18 @@ class MainScreen:
         with ui.row().classes("w-full flex-1 no-wrap gap-1"):
             with ui.column().classes("flex-1 min-w-0 h-full gap-0"):
                 ui.label(tr("chart.speed_title")).classes("text-sm font-bold")
-                self.speed_chart = ui.echart(speed_options([], units=self.units)).classes(
-                    "w-full flex-1"
+                self.speed_chart = (
+                    ui.echart(speed_options([], units=self.units, night=self.hub.prefs.night))
+                    .classes("w-full flex-1")
+                    .mark("speed_chart")
                 )
             with ui.column().classes("flex-1 min-w-0 h-full gap-0"):
                 ui.label(tr("chart.meter_title")).classes("text-sm font-bold")
-                self.meter_chart = ui.echart(meter_options([])).classes("w-full flex-1")
+                self.meter_chart = (
+                    ui.echart(meter_options([], night=self.hub.prefs.night))
+                    .classes("w-full flex-1")
+                    .mark("meter_chart")
+                )
 
     def _panel_crop(self) -> None:
         rpm = tr("unit.rpm")
@@ -399,9 +405,10 @@ class MainScreen:
         if s.t_s - self._chart_t >= CHART_PERIOD_S or s.t_s < self._chart_t:
             self._chart_t = s.t_s
             history = self.hub.history()
-            self.speed_chart.options.update(speed_options(history, units=self.units))
+            night = self.hub.prefs.night
+            self.speed_chart.options.update(speed_options(history, units=self.units, night=night))
             self.speed_chart.update()
-            self.meter_chart.options.update(meter_options(history))
+            self.meter_chart.options.update(meter_options(history, night=night))
             self.meter_chart.update()
             self.map.update()
 
