@@ -197,3 +197,21 @@ def test_client_options_read_from_its_version_message() -> None:
     ecu = connected(TcServer(tc_name(7))).tc.client
     assert ecu is not None and ecu.version is not None
     assert ecu.geo == bool(ecu.options & 0x06) and ecu.section_control
+
+
+def test_sections_set_and_read_back_condensed() -> None:
+    bus = connected(TcServer(tc_name(7)))
+    tc = bus.tc
+    assert tc.sections_working() is None or len(tc.sections_working() or []) == 6
+    tc.set_value(2, 160, 1)  # section control: automatic
+    tc.set_value(2, 289, 1)
+    tc.set_sections([True, True, False, False, True, None])
+    tc.measure_on_change(2, 161, 1)
+    bus.run(0.5)
+    assert bus.node.sections_on == 0b010011  # the ECU takes "leave as is" (11) for off
+    # the machine reports what its sections do (here 1 and 6 working), by change
+    bus.node.set_actual(2, 161, -4096 + 0b01_00_00_00_00_01)
+    bus.run(0.3)
+    assert tc.sections_working() == [True, False, False, False, False, True]
+    with pytest.raises(ProtocolError, match="7 section states for 6 sections"):
+        tc.set_sections([True] * 7)

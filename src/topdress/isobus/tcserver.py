@@ -34,6 +34,7 @@ from topdress.isobus.devicemap import (
 )
 from topdress.isobus.node import ClaimNode, Frame, TpEndpoint, name_fields, split_id
 from topdress.isobus.poolstore import PoolStore
+from topdress.isobus.workstate import condensed_states, condensed_value
 
 __all__ = [
     "ACTUAL_CONDENSED",
@@ -238,6 +239,27 @@ class TcServer:
         if ack:
             c.awaiting.setdefault((element, ddi), -1)  # stamped with the next step's time
         self.counters["values_set"] += 1
+
+    def set_sections(self, states: list[bool | None], ack: bool = True) -> None:
+        """The sections' setpoint work states (section 1 first; None leaves one as it is) as the
+        condensed setpoint (DDI 290) on the element the pool carries it on."""
+        c = self._active_client()
+        element = None if c.device is None else c.device.condensed.get(SETPOINT_CONDENSED)
+        if element is None:
+            raise ProtocolError("the DDOP has no setpoint condensed work state (DDI 290)")
+        if c.device is not None and len(states) > len(c.device.sections):
+            raise ProtocolError(f"{len(states)} section states for {len(c.device.sections)} "
+                                "sections")  # fmt: skip
+        self.set_value(element, SETPOINT_CONDENSED, condensed_value(states), ack)
+
+    def sections_working(self) -> list[bool | None] | None:
+        """The sections' actual work states as the client last reported them (DDI 161), section
+        1 first; None before any report."""
+        c = self.client
+        if c is None or c.device is None or ACTUAL_CONDENSED not in c.device.condensed:
+            return None
+        value = c.values.get((c.device.condensed[ACTUAL_CONDENSED], ACTUAL_CONDENSED))
+        return None if value is None else condensed_states(value, len(c.device.sections))
 
     def _measure(self, cmd: int, trigger: int, element: int, ddi: int, value: int) -> None:
         c = self._active_client()
