@@ -8,12 +8,14 @@ import re
 from pathlib import Path
 
 from topdress.isobus.node import Frame, IsobusNode, split_id, topdress_name
+from topdress.isobus.poolstore import PoolStore
 from topdress.isobus.tcserver import TcServer, tc_name
 
 DATA = Path(__file__).parent / "data"
 TRACE = DATA / "agiso_tc_session_agiso_client.log"
 DDOP = DATA / "agiso_spreader_ddop_2bins_6sections.bin"
 CLIENT, TC = 0x80, 0xF7
+AGISO_NAME = 0xA00A8000AFE01092  # the AgIsoStack++ spreader client of the recordings
 LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-F]{8})#([0-9A-F]*)")
 
 
@@ -32,8 +34,11 @@ def client_frames(trace: Path = TRACE) -> list[tuple[int, Frame]]:
     return out
 
 
-def replay_agiso(trace: Path = TRACE) -> tuple[TcServer, list[Frame]]:
-    tc = TcServer(tc_name(7))
+def replay_agiso(
+    trace: Path = TRACE, store: PoolStore | None = None
+) -> tuple[TcServer, list[Frame]]:
+    """The client's side of a recorded session against a fresh server, 10 ms steps between."""
+    tc = TcServer(tc_name(7), store=store)
     tc.start(0)
     sent: list[Frame] = []
     now = 0

@@ -10,9 +10,25 @@ from pathlib import Path
 
 import pytest
 
-from tc_rig import ECU_NAME, STEP_US, connected, replay_agiso
+from tc_rig import (
+    AGISO_NAME,
+    CLIENT,
+    DATA,
+    DDOP,
+    ECU_NAME,
+    STEP_US,
+    client_frames,
+    connected,
+    replay_agiso,
+)
 from topdress.errors import ProtocolError
-from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_DISTANCE, TRIG_THRESHOLD, TRIG_TIME
+from topdress.isobus.devicemap import (
+    TRIG_CHANGE,
+    TRIG_DISTANCE,
+    TRIG_THRESHOLD,
+    TRIG_TIME,
+    map_device,
+)
 from topdress.isobus.node import Frame, split_id
 from topdress.isobus.poolstore import PoolStore
 from topdress.isobus.tcserver import TcServer, pd_frame, pdack_errors, tc_name
@@ -215,3 +231,34 @@ def test_sections_set_and_read_back_condensed() -> None:
     assert tc.sections_working() == [True, False, False, False, False, True]
     with pytest.raises(ProtocolError, match="7 section states for 6 sections"):
         tc.set_sections([True] * 7)
+
+
+@pytest.mark.interop
+def test_agiso_client_live_upload_then_labels_match_and_no_upload(tmp_path: Path) -> None:
+    """Two sessions recorded live between this server (kept pools in a folder) and AgIsoStack++'s
+    client (commit in docs/isobus.md): the first uploads its 1750-byte pool, which is kept; in
+    the second the client hears its structure and localization labels, activates without
+    sending the pool (93 frames on the bus, not 361), and is served. Replayed here: the
+    client's side of each against a fresh server on one store."""
+    store = PoolStore.beside(tmp_path)
+    first, _ = replay_agiso(DATA / "topdress_tc_agiso_client_upload.log", store)
+    c1 = first.client
+    assert c1 is not None and c1.active and not c1.from_store and first.errors == []
+    assert c1.pool == DDOP.read_bytes() and c1.geo  # version 4, options 0x15: TC-GEO
+    kept = store.load(AGISO_NAME)
+    assert kept == DDOP.read_bytes()
+    second, sent2 = replay_agiso(DATA / "topdress_tc_agiso_client_stored.log", store)
+    c2 = second.client
+    assert c2 is not None and c2.active and c2.from_store and second.errors == []
+    assert second.counters["uploads_saved"] == 1
+    to_client = [f.data for f in sent2 if split_id(f.can_id)[3] == CLIENT]
+    device = map_device(DDOP.read_bytes())
+    assert bytes([0x11]) + device.structure_label in to_client
+    assert bytes([0x31]) + device.localization_label in to_client
+    assert bytes([0x91, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0, 0xFF]) in to_client
+    # the recorded client sent no pool: no TP from it in the second session
+    frames = client_frames(DATA / "topdress_tc_agiso_client_stored.log")
+    assert not [f for _, f in frames if split_id(f.can_id)[1] in (0xEC00, 0xEB00, 0xC800)]
+    # and what it reported in the live run: the upper bin at 180 kg/ha, sections 4-6 working
+    assert c2.values[(3, 7)] == 18000
+    assert second.sections_working() == [False, False, False, True, True, True]

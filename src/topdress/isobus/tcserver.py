@@ -381,6 +381,7 @@ class TcServer:
         if pgn in (0xEC00, 0xEB00, 0xC800, 0xC700) and self._tp is not None:
             n = len(self._tp.received)
             self._tp.rx(f.can_id, f.data, now_us)
+            self._out += self._tp.tx()  # the end-of-message ack goes before any answer to it
             if len(self._tp.received) > n:
                 pgn_in, src, data = self._tp.received.pop()
                 if pgn_in == PD_PGN:
@@ -486,6 +487,8 @@ class TcServer:
     def _technical(self, c: Client, d: bytes) -> None:
         if d[0] == 0x00:  # version request
             self._send(c.address, bytes([0x10, VERSION, 0xFF, SERVER_OPTIONS, 0, 1, 16, 2]))
+            if c.version is None:  # ours came too early for it (AgIsoStack++): ask again
+                self._send(c.address, bytes([0x00]) + b"\xff" * 7)
         elif d[0] == 0x10:  # the client's own version, answering ours
             c.version = bytes(d)
             _log.info("TC: client %#x version %d, options %s%s", c.address, d[1],
