@@ -230,6 +230,7 @@ def test_process_data_path_fuzzed_server_keeps_serving() -> None:
         out += got
     assert len(_status_times(out)) == 10  # every 2 s over 20 s
     assert tc.ignored > 0 and tc.counters["unknown_values"] > 0
+    assert len(tc.errors) <= 200  # the words kept are bounded however much garbage came
     # a fresh connection after all that: the C client connects and its rate is set
     fresh = Bus(TcServer(tc_name(7)))
     fresh.run(4.0)
@@ -298,3 +299,14 @@ def test_ddop_parser_fuzzed_structure_aware() -> None:
                 said[next(k for k in kinds if k in str(exc))] += 1
     assert outcomes["mapped"] > 100 and outcomes["refused"] > 500
     assert all(n > 0 for k, n in said.items() if k != "over 4095"), said
+
+
+def test_endless_new_nonsense_is_counted_past_the_words_kept() -> None:
+    tc, _ = replay_agiso()
+    t = 60_000_000
+    for ddi in range(3000):  # 3,000 DDIs its pool does not have, each once
+        t += STEP_US
+        tc.step(t, [_pd(CLIENT, bytes([0x33, 0]) + struct.pack("<Hi", 1000 + ddi, 1))])
+    assert tc.counters["unknown_values"] == 3000
+    assert tc.counters["errors_suppressed"] > 1900 and len(tc.errors) == 200
+    assert tc.client is not None and tc.client.active and not tc.client.lost

@@ -66,6 +66,7 @@ PDACK_TIMEOUT_US = 1_000_000  # a Set Value and Acknowledge unanswered this long
 FLOOD_PER_S = 200  # process-data messages a second from one address; more are dropped
 KEEP_PDACKS = 256  # the last acknowledges kept per client
 KEEP_ERRORS = 200  # the last error lines kept
+KEEP_SAID = 1024  # faults said once; past this many kinds, further new ones are only counted
 
 # process-data commands (low nibble of byte 0)
 TECH, DEVICE, REQUEST, VALUE, MEAS_TIME, MEAS_DISTANCE = 0, 1, 2, 3, 4, 5
@@ -219,6 +220,9 @@ class TcServer:
         """Records a fault in words (once per `key`, when given) and logs it."""
         if key is not None:
             if key in self._said:
+                return
+            if len(self._said) >= KEEP_SAID:  # a client inventing new faults without end
+                self.counters["errors_suppressed"] += 1
                 return
             self._said.add(key)
         self.errors.append(what)
