@@ -38,18 +38,6 @@ class PoolStore:
             return []
         return sorted(self.folder.glob(f"{name:016X}_*{SUFFIX}"))
 
-    def labels(self, name: int) -> tuple[bytes, bytes] | None:
-        """(structure, localization) of the pool kept for `name`, from its file name."""
-        files = self._files(name)
-        if not files:
-            return None
-        parts = files[-1].stem.split("_")
-        try:
-            structure, localization = bytes.fromhex(parts[1]), bytes.fromhex(parts[2])
-        except (IndexError, ValueError):
-            return None
-        return structure, localization
-
     def load(self, name: int) -> bytes | None:
         """The pool kept for `name`; None when there is none. ProtocolError (the file renamed
         `*.corrupt`) when it does not read back as it was written."""
