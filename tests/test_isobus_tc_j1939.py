@@ -65,11 +65,14 @@ def _ca(ecu: Any, name: int, address: int) -> Any:
     return ca
 
 
-def _tc_wire(group: str) -> Wire:
+def _tc_on_bus(group: str) -> tuple[Wire, TcServer]:
+    """The TC on the bus, once it holds 0xF7."""
     w = TcOnWire(TcServer(OURS))
     wire = Wire(udp_bus(group), w, w.step)
     w.tc.start(wire.now_us())
-    return wire
+    wire.pump(0.5, until=lambda: w.tc.address == TC)
+    assert w.tc.address == TC
+    return wire, w.tc
 
 
 def _wait(what: Any, seconds: float = 3.0) -> None:
@@ -81,10 +84,7 @@ def _wait(what: Any, seconds: float = 3.0) -> None:
 
 def test_tc_address_won_by_a_lower_tc_name(peer: tuple[str, Any]) -> None:
     group, ecu = peer
-    w = _tc_wire(group)
-    tc: TcServer = w.obj.tc
-    w.pump(0.5, until=lambda: tc.address == TC)
-    assert tc.address == TC
+    w, tc = _tc_on_bus(group)
     rival = _ca(ecu, OURS - 0x100, TC)  # another TC number 1, with a lower NAME
     w.pump(2.0, until=lambda: tc.address not in (TC, None))
     w.pump(0.3)
@@ -100,9 +100,7 @@ def test_tc_address_won_by_a_lower_tc_name(peer: tuple[str, Any]) -> None:
 
 def test_tc_address_defended_against_a_higher_name(peer: tuple[str, Any]) -> None:
     group, ecu = peer
-    w = _tc_wire(group)
-    tc: TcServer = w.obj.tc
-    w.pump(0.5, until=lambda: tc.address == TC)
+    w, tc = _tc_on_bus(group)
     intruder = _ca(ecu, CLIENT_NAME, TC)  # an implement that wants 0xF7
     w.pump(2.0, until=lambda: intruder.device_address not in (TC, None))
     w.pump(0.3)
@@ -113,9 +111,7 @@ def test_tc_address_defended_against_a_higher_name(peer: tuple[str, Any]) -> Non
 
 def test_j1939_client_uploads_its_pool_over_tp_and_is_activated(peer: tuple[str, Any]) -> None:
     group, ecu = peer
-    w = _tc_wire(group)
-    tc: TcServer = w.obj.tc
-    w.pump(0.5, until=lambda: tc.address == TC)
+    w, tc = _tc_on_bus(group)
     ca = _ca(ecu, CLIENT_NAME, 0x80)
     got: list[bytes] = []
     ca.subscribe(lambda prio, pgn, sa, ts, data: got.append(bytes(data)) if pgn == 0xCB00 else None)
