@@ -11,11 +11,12 @@ from pathlib import Path
 import pytest
 import shapely
 
-from tc_rig import DDOP
+from tc_rig import DDOP, connected
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.outlet import offset_position
 from topdress.geo.sectionctl import Section, SectionControl, sections_from_device
 from topdress.isobus.devicemap import map_device
+from topdress.isobus.tcserver import TcServer, tc_name
 from topdress.isobus.workstate import condensed_states, condensed_value
 
 SW = (48.10, 11.50)  # the field's south-west corner
@@ -142,3 +143,40 @@ def test_condensed_work_state_as_the_client_reads_it() -> None:
     assert condensed_value([False, False, False, True, True, True]) == 0xFFFFF540 - (1 << 32)
     assert condensed_states(0xFFFFF540 - (1 << 32), 6) == [False] * 3 + [True] * 3
     assert condensed_states(condensed_value([True, None, False]), 4) == [True, None, False, None]
+
+
+def test_closed_loop_with_the_ecu_client_through_the_tc() -> None:
+    """The chain end to end: the topdress ECU's C TC client connects to the terminal's TC; its
+    pool's six 0.6 m sections are placed by SectionControl, whose setpoints the TC sends (DDI
+    290) as the machine drives; the ECU's sections follow, it reports them (DDI 161, on change)
+    and that report is what counts as covered. Up a pass at east 2 m, back at 5 m: the one
+    section over the first pass is off, the others on."""
+    bus = connected(TcServer(tc_name(7)))
+    tc, node = bus.tc, bus.node
+    c = tc.client
+    assert c is not None and c.device is not None
+    sc = SectionControl(sections_from_device(c.device), _field())
+    assert [round(s.width_m, 3) for s in sc.sections] == [0.6] * 6
+    tc.set_value(2, 160, 1)  # automatic section control
+    tc.set_value(2, 289, 1)
+    tc.measure_on_change(2, 161, 1)
+    sent: list[list[bool]] = []
+
+    def drive(east: float, heading: float, north: list[float]) -> int:
+        for n in north:
+            lat, lon = at(east, n)
+            states = sc.decide(lat, lon, heading)
+            if not sent or states != sent[-1]:
+                tc.set_sections(list[bool | None](states))
+                sent.append(states)
+            bus.run(0.1)  # 10 km/h: 0.28 m
+            mask = node.sections_on
+            node.set_actual(2, 161, condensed_value([bool(mask >> i & 1) for i in range(6)]))
+            sc.cover(lat, lon, heading, tc.sections_working() or [False] * 6)
+        return node.sections_on
+
+    drive(2.0, NORTH, _steps(-2.0, 102.0, 0.28))
+    assert sent[0] == [False] * 6 and [True] * 6 in sent and sent[-1] == [False] * 6
+    mid = drive(5.0, SOUTH, _steps(102.0, 50.0, 0.28))
+    assert mid == 0b011111  # heading south section 6 is at east 3.2..3.8 m: the first pass's
+    assert tc.errors == [] and tc.counters["pdacks_ok"] >= len(sent)
