@@ -310,3 +310,17 @@ def test_endless_new_nonsense_is_counted_past_the_words_kept() -> None:
     assert tc.counters["unknown_values"] == 3000
     assert tc.counters["errors_suppressed"] > 1900 and len(tc.errors) == 200
     assert tc.client is not None and tc.client.active and not tc.client.lost
+
+
+def test_a_tc_status_from_an_address_that_never_claimed_is_another_tc() -> None:
+    tc, _ = replay_agiso()
+    status = Frame(
+        3 << 26 | 0xCB00 << 8 | 0xFF << 8 | 0xF0, bytes([0xFE, 0xFF, 0xFF, 0xFF, 0, 0xFF, 0, 0xFF])
+    )
+    assert tc.client is not None
+    t0 = tc.client.last_heard_us + STEP_US
+    for k in range(3):  # every second, within the client's timeout
+        tc.step(t0 + k * 1_000_000, [status])
+    assert tc.other_tcs == {0xF0: None} and tc.counters["other_tcs"] == 1
+    assert tc.alarms == ["another Task Controller at 0xf0 (its number not known)"]
+    assert tc.client is not None and tc.client.active  # its own client still served

@@ -201,7 +201,9 @@ class TcServer:
             out.append("the TC found no free address: no client can reach it")
         mine = name_fields(self.name)["function_instance"]
         for sa, n in sorted(self.other_tcs.items()):
-            if n is None or name_fields(n)["function_instance"] == mine:
+            if n is None:
+                out.append(f"another Task Controller at {sa:#x} (its number not known)")
+            elif name_fields(n)["function_instance"] == mine:
                 out.append(f"another Task Controller number {mine + 1} at {sa:#x}")
         c = self.client
         if c is not None and c.active and c.lost:
