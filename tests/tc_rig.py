@@ -19,7 +19,10 @@ AGISO_NAME = 0xA00A8000AFE01092  # the AgIsoStack++ spreader client of the recor
 LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-F]{8})#([0-9A-F]*)")
 
 
-def client_frames(trace: Path = TRACE) -> list[tuple[int, Frame]]:
+def client_frames(
+    trace: Path = TRACE, sources: tuple[int, ...] = (CLIENT,)
+) -> list[tuple[int, Frame]]:
+    """The frames the clients at `sources` sent in a candump trace, with their time (us)."""
     out = []
     t0 = None
     for line in trace.read_text(encoding="ascii").splitlines():
@@ -29,20 +32,20 @@ def client_frames(trace: Path = TRACE) -> list[tuple[int, Frame]]:
         t = float(m[1])
         t0 = t if t0 is None else t0
         can_id = int(m[2], 16)
-        if split_id(can_id)[2] == CLIENT:
+        if split_id(can_id)[2] in sources:
             out.append((int((t - t0) * 1e6), Frame(can_id, bytes.fromhex(m[3]))))
     return out
 
 
 def replay_agiso(
-    trace: Path = TRACE, store: PoolStore | None = None
+    trace: Path = TRACE, store: PoolStore | None = None, sources: tuple[int, ...] = (CLIENT,)
 ) -> tuple[TcServer, list[Frame]]:
     """The client's side of a recorded session against a fresh server, 10 ms steps between."""
     tc = TcServer(tc_name(7), store=store)
     tc.start(0)
     sent: list[Frame] = []
     now = 0
-    for t, f in client_frames(trace):
+    for t, f in client_frames(trace, sources):
         while now + 10_000 <= t:
             now += 10_000
             sent += tc.step(now, [])

@@ -7,18 +7,15 @@ from __future__ import annotations
 
 import random
 import struct
-from pathlib import Path
 
-from tc_rig import STEP_US, Bus, connected, replay_agiso
+import pytest
+
+from tc_rig import AGISO_NAME, CLIENT, DATA, STEP_US, TC, Bus, connected, replay_agiso
 from topdress.errors import ProtocolError
 from topdress.isobus.ddop import Machine, build, parse
 from topdress.isobus.devicemap import map_device
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, split_id, topdress_name
 from topdress.isobus.tcserver import FLOOD_PER_S, TcServer, tc_name
-
-DATA = Path(__file__).parent / "data"
-AGISO_NAME = 0xA00A8000AFE01092  # the AgIsoStack++ client of the recorded session, at 0x80
-TC, CLIENT = 0xF7, 0x80
 
 
 def _pd(sa: int, data: bytes, da: int = TC) -> Frame:
@@ -324,3 +321,22 @@ def test_a_tc_status_from_an_address_that_never_claimed_is_another_tc() -> None:
     assert tc.other_tcs == {0xF0: None} and tc.counters["other_tcs"] == 1
     assert tc.alarms == ["another Task Controller at 0xf0 (its number not known)"]
     assert tc.client is not None and tc.client.active  # its own client still served
+
+
+@pytest.mark.interop
+def test_two_agiso_clients_live_the_second_nacked_then_served() -> None:
+    """Recorded live: this server and two AgIsoStack++ clients (commit in docs/isobus.md), A at
+    0x80 from 1 s to 25 s, B at 0x81 from 3 s. B is refused and NACKed; the library says "The TC
+    Server is NACK-ing our messages. Disconnecting." and tries again after its start-up delay,
+    three times, until A has gone (lost 6 s after its last frame); then B uploads its pool and
+    is activated. Both clients' side replayed here."""
+    tc, sent = replay_agiso(DATA / "topdress_tc_two_agiso_clients.log", sources=(0x80, 0x81))
+    nacks = [f for f in sent if split_id(f.can_id)[1:4:2] == (0xE800, 0x81)]
+    assert len(nacks) >= 3 and all(f.data[0] == 1 for f in nacks)
+    assert tc.errors[:2] == [
+        "client 0x81 refused: the TC serves 0x80, one at a time",
+        "client 0x80 silent for 6000 ms",
+    ]
+    c = tc.client
+    assert c is not None and c.address == 0x81 and c.active and c.name == 0xA00A8000AFE00007
+    assert tc.counters["activations"] == 2 and tc.counters["clients_lost"] == 1
