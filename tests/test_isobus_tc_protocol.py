@@ -262,3 +262,24 @@ def test_agiso_client_live_upload_then_labels_match_and_no_upload(tmp_path: Path
     # and what it reported in the live run: the upper bin at 180 kg/ha, sections 4-6 working
     assert c2.values[(3, 7)] == 18000
     assert second.sections_working() == [False, False, False, True, True, True]
+
+
+@pytest.mark.interop
+def test_agiso_client_live_corrupt_kept_pool_asked_for_again(tmp_path: Path) -> None:
+    """Recorded live with a kept pool whose bytes were flipped on disk: the server sets the
+    file aside, answers "none stored", and AgIsoStack++'s client uploads its pool again (TP) and
+    is activated; the pool is kept anew."""
+    store = PoolStore.beside(tmp_path)
+    device = map_device(DDOP.read_bytes())
+    path = store.save(AGISO_NAME, DDOP.read_bytes(), device.structure_label,
+                      device.localization_label)  # fmt: skip
+    raw = bytearray(path.read_bytes())
+    raw[-300] ^= 0x10  # as on the recording's disk
+    path.write_bytes(bytes(raw))
+    tc, sent = replay_agiso(DATA / "topdress_tc_agiso_client_corrupt_kept.log", store)
+    c = tc.client
+    assert c is not None and c.active and not c.from_store and c.pool == DDOP.read_bytes()
+    assert tc.counters["stored_pools_corrupt"] == 1 and "fails its checksum" in tc.errors[0]
+    assert bytes([0x11]) + b"\xff" * 7 in [f.data for f in sent]
+    assert store.load(AGISO_NAME) == DDOP.read_bytes()
+    assert len(list((tmp_path / "ddop").glob("*.corrupt"))) == 1
