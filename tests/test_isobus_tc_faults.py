@@ -340,3 +340,20 @@ def test_two_agiso_clients_live_the_second_nacked_then_served() -> None:
     c = tc.client
     assert c is not None and c.address == 0x81 and c.active and c.name == 0xA00A8000AFE00007
     assert tc.counters["activations"] == 2 and tc.counters["clients_lost"] == 1
+
+
+@pytest.mark.interop
+def test_beside_agiso_tc_live_named_alarmed_and_its_client_let_go() -> None:
+    """Recorded live: this server (0xF7), AgIsoStack++'s TaskControllerServer (TC number 1 too;
+    it took 0x80) and its client (0x81) on one bus. The client announced itself to both, chose
+    the other TC and was activated there. Replayed (the other TC's and the client's frames):
+    the server names the other TC, raises the alarm, and lets the client go instead of waiting
+    for it and reporting it lost."""
+    tc, _ = replay_agiso(DATA / "topdress_tc_beside_agiso_tc.log", sources=(0x80, 0x81))
+    assert tc.address == TC and tc.other_tcs == {0x80: 0xA0008200AFE00014}
+    assert tc.alarms == ["another Task Controller number 1 at 0x80"]
+    assert tc.errors == [
+        "another Task Controller at 0x80, TC number 1",
+        "client 0x81 works with the Task Controller at 0x80",
+    ]
+    assert tc.client is None and tc.counters["clients_lost"] == 0

@@ -373,6 +373,9 @@ class TcServer:
             self._other_tc(sa, self.names.get(sa))
             return
         if me is None or da not in (me, 0xFF):
+            c = self.client
+            if pgn == PD_PGN and da in self.other_tcs and c is not None and c.address == sa:
+                self._elsewhere(c, da)
             return
         if pgn == 0xEA00 and f.data[:3] == b"\x0f\xfe\x00":  # request for the language command
             self._out.append(Frame(6 << 26 | 0xFE0F << 8 | me, b"en\x50\x00\x00\x00\xff\xff"))
@@ -433,6 +436,14 @@ class TcServer:
         self.counters["other_tcs"] += 1
         inst = "" if name is None else f", TC number {name_fields(name)['function_instance'] + 1}"
         self._error(f"another Task Controller at {sa:#x}{inst}", key=key)
+
+    def _elsewhere(self, c: Client, tc: int) -> None:
+        """The client talks to another TC (two on the bus, and it chose that one): let it go
+        rather than wait for it and call it lost."""
+        self.client = None
+        self.counters["clients_to_other_tc"] += 1
+        self._error(f"client {c.address:#x} works with the Task Controller at {tc:#x}",
+                    key=f"elsewhere:{c.address}:{tc}")  # fmt: skip
 
     def _flooding(self, sa: int, now_us: int) -> bool:
         second = now_us // 1_000_000
