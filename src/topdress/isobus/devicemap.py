@@ -136,7 +136,7 @@ def map_device(pool: bytes) -> Device:
         for ddi in (SETPOINT_CONDENSED, ACTUAL_CONDENSED):
             if ddi in ddis:
                 condensed[ddi] = element
-    parents = {e: element_of[p] for e, p in parent_ids.items() if p in element_of and p != e}
+    parents = {e: element_of[p] for e, p in parent_ids.items() if element_of.get(p, e) != e}
     f = dvcs[0].fields
     return Device(
         str(f["designator"]), bins, sections, condensed, frozenset(settable), len(objs),
