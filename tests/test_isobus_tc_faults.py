@@ -10,7 +10,7 @@ import struct
 
 import pytest
 
-from tc_rig import AGISO_NAME, CLIENT, DATA, STEP_US, TC, Bus, connected, replay_agiso
+from tc_rig import AGISO_NAME, CLIENT, DATA, DDOP, STEP_US, TC, Bus, connected, replay_agiso
 from topdress.errors import ProtocolError
 from topdress.isobus.ddop import Machine, build, parse
 from topdress.isobus.devicemap import map_device
@@ -357,3 +357,42 @@ def test_beside_agiso_tc_live_named_alarmed_and_its_client_let_go() -> None:
         "client 0x81 works with the Task Controller at 0x80",
     ]
     assert tc.client is None and tc.counters["clients_lost"] == 0
+
+
+def test_a_slow_pool_transfer_is_no_silence() -> None:
+    """A client whose 1750-byte pool takes longer than the 6 s client timeout to arrive (it
+    takes each clear-to-send 0.6 s late, sending no task message meanwhile): its transport
+    frames count as heard, so it is not lost halfway, and the pool is activated."""
+    tc = TcServer(tc_name(7))
+    tc.start(0)
+    tp = TpEndpoint(0x8A, 4096)
+    pool = DDOP.read_bytes()
+    t, answers, held = 0, list[bytes](), list[Frame]()
+
+    def step(frames: list[Frame], slow: bool = False) -> None:
+        nonlocal t
+        t += STEP_US
+        tp.step(t)
+        held.extend(tc.step(t, frames + tp.tx()))
+        if slow and t % 600_000:
+            return
+        for f in held:
+            tp.rx(f.can_id, f.data, t)
+            if split_id(f.can_id)[1:4:2] == (0xCB00, 0x8A):
+                answers.append(f.data)
+        held.clear()
+
+    for _ in range(40):
+        step([])
+    step([Frame(6 << 26 | 0xFE0D << 8 | 0x8A, bytes([1]) + b"\xff" * 7)])
+    step([_pd(0x8A, bytes([0x41]) + len(pool).to_bytes(4, "little") + b"\xff" * 3)])
+    start = t
+    tp.send(0xCB00, TC, bytes([0x61]) + pool, t)
+    while tp.send_state == "busy":
+        step([], slow=True)
+    step([_pd(0x8A, bytes([0x81]) + b"\xff" * 7)])
+    assert t - start > 6_000_000  # slower than the client timeout
+    assert tp.send_state == "done" and tc.counters["clients_lost"] == 0
+    c = tc.client
+    assert c is not None and c.active and c.pool == pool
+    assert answers[-1] == bytes([0x91, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0, 0xFF])

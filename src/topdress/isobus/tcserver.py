@@ -388,6 +388,9 @@ class TcServer:
         if da != me:
             return
         if pgn in (0xEC00, 0xEB00, 0xC800, 0xC700) and self._tp is not None:
+            c = self.client
+            if c is not None and c.address == sa and not c.lost:
+                c.last_heard_us = now_us  # a slow pool transfer is a client still there
             n = len(self._tp.received)
             self._tp.rx(f.can_id, f.data, now_us)
             self._out += self._tp.tx()  # the end-of-message ack goes before any answer to it
