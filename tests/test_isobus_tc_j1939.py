@@ -6,14 +6,17 @@ it activated."""
 
 from __future__ import annotations
 
+import random
 import time
 from collections.abc import Iterator
 from typing import Any
 
+import can
 import j1939
 import pytest
+from can import BusABC as Bus
 
-from isobus_rig import Wire, udp_bus, udp_group
+from isobus_rig import Wire, udp_group
 from tc_rig import DDOP
 from topdress.isobus.node import Frame, split_id
 from topdress.isobus.tcserver import TcServer, tc_name
@@ -46,14 +49,17 @@ class TcOnWire:
 
 
 @pytest.fixture
-def peer() -> Iterator[tuple[str, Any]]:
-    group = udp_group()
+def peer() -> Iterator[tuple[Bus, Any]]:
+    """A can-j1939 ECU and a python-can bus on one multicast group and a port of their own: the
+    interface binds its port for every group, so a shared port would hear other tests' buses."""
+    group, port = udp_group(), random.randrange(20_000, 60_000)
     ecu = j1939.ElectronicControlUnit()
     try:
-        ecu.connect(interface="udp_multicast", channel=group, fd=False)
+        ecu.connect(interface="udp_multicast", channel=group, port=port, fd=False)
+        bus = can.Bus(interface="udp_multicast", channel=group, port=port, fd=False)
     except OSError as exc:
         pytest.skip(f"udp_multicast CAN unavailable here: {exc}")
-    yield group, ecu
+    yield bus, ecu
     ecu.stop()
     ecu.disconnect()
 
@@ -65,10 +71,10 @@ def _ca(ecu: Any, name: int, address: int) -> Any:
     return ca
 
 
-def _tc_on_bus(group: str) -> tuple[Wire, TcServer]:
+def _tc_on_bus(bus: Bus) -> tuple[Wire, TcServer]:
     """The TC on the bus, once it holds 0xF7."""
     w = TcOnWire(TcServer(OURS))
-    wire = Wire(udp_bus(group), w, w.step)
+    wire = Wire(bus, w, w.step)
     w.tc.start(wire.now_us())
     wire.pump(0.5, until=lambda: w.tc.address == TC)
     assert w.tc.address == TC
@@ -82,9 +88,9 @@ def _wait(what: Any, seconds: float = 3.0) -> None:
     assert what()
 
 
-def test_tc_address_won_by_a_lower_tc_name(peer: tuple[str, Any]) -> None:
-    group, ecu = peer
-    w, tc = _tc_on_bus(group)
+def test_tc_address_won_by_a_lower_tc_name(peer: tuple[Bus, Any]) -> None:
+    bus, ecu = peer
+    w, tc = _tc_on_bus(bus)
     rival = _ca(ecu, OURS - 0x100, TC)  # another TC number 1, with a lower NAME
     w.pump(2.0, until=lambda: tc.address not in (TC, None))
     w.pump(0.3)
@@ -98,9 +104,9 @@ def test_tc_address_won_by_a_lower_tc_name(peer: tuple[str, Any]) -> None:
     w.bus.shutdown()
 
 
-def test_tc_address_defended_against_a_higher_name(peer: tuple[str, Any]) -> None:
-    group, ecu = peer
-    w, tc = _tc_on_bus(group)
+def test_tc_address_defended_against_a_higher_name(peer: tuple[Bus, Any]) -> None:
+    bus, ecu = peer
+    w, tc = _tc_on_bus(bus)
     intruder = _ca(ecu, CLIENT_NAME, TC)  # an implement that wants 0xF7
     w.pump(2.0, until=lambda: intruder.device_address not in (TC, None))
     w.pump(0.3)
@@ -109,9 +115,9 @@ def test_tc_address_defended_against_a_higher_name(peer: tuple[str, Any]) -> Non
     w.bus.shutdown()
 
 
-def test_j1939_client_uploads_its_pool_over_tp_and_is_activated(peer: tuple[str, Any]) -> None:
-    group, ecu = peer
-    w, tc = _tc_on_bus(group)
+def test_j1939_client_uploads_its_pool_over_tp_and_is_activated(peer: tuple[Bus, Any]) -> None:
+    bus, ecu = peer
+    w, tc = _tc_on_bus(bus)
     ca = _ca(ecu, CLIENT_NAME, 0x80)
     got: list[bytes] = []
     ca.subscribe(lambda prio, pgn, sa, ts, data: got.append(bytes(data)) if pgn == 0xCB00 else None)
@@ -132,7 +138,7 @@ def test_j1939_client_uploads_its_pool_over_tp_and_is_activated(peer: tuple[str,
     send(0xCB, TC, bytes([0x10, 4, 0xFF, 0x15, 0, 1, 6, 2]), None)  # its version
     send(0xCB, TC, bytes([0x01]) + b"\xff" * 7, 0x11)  # structure label: none kept
     send(0xCB, TC, bytes([0x41]) + len(pool).to_bytes(4, "little") + b"\xff" * 3, 0x51)
-    send(0xCB, TC, bytes([0x61]) + pool, 0x71, seconds=8.0)  # 1751 bytes: TP CMDT
+    send(0xCB, TC, bytes([0x61]) + pool, 0x71, seconds=20.0)  # 1751 bytes: TP CMDT
     send(0xCB, TC, bytes([0x81]) + b"\xff" * 7, 0x91)
     c = tc.client
     assert c is not None and c.address == 0x80 and c.name == CLIENT_NAME
