@@ -47,8 +47,8 @@ def sections_from_device(device: Device) -> list[Section]:
 
 
 class SectionControl:
-    """Section setpoints for one implement; `decide` is a pure function of the position and the
-    coverage so far, `cover` adds what the implement reports it worked."""
+    """Section setpoints for one implement; what `decide` answers depends only on the position
+    and the ground covered so far, `cover` adds what the implement reports it worked."""
 
     def __init__(
         self,
