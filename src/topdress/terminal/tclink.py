@@ -31,6 +31,7 @@ import can
 from topdress.errors import DeviceError, ProtocolError
 from topdress.i18n import text
 from topdress.isobus.ddop import condensed, parse, sections_of
+from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
 from topdress.isobus.tcserver import Client, Device, TcServer, map_device, tc_name
 from topdress.terminal.ecuview import LinkCounters
@@ -343,8 +344,16 @@ class TcLink:
         return [e for e, ddis in sorted(self._ddis.items()) if ddi in ddis]
 
     def _measure(self, element: int, ddi: int, ms: int) -> None:
-        if ddi in self._ddis.get(element, ()):
+        """Ask for `ddi` every `ms`, or on change where the pool offers no time trigger for it
+        (a measurement command the pool does not offer is refused by the server)."""
+        c = self.server.client
+        device = None if c is None else c.device
+        if device is None or ddi not in self._ddis.get(element, ()):
+            return
+        if device.measured(element, ddi, TRIG_TIME):
             self.server.measure_every(element, ddi, ms)
+        elif device.measured(element, ddi, TRIG_CHANGE):
+            self.server.measure_on_change(element, ddi)
 
     def _command(self, c: Client, now: float, command: tuple[bool, float, float, float]) -> None:
         start, _, upper, lower = command
