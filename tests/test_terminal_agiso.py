@@ -8,9 +8,7 @@ map."""
 
 from __future__ import annotations
 
-import itertools
 import json
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,18 +16,15 @@ import can
 import pytest
 
 from tc_rig import AGISO_NAME, CLIENT, client_frames
+from term_rig import TerminalParts
 from topdress.config import DEFAULT_TOML, loads_config
-from topdress.devices.can import open_bus
-from topdress.devices.lines import FakeLineSource
 from topdress.geo.export import export_maps
 from topdress.isobus.node import Frame, split_id
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.app import Terminal
 from topdress.view.snapshot import Snapshot
 
-_channels = itertools.count()
 PD_PGN = 0xCB00
 
 
@@ -48,16 +43,13 @@ def _value(f: Frame) -> tuple[int, int, int, int] | None:
 
 @pytest.mark.interop
 def test_the_terminal_serves_an_agisostack_client(tmp_path: Path) -> None:
-    cfg = loads_config(DEFAULT_TOML)
-    cfg = replace(cfg, can=replace(cfg.can, channel=f"agiso-{next(_channels)}", implement="isobus"))
     session = SessionLog.create(tmp_path, DEFAULT_TOML)
     drive = Drive([Segment("stop", duration_s=2.0),
                    Segment("straight", speed_kmh=8.0, length_m=150.0, hold=True)])  # fmt: skip
+    cfg = loads_config(DEFAULT_TOML)
     world = World(SimConfig.of_machine(cfg), seed=3, drive=drive)
-    gnss, crop = FakeLineSource(), FakeLineSource()
-    pc_bus, wire = open_bus(cfg.can), open_bus(cfg.can)
-    term = Terminal(cfg, gnss, crop, pc_bus, session, clock=lambda: world.t_s)
-    term.open()
+    parts = TerminalParts(cfg, lambda: world.t_s, session, implement="isobus")
+    term, gnss, crop, wire = parts.term, parts.gnss, parts.crop, parts.ecu_bus
     replay = client_frames()
     sent: list[tuple[float, Frame]] = []  # what the terminal's TC said
     snaps: list[Snapshot] = []
@@ -83,9 +75,7 @@ def test_the_terminal_serves_an_agisostack_client(tmp_path: Path) -> None:
                 term.tick(t)
                 snaps.append(term.snapshot)
     finally:
-        term.close()
-        pc_bus.shutdown()
-        wire.shutdown()
+        parts.close()
     events = _events(session.path)
     # the pool taken: the client named by its NAME and its DDOP's designator, connected
     (implement,) = [e.detail for e in events if e.kind == "isobus.implement"]
