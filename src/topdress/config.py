@@ -309,6 +309,11 @@ class IsobusConfig:
     tc_identity: int = _num(1, 0, (1 << 21) - 1)  # its NAME's identity number (one per cab)
     # a product set in volume per area (DDI 1, a liquid): kg/ha to L/ha by this density
     density_kg_l: float = _num(1.0, 0.1, 5.0)
+    # Section control (TC-SC, geo.sectionctl): each section off over ground already covered
+    # and outside the field boundary; false = all sections with the rate.
+    section_control: bool = True
+    overlap_pct: float = _num(50.0, 0.0, 99.0)  # a section goes off above this % done/outside
+    section_look_m: float = _num(1.0, 0.1, 20.0)  # length of ground each section looks at
 
 
 @dataclass(frozen=True)
@@ -912,5 +917,8 @@ product = "fertilizer"     # what the machine spreads, as the office's swaths na
 tc_address = 247           # the address claimed first (0xF7); 128..247 if it is taken
 tc_identity = 1            # the TC NAME's identity number: different in each cab on one bus
 density_kg_l = 1.0         # volume-per-area products (DDI 1): kg/ha -> L/ha by this density
+section_control = true     # sections off over ground covered and outside the boundary
+overlap_pct = 50.0         # a section goes off when more of its ground ahead is done/outside
+section_look_m = 1.0       # the strip of ground each section looks at, m (past its delay)
 """
 )

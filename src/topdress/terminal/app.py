@@ -118,6 +118,7 @@ class Terminal:
         self.desk = OperatorDesk(parts, start, config_path)
         self.snapshot = Snapshot()
         self._t0: float | None = None
+        self._sc_at: tuple[float, float] | None = None  # the outlet section control last saw
 
     # ---- the parts, as the loop's callers know them --------------------------------------------
     @property
@@ -307,6 +308,11 @@ class Terminal:
         ahead_m = max(v_sel, 0.0) / 3.6 * self.ndvi.lookahead_s
         at = self.gnss_in.tick(now, link, self.ndvi.odometer.distance_m, ahead_m)
         outlet, target = at.outlet, at.target
+        if tc is not None and outlet is not None and outlet.heading_deg is not None:
+            here = (outlet.lat, outlet.lon)
+            if here != self._sc_at:  # a new position: section control (terminal.tclink)
+                self._sc_at = here
+                tc.on_position(*here, outlet.heading_deg, v_sel, self.site.boundary)
         site = self.site.decide(
             ndvi,
             (outlet.lat, outlet.lon) if outlet is not None else None,

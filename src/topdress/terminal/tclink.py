@@ -10,7 +10,10 @@ blocks (the port sends from its own thread). Once a client's pool (DDOP) is acti
   product takes the upper layer's rate, the second the lower's, a single one both; on a change
   (acknowledged) and again every SETPOINT_REFRESH_S (a client that restarted gets it);
 - switches the work state (DDI 289), section control (160) and the sections (290) with the
-  operator's start and the site's rate (all sections on while there is a rate);
+  operator's start and the site's rate; with `[isobus] section_control` each section is also
+  off over ground already covered (what the implement reported working, DDI 161) and outside
+  the field boundary (geo.sectionctl, decided at each new outlet position: `on_position`);
+  with no boundary and nothing covered yet, all sections go with the rate;
 - asks for the actual rates (DDI 7/2), the work state (141), the sections (161) every
   MEASURE_MS and the totals (DDI 81/80) every TOTAL_MS;
 - reads the implement's delays from its pool (DDI 142, 143): 142 sets the look-ahead;
@@ -29,6 +32,8 @@ from typing import Any, Protocol
 import can
 
 from topdress.errors import DeviceError, ProtocolError
+from topdress.geo.boundary import FieldBoundary
+from topdress.geo.sectionctl import SectionControl, sections_from_device
 from topdress.i18n import text
 from topdress.isobus.ddop import condensed, parse, sections_of
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
@@ -148,6 +153,8 @@ class TcLink:
         self.connected_once = False  # a client's pool was active once
         self._functions_key: object = None
         self._functions_view: tuple[ControlFunctionView, ...] = ()
+        self._sc: SectionControl | None = None  # the implement's section control, once placed
+        self.section_on: tuple[bool, ...] | None = None  # what it decided last (None: all)
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -297,6 +304,7 @@ class TcLink:
         self._served = (c.address, c.device)
         self.connected_once = True
         self._sent.clear()
+        self._sc, self.section_on = None, None  # a new pool: its own sections and coverage
         if c.pool is not None:
             self._ddis, self.latency_ms = pool_ddis(c.pool)
         else:  # a pool the TC had stored: what its mapping kept (no delays)
@@ -377,9 +385,39 @@ class TcLink:
             self._set(c, now, element, SECTION_CONTROL_STATE, 1)  # automatic: the TC switches
         for element in self._carrying(SETPOINT_WORK_STATE):
             self._set(c, now, element, SETPOINT_WORK_STATE, int(working))
+        chosen = self.section_on
         for element in self._carrying(SETPOINT_CONDENSED):
-            on = tuple(working for _ in range(self.sections))
+            on = tuple(working and (chosen is None or chosen[i]) for i in range(self.sections))
             self._set(c, now, element, SETPOINT_CONDENSED, condensed(on))
+
+    def on_position(
+        self,
+        lat: float,
+        lon: float,
+        heading_deg: float,
+        speed_kmh: float,
+        boundary: FieldBoundary | None,
+    ) -> None:
+        """A new outlet position (the device reference point): the ground the sections the
+        implement reports working passed since the last one is covered, then each section's
+        setpoint is decided for the ground just ahead of it, past its delay (DDI 142)."""
+        c = self._client()
+        if not self._settings.cfg.isobus.section_control or c is None or c.device is None:
+            self.section_on = None
+            return
+        if self._sc is None:
+            sections = sections_from_device(c.device)
+            if not sections or any(s.width_m <= 0.0 for s in sections):
+                return  # a pool without section widths: all sections with the rate
+            cfg = self._settings.cfg.isobus
+            self._sc = SectionControl(
+                sections, boundary, off_pct=cfg.overlap_pct, look_m=cfg.section_look_m
+            )
+        reported = self._sections()
+        if reported:
+            self._sc.cover(lat, lon, heading_deg, list(reported))
+        lead_m = max(speed_kmh, 0.0) / 3.6 * self.latency_ms.get(SETPOINT_LATENCY, 0) / 1000
+        self.section_on = tuple(self._sc.decide(lat, lon, heading_deg, lead_m))
 
     def _set(self, c: Client, now: float, element: int, ddi: int, value: int) -> None:
         """Set a value on a change (acknowledged) or after SETPOINT_REFRESH_S (not)."""

@@ -1,0 +1,113 @@
+"""Section control in the terminal's TC link: the real terminal loop (IsobusRig) with the
+simulated topdress ECU on ISOBUS, driving a pass north and back south on a pass that overlaps
+the first by two of its six 0.6 m sections, in a field whose west edge cuts two more."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from test_terminal_isobus import IsobusRig
+from topdress.config import DEFAULT_TOML, ConfigError, TerminalConfig, loads_config
+from topdress.geo.outlet import offset_position
+from topdress.sim.gnss import GnssParams
+from topdress.sim.tractor import Drive, Segment
+
+# The turn's 1.2 m radius puts the way back about 2.2 m west (the tractor drifts back a little):
+# its sections 1 and 2 (0.6 m each, left going south) are over the first pass; the field's west
+# edge 3.0 m west of the first pass's centre leaves section 6 (and part of 5) outside.
+WEST_EDGE_M = -3.0
+
+
+def _drive() -> Drive:
+    return Drive(
+        [
+            Segment("stop", duration_s=3.0),
+            Segment("straight", speed_kmh=6.0, length_m=40.0, hold=True),
+            Segment("turn", speed_kmh=4.0, angle_deg=-180.0, radius_m=1.2),
+            Segment("straight", speed_kmh=6.0, length_m=40.0),
+            Segment("stop", duration_s=2.0),
+        ]
+    )
+
+
+def _boundary(tmp_path: Path) -> str:
+    p = GnssParams()
+    corners = [(WEST_EDGE_M, -30.0), (30.0, -30.0), (30.0, 100.0), (WEST_EDGE_M, 100.0)]
+    ring = [offset_position(p.lat0_deg, p.lon0_deg, 0.0, n, e)[::-1] for e, n in corners]
+    path = tmp_path / "field.geojson"
+    feature = {"type": "Feature", "properties": {},
+               "geometry": {"type": "Polygon", "coordinates": [[*ring, ring[0]]]}}  # fmt: skip
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": [feature]}))
+    return str(path)
+
+
+def _run(cfg: TerminalConfig) -> list[tuple[float, tuple[bool, ...], tuple[bool, ...]]]:
+    """(time, the sections the terminal reports from DDI 161, the sim's sections) at each tick
+    of the way back, once well clear of the turn."""
+    rig = IsobusRig(cfg, _drive())
+    out = []
+    try:
+        while rig.world.t_s < 58.0:
+            rig.run(rig.world.t_s + 0.1)
+            tr = rig.world.tractor
+            if abs(tr.heading) > 3.0 and 10.0 < tr.y < 30.0 and tr.v > 1.0:
+                iso = rig.term.snapshot.isobus
+                assert iso is not None
+                n = rig.sim.node.sections_on
+                sim = tuple(bool(n >> i & 1) for i in range(6))
+                out.append((rig.world.t_s, iso.sections, sim))
+    finally:
+        rig.close()
+    return out
+
+
+def _cfg(tmp_path: Path | None, **isobus: object) -> TerminalConfig:
+    cfg = loads_config(DEFAULT_TOML)
+    cfg = replace(cfg, isobus=replace(cfg.isobus, **isobus))  # type: ignore[arg-type]
+    if tmp_path is not None:
+        cfg = replace(cfg, boundary=replace(cfg.boundary, path=_boundary(tmp_path)))
+    return cfg
+
+
+def test_way_back_sections_off_over_the_first_pass_and_outside_the_field(tmp_path: Path) -> None:
+    back = _run(_cfg(tmp_path))
+    assert len(back) > 50
+    # what the implement reports (DDI 161) is what it does, but for a tick's lag at a switch
+    assert sum(reported == sim for _, reported, sim in back) >= 0.9 * len(back)
+    for _, _, sim in back:
+        assert not (sim[0] or sim[1])  # over the first pass: off
+        assert not sim[5]  # outside the field: off
+
+
+def test_without_a_boundary_only_the_overlap_goes_off() -> None:
+    back = _run(_cfg(None))
+    assert len(back) > 50
+    assert sum(reported == sim for _, reported, sim in back) >= 0.9 * len(back)
+    for _, _, sim in back:
+        assert not (sim[0] or sim[1])  # over the first pass: off
+        assert sim[4] and sim[5]  # on fresh ground, with no boundary to leave: on
+
+
+def test_section_control_off_switches_all_sections_with_the_rate(tmp_path: Path) -> None:
+    back = _run(_cfg(tmp_path, section_control=False))
+    assert len(back) > 50
+    assert all(reported == sim == (True,) * 6 for _, reported, sim in back)
+
+
+@pytest.mark.parametrize(
+    ("line", "key"),
+    [
+        ("overlap_pct = 100.0", "isobus.overlap_pct"),
+        ("section_look_m = 0.0", "isobus.section_look_m"),
+        ('section_control = "yes"', "isobus.section_control"),
+    ],
+)
+def test_a_bad_section_control_key_is_refused_naming_it(line: str, key: str) -> None:
+    name = line.split(" = ")[0]
+    lines = [line if x.startswith(f"{name} = ") else x for x in DEFAULT_TOML.splitlines()]
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        loads_config("\n".join(lines))
