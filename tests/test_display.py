@@ -1180,6 +1180,7 @@ async def test_no_isobus_card_with_the_topdress_ecu(user: User) -> None:
     await user.should_not_see(marker="isobus_tc")
     await user.open("/")
     await user.should_not_see(marker="implement")
+    await shows(user, "source_why", "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 km/h > 6 km/h")
     # an implement waiting for its pool: the card with no implement in it
     hub.publish(working(isobus=IsobusView(tc_address=None)))
     await user.open("/communication")
@@ -1195,6 +1196,8 @@ async def test_main_screen_shows_the_implement_and_its_sections(user: User) -> N
     await user.open("/")
     await shows(user, "implement", "Spreader 2400: ok · ■■□■□■")
     assert text_of(user, "rate_upper") == "138.9"  # the rates as for the topdress ECU
+    # the ECU's speed-source rule does not apply to it: its line gives the implement room
+    await user.should_not_see(marker="source_why")
     hub.publish(working(isobus=isobus_view(state="refused", implement="", sections=())))
     await shows(user, "implement", "ISOBUS: refused")
     i18n.set_language("zh")

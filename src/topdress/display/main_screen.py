@@ -397,7 +397,10 @@ class MainScreen:
         if self.source.props.get("color") != colour:
             self.source.props["color"] = colour
             self.source.update()
-        self.why.set_text(render(u.shown(s.speed_why)) if live else "")
+        # An ISOBUS implement meters on the GNSS speed the terminal sends: the ECU's rule for
+        # its speed source does not apply, and its line makes room for the implement's.
+        self.why.set_visibility(s.isobus is None)
+        self.why.set_text(render(u.shown(s.speed_why)) if live and s.isobus is None else "")
         for i, layer in enumerate(op.LAYERS):
             self.rate[layer].set_text(fmt.num(u.rate(s.rate_kg_ha[i]), ".1f"))
             self.applied[layer].set_text(fmt.ecu(s, u.rate(s.applied_kg_ha[i]), ".1f"))
