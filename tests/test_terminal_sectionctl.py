@@ -92,6 +92,35 @@ def test_without_a_boundary_only_the_overlap_goes_off() -> None:
         assert sim[4] and sim[5]  # on fresh ground, with no boundary to leave: on
 
 
+def test_the_coverage_outlives_the_implement_lost_and_back() -> None:
+    drive = _drive()
+    drive.segments.insert(3, Segment("stop", duration_s=12.0))  # after the turn: unplugged
+    cfg = _cfg(None)
+    rig = IsobusRig(cfg, drive)
+    try:
+        rig.run(40.0)
+        tc = rig.term.can.tc
+        assert tc is not None
+        rig.implement_off = True
+        rig.run(48.0)
+        assert tc.state == "lost"
+        rig.implement_off = False
+        rig.run(51.0)
+        assert tc.state == "ok"
+        back = []
+        while rig.world.t_s < 72.0:
+            rig.run(rig.world.t_s + 0.1)
+            tr = rig.world.tractor
+            if abs(tr.heading) > 3.0 and 10.0 < tr.y < 30.0 and tr.v > 1.0:
+                back.append(rig.sim.node.sections_on)
+    finally:
+        rig.close()
+    assert len(back) > 50
+    # the two sections over the first pass stay off (the coverage before the loss is kept),
+    # the outermost, on fresh ground, works
+    assert all(not (n & 0b11) and n & 0b100000 for n in back)
+
+
 def test_section_control_off_switches_all_sections_with_the_rate(tmp_path: Path) -> None:
     back = _run(_cfg(tmp_path, section_control=False))
     assert len(back) > 50

@@ -304,7 +304,9 @@ class TcLink:
         self._served = (c.address, c.device)
         self.connected_once = True
         self._sent.clear()
-        self._sc, self.section_on = None, None  # a new pool: its own sections and coverage
+        if self._sc is not None and self._sc.sections != sections_from_device(c.device):
+            self._sc = None  # another implement: its own sections and coverage
+        self.section_on = None
         if c.pool is not None:
             self._ddis, self.latency_ms = pool_ddis(c.pool)
         else:  # a pool the TC had stored: what its mapping kept (no delays)
