@@ -96,6 +96,10 @@ typedef struct {
     float ramp_v0_ms;          /**< the estimate's speed then, m/s */
     float ramp_z0_ms;          /**< and GNSS's 1 s mean, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
+    bool cruise;               /**< the last fix found the motion flat and settled: GNSS holds the level */
+    float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none) */
+    float hold_w0_ms;          /**< the wheel's speed before that step, m/s */
+    uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
     uint8_t hist_head;         /**< index of the newest complete bucket */

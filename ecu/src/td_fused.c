@@ -52,7 +52,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_A_MS2 0.2f   /* the wheel's own acceleration at which the whole jerk is back */
 #define Q_FLAT_SHARE 0.05f  /* the least share */
 #define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
-#define WHEEL_FLAT_GAIN 30.0f /* and weighs this much less */
+#define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
 /* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
 #define RAMP_A_MS2 0.1f     /* the estimate's acceleration beyond this is a ramp it believes in */
@@ -62,7 +62,15 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define RAMP_P_A 0.01f       /* and the acceleration's, (0.1 m/s^2)^2 */
 #define RAMP_SIGMA2 9.0f     /* GNSS apart from the scaled wheel by 3 GNSS sigmas */
 #define RAMP_W_S 0.5f        /* the wheel's mean over its last this long */   /* flat: a fix corrects v itself while the jerk's share is below this */
-#define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
+#define CRUISE_A_MS2 0.05f    /* an acceleration the wheel may not have shown yet, over the delay */
+/* a sharp step of the wheel in cruise (step_check): a slip step or a speed change */
+#define STEP_REL 0.05f      /* the wheel's newest 0.2 s beyond this share of the estimate's wheel speed */
+#define STEP_SHARP_REL 0.07f /* and moved by this share since 0.2-0.5 s ago: sharper than a machine's ramp */
+#define STEP_MAX_REL 0.25f  /* a wheel further off is no slip step (a cut cable, a stop): the gate's */
+#define STEP_HOLD_S 0.3f    /* then the wheel waits this long before it weighs again */
+#define STEP_LEVEL_REL 0.035f /* the wheel level since within this share: the slip stepped */
+#define STEP_AFTER_N 4u     /* the buckets newer than this are after the step when it is judged */
+#define STEP_GNSS_S 1.5f    /* GNSS this recent backs the hold */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -92,6 +100,10 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
+    f->cruise = false;
+    f->hold_s = 0.0f;
+    f->hold_w0_ms = 0.0f;
+    f->departed = 0u;
     f->hist_head = 0u;
     f->hist_n = 0u;
     f->hist_sum = 0.0f;
@@ -207,6 +219,10 @@ float td_fused_shape(const td_fused_t *f, float v_ms, float *slope) {
 }
 
 td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs) {
+    if (f->hold_s > 0.0f) {
+        /* a sharp step of the wheel is being judged (step_check): it weighs nothing meanwhile */
+        return TD_FUSED_ACCEPTED;
+    }
     float dg = 0.0f;
     const float g = td_fused_shape(f, f->v_ms, &dg);
     /* z = s * g(v) * v: dz/dv = s * (g + v * g'), dz/ds = g * v */
@@ -259,6 +275,82 @@ static void set_q_share(td_fused_t *f) {
     f->q_share = share < Q_FLAT_SHARE ? Q_FLAT_SHARE : (share > 1.0f ? 1.0f : share);
 }
 
+/* Mean of the history's buckets i0..i1 (0 = newest), m/s. */
+static float hist_mean(const td_fused_t *f, unsigned i0, unsigned i1) {
+    uint32_t sum = 0u;
+    for (unsigned i = i0; i <= i1; i++) {
+        sum += f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+    }
+    return (float)sum * TD_FUSED_HIST_MM_S / (float)(i1 - i0 + 1u);
+}
+
+/* In cruise a wheel that steps away from the estimate within a few tenths of a second is
+ * held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet patch
+ * changes the wheel's slip so. Level since: the scale takes the step and the speed holds (GNSS
+ * would show the truth only a lag later). Still moving: a speed change after all, and the
+ * estimate restarts from the wheel with the change it saw. */
+static void step_check(td_fused_t *f) {
+    if (f->hist_n < 6u) {
+        f->hold_s = 0.0f;
+        return;
+    }
+    const float g = td_fused_shape(f, f->v_ms, NULL);
+    const float pred = f->scale * g * f->v_ms;
+    const float w_new = hist_mean(f, 0u, 1u);
+    if (f->hold_s > 0.0f) {
+        f->hold_s += TD_FUSED_BUCKET_S;
+        if (f->hold_s < STEP_HOLD_S + 0.5f * TD_FUSED_BUCKET_S) {
+            return;
+        }
+        f->hold_s = 0.0f;
+        const float w_mid = hist_mean(f, 2u, 3u);
+        if (fabsf(w_new - w_mid) < STEP_LEVEL_REL * pred && f->v_ms > SCALE_MIN_MS) {
+            float s_new = w_new / (g * f->v_ms);
+            s_new = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
+            /* the wheel's history before the step as the new scale would have read it: GNSS
+             * against it, and the wheel's own acceleration, then see no step */
+            const float ratio = s_new / f->scale;
+            for (unsigned i = STEP_AFTER_N; i < f->hist_n; i++) {
+                uint16_t *b = &f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+                *b = (uint16_t)((float)*b * ratio + 0.5f);
+            }
+            f->scale = s_new;
+            set_q_share(f);
+            f->p[VS] = 0.0f;
+            f->p[AS] = 0.0f;
+            f->p[SS] = f->p[SS] > RAMP_P_S ? f->p[SS] : RAMP_P_S;
+            return;
+        }
+        f->cruise = false;
+        const float sg = f->scale * g;
+        f->v_ms = w_new / sg;
+        f->a_ms2 = (w_new - f->hold_w0_ms) / (sg * (STEP_HOLD_S + TD_FUSED_BUCKET_S));
+        f->p[VV] = f->p[VV] > f->r_gnss ? f->p[VV] : f->r_gnss;
+        f->p[VA] = 0.0f;
+        f->p[AA] = P0_A;
+        f->q_share = 1.0f;
+        return;
+    }
+    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(pred > SCALE_MIN_MS)) {
+        return;
+    }
+    const float b0 = hist_mean(f, 0u, 0u);
+    if (!(fabsf(b0 - pred) > STEP_REL * pred)) {
+        f->departed = 0u;
+        return;
+    }
+    /* judged on the first two buckets beyond: a ramp that went on is no step */
+    if (f->departed >= 2u) {
+        return;
+    }
+    f->departed++;
+    const float w_old = hist_mean(f, 2u, 4u);
+    if (fabsf(b0 - w_old) > STEP_SHARP_REL * pred && fabsf(b0 - pred) < STEP_MAX_REL * pred) {
+        f->hold_s = TD_FUSED_BUCKET_S * 0.5f;
+        f->hold_w0_ms = w_old;
+    }
+}
+
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
     if (!(z_ms >= 0.0f && z_ms < HIST_Z_MAX_MS) || !(dt_s <= HIST_DT_MAX_S)) {
         /* no wheel (encoder fault), or no number: the history says nothing any more, and a
@@ -268,6 +360,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->hist_s = 0.0f;
         f->reopened = false;
         f->q_share = 1.0f;
+        f->hold_s = 0.0f;
         return;
     }
     f->hist_sum += z_ms * dt_s;
@@ -283,6 +376,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->hist_s -= TD_FUSED_BUCKET_S;
         f->hist_sum = z_ms * f->hist_s;
         set_q_share(f);
+        step_check(f);
     }
 }
 
@@ -429,6 +523,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     /* flat and settled: the speed then was the speed now, so the fix corrects v itself; through
      * v - a d an acceleration could take up GNSS's difference and hold v off for seconds */
     const bool cruise = learning && !f->reopened && f->q_share < CRUISE_SHARE;
+    f->cruise = cruise || f->hold_s > 0.0f;
     if (cruise) {
         h[1] = 0.0f;
         r = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
@@ -456,6 +551,8 @@ void td_fused_standstill(td_fused_t *f) {
     f->run_sum = 0.0f;
     f->run_sign = 0;
     f->ramp_s = 0.0f;
+    f->cruise = false;
+    f->hold_s = 0.0f;
 }
 
 float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
