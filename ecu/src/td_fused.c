@@ -67,7 +67,11 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define STEP_REL 0.05f      /* the wheel's newest 0.2 s beyond this share of the estimate's wheel speed */
 #define STEP_SHARP_REL 0.07f /* and moved by this share since 0.2-0.5 s ago: sharper than a machine's ramp */
 #define STEP_MAX_REL 0.25f  /* a wheel further off is no slip step (a cut cable, a stop): the gate's */
-#define STEP_HOLD_S 0.3f    /* then the wheel waits this long before it weighs again */
+#define STEP_SHARP_K 3.0f   /* or by this many sigmas of the wheel's bucket-to-bucket bounce */
+#define STEP_BOUNCE_K 0.02f /* that bounce's variance, a running mean over ~5 s of buckets */
+#define STEP_BOUNCE0 0.0009f /* and its start, (3 %)^2 */
+#define STEP_HOLD_S 0.3f
+#define STEP_MIX 0.0f       /* meanwhile the estimate moves this share of the way the wheel went */    /* then the wheel waits this long before it weighs again */
 #define STEP_LEVEL_REL 0.035f /* the wheel level since within this share: the slip stepped */
 #define STEP_AFTER_N 4u     /* the buckets newer than this are after the step when it is judged */
 #define STEP_GNSS_S 1.5f    /* GNSS this recent backs the hold */
@@ -103,6 +107,8 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->cruise = false;
     f->hold_s = 0.0f;
     f->hold_w0_ms = 0.0f;
+    f->hold_v0_ms = 0.0f;
+    f->bounce_var = STEP_BOUNCE0;
     f->departed = 0u;
     f->hist_head = 0u;
     f->hist_n = 0u;
@@ -300,12 +306,19 @@ static void step_check(td_fused_t *f) {
     if (f->hold_s > 0.0f) {
         f->hold_s += TD_FUSED_BUCKET_S;
         if (f->hold_s < STEP_HOLD_S + 0.5f * TD_FUSED_BUCKET_S) {
+            /* both readings equally likely until judged: the estimate halfway between them */
+            f->v_ms = f->hold_v0_ms + STEP_MIX * (w_new / (f->scale * g) - f->hold_v0_ms);
             return;
         }
         f->hold_s = 0.0f;
         const float w_mid = hist_mean(f, 2u, 3u);
-        if (fabsf(w_new - w_mid) < STEP_LEVEL_REL * pred && f->v_ms > SCALE_MIN_MS) {
-            float s_new = w_new / (g * f->v_ms);
+        const float step = w_new - f->hold_w0_ms;
+        const float since = w_new - w_mid;
+        if (!(fabsf(step) > STEP_REL * pred) || (fabsf(since) >= STEP_LEVEL_REL * pred && since * step < 0.0f)) {
+            return; /* the wheel came back: a bounce, nothing changed */
+        }
+        if (fabsf(since) < STEP_LEVEL_REL * pred && f->v_ms > SCALE_MIN_MS) {
+            float s_new = w_new / (g * f->hold_v0_ms);
             s_new = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
             /* the wheel's history before the step as the new scale would have read it: GNSS
              * against it, and the wheel's own acceleration, then see no step */
@@ -315,6 +328,7 @@ static void step_check(td_fused_t *f) {
                 *b = (uint16_t)((float)*b * ratio + 0.5f);
             }
             f->scale = s_new;
+            f->v_ms = f->hold_v0_ms;
             set_q_share(f);
             f->p[VS] = 0.0f;
             f->p[AS] = 0.0f;
@@ -331,10 +345,14 @@ static void step_check(td_fused_t *f) {
         f->q_share = 1.0f;
         return;
     }
-    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(pred > SCALE_MIN_MS)) {
+    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(pred > SCALE_MIN_MS) || !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
         return;
     }
     const float b0 = hist_mean(f, 0u, 0u);
+    /* the wheel's bounce from one bucket to the next (share of the speed): a step stands out
+     * of it by STEP_SHARP_K of its sigmas (a wheel that bounces harder needs a larger one) */
+    const float d01 = (b0 - hist_mean(f, 1u, 1u)) / pred;
+    f->bounce_var += STEP_BOUNCE_K * (d01 * d01 - f->bounce_var);
     if (!(fabsf(b0 - pred) > STEP_REL * pred)) {
         f->departed = 0u;
         return;
@@ -345,9 +363,13 @@ static void step_check(td_fused_t *f) {
     }
     f->departed++;
     const float w_old = hist_mean(f, 2u, 4u);
-    if (fabsf(b0 - w_old) > STEP_SHARP_REL * pred && fabsf(b0 - pred) < STEP_MAX_REL * pred) {
+    const float sharp = STEP_SHARP_K * sqrtf(f->bounce_var);
+    if (fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred &&
+        fabsf(b0 - pred) < STEP_MAX_REL * pred) {
         f->hold_s = TD_FUSED_BUCKET_S * 0.5f;
         f->hold_w0_ms = w_old;
+        f->hold_v0_ms = f->v_ms;
+        f->v_ms += STEP_MIX * (w_new / pred - 1.0f) * f->v_ms;
     }
 }
 
