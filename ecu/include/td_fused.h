@@ -91,6 +91,7 @@ typedef struct {
     float run_sum;             /**< its integral over that time, m */
     int8_t run_sign;           /**< their sign (0: none) */
     float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
+    uint8_t moves_n;           /**< fixes in a row beyond 0.1 m/s of that mean, 0..2 (2 ends the quiet) */
     float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
     float ramp_s;              /**< time since the estimate's acceleration went beyond 0.1 m/s^2, s (0: none) */
     float ramp_v0_ms;          /**< the estimate's speed then, m/s */

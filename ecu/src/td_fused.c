@@ -99,6 +99,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->run_sum = 0.0f;
     f->run_sign = 0;
     f->quiet_s = 0.0f;
+    f->moves_n = 0u;
     f->gnss_avg_ms = 0.0f;
     f->ramp_s = 0.0f;
     f->reopened = false;
@@ -490,7 +491,10 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
     const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
     f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
-    f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
+    /* one fix off its mean is noise (at 5 Hz one in ~60 is 2.5 sigmas out); two in a row, a
+     * moving speed */
+    f->moves_n = gnss_moves ? (uint8_t)(f->moves_n < 2u ? f->moves_n + 1u : 2u) : 0u;
+    f->quiet_s = f->moves_n >= 2u ? 0.0f : f->quiet_s + f->since_gnss_s;
     /* a speed change GNSS should show by now (it began longer than the delay ago): GNSS moved,
      * it was one; GNSS held still and stands apart from the wheel at the fix's time against it,
      * the wheel's scale stepped (a wet patch) and the speed did not. The scale then takes the
