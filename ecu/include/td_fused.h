@@ -101,6 +101,7 @@ typedef struct {
     float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none) */
     float hold_w0_ms;          /**< the wheel's speed before that step, m/s */
     float hold_v0_ms;          /**< and the estimate's, m/s */
+    float wheel_dev;           /**< the wheel's innovation, share of its speed, mean over ~0.3 s */
     float bounce_var;          /**< the wheel's bucket-to-bucket change in cruise, its mean square, share of speed ^2 */
     uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */

@@ -54,6 +54,11 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
 #define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
+#define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
+#define CRUISE_MIN_MS 1.67f /* and above the paper's 6 km/h: slower, the wheel measures well and a brake
+                              * from a slow pass shows in it first (Table 2's stop at 3.5 km/h) */
+#define CRUISE_DEV_REL 0.02f /* while the wheel's mean innovation stays within this share */
+#define WHEEL_DEV_K 0.03f   /* that mean: over ~0.3 s of 10 ms steps */
 /* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
 #define RAMP_A_MS2 0.1f     /* the estimate's acceleration beyond this is a ramp it believes in */
 #define RAMP_MARGIN_S 0.2f   /* GNSS shows a change this long after the delay, or it was none */
@@ -110,6 +115,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->hold_w0_ms = 0.0f;
     f->hold_v0_ms = 0.0f;
     f->bounce_var = STEP_BOUNCE0;
+    f->wheel_dev = 0.0f;
     f->departed = 0u;
     f->hist_head = 0u;
     f->hist_n = 0u;
@@ -147,6 +153,16 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     f->v_ms += f->a_ms2 * dt_s;
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
+    }
+    if (f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < CRUISE_DEV_REL &&
+        f->v_ms > CRUISE_MIN_MS) {
+        /* in cruise the acceleration is a short-lived correction (a Gauss-Markov one of time
+         * constant CRUISE_TAU_S): a GNSS fix's noise left in a would ramp v until the next */
+        const float k = dt_s < CRUISE_TAU_S ? 1.0f - dt_s / CRUISE_TAU_S : 0.0f;
+        f->a_ms2 *= k;
+        p[VA] *= k;
+        p[AS] *= k;
+        p[AA] *= k * k;
     }
     if (f->since_gnss_s < 60.0f) {
         f->since_gnss_s += dt_s;
@@ -236,6 +252,9 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
     const float h[3] = { f->scale * (g + f->v_ms * dg), 0.0f, g * f->v_ms };
     const float sd = f->wheel_rel * z_ms;
     const float y = z_ms - f->scale * g * f->v_ms;
+    if (z_ms > SCALE_MIN_MS) {
+        f->wheel_dev += WHEEL_DEV_K * (y / z_ms - f->wheel_dev);
+    }
     float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
     if (gnss_backs && f->q_share < CRUISE_SHARE && fabsf(y) < WHEEL_FLAT_REL * z_ms) {
         /* flat motion, the wheel within its bounce: the bounce wanders over seconds and is no

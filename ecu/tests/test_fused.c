@@ -485,9 +485,11 @@ static void test_slip_step_with_a_short_lag(void **state) {
     td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
     run(&r, 40.0, v_35, 0.95, true, 0.6, 0.6, true);
     run(&r, 1.0, v_35, 0.85, true, 0.6, 0.6, false);
-    assert_true(r.f.v_ms < 3.5 * 0.9); /* the step: over 10 % low at first (measured -13.6 %) */
+    /* the step: the wheel's sharp step is held out and taken by the scale (measured -8.1 %; it
+     * was -13.6 % when the wheel was followed until GNSS disagreed) */
+    assert_float_equal(r.f.v_ms, 3.5, 3.5 * 0.10);
     run(&r, 3.0, v_35, 0.85, true, 0.6, 0.6, false);
-    assert_float_equal(r.f.v_ms, 3.5, 3.5 * 0.04); /* 4 s after: measured -3.1 % */
+    assert_float_equal(r.f.v_ms, 3.5, 3.5 * 0.02); /* 4 s after: measured +0.4 % (was -3.1 %) */
     run(&r, 15.0, v_35, 0.85, true, 0.6, 0.6, false);
     assert_float_equal(r.f.v_ms, 3.5, 3.5 * 0.025); /* measured -1.7 % */
     assert_true(fabs(r.f.a_ms2) < 0.15);
