@@ -365,7 +365,7 @@ static void step_check(td_fused_t *f) {
         f->q_share = 1.0f;
         return;
     }
-    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(pred > SCALE_MIN_MS) || !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
+    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) || !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
         return;
     }
     const float b0 = hist_mean(f, 0u, 0u);
