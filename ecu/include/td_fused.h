@@ -100,7 +100,10 @@ typedef struct {
     bool cruise;               /**< the last fix found the motion flat and settled: GNSS holds the level */
     float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none) */
     float hold_w0_ms;          /**< the wheel's speed before that step, m/s */
-    float hold_v0_ms;          /**< and the estimate's, m/s */
+    float stepped_s;           /**< time since the scale took a wheel's step, s (0: none pending GNSS's check) */
+    float step_scale0;         /**< the scale before it */
+    float step_dv_ms;          /**< the step, as a speed, m/s */
+    float step_z0_ms;          /**< GNSS's 1 s mean then, m/s */
     float wheel_dev;           /**< the wheel's innovation, share of its speed, mean over ~0.3 s */
     float bounce_var;          /**< the wheel's bucket-to-bucket change in cruise, its mean square, share of speed ^2 */
     uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */

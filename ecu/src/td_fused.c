@@ -75,8 +75,10 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define STEP_SHARP_K 3.0f   /* or by this many sigmas of the wheel's bucket-to-bucket bounce */
 #define STEP_BOUNCE_K 0.02f /* that bounce's variance, a running mean over ~5 s of buckets */
 #define STEP_BOUNCE0 0.0009f /* and its start, (3 %)^2 */
-#define STEP_HOLD_S 0.3f
-#define STEP_MIX 0.0f       /* meanwhile the estimate moves this share of the way the wheel went */    /* then the wheel waits this long before it weighs again */
+#define STEP_HOLD_S 0.6f    /* then the wheel waits this long before it weighs again */
+#define STEP_N 3u           /* and is judged on two means of this many buckets */
+#define STEP_VERIFY_S 0.5f  /* GNSS checks a scale step this long after its delay ... */
+#define STEP_CONFIRM_S 1.5f /* ... and has confirmed it this long after */    /* then the wheel waits this long before it weighs again */
 #define STEP_LEVEL_REL 0.035f /* the wheel level since within this share: the slip stepped */
 #define STEP_AFTER_N 4u     /* the buckets newer than this are after the step when it is judged */
 #define STEP_GNSS_S 1.5f    /* GNSS this recent backs the hold */
@@ -113,7 +115,10 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->cruise = false;
     f->hold_s = 0.0f;
     f->hold_w0_ms = 0.0f;
-    f->hold_v0_ms = 0.0f;
+    f->stepped_s = 0.0f;
+    f->step_scale0 = 1.0f;
+    f->step_dv_ms = 0.0f;
+    f->step_z0_ms = 0.0f;
     f->bounce_var = STEP_BOUNCE0;
     f->wheel_dev = 0.0f;
     f->departed = 0u;
@@ -166,6 +171,9 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     }
     if (f->since_gnss_s < 60.0f) {
         f->since_gnss_s += dt_s;
+    }
+    if (f->stepped_s > 0.0f && f->stepped_s < 60.0f) {
+        f->stepped_s += dt_s;
     }
     /* a speed change the estimate believes in: from where a went beyond RAMP_A_MS2, for at most
      * RAMP_MAX_S (td_fused_gnss checks it against GNSS) */
@@ -310,62 +318,83 @@ static float hist_mean(const td_fused_t *f, unsigned i0, unsigned i1) {
     return (float)sum * TD_FUSED_HIST_MM_S / (float)(i1 - i0 + 1u);
 }
 
-/* In cruise a wheel that steps away from the estimate within a few tenths of a second is
- * held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet patch
- * changes the wheel's slip so. Level since: the scale takes the step and the speed holds (GNSS
- * would show the truth only a lag later). Still moving: a speed change after all, and the
- * estimate restarts from the wheel with the change it saw. */
+/* Rescales the wheel's history older than bucket i0 by ratio (clamped to 16 bits). */
+static void rescale_history(td_fused_t *f, unsigned i0, float ratio) {
+    for (unsigned i = i0; i < f->hist_n; i++) {
+        uint16_t *b = &f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+        const float x = (float)*b * ratio + 0.5f;
+        *b = (uint16_t)(x < 65535.0f ? x : 65535.0f);
+    }
+}
+
+/* The speed changed after all: the estimate restarts from the wheel at scale s, with the
+ * acceleration it saw from w0 to w over span_s. */
+static void snap_to_wheel(td_fused_t *f, float w, float w0, float span_s) {
+    const float sg = f->scale * td_fused_shape(f, f->v_ms, NULL);
+    f->cruise = false;
+    f->v_ms = w / sg;
+    f->a_ms2 = (w - w0) / (sg * span_s);
+    f->p[VV] = f->p[VV] > f->r_gnss ? f->p[VV] : f->r_gnss;
+    f->p[VA] = 0.0f;
+    f->p[AA] = P0_A;
+    f->q_share = 1.0f;
+}
+
+/* A scale step taken from the wheel proved a speed change: the scale and the history back. */
+static void undo_step(td_fused_t *f) {
+    const unsigned since_n = (unsigned)(f->stepped_s / TD_FUSED_BUCKET_S);
+    rescale_history(f, STEP_AFTER_N + since_n, f->step_scale0 / f->scale);
+    f->scale = f->step_scale0;
+    f->stepped_s = 0.0f;
+}
+
+/* In cruise above 6 km/h a wheel that steps away from the estimate within a few tenths of a
+ * second is held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet
+ * patch changes the wheel's slip so. Level since: the scale takes the step and the speed holds
+ * (GNSS would show the truth only a lag later, and td_fused_gnss checks it then). Still moving
+ * the same way: a speed change after all, and the estimate restarts from the wheel. Back where
+ * it was: a bounce. A second step the same way soon after a scale step undoes it: a brake. */
 static void step_check(td_fused_t *f) {
-    if (f->hist_n < 6u) {
+    if (f->hist_n < 2u * STEP_N) {
         f->hold_s = 0.0f;
         return;
     }
     const float g = td_fused_shape(f, f->v_ms, NULL);
     const float pred = f->scale * g * f->v_ms;
-    const float w_new = hist_mean(f, 0u, 1u);
     if (f->hold_s > 0.0f) {
         f->hold_s += TD_FUSED_BUCKET_S;
-        if (f->hold_s < STEP_HOLD_S + 0.5f * TD_FUSED_BUCKET_S) {
-            /* both readings equally likely until judged: the estimate halfway between them */
-            f->v_ms = f->hold_v0_ms + STEP_MIX * (w_new / (f->scale * g) - f->hold_v0_ms);
+        if (f->hold_s < STEP_HOLD_S - 0.5f * TD_FUSED_BUCKET_S) {
             return;
         }
         f->hold_s = 0.0f;
-        const float w_mid = hist_mean(f, 2u, 3u);
+        const float w_new = hist_mean(f, 0u, STEP_N - 1u);
+        const float since = w_new - hist_mean(f, STEP_N, 2u * STEP_N - 2u);
         const float step = w_new - f->hold_w0_ms;
-        const float since = w_new - w_mid;
         if (!(fabsf(step) > STEP_REL * pred) || (fabsf(since) >= STEP_LEVEL_REL * pred && since * step < 0.0f)) {
             return; /* the wheel came back: a bounce, nothing changed */
         }
-        if (fabsf(since) < STEP_LEVEL_REL * pred && f->v_ms > SCALE_MIN_MS) {
-            float s_new = w_new / (g * f->hold_v0_ms);
-            s_new = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
-            /* the wheel's history before the step as the new scale would have read it: GNSS
-             * against it, and the wheel's own acceleration, then see no step */
-            const float ratio = s_new / f->scale;
-            for (unsigned i = STEP_AFTER_N; i < f->hist_n; i++) {
-                uint16_t *b = &f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
-                *b = (uint16_t)((float)*b * ratio + 0.5f);
-            }
-            f->scale = s_new;
-            f->v_ms = f->hold_v0_ms;
-            set_q_share(f);
-            f->p[VS] = 0.0f;
-            f->p[AS] = 0.0f;
-            f->p[SS] = f->p[SS] > RAMP_P_S ? f->p[SS] : RAMP_P_S;
+        if (fabsf(since) >= STEP_LEVEL_REL * pred) {
+            snap_to_wheel(f, w_new, f->hold_w0_ms, STEP_HOLD_S + 2.0f * TD_FUSED_BUCKET_S);
             return;
         }
-        f->cruise = false;
-        const float sg = f->scale * g;
-        f->v_ms = w_new / sg;
-        f->a_ms2 = (w_new - f->hold_w0_ms) / (sg * (STEP_HOLD_S + TD_FUSED_BUCKET_S));
-        f->p[VV] = f->p[VV] > f->r_gnss ? f->p[VV] : f->r_gnss;
-        f->p[VA] = 0.0f;
-        f->p[AA] = P0_A;
-        f->q_share = 1.0f;
+        float s_new = w_new / (g * f->v_ms);
+        s_new = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
+        /* the wheel's history before the step as the new scale would have read it: GNSS
+         * against it, and the wheel's own acceleration, then see no step */
+        rescale_history(f, STEP_AFTER_N, s_new / f->scale);
+        f->step_scale0 = f->scale;
+        f->step_dv_ms = step / (f->scale * g);
+        f->step_z0_ms = f->gnss_avg_ms;
+        f->stepped_s = TD_FUSED_BUCKET_S;
+        f->scale = s_new;
+        set_q_share(f);
+        f->p[VS] = 0.0f;
+        f->p[AS] = 0.0f;
+        f->p[SS] = f->p[SS] > RAMP_P_S ? f->p[SS] : RAMP_P_S;
         return;
     }
-    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) || !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
+    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) ||
+        !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
         return;
     }
     const float b0 = hist_mean(f, 0u, 0u);
@@ -384,13 +413,18 @@ static void step_check(td_fused_t *f) {
     f->departed++;
     const float w_old = hist_mean(f, 2u, 4u);
     const float sharp = STEP_SHARP_K * sqrtf(f->bounce_var);
-    if (fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred &&
-        fabsf(b0 - pred) < STEP_MAX_REL * pred) {
-        f->hold_s = TD_FUSED_BUCKET_S * 0.5f;
-        f->hold_w0_ms = w_old;
-        f->hold_v0_ms = f->v_ms;
-        f->v_ms += STEP_MIX * (w_new / pred - 1.0f) * f->v_ms;
+    if (!(fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred) ||
+        !(fabsf(b0 - pred) < STEP_MAX_REL * pred)) {
+        return;
     }
+    if (f->stepped_s > 0.0f && (b0 - w_old) * f->step_dv_ms > 0.0f) {
+        /* the wheel went on the same way: the first step was a brake (or a launch) too */
+        undo_step(f);
+        snap_to_wheel(f, b0, w_old, 3.0f * TD_FUSED_BUCKET_S);
+        return;
+    }
+    f->hold_s = TD_FUSED_BUCKET_S;
+    f->hold_w0_ms = w_old;
 }
 
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
@@ -514,6 +548,26 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
      * moving speed */
     f->moves_n = gnss_moves ? (uint8_t)(f->moves_n < 2u ? f->moves_n + 1u : 2u) : 0u;
     f->quiet_s = f->moves_n >= 2u ? 0.0f : f->quiet_s + f->since_gnss_s;
+    /* a scale step taken from the wheel (step_check), checked once GNSS shows its time: GNSS's
+     * mean moved half the step the same way, it was a speed change */
+    if (f->stepped_s > d + STEP_VERIFY_S) {
+        const float moved = f->gnss_avg_ms - f->step_z0_ms;
+        float w_now = 0.0f;
+        if (moved * f->step_dv_ms > 0.0f && fabsf(moved) > 0.5f * fabsf(f->step_dv_ms) &&
+            moved * moved > RAMP_SIGMA2 * f->r_gnss &&
+            wheel_over(f, RAMP_W_S, RAMP_W_S, &w_now)) {
+            undo_step(f);
+            f->v_ms = w_now / (f->scale * td_fused_shape(f, f->v_ms, NULL));
+            f->a_ms2 = 0.0f;
+            f->p[VV] = f->p[VV] > f->r_gnss ? f->p[VV] : f->r_gnss;
+            f->p[VA] = 0.0f;
+            f->p[AA] = P0_A;
+            f->q_share = 1.0f;
+            f->cruise = false;
+        } else if (f->stepped_s > d + STEP_CONFIRM_S) {
+            f->stepped_s = 0.0f;
+        }
+    }
     /* a speed change GNSS should show by now (it began longer than the delay ago): GNSS moved,
      * it was one; GNSS held still and stands apart from the wheel at the fix's time against it,
      * the wheel's scale stepped (a wet patch) and the speed did not. The scale then takes the
