@@ -57,7 +57,6 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
 #define CRUISE_MIN_MS 1.67f /* and above the paper's 6 km/h: slower, the wheel measures well and a brake
                               * from a slow pass shows in it first (Table 2's stop at 3.5 km/h) */
-#define CRUISE_DEV_REL 0.02f /* while the wheel's mean innovation stays within this share */
 #define WHEEL_DEV_K 0.03f   /* that mean: over ~0.3 s of 10 ms steps */
 /* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
 #define RAMP_A_MS2 0.1f     /* the estimate's acceleration beyond this is a ramp it believes in */
@@ -67,7 +66,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define RAMP_P_A 0.01f       /* and the acceleration's, (0.1 m/s^2)^2 */
 #define RAMP_SIGMA2 9.0f     /* GNSS apart from the scaled wheel by 3 GNSS sigmas */
 #define RAMP_W_S 0.5f        /* the wheel's mean over its last this long */   /* flat: a fix corrects v itself while the jerk's share is below this */
-#define CRUISE_A_MS2 0.05f    /* an acceleration the wheel may not have shown yet, over the delay */
+#define CRUISE_A_MS2 0.02f    /* an acceleration the wheel may not have shown yet, over the delay */
 /* a sharp step of the wheel in cruise (step_check): a slip step or a speed change */
 #define STEP_REL 0.05f      /* the wheel's newest 0.2 s beyond this share of the estimate's wheel speed */
 #define STEP_SHARP_REL 0.07f /* and moved by this share since 0.2-0.5 s ago: sharper than a machine's ramp */
@@ -159,7 +158,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
     }
-    if (f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < CRUISE_DEV_REL &&
+    if (f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < WHEEL_FLAT_REL &&
         f->v_ms > CRUISE_MIN_MS) {
         /* in cruise the acceleration is a short-lived correction (a Gauss-Markov one of time
          * constant CRUISE_TAU_S): a GNSS fix's noise left in a would ramp v until the next */
