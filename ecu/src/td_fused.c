@@ -166,7 +166,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
         f->a_ms2 *= k;
         p[VA] *= k;
         p[AS] *= k;
-        p[AA] *= k * k;
+        p[AA] = p[AA] * k * k > 1.0e-8f ? p[AA] * k * k : 1.0e-8f;
     }
     if (f->since_gnss_s < 60.0f) {
         f->since_gnss_s += dt_s;
