@@ -72,8 +72,8 @@ def working(t_s: float = 12.0, **kw: object) -> Snapshot:
             cv=text("why.cv", cv=2.51),
             threshold=4.2,
             compare=text("source.gnss"),
-            speed=8.0,
-            switch=6.0,
+            kmh=8.0,
+            switch_kmh=6.0,
         ),
     )
     base.update(kw)
@@ -132,7 +132,7 @@ async def test_main_screen_shows_the_snapshot(user: User) -> None:
     assert text_of(user, "v_wheel") == "7.6"
     assert text_of(user, "v_gnss") == "8.0"
     assert text_of(user, "source") == "GNSS"
-    assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 > 6 km/h"
+    assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 km/h > 6 km/h"
     assert text_of(user, "op_state") == "RUNNING"
     assert text_of(user, "manual_state") == ""
     assert text_of(user, "rate_upper") == "138.9"
@@ -223,7 +223,7 @@ async def test_language_switches_at_run_time(user: User) -> None:
     await shows(user, "faults", "上层排肥器堵转")
     assert text_of(user, "source") == "GNSS"
     # the terminal's messages too: why this source, the last event
-    assert text_of(user, "source_why") == "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 > 6 km/h"
+    assert text_of(user, "source_why") == "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 km/h > 6 km/h"
     assert text_of(user, "last_event") == "控制器丢失：1.0 秒无状态帧"
     await user.should_see("km/h")  # units shown in both languages
 
@@ -754,22 +754,25 @@ def test_a_taken_port_is_said_before_anything_starts() -> None:
         assert link.pid is None  # no display process was started
 
 
-async def test_main_screen_shows_the_gnss_lag_one_touch_away(user: User) -> None:
+async def test_main_screen_shows_the_gnss_lag(user: User) -> None:
     hub = DisplayHub(default_config)
     hub.publish(working(gnss_lag=LagView(950, 950, "learned")))
     register_pages(hub)
     await user.open("/")
-    panel(user, "crop")
+    assert text_of(user, "gnss_lag_short") == "lag 0.95 s"  # on the speed card, no touch
+    panel(user, "crop")  # where it comes from: one touch away
     assert text_of(user, "gnss_lag") == "GNSS lag 0.95 s (learned)"
     hub.publish(working(t_s=12.1, gnss_lag=LagView(500, 500, "overruled", fixed_ms=1800.0)))
     await shows(user, "gnss_lag", "GNSS lag 0.50 s (learned, not the set 1.80 s)")
     hub.publish(working(t_s=12.2, ecu_live=False, gnss_lag=LagView(950, 950, "learned")))
     await shows(user, "gnss_lag", "")  # not while the ECU is not heard
+    assert text_of(user, "gnss_lag_short") == ""
     i18n.set_language("zh")
     hub.publish(working(t_s=12.3, gnss_lag=LagView(1300, None, "start")))
     await user.open("/")
     panel(user, "crop")
     assert text_of(user, "gnss_lag") == "GNSS 滞后 1.30 秒（学习中）"
+    assert text_of(user, "gnss_lag_short") == "滞后 1.30 秒"
 
 
 # ---- the cab: Stop on every screen, never redrawn; states never silent ----------------------
@@ -972,7 +975,14 @@ async def test_units_tank_and_area_left(user: User) -> None:
 
     term = Terminal()
     hub = DisplayHub(default_config, term.post)
-    hub.publish(working(tank=TankView(500.0, 120.0, 100.0), count_field=CounterView(area_ha=0.5)))
+    low = AlarmView("tank_low", text("alarm.text.tank_low", kg=95.0), "active", 11.0)
+    hub.publish(
+        working(
+            tank=TankView(500.0, 120.0, 100.0),
+            count_field=CounterView(area_ha=0.5),
+            alarms=(low,),
+        )
+    )
     monkey_maps = FieldMaps(field_ha=2.0)
     pages_load = pages.load_field_maps
     pages.load_field_maps = lambda cfg: monkey_maps  # type: ignore[assignment]
@@ -990,6 +1000,14 @@ async def test_units_tank_and_area_left(user: User) -> None:
     assert text_of(user, "applied_upper") == "126.6"  # 141.9 kg/ha
     assert text_of(user, "tank") == "tank 265 lb left · enough for 1.05 ac"
     assert text_of(user, "area") == "done 1.24 ac · left 3.71 ac"
+    # the alarm and the speed source's rule in the same units (95 kg = 209 lb; 6 km/h = 3.7 mph)
+    assert text_of(user, "alarm_banner") == "tank low: 209 lb left · active"
+    assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 5.0 mph > 3.73 mph"
+    hub.set_prefs(units="metric")
+    await shows(user, "alarm_banner", "tank low: 95 kg left · active")
+    assert text_of(user, "source_why") == "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 km/h > 6 km/h"
+    hub.set_prefs(units="imperial")
+    await shows(user, "v_selected", "5.0")
     panel(user, "counters")
     (fill,) = user.find(marker="tank_fill").elements
     (alarm,) = user.find(marker="tank_alarm").elements
@@ -1042,3 +1060,17 @@ def test_the_speed_chart_follows_the_units() -> None:
     assert metric["series"][2]["data"][-1][1] == 8.0
     assert imperial["series"][2]["data"][-1][1] == pytest.approx(8.0 / 1.609344, abs=0.01)
     assert "mph" in str(imperial["yAxis"]) and "km/h" in str(metric["yAxis"])
+
+
+def test_only_values_shown_with_their_unit_word_change_units() -> None:
+    from topdress.display.units import Units
+
+    imperial = Units("imperial")
+    tank = text("alarm.text.tank_low", kg=100.0)
+    assert i18n.render(imperial.shown(tank), "en") == "tank low: 220 lb left"
+    assert i18n.render(Units("metric").shown(tank), "en") == "tank low: 100 kg left"
+    assert i18n.render(tank, "zh") == "料箱肥量低：剩余 100 kg"
+    # a value written with a fixed unit in its template stays as it is
+    far = text("alarm.text.wrong_field_boundary", distance_m=12, file="f.geojson", limit_m=5.0)
+    assert imperial.shown(far) == far
+    assert imperial.shown("plain words") == "plain words" and imperial.shown(None) is None

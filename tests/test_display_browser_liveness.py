@@ -3,7 +3,9 @@
 `topdress demo` with its display in headless Chromium: Start, then `kill -9` of the display
 process: the page goes to its full-screen stale state (no green RUNNING, the values greyed under
 it); the terminal starts a new display process and the page comes back by itself, live. Then
-SIGTERM of the terminal: the stale state again. The times are printed (bench/display_bench.py
+SIGTERM of the terminal: the stale state again. Night mode and the units chosen before the kill
+are what the new display shows. A terminal stopped for 5 s (SIGSTOP) leaves the healthy display
+running and reported up. The times are printed (bench/display_bench.py
 measures them against their targets); the test checks what is shown.
 """
 
@@ -44,11 +46,32 @@ def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:
         def stale() -> bool:
             return bool(driver.execute_script(STALE_JS))
 
+        def night() -> bool:
+            return bool(driver.execute_script(
+                "return document.body.classList.contains('body--dark')"))  # fmt: skip
+
+        def mph() -> bool:
+            return bool(driver.find_elements(By.XPATH, "//*[text()='mph']"))
+
         driver.get(demo.url)
         until("the ECU acknowledging its parameters", lambda: content("link_ecu") == "ECU: ok")
         driver.find_element(By.CSS_SELECTOR, '[data-testid="start"]').click()
         until("RUNNING", lambda: text("op_state") == "RUNNING")
         assert not stale()
+        # night and US units, chosen before the kill, come back with the new display process
+
+        def choose(item: str) -> bool:
+            """Open the view menu and touch `item` (the page redraws after each choice)."""
+            driver.find_element(By.CSS_SELECTOR, '[data-testid="view_menu"]').click()
+            until(f"the {item} item", lambda: driver.find_element(
+                By.CSS_SELECTOR, f'[data-testid="{item}"]').is_displayed())  # fmt: skip
+            driver.find_element(By.CSS_SELECTOR, f'[data-testid="{item}"]').click()
+            return True
+
+        # (each a toggle: touched again only if the page did not take it)
+        until("night chosen", lambda: night() or (choose("night") and until("night", night, 3.0)))
+        until("US units chosen", lambda: mph() or (choose("units") and until("mph", mph, 3.0)))
+        until("night and mph", lambda: night() and mph())
         first = display_pid(demo.proc.pid)
         assert first is not None
 
@@ -74,6 +97,19 @@ def test_a_killed_display_shows_stale_then_comes_back(tmp_path: Path) -> None:
         back_s = time.monotonic() - killed
         clock = text("clock")
         until("the values moving", lambda: text("clock") != clock)
+        assert night() and mph()  # the operator's view, not the defaults
+        # the terminal stalled 5 s (SIGSTOP): a stall of the terminal, not a hang of the
+        # display, so the healthy display is neither killed nor reported down
+        second = display_pid(demo.proc.pid)
+        downs = demo.output().count("display down")
+        demo.proc.send_signal(signal.SIGSTOP)
+        time.sleep(5.0)
+        demo.proc.send_signal(signal.SIGCONT)
+        clock = text("clock")
+        until("the page live after the stall", lambda: not stale() and text("clock") != clock)
+        time.sleep(2.0)  # the terminal's watch has looked again
+        assert display_pid(demo.proc.pid) == second
+        assert demo.output().count("display down") == downs, demo.output()
         print(f"\nstale shown {shown_s:.2f} s after kill -9; live again after {back_s:.2f} s")
         assert "display down (killed by signal 9)" in demo.output()
         assert "display started again (1 restarts)" in demo.output()

@@ -11,6 +11,7 @@ cab layout are taken here ($TOPDRESS_SCREENSHOTS, `make screenshots`).
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -19,6 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from browser import DemoProcess, chromium, missing_browser, until, viewport
@@ -106,6 +108,67 @@ def ratio(fg: list[float], bg: list[float]) -> float:
     la, lb = (0.2126 * _lin(c[0]) + 0.7152 * _lin(c[1]) + 0.0722 * _lin(c[2]) for c in (f, bg))
     hi, lo = max(la, lb), min(la, lb)
     return (hi + 0.05) / (lo + 0.05)
+
+
+def _png(png: bytes) -> np.ndarray:
+    """A screenshot as an H×W×3 array of 0..255."""
+    from matplotlib.image import imread
+
+    return np.asarray(imread(io.BytesIO(png), format="png"))[:, :, :3] * 255.0
+
+
+def _most_contrast(px: np.ndarray, bg: np.ndarray) -> float:
+    """The highest WCAG contrast of any pixel in `px` against the colour `bg`: the core of a
+    glyph's stroke or a line, where anti-aliasing leaves the colour as drawn."""
+    lin = np.where(px / 255 <= 0.04045, px / 255 / 12.92, ((px / 255 + 0.055) / 1.055) ** 2.4)
+    lum = lin @ np.array([0.2126, 0.7152, 0.0722])
+    lb = float(np.array([_lin(c) for c in bg]) @ np.array([0.2126, 0.7152, 0.0722]))
+    return float(np.max((np.maximum(lum, lb) + 0.05) / (np.minimum(lum, lb) + 0.05)))
+
+
+def _background(px: np.ndarray) -> np.ndarray:
+    colours, counts = np.unique(px.reshape(-1, 3).round(), axis=0, return_counts=True)
+    return np.asarray(colours[counts.argmax()])
+
+
+FIELD_JS = """const m = getElement(document.querySelector('[data-testid="map"]')).map;
+const sw = m.latLngToContainerPoint(arguments[0]), ne = m.latLngToContainerPoint(arguments[1]);
+return [sw.x, ne.y, sw.y];"""
+
+
+def drawn_contrast(driver: Any) -> dict[str, float]:
+    """The contrast of what the page drew, read from screenshots: the charts' axis words
+    against the chart, the field boundary's left edge against the map beside it."""
+    from selenium.webdriver.common.by import By
+
+    def shot(tid: str) -> np.ndarray:
+        return _png(
+            driver.find_element(By.CSS_SELECTOR, f'[data-testid="{tid}"]').screenshot_as_png
+        )
+
+    out: dict[str, float] = {}
+    for chart in ("speed_chart", "meter_chart"):
+        px = shot(chart)
+        h, w = px.shape[:2]
+        bg = _background(px)
+        # the grid: 50 px left, 24 right, 40 top, 28 bottom (charts.py); the strips hold words
+        # only: below the source bands' names (at the grid's top), below the x axis's ticks
+        out[f"{chart}_y_words"] = _most_contrast(px[58 : h - 30, 0:44], bg)
+        out[f"{chart}_x_words"] = _most_contrast(px[h - 21 : h, 50 : w - 24], bg)
+    return out
+
+
+def boundary_contrast(driver: Any) -> float:
+    sw, ne = rect(-8, -6, 16, 48)[0], rect(-8, -6, 16, 48)[2]
+    x, top, bottom = (round(v) for v in driver.execute_script(FIELD_JS, sw[::-1], ne[::-1]))
+    from selenium.webdriver.common.by import By
+
+    px = _png(driver.find_element(By.CSS_SELECTOR, '[data-testid="map"]').screenshot_as_png)
+    # rows 5..15 m north of the field's south edge: inside one zone, clear of the zones' edges
+    span = bottom - top
+    mid = slice(bottom - span * 15 // 54, bottom - span * 5 // 54)
+    beside = np.median(px[mid, x - 20 : x - 10].reshape(-1, 3), axis=0)
+    return _most_contrast(px[mid, x - 3 : x + 4], beside)
 
 
 def control(fill: list[float], behind: list[float], edge: list[float], edge_px: float) -> float:
@@ -295,6 +358,15 @@ def test_the_cab_screen_at_800x480(demo: DemoProcess, tmp_path: Path) -> None:
         open_screen("main")
         time.sleep(1.0)
         driver.save_screenshot(str(shots / "display-cab-night-en.png"))
+        # the pixels as drawn (the DOM check above cannot see into a canvas or an SVG map)
+        figures["night_boundary"] = round(boundary_contrast(driver), 2)
+        driver.find_element(By.XPATH, "//button[.//span[text()='Charts']]").click()
+        time.sleep(1.5)  # the charts drawn at their size
+        drawn = drawn_contrast(driver)
+        figures["night_charts"] = {k: round(v, 2) for k, v in drawn.items()}
+        assert figures["night_boundary"] >= 3.0, figures["night_boundary"]
+        assert min(drawn.values()) >= 4.5, drawn
+        driver.find_element(By.XPATH, "//button[.//span[text()='Map']]").click()
 
         # Stop during a running calibration (the machine stands after its one pass)
         until("the machine standing", lambda: text("v_wheel") in ("0.0", "-0.0"), 120.0)
@@ -336,6 +408,26 @@ def test_the_cab_screen_at_800x480(demo: DemoProcess, tmp_path: Path) -> None:
         assert driver.execute_script("return document.documentElement.scrollHeight") <= 600
         for tid in MAIN_IN_VIEW:
             assert in_view(tid, 1024, 600), (tid, "1024x600")
+
+        # resized to 1280×800 (no reload): the field fitted again, as a page opened at that size
+        sw, ne = rect(-8, -6, 16, 48)[0], rect(-8, -6, 16, 48)[2]
+        field = [[sw[1], sw[0]], [ne[1], ne[0]]]  # lat, lon
+        fit_js = (
+            "const m = getElement(document.querySelector('[data-testid=\"map\"]')).map;"
+            "const c = m.latLngToContainerPoint(m.getCenter()),"
+            " f = m.latLngToContainerPoint([(arguments[0][0][0] + arguments[0][1][0]) / 2,"
+            " (arguments[0][0][1] + arguments[0][1][1]) / 2]);"
+            "return [m.getZoom(), m.getBoundsZoom(arguments[0], false, [16, 16]),"
+            " Math.hypot(c.x - f.x, c.y - f.y)];"
+        )
+        zoom, fit, _ = driver.execute_script(fit_js, field)
+        assert zoom == fit, ("1024x600", zoom, fit)
+        viewport(driver, 1280, 800)
+        until(
+            "the field fitted at 1280x800", lambda: driver.execute_script(fit_js, field)[0] > zoom
+        )
+        zoom, fit, off_px = driver.execute_script(fit_js, field)
+        assert zoom == fit and off_px < 30, ("1280x800", zoom, fit, off_px)
     except Exception:
         driver.save_screenshot(str(tmp_path / "failed.png"))
         print("screenshot of the failure:", tmp_path / "failed.png")

@@ -286,6 +286,24 @@ def test_every_route_is_behind_the_guard(plain: Served) -> None:
         assert s.recv(64).startswith(b"HTTP/1.1 421")
 
 
+def _raw(port: int, request: bytes) -> bytes:
+    """The status of a request written by hand ("400", "421", ...)."""
+    with socket.create_connection(("127.0.0.1", port)) as s:
+        s.sendall(request)
+        return s.recv(64)[9:12]
+
+
+def test_a_request_line_naming_another_host_is_refused(plain: Served) -> None:
+    """Host is ours, an absolute-form target names a host: refused, whichever host it is."""
+    ours = f"Host: 127.0.0.1:{plain.port}\r\n".encode()
+    for target in (b"http://rebind.attacker.example/", f"http://127.0.0.1:{plain.port}/".encode()):
+        assert _raw(plain.port, b"GET " + target + b" HTTP/1.1\r\n" + ours + b"\r\n") == b"421"
+    two = b"GET / HTTP/1.1\r\n" + ours + b"Host: rebind.attacker.example\r\n\r\n"
+    assert _raw(plain.port, two) in (b"400", b"421")  # two Host headers
+    assert _raw(plain.port, b"GET / HTTP/1.1\r\nHost: 127.0.0.1:abc\r\n\r\n") == b"421"
+    assert _raw(plain.port, b"GET / HTTP/1.1\r\n" + ours + b"\r\n") == b"200"
+
+
 def test_one_host_with_a_numeric_port_is_all_that_is_taken() -> None:
     from topdress.display.guard import Guard
 

@@ -10,14 +10,19 @@ PIN to start. One demo and one browser for the whole module.
 
 from __future__ import annotations
 
+import http.server
+import threading
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from browser import DemoProcess, chromium, missing_browser, until, viewport
+from topdress.cli.display import kiosk_token
+from topdress.log.session import SessionReader
 
 pytestmark = [
     pytest.mark.browser,
@@ -30,8 +35,12 @@ TABLET = "10.9.9.9"
 
 
 @pytest.fixture(scope="module")
-def tablet(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[DemoProcess, Any]]:
-    where = tmp_path_factory.mktemp("stop")
+def where(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("stop")
+
+
+@pytest.fixture(scope="module")
+def tablet(where: Path) -> Iterator[tuple[DemoProcess, Any]]:
     config = where / "cab.toml"
     config.write_text(
         f'[display]\npin = "{PIN}"\ntrusted_proxies = ["127.0.0.1"]\n'
@@ -178,6 +187,83 @@ def test_stop_over_every_overlay_and_through_a_lockout(
     _touch(driver, "stop")
     until("STOPPED by Stop during a lockout", lambda: _text(driver, "op_state") == "STOPPED", 10.0)
     assert not driver.find_elements(By.CSS_SELECTOR, ".q-dialog input")
+
+
+def _serve(page: str) -> http.server.ThreadingHTTPServer:
+    """`page` at / of a local server on a port of its own: another origin than the display's."""
+
+    class Page(http.server.BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            body = page.encode()
+            self.send_response(200)
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Page)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server
+
+
+def test_a_page_of_another_origin_guessing_the_kiosk_token_leaves_the_cab_in(
+    tablet: tuple[DemoProcess, Any], where: Path
+) -> None:
+    """Six `<img src=".../?kiosk=guessN">` on a page of another local origin (no-cors GETs carry
+    no Origin) lock 127.0.0.1 out; the cab's kiosk coming back with its token is still the cab:
+    its page, Start without the PIN, Stop."""
+    from selenium.webdriver.common.by import By
+
+    demo, driver = tablet
+
+    def guesses() -> int:
+        """The kiosk-token guesses from 127.0.0.1 in the session log so far."""
+        (path,) = (demo.out_dir / "sessions").glob("*.sqlite")
+        with SessionReader(path) as reader:
+            return sum(
+                1
+                for e in reader.events()
+                if e.kind == "display.pin_failed"
+                and e.detail == {**e.detail, "address": "127.0.0.1", "what": "kiosk"}
+            )
+
+    before = guesses()
+    driver.execute_cdp_cmd("Network.setExtraHTTPHeaders", {"headers": {}})  # the PC's own
+    imgs = "".join(f'<img src="{demo.url}/?kiosk=guess{n}" width=1>' for n in range(6))
+    attacker = _serve(f"<!doctype html><title>another site</title>{imgs}")
+    try:
+        driver.get(f"http://127.0.0.1:{attacker.server_address[1]}/")
+
+        def locked() -> bool:
+            try:
+                urllib.request.urlopen(f"{demo.url}/?kiosk=guess", timeout=5)
+            except urllib.error.HTTPError as refused:
+                return refused.code == 429
+            return False
+
+        until("the six guesses counted and logged", lambda: guesses() >= before + 6)
+        until("127.0.0.1 locked out by the guesses", locked)
+        driver.get(f"{demo.url}/?kiosk={kiosk_token(str(where / 'kiosk-token'))}")
+        until("the cab's page", lambda: _text(driver, "op_state") in ("STOPPED", "RUNNING"))
+        assert "?kiosk" not in driver.current_url  # the token left the address bar
+        _live(driver)
+        if _text(driver, "op_state") == "RUNNING":
+            _touch(driver, "stop")
+            until("STOPPED", lambda: _text(driver, "op_state") == "STOPPED")
+        _press(driver, "start")  # the cab: no PIN asked
+        until("RUNNING without the PIN", lambda: _text(driver, "op_state") == "RUNNING", 10.0)
+        assert not driver.find_elements(By.CSS_SELECTOR, ".q-dialog input")
+        _touch(driver, "stop")
+        until("STOPPED", lambda: _text(driver, "op_state") == "STOPPED", 10.0)
+    finally:
+        attacker.shutdown()
+        driver.delete_all_cookies()  # the tablet again for the module's other tests
+        driver.execute_cdp_cmd(
+            "Network.setExtraHTTPHeaders", {"headers": {"X-Forwarded-For": TABLET}}
+        )
 
 
 #: Every tab's and header button's label whose text runs over more than one line.

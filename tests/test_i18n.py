@@ -59,14 +59,14 @@ def test_the_terminals_messages_are_keyed_with_their_values() -> None:
         cv=text("why.cv", cv=2.514),
         threshold=4.2,
         compare=text("source.wheel"),
-        speed=7.96,
-        switch=6.0,
+        kmh=7.96,
+        switch_kmh=6.0,
     )
     # str() is the English of the program log; render() follows the language in force
-    assert str(why) == "GNSS: CV 2.51 % < 4.2 %, wheel 8.0 > 6 km/h"
+    assert str(why) == "GNSS: CV 2.51 % < 4.2 %, wheel 8.0 km/h > 6 km/h"
     set_language("zh")
-    assert render(why) == "GNSS：变异系数 2.51 % < 4.2 %，地轮 8.0 > 6 km/h"
-    assert str(why) == "GNSS: CV 2.51 % < 4.2 %, wheel 8.0 > 6 km/h"  # the log stays English
+    assert render(why) == "GNSS：变异系数 2.51 % < 4.2 %，地轮 8.0 km/h > 6 km/h"
+    assert str(why) == "GNSS: CV 2.51 % < 4.2 %, wheel 8.0 km/h > 6 km/h"  # the log stays English
     assert render(why, "en") == str(why)
     # a library's or the system's own words pass as they are; nothing is empty
     assert render("[Errno 2] No such file") == "[Errno 2] No such file" and render(None) == ""

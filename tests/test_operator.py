@@ -145,7 +145,7 @@ def test_manual_fixed_and_percent_rates_are_commanded_and_shown() -> None:
         )
         assert (s.cv_threshold_pct, s.switch_speed_kmh) == (4.2, 6.0)
         why = str(s.speed_why)
-        assert why.startswith("GNSS: CV ") and why.endswith(", GNSS 8.0 > 6 km/h"), why
+        assert why.startswith("GNSS: CV ") and why.endswith(", GNSS 8.0 km/h > 6 km/h"), why
         assert post(rig, op.SetManual("percent", percent=20.0)).ok
         rig.run(17.0)
         s = rig.term.snapshot

@@ -163,7 +163,7 @@ def test_the_block_fits_80_columns_and_shows_the_operator_state() -> None:
     assert "operator RUNNING           rate MANUAL 200.0 / 100.0 kg/ha" in text
     # waiting for the ECU with a long bus name, the first line packs so the run state shows
     assert lines[0].endswith("  ECU waiting (socketcan:can0)  GNSS ok  CROP 3/4 fresh  RUNNING")
-    assert "source  GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 > 6 km/h" in text
+    assert "source  GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 km/h > 6 km/h" in text
     assert "alarms  lower meter blocked  upper meter off rate (acknowledged)" in text
     assert "crop sensors lost: no NDVI (gone, not acknowledged)" in text
     assert "calib   Metering catch test weigh and enter kg 100 %: upper meter: 20.012" in text
@@ -186,8 +186,8 @@ BUSY = replace(
         cv=text("why.cv", cv=2.51),
         threshold=4.2,
         compare=text("source.gnss"),
-        speed=8.0,
-        switch=6.0,
+        kmh=8.0,
+        switch_kmh=6.0,
     ),
     alarms=(
         AlarmView("blocked_lower", text("alarm.text.blocked_lower"), "active", 3.0),
@@ -220,7 +220,7 @@ def test_the_block_follows_the_language_and_fits_80_columns_in_chinese() -> None
     assert tr("manual.shown_fixed", upper="200.0", lower="100.0", unit="kg/ha") in text
     assert tr("cal.catch") in text and tr("cal.step.weigh") in text
     # the terminal's own messages in the language: why the source, the wizard, the last event
-    assert "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 > 6 km/h" in text
+    assert "GNSS：变异系数 2.51 % < 4.2 %，GNSS 8.0 km/h > 6 km/h" in text
     assert "上层排肥器：已转" in text
     assert "GNSS 丢失（serial:/dev/ttyUSB0" in text
     working = "\n".join(render_lines(WORKING))

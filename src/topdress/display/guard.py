@@ -273,6 +273,12 @@ class GuardMiddleware:
             text = bytes(value).decode("latin-1")
             headers[name] = f"{headers[name]}, {text}" if name in headers else text
         host = headers.get(b"host", "")
+        target = bytes(scope.get("raw_path") or b"/")
+        if scope["type"] == "http" and not target.startswith(b"/"):
+            # absolute-form ("GET http://other.example/"): its host, not Host, is the one
+            # asked for (RFC 9112 3.2.2); a browser sends it only to a proxy
+            await _refuse(scope, send, 421, "this display is not a proxy\n")
+            return
         if not self.guard.host_ok(host):
             await _refuse(scope, send, 421, "this display is not served under that name\n")
             return

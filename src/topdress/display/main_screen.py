@@ -154,6 +154,8 @@ class MainScreen:
                         ui.label(tr(name)).classes("td-muted")
                         setattr(self, attr, ui.label("--").classes("font-mono").mark(attr))
                         ui.label(u.speed_unit).classes("td-muted")
+                # the GNSS lag in use, short; its source and state in the "NDVI, links" panel
+                self.lag_short = ui.label("").classes("font-mono td-muted").mark("gnss_lag_short")
             self.why = ui.label("").classes("text-xs").mark("source_why")
 
     def _build_left(self) -> None:
@@ -201,12 +203,18 @@ class MainScreen:
         with ui.row().classes("w-full flex-1 no-wrap gap-1"):
             with ui.column().classes("flex-1 min-w-0 h-full gap-0"):
                 ui.label(tr("chart.speed_title")).classes("text-sm font-bold")
-                self.speed_chart = ui.echart(speed_options([], units=self.units)).classes(
-                    "w-full flex-1"
+                self.speed_chart = (
+                    ui.echart(speed_options([], units=self.units, night=self.hub.prefs.night))
+                    .classes("w-full flex-1")
+                    .mark("speed_chart")
                 )
             with ui.column().classes("flex-1 min-w-0 h-full gap-0"):
                 ui.label(tr("chart.meter_title")).classes("text-sm font-bold")
-                self.meter_chart = ui.echart(meter_options([])).classes("w-full flex-1")
+                self.meter_chart = (
+                    ui.echart(meter_options([], night=self.hub.prefs.night))
+                    .classes("w-full flex-1")
+                    .mark("meter_chart")
+                )
 
     def _panel_crop(self) -> None:
         rpm = tr("unit.rpm")
@@ -239,8 +247,7 @@ class MainScreen:
                     k: ui.label("--").classes("text-base").mark(f"link_{k}")
                     for k in ("ecu", "gnss", "crop")
                 }
-                # the GNSS lag the ECU uses (learned or set): one touch away, the main
-                # screen's speed card keeps its height at 800x480
+                # the GNSS lag the ECU uses and where it comes from (learned or set)
                 self.lag = ui.label("").classes("text-sm").mark("gnss_lag")
                 ui.label(tr("main.faults")).classes("text-sm td-muted")
                 self.faults = ui.label("--").classes("text-base").mark("faults")
@@ -387,7 +394,7 @@ class MainScreen:
         if self.source.props.get("color") != colour:
             self.source.props["color"] = colour
             self.source.update()
-        self.why.set_text(render(s.speed_why) if live else "")
+        self.why.set_text(render(u.shown(s.speed_why)) if live else "")
         for i, layer in enumerate(op.LAYERS):
             self.rate[layer].set_text(fmt.num(u.rate(s.rate_kg_ha[i]), ".1f"))
             self.applied[layer].set_text(fmt.ecu(s, u.rate(s.applied_kg_ha[i]), ".1f"))
@@ -398,9 +405,10 @@ class MainScreen:
         if s.t_s - self._chart_t >= CHART_PERIOD_S or s.t_s < self._chart_t:
             self._chart_t = s.t_s
             history = self.hub.history()
-            self.speed_chart.options.update(speed_options(history, units=self.units))
+            night = self.hub.prefs.night
+            self.speed_chart.options.update(speed_options(history, units=self.units, night=night))
             self.speed_chart.update()
-            self.meter_chart.options.update(meter_options(history))
+            self.meter_chart.options.update(meter_options(history, night=night))
             self.meter_chart.update()
             self.map.update()
 
@@ -471,7 +479,9 @@ class MainScreen:
 
     def _update_details(self, s: Snapshot) -> None:
         live = s.ecu_live
-        self.lag.set_text(render(s.gnss_lag.text()) if live and s.gnss_lag else "")
+        lag = s.gnss_lag if live else None
+        self.lag.set_text(render(lag.text()) if lag else "")
+        self.lag_short.set_text(tr("main.lag", s=lag.in_use_ms / 1000) if lag else "")
         self.ndvi_sensors.set_text(fmt.num(s.ndvi_sensors, ".3f"))
         self.ndvi_meters.set_text(fmt.num(s.ndvi, ".3f"))
         self.per_sensor.set_text(

@@ -24,6 +24,7 @@ from topdress.display.main_screen import MainScreen
 from topdress.display.map_view import FieldMaps, load_field_maps
 from topdress.display.options import is_loopback
 from topdress.display.settings_screens import CommunicationScreen, ControlScreen
+from topdress.display.units import Units
 from topdress.i18n import render, tr
 from topdress.view import commands as op
 from topdress.view.snapshot import AlarmView, Snapshot
@@ -264,7 +265,8 @@ class Header:
         else:
             self._shown_alarm = shown.name
             more = len(alarms) - 1
-            words = f"{render(shown.text)} · {tr(f'alarm.state.{shown.state}')}"
+            said = render(Units(self.hub.prefs.units).shown(shown.text))
+            words = f"{said} · {tr(f'alarm.state.{shown.state}')}"
             if more:
                 words += " " + tr("alarm.more", n=more)
             self.banner_text.set_text(words)

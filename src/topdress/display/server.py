@@ -51,4 +51,7 @@ def run_server(
         # The peer is the client: X-Forwarded-For only from display.trusted_proxies (guard).
         proxy_headers=False,
         server_header=False,
+        # h11 hands the request target over as written: httptools drops the host of an
+        # absolute-form target ("GET http://other.example/"), which the guard must see
+        http="h11",
     )

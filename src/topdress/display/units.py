@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from topdress.i18n import tr
+from topdress.i18n import Text, quantities, si_unit, tr
 
 KG_PER_LB = 0.45359237
 HA_PER_AC = 0.40468564224
@@ -66,3 +66,24 @@ class Units:
     @property
     def length_unit(self) -> str:
         return tr("unit.ft") if self.imperial else tr("unit.m")
+
+    def shown(self, message: Text | str | None) -> Text | str | None:
+        """`message` with its quantities (the values its template writes with their unit word,
+        i18n.quantities) in these units and their unit words beside them."""
+        if not isinstance(message, Text) or not self.imperial:
+            return message
+        convert = {
+            "kg": (self.mass, self.mass_unit),
+            "kmh": (self.speed, self.speed_unit),
+            "kg_ha": (self.rate, self.rate_unit),
+        }
+        keys = set(quantities(message))
+        values: list[tuple[str, object]] = []
+        for k, v in message.values:
+            unit = si_unit(k) if k in keys and isinstance(v, int | float) else None
+            if unit is None:
+                values.append((k, v))
+            else:
+                to, word = convert[unit]
+                values += [(k, to(float(v))), (k + "_unit", word)]
+        return Text(message.key, tuple(values))

@@ -92,6 +92,26 @@ def text(key: str, **values: Any) -> Text:
     return Text(key, tuple(values.items()))
 
 
+#: A value named by its SI unit (`kg`, `switch_kmh`, ...) whose template writes the unit as
+#: `{NAME_unit}` is a quantity: the display may give it in other units (display/units.py);
+#: otherwise `render` writes the SI unit's word here. The longest suffix is tried first.
+SI_UNITS: Mapping[str, str] = {"kg_ha": "unit.kgha", "kmh": "unit.kmh", "kg": "unit.kg"}
+
+
+def si_unit(name: str) -> str | None:
+    """The SI unit a value's name ends in (`kg_ha`, `kmh`, `kg`), or None."""
+    for unit in SI_UNITS:
+        if name == unit or name.endswith("_" + unit):
+            return unit
+    return None
+
+
+def quantities(message: Text) -> list[str]:
+    """The values of `message` its template shows with their unit word (`{NAME_unit}`)."""
+    template = "".join(CATALOGUE[message.key])
+    return [k for k, _ in message.values if si_unit(k) and "{" + k + "_unit}" in template]
+
+
 def render(message: Text | str | None, lang: Language | None = None) -> str:
     """A message in `lang` (default: the language in force); a plain string (a library's or the
     operating system's own words) as it is, None as empty."""
@@ -100,19 +120,24 @@ def render(message: Text | str | None, lang: Language | None = None) -> str:
     if isinstance(message, str):
         return message
     values = {k: render(v, lang) if isinstance(v, Text) else v for k, v in message.values}
+    for k in quantities(message):
+        values.setdefault(k + "_unit", tr(SI_UNITS[si_unit(k) or ""], lang))
     return tr(message.key, lang, **values)
 
 
 __all__ = [
     "LANGUAGES",
     "LANGUAGE_NAMES",
+    "SI_UNITS",
     "Language",
     "Text",
     "UnknownLanguage",
     "language",
     "parse_language",
+    "quantities",
     "render",
     "set_language",
+    "si_unit",
     "text",
     "tr",
     "version",

@@ -58,6 +58,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     ),
     "why.no_gnss": ("{source}: no valid GNSS speed", "{source}：无有效 GNSS 速度"),
     # the GNSS lag in use and where it comes from (EcuGnssLag)
+    "main.lag": ("lag {s:.2f} s", "滞后 {s:.2f} 秒"),
     "lag.start": ("GNSS lag {s:.2f} s (learning)", "GNSS 滞后 {s:.2f} 秒（学习中）"),
     "lag.learned": ("GNSS lag {s:.2f} s (learned)", "GNSS 滞后 {s:.2f} 秒（已学习）"),
     "lag.fixed": ("GNSS lag {s:.2f} s (fixed)", "GNSS 滞后 {s:.2f} 秒（固定）"),
@@ -68,16 +69,18 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "why.cv": ("CV {cv:.2f} %", "变异系数 {cv:.2f} %"),
     "why.cv_none": ("CV --", "变异系数 --"),
     "why.gnss": (
-        "GNSS: {cv} < {threshold:g} %, {compare} {speed:.1f} > {switch:g} km/h",
-        "GNSS：{cv} < {threshold:g} %，{compare} {speed:.1f} > {switch:g} km/h",
+        "GNSS: {cv} < {threshold:g} %, "
+        "{compare} {kmh:.1f} {kmh_unit} > {switch_kmh:.3g} {switch_kmh_unit}",
+        "GNSS：{cv} < {threshold:g} %，"
+        "{compare} {kmh:.1f} {kmh_unit} > {switch_kmh:.3g} {switch_kmh_unit}",
     ),
     "why.not_uniform": (
         "wheel: {cv} ≥ {threshold:g} % (not uniform)",
         "地轮：{cv} ≥ {threshold:g} %（非匀速）",
     ),
     "why.slow": (
-        "wheel: {compare} {speed:.1f} ≤ {switch:g} km/h",
-        "地轮：{compare} {speed:.1f} ≤ {switch:g} km/h",
+        "wheel: {compare} {kmh:.1f} {kmh_unit} ≤ {switch_kmh:.3g} {switch_kmh_unit}",
+        "地轮：{compare} {kmh:.1f} {kmh_unit} ≤ {switch_kmh:.3g} {switch_kmh_unit}",
     ),
     "link_name.ecu": ("ECU", "控制器"),
     "link_name.gnss": ("GNSS", "GNSS"),
@@ -772,7 +775,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     "view.metric": ("Units: kg/ha, km/h", "单位：kg/ha、km/h"),
     "alarm.more": ("(+{n} more)", "（另有 {n} 项）"),
     "alarm.text.link": ("{link} {state} while the meters are on", "排肥时{link}{state}"),
-    "alarm.text.tank_low": ("tank low: {kg:.0f} kg left", "料箱肥量低：剩余 {kg:.0f} kg"),
+    "alarm.text.tank_low": (
+        "tank low: {kg:.0f} {kg_unit} left",
+        "料箱肥量低：剩余 {kg:.0f} {kg_unit}",
+    ),
     "main.rate_target": ("target", "目标"),
     "main.prescription": ("prescription {rate} {unit}", "处方 {rate} {unit}"),
     "zone.field": ("in the field", "田块内"),

@@ -72,8 +72,8 @@ def speed_why(snap: Snapshot, cfg: TerminalConfig) -> Text | None:
         cv=cv,
         threshold=s.cv_threshold_pct,
         compare=text(f"source.{s.switch_compare}"),
-        speed=cmp_v,
-        switch=s.switch_speed_kmh,
+        kmh=cmp_v,
+        switch_kmh=s.switch_speed_kmh,
     )
     if snap.source == Source.GNSS:
         return text("why.gnss", **rule)
