@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
+CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/src/gen/*.h ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
 .PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c bench sysdeps browser qemu office screenshots clean firmware interop

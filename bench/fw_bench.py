@@ -28,7 +28,8 @@ Prints exactly:
     fw_lockstep_host_p99_us: X
     fw_lockstep_host_max_us: X
     fw_lockstep_realtime_x: X       simulated seconds per host second
-    fw_lockstep_step_cost_max_us: N longest core step on the emulated chip (host time in QEMU)
+    fw_lockstep_step_cost_max_us: N longest step on the emulated chip: the core and the time its
+                                    received frames took (host time in QEMU)
 Details go to stderr. Without qemu-system-arm the qemu figures are left out (said on stderr).
 """
 

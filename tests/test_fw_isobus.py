@@ -128,3 +128,77 @@ def test_emulated_isobus_ecu_activates_its_pool_with_a_tc() -> None:
     assert tc.client is not None, tc.errors
     assert tc.client.address == 0x84
     assert tc.client.active, tc.errors
+
+
+@pytest.mark.qemu
+@pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing()))
+def test_emulated_isobus_ecu_meters_the_tcs_rate() -> None:
+    """The FW_ISOBUS image in lockstep with the simulated machine and the terminal's TC: the
+    rate the TC sets reaches the meters (metered on the simulated ground), sections off stop
+    them. The terminal's GNSS speed goes as PcGnssTime on Proprietary B from the TC's address
+    (the firmware's core would otherwise run on its slipping wheel alone). Then 100 % bus load
+    on the link for 8 s: no step late or missed (no reset), the rate held."""
+    from topdress.isobus.node import Frame, to_bus
+    from topdress.protocol.frames import encode_gnss_time
+    from topdress.sim.qemu_ecu import QemuWorld
+    from topdress.sim.tc import MiniTc
+    from topdress.sim.tractor import Drive
+
+    out = REPO / "build" / "fw-qemu-isobus"
+    done = _make(out, "FW_ISOBUS=1", "VARIANT=qemu")
+    assert done.returncode == 0, done.stderr
+    tc = MiniTc()
+    with QemuEcu(QemuOptions(image=out / ELF)) as ecu:
+        world = QemuWorld(ecu, seed=3, drive=Drive.paper_run(7.0, hold_m=400.0, wait_s=3.0))
+        pending: list[Frame] = []
+        steps = 0
+
+        def run(
+            seconds: float, dist: list[float] | None = None, extra: tuple[Frame, ...] = ()
+        ) -> None:
+            nonlocal pending, steps
+            for _ in range(round(seconds / world.dt)):
+                steps += 1
+                if steps % 10 == 0 and tc.server.address is not None:  # a fix every 100 ms
+                    g = encode_gnss_time(world.truth.v_kmh, 0, steps // 10)
+                    bus = to_bus(Frame(g.arbitration_id, bytes(g.data)), False, tc.server.address)
+                    assert bus is not None
+                    pending.append(bus)
+                for f in [*pending, *extra]:
+                    world.link.send((f.can_id, f.data))
+                frames = [Frame(i, d) for i, d in world.step().can]
+                pending = tc.step(world.now_us, frames)
+                if dist is not None:
+                    dist[0] += world.truth.v_kmh / 3.6 * world.dt
+
+        run(4.0)
+        assert tc.activated, tc.server.errors
+        for element, ddi, value in ((2, 160, 1), (2, 289, 1), (3, 6, 15000), (4, 6, 10000),
+                                    (2, 290, -4096 + 0x555)):  # fmt: skip
+            tc.command(element, ddi, value)
+        run(16.0)
+        kg0, dist = (world.metered_kg(0), world.metered_kg(1)), [0.0]
+        run(8.0, dist)
+        area_ha = dist[0] * 3.6 / 10_000
+        rates = [(world.metered_kg(i) - kg0[i]) / area_ha for i in (0, 1)]
+        print(f"emulated ISOBUS ECU metered {rates[0]:.1f} / {rates[1]:.1f} kg/ha (TC 150 / 100)")
+        assert rates[0] == pytest.approx(150.0, rel=0.03)
+        assert rates[1] == pytest.approx(100.0, rel=0.03)
+        # 100 % bus load on the link: a babbling node's 19 frames a step (priority 0, a third of
+        # them Proprietary A to the ECU from the wrong address) beside the TC's; every step
+        # still comes at its time (no reset: lockstep would stall) and the rate holds
+        flood = [Frame((0xEF84 if i % 3 == 0 else 0xFF10) << 8 | 0x20, bytes([i] * 8))
+                 for i in range(19)]  # fmt: skip
+        late = world.timing.late_inputs
+        kg0, dist = (world.metered_kg(0), world.metered_kg(1)), [0.0]
+        run(8.0, dist, tuple(flood))
+        area_ha = dist[0] * 3.6 / 10_000
+        loaded = [(world.metered_kg(i) - kg0[i]) / area_ha for i in (0, 1)]
+        print(f"at 100 % load: {loaded[0]:.1f} / {loaded[1]:.1f} kg/ha")
+        assert loaded[0] == pytest.approx(150.0, rel=0.03)
+        assert world.timing.late_inputs == late
+        assert set(world.timing.intervals_us) == {10_000}
+        rpm_on = world.truth.meter_rpm[0]
+        tc.command(2, 290, -4096)  # every section off
+        run(0.5)
+        assert world.truth.meter_rpm[0] < 0.3 * rpm_on

@@ -1,6 +1,7 @@
 """Interoperability of the ECU's ISOBUS layer (C, through cffi) with `can-j1939`, a J1939 stack
 nobody here wrote, over python-can's udp_multicast on loopback: address-claim contests won and
-lost by NAME, TP sessions both ways (CMDT and BAM) and aborts."""
+lost by NAME, TP sessions both ways (CMDT and BAM) and aborts, the private frames on
+Proprietary A/B."""
 
 from __future__ import annotations
 
@@ -8,11 +9,13 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+import can
 import j1939
 import pytest
 
 from isobus_rig import Wire, udp_bus, udp_group
-from topdress.isobus.node import ClaimNode, TpEndpoint, split_id
+from topdress.isobus.node import ClaimNode, Frame, IsobusNode, TpEndpoint, split_id
+from topdress.protocol.dbc import frame_ids
 
 pytestmark = [pytest.mark.interop, pytest.mark.wallclock]
 
@@ -173,3 +176,77 @@ def test_our_cancel_aborts_the_peers_receive(group: str, peer: Any) -> None:
     w.pump(5.0, until=lambda: bool(got))
     assert (PGN_PROPA, 0x26, payload) in got
     w.bus.shutdown()
+
+
+class _EcuWithCore:
+    """The whole node on the bus, with the control core's frames going out on their ISOBUS
+    PGNs (`queue`) and the terminal's frames it takes for the core kept in `taken`."""
+
+    def __init__(self) -> None:
+        self.node = IsobusNode(OURS, tc_timeout_ms=3500)
+        self.queue: list[Frame] = []
+        self.taken: list[Frame] = []
+
+    def rx(self, can_id: int, data: bytes, now_us: int) -> None:
+        self.node.rx(can_id, data, now_us)
+        core = self.node.prop_rx(Frame(can_id, data))
+        if core is not None:
+            self.taken.append(core)
+
+    def step(self, now_us: int) -> None:
+        self.node.step(now_us, 0)
+
+    def tx(self) -> list[Frame]:
+        out = self.node.tx()
+        for f in self.queue:
+            bus = self.node.prop_tx(f)
+            assert bus is not None, f"{f.can_id:#x} has no ISOBUS form now"
+            out.append(bus)
+        self.queue = []
+        return out
+
+
+def test_private_frames_on_proprietary_pgns_with_the_peer(group: str, peer: Any) -> None:
+    """The peer plays the terminal (a TC status from its address): its Proprietary A frame to
+    us reaches the core as PcParamSet; our EcuStatus reaches it on Proprietary B from our
+    claimed address and our EcuParamAck on Proprietary A to it; the same Proprietary A frame
+    from another address is ignored and counted."""
+    got: list[tuple[int, int, bytes]] = []
+    ca = _ca(peer, HIGHER, 0x90)
+    ca.subscribe(lambda prio, pgn, sa, ts, data: got.append((pgn, sa, bytes(data))))
+    _settled(ca, 0x90)
+    ecu = _EcuWithCore()
+    w = Wire(udp_bus(group), ecu, ecu.step)
+    ecu.node.start(w.now_us())
+    w.pump(0.5, until=lambda: ecu.node.address == 0x84)
+    assert ecu.node.address == 0x84
+    status = bytes([0xFE, 0xFF, 0xFF, 0xFF, 0x00, 0xFF, 0x00, 0xFF])  # TC status, to all
+    assert ca.send_pgn(0, 0xCB, 0xFF, 3, list(status))
+    w.pump(0.5, until=lambda: ecu.node.tc_address == 0x90)
+    assert ecu.node.tc_address == 0x90
+    ids = frame_ids()
+    param = bytes([37, 0, 0, 0, 0x2C, 0x01, 0, 0])  # MeterTau = 300 ms
+    _peer_send_prio(ca, w, 0xEF, 0x84, 2, param)
+    w.pump(1.0, until=lambda: bool(ecu.taken))
+    assert ecu.taken == [Frame(ids["PcParamSet"], param)]
+    ecu.queue = [Frame(ids["EcuStatus"], bytes(range(8))),
+                 Frame(ids["EcuParamAck"], bytes([37, 0, 0, 0, 0x2C, 0x01, 0, 0]))]  # fmt: skip
+    w.pump(1.0, until=lambda: len([g for g in got if g[1] == 0x84 and g[0] != 0xCB00]) >= 2)
+    mine = [(pgn & 0x3FF00 if pgn & 0xFF00 < 0xF000 else pgn, data)
+            for pgn, sa, data in got if sa == 0x84]  # fmt: skip
+    assert (0xFF5C, bytes(range(8))) in mine
+    assert (0xEF00, bytes([37, 0, 0, 0, 0x2C, 0x01, 0, 0])) in mine
+    # the same frame from 0x91, a node that is not the TC (sent raw on the bus)
+    stranger = (2 << 26) | (0xEF84 << 8) | 0x91
+    w.bus.send(can.Message(arbitration_id=stranger, data=param, is_extended_id=True))
+    w.pump(1.0, until=lambda: ecu.node.counters["prop_wrong_source"] >= 1)
+    assert ecu.node.counters["prop_wrong_source"] == 1
+    assert len(ecu.taken) == 1
+    w.bus.shutdown()
+
+
+def _peer_send_prio(ca: Any, w: Wire, pf: int, ps: int, prio: int, payload: bytes) -> None:
+    deadline = time.monotonic() + 3.0
+    while not ca.send_pgn(0, pf, ps, prio, list(payload)):
+        assert time.monotonic() < deadline, "the peer refused to send"
+        w.pump(0.05)

@@ -6,8 +6,9 @@
  *
  * Port contract: call td_isob_rx() for every extended frame received, td_isob_step() every
  * control period (10 ms) with the time and the implement's odometer, and send what
- * td_isob_tx() hands out until it returns false. No heap, no globals; 2,888 B of state on a
- * Cortex-M4 (1,516 B of it the DDOP copy with our NAME).
+ * td_isob_tx() hands out until it returns false. No heap, no globals; the state's size on a
+ * Cortex-M4 is isobus_cm4_state_bytes of docs/figures.md (most of it the DDOP copy with our
+ * NAME).
  */
 #ifndef TD_ISOB_H
 #define TD_ISOB_H
@@ -16,6 +17,7 @@
 #include <stdint.h>
 
 #include "td_claim.h"
+#include "td_prop.h"
 #include "td_tc.h"
 #include "td_tp.h"
 
@@ -31,6 +33,8 @@ typedef struct {
     uint8_t bam_buf[TD_ISOB_BAM_BUF];
     uint32_t rx_frames; /**< frames taken */
     uint32_t rx_errors; /**< malformed frames (counted, dropped) */
+    uint32_t prop_rx;           /**< the terminal's private frames taken (td_isob_prop_rx) */
+    uint32_t prop_wrong_source; /**< private frames from an address not our TC's (dropped) */
 } td_isob_t;
 
 /** `name` from td_ibname_encode(); the preferred address and fallback range as td_claim_init;
@@ -43,6 +47,19 @@ int td_isob_start(td_isob_t *n, uint32_t now_us);
 int td_isob_rx(td_isob_t *n, const td_can_frame_t *f, uint32_t now_us);
 /** The control period's work. */
 void td_isob_step(td_isob_t *n, uint32_t now_us, uint32_t distance_mm);
+/**
+ * A received frame that is one of the terminal's private frames (td_prop.h) from the address
+ * of our Task Controller (the terminal): 1, `core` then holds it with the paper's fixed
+ * identifier for the control core; 0 for other traffic; TD_IB_E_SOURCE when it came from
+ * another address or no TC is known: dropped and counted in `prop_wrong_source`.
+ */
+int td_isob_prop_rx(td_isob_t *n, const td_can_frame_t *f, td_can_frame_t *core);
+/**
+ * A frame of the control core as it goes on the ISOBUS: from our claimed address (to the TC
+ * for Proprietary A). TD_IB_E_NO_ADDRESS before the claim or, for Proprietary A, without a TC;
+ * TD_IB_E_FRAME for a frame with no ISOBUS form. Either way nothing is to be sent.
+ */
+int td_isob_prop_tx(const td_isob_t *n, const td_can_frame_t *core, td_can_frame_t *out);
 /** The next frame to send; false when none. */
 bool td_isob_tx(td_isob_t *n, td_can_frame_t *out);
 

@@ -75,6 +75,7 @@ typedef struct {
 typedef struct {
     td_tc_state_t state;
     uint8_t tc_addr;
+    uint8_t my_addr; /**< our address when the connection began: a move starts it again */
     uint8_t tc_version;
     uint8_t tc_options;
     char language[2];

@@ -72,3 +72,24 @@ void td_isob_step(td_isob_t *n, uint32_t now_us, uint32_t distance_mm) {
 bool td_isob_tx(td_isob_t *n, td_can_frame_t *out) {
     return n != NULL && td_ib_txq_pop(&n->q, out);
 }
+
+int td_isob_prop_rx(td_isob_t *n, const td_can_frame_t *f, td_can_frame_t *core) {
+    int rc;
+    if (n == NULL) {
+        return TD_IB_E_ARG;
+    }
+    rc = td_prop_from_bus(f, TD_PROP_TERMINAL, n->tc.tc_addr, td_claim_address(&n->claim), core);
+    if (rc == 1) {
+        n->prop_rx++;
+    } else if (rc == TD_IB_E_SOURCE) {
+        n->prop_wrong_source++;
+    }
+    return rc;
+}
+
+int td_isob_prop_tx(const td_isob_t *n, const td_can_frame_t *core, td_can_frame_t *out) {
+    if (n == NULL) {
+        return TD_IB_E_ARG;
+    }
+    return td_prop_to_bus(core, TD_PROP_ECU, td_claim_address(&n->claim), n->tc.tc_addr, out);
+}

@@ -363,6 +363,7 @@ int td_tc_rx(td_tc_t *tc, uint32_t pgn, uint8_t sa, uint8_t da, const uint8_t *d
     if (cmd == PD_STATUS) {
         if (tc->state == TD_TC_WAIT_STATUS) {
             tc->tc_addr = sa;
+            tc->my_addr = my_addr;
             tc->last_status_us = now_us;
             tc->task_active = (d[4] & 1u) != 0u;
             go(tc, TD_TC_VERSION, my_addr, now_us, q);
@@ -446,6 +447,12 @@ void td_tc_step(td_tc_t *tc, uint8_t my_addr, uint32_t now_us, uint32_t distance
         return;
     }
     if (tc->state == TD_TC_NO_ADDRESS) {
+        enter(tc, TD_TC_WAIT_STATUS, now_us);
+    }
+    if (tc->state != TD_TC_WAIT_STATUS && tc->state != TD_TC_REFUSED && my_addr != tc->my_addr) {
+        /* a higher-priority NAME took our address and we moved: the TC knows the client by
+         * its address, so connect again from the new one; no rates meanwhile */
+        tc->alarm = true;
         enter(tc, TD_TC_WAIT_STATUS, now_us);
     }
     if (tc->state != TD_TC_WAIT_STATUS &&

@@ -24,7 +24,8 @@ static uint32_t rnd(rng_t *g) {
 
 static const uint32_t PGNS[] = {TD_IB_PGN_ADDRESS_CLAIM, TD_IB_PGN_REQUEST, TD_IB_PGN_TP_CM,
                                 TD_IB_PGN_TP_DT, TD_IB_PGN_ETP_CM, TD_IB_PGN_ETP_DT,
-                                TD_IB_PGN_PROCESS_DATA, TD_IB_PGN_LANGUAGE, 0xFECAu, 0xEF00u};
+                                TD_IB_PGN_PROCESS_DATA, TD_IB_PGN_LANGUAGE, 0xFECAu, 0xEF00u,
+                                0x1EF00u, 0xFF62u};
 
 static td_can_frame_t random_frame(rng_t *g, uint8_t my) {
     td_can_frame_t f;
@@ -132,6 +133,12 @@ static void test_receive_path_survives_random_traffic(void **s) {
         const uint8_t my = n.claim.address;
         f = random_frame(&g, my == TD_IB_ADDR_NULL ? 0x84u : my);
         (void)td_isob_rx(&n, &f, now);
+        {
+            td_can_frame_t core;
+            const int rc = td_isob_prop_rx(&n, &f, &core);
+            assert_true(rc == 0 || rc == 1 || rc == TD_IB_E_SOURCE);
+            assert_true(rc != 1 || (core.dlc == f.dlc && core.extended == 1u));
+        }
         check(&n);
         if (rnd(&g) % 50u == 0u) {
             const uint8_t st[8] = {0xFE, 0xFF, 0xFF, 0xFF, 0x01, 0xFF, 0x00, 0xFF};

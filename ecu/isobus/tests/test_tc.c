@@ -285,6 +285,25 @@ static void test_lost_tc_is_fail_safe_and_reconnects_without_transfer(void **s) 
     assert_int_equal(td_tc_rate_mg_m2(&R.tc, 0u), 15000); /* the TC sets it again; kept meanwhile */
 }
 
+/* A higher-priority NAME took our address and the claim moved us: the TC knows its client by
+ * the address, so the connection starts again from the new one, with no rate meanwhile. */
+static void test_moved_address_connects_again(void **s) {
+    (void)s;
+    rig_init();
+    connect(false);
+    set_ack(TD_DDOP_EL_UPPER, 6u, 15000);
+    set_ack(TD_DDOP_EL_BOOM, 289u, 1);
+    assert_int_equal(td_tc_rate_mg_m2(&R.tc, 0u), 15000);
+    R.now += 10000u;
+    td_tc_step(&R.tc, 0x85u, R.now, 0u, &R.tp, &R.q);
+    assert_true(R.tc.alarm);
+    assert_int_equal(R.tc.state, TD_TC_WAIT_STATUS);
+    assert_int_equal(td_tc_rate_mg_m2(&R.tc, 0u), 0);
+    assert_int_equal(td_tc_sections_on(&R.tc), 0u);
+    tc_status(); /* the next status: the connection begins again */
+    assert_int_equal(R.tc.state, TD_TC_VERSION);
+}
+
 static void test_refused_pool_raises_alarm(void **s) {
     uint8_t d[8];
     const uint8_t version[8] = {0x10, 4, 0xFF, 0x13, 0, 1, 16, 2};
@@ -323,6 +342,7 @@ int main(void) {
         cmocka_unit_test(test_sections_by_condensed_work_state),
         cmocka_unit_test(test_measurements_by_time_distance_change),
         cmocka_unit_test(test_lost_tc_is_fail_safe_and_reconnects_without_transfer),
+        cmocka_unit_test(test_moved_address_connects_again),
         cmocka_unit_test(test_refused_pool_raises_alarm),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -95,10 +95,15 @@ void fw_uart_pump(void);
 #if defined(FW_ISOBUS)
 /** The node with its NAME from the chip's unique ID; starts the address claim. false: no NAME. */
 bool fw_isobus_init(const td_params_t *p, uint32_t now_us);
-/** A received frame (29-bit ones only) to the node. */
-void fw_isobus_rx(const td_can_frame_t *f, uint32_t now_us);
-/** The core's PcCommand from the TC's rates and sections (stop without a TC). */
-void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd);
+/** A received frame (29-bit ones only) to the node; the terminal's private frames from the TC's
+ *  address (Proprietary A/B, td_prop.h) to the core with their fixed identifiers. */
+void fw_isobus_rx(td_app_t *app, const td_can_frame_t *f, uint32_t now_us);
+/** A frame of the core as it goes on the ISOBUS (from the claimed address); false: not sent
+ *  (no address yet, no TC for an answer, or no ISOBUS form). */
+bool fw_isobus_to_bus(const td_can_frame_t *core, td_can_frame_t *out);
+/** The core's PcCommand from the TC's rates and sections (stop without a TC), with the
+ *  terminal's last GNSS speed (PcGnssTime) while fresh, else "not available". */
+void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd, uint32_t now_us);
 /** After the core's step: actual rates and work state to the TC, the node's period. */
 void fw_isobus_step(const td_app_t *app, uint32_t now_us);
 /** The node's next frame to send; false when none. */

@@ -40,6 +40,12 @@ static td_isob_t node;
 static uint32_t last_us;
 static float distance_mm; /* the implement's odometer from the selected speed */
 static bool started;
+/* the terminal's last GNSS speed (PcGnssTime from the TC's address): the command carries it,
+ * as a cab PC's does; without one the core runs on its wheel */
+static float gnss_kmh;
+static uint32_t gnss_us;
+static bool have_gnss;
+static uint32_t gnss_timeout_us;
 
 static unsigned bits_set(uint16_t v) {
     unsigned n = 0u;
@@ -77,17 +83,37 @@ bool fw_isobus_init(const td_params_t *p, uint32_t now_us) {
     (void)td_isob_start(&node, now_us);
     last_us = now_us;
     distance_mm = 0.0f;
+    have_gnss = false;
+    gnss_timeout_us = (uint32_t)p->gnss_timeout_ms * 1000u;
     started = true;
     return true;
 }
 
-void fw_isobus_rx(const td_can_frame_t *f, uint32_t now_us) {
+void fw_isobus_rx(td_app_t *app, const td_can_frame_t *f, uint32_t now_us) {
+    td_can_frame_t core;
     if (started && f->extended != 0u) {
         (void)td_isob_rx(&node, f, now_us); /* malformed frames are counted by the node */
+        /* the terminal's private frames reach the core only from the TC's address (the rest
+         * counted by the node); a fixed paper identifier on an ISOBUS is another node's PGN */
+        if (td_isob_prop_rx(&node, f, &core) == 1) {
+            (void)td_app_rx(app, &core, now_us);
+            struct td_can_pc_gnss_time_t g;
+            if (core.id == TD_CAN_PC_GNSS_TIME_FRAME_ID &&
+                td_can_pc_gnss_time_unpack(&g, core.data, core.dlc) == 0) {
+                gnss_kmh = td_can_pc_gnss_time_gnss_speed_precise_decode(g.gnss_speed_precise);
+                have_gnss = g.gnss_speed_precise != 0xFFFFu && gnss_kmh <= 25.0f;
+                gnss_us = now_us;
+            }
+        }
     }
 }
 
-void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd) {
+bool fw_isobus_to_bus(const td_can_frame_t *core, td_can_frame_t *out) {
+    return started && td_isob_prop_tx(&node, core, out) == TD_IB_OK;
+}
+
+void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd, uint32_t now_us) {
+    const bool gnss = have_gnss && now_us - gnss_us <= gnss_timeout_us;
     const float share = (float)bits_set(td_tc_sections_on(&node.tc)) / (float)TD_DDOP_SECTIONS;
     const float upper = (float)td_tc_rate_mg_m2(&node.tc, 0u) / MG_M2_PER_KG_HA * share;
     const float lower = (float)td_tc_rate_mg_m2(&node.tc, 1u) / MG_M2_PER_KG_HA * share;
@@ -97,7 +123,7 @@ void fw_isobus_command(const td_app_t *app, td_can_frame_t *cmd) {
         .fan_speed = td_can_pc_command_fan_speed_encode(FW_ISOBUS_FAN_RPM),
         .upper_rate = td_can_pc_command_upper_rate_encode(upper),
         .lower_rate = td_can_pc_command_lower_rate_encode(lower),
-        .gnss_speed = 0xFFu, /* not available: the core runs on its wheel */
+        .gnss_speed = gnss ? td_can_pc_command_gnss_speed_encode(gnss_kmh) : 0xFFu,
     };
     cmd->id = app->p.command_id;
     cmd->extended = 1u;

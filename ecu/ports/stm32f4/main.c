@@ -30,7 +30,7 @@
 #include "stm32f4_regs.h"
 
 #if defined(FW_ISOBUS)
-/* the ISOBUS build: the node beside the core, every 29-bit frame to both */
+/* the ISOBUS build: the node beside the core; the core's frames on Proprietary A/B (td_prop.h) */
 #define ISOBUS_BUILD true
 #else
 #define ISOBUS_BUILD false
@@ -54,6 +54,7 @@ static td_slcan_parser_t slcan;
 static bool slcan_open;
 static const bool hil_mode = HIL_BUILD;
 static uint32_t slcan_tx_dropped;
+static uint32_t rx_cost_us; /* lockstep: the time the step's bus frames took to take in */
 
 static void slcan_send(const td_can_frame_t *f) {
     char line[TD_SLCAN_FRAME_MAX];
@@ -68,6 +69,8 @@ static td_ident_t ident;
 static uint16_t sat16(uint32_t v) {
     return v > 0xFFFFu ? 0xFFFFu : (uint16_t)v;
 }
+
+static void core_can_write(const td_can_frame_t *core);
 
 /* Once a second on CAN: the controller's health (EcuCanHealth) and, after a fault reset, one
  * register of what the fault handler kept (EcuFaultRecord), the next one each second. */
@@ -85,7 +88,7 @@ static void send_diagnostics(void) {
     };
     td_can_frame_t f = { .id = TD_CAN_ECU_CAN_HEALTH_FRAME_ID, .extended = 1u, .dlc = 8u };
     (void)td_can_ecu_can_health_pack(f.data, &h, sizeof f.data);
-    (void)fw_can_write(&f);
+    core_can_write(&f);
     fw_fault_record_t r;
     fw_fault_record(&r);
     if (r.kind == (uint8_t)FW_FAULT_NONE) {
@@ -95,7 +98,7 @@ static void send_diagnostics(void) {
     const struct td_can_ecu_fault_record_t fr = { .register_id = fault_reg, .kind = r.kind, .value = regs[fault_reg] };
     f.id = TD_CAN_ECU_FAULT_RECORD_FRAME_ID;
     (void)td_can_ecu_fault_record_pack(f.data, &fr, sizeof f.data);
-    (void)fw_can_write(&f);
+    core_can_write(&f);
     fault_reg = (uint8_t)((fault_reg + 1u) % 6u);
 }
 
@@ -108,21 +111,39 @@ static void isobus_start(uint32_t now_us) {
 #endif
 }
 
-/* The ISOBUS build's hooks; nothing in the default build. */
-static void isobus_rx(const td_can_frame_t *f, uint32_t now_us) {
+/* A received bus frame: to the core on the paper's bus; in the ISOBUS build to the node,
+ * which hands the core the terminal's private frames from the TC's address. */
+static void bus_rx(const td_can_frame_t *f, uint32_t now_us) {
 #if defined(FW_ISOBUS)
-    fw_isobus_rx(f, now_us);
+    fw_isobus_rx(&app, f, now_us);
 #else
-    (void)f;
-    (void)now_us;
+    (void)td_app_rx(&app, f, now_us);
 #endif
+}
+
+/* A frame of the core for the bus: as it is on the paper's bus; in the ISOBUS build on its
+ * Proprietary A/B PGN from the claimed address, or not at all (no address yet). */
+static bool bus_form(const td_can_frame_t *core, td_can_frame_t *out) {
+#if defined(FW_ISOBUS)
+    return fw_isobus_to_bus(core, out);
+#else
+    *out = *core;
+    return true;
+#endif
+}
+
+static void core_can_write(const td_can_frame_t *core) {
+    td_can_frame_t f;
+    if (bus_form(core, &f)) {
+        (void)fw_can_write(&f);
+    }
 }
 
 /* Before the core's step: the TC's command as the core's own PcCommand. */
 static void isobus_before_step(uint32_t now_us) {
 #if defined(FW_ISOBUS)
     td_can_frame_t cmd;
-    fw_isobus_command(&app, &cmd);
+    fw_isobus_command(&app, &cmd, now_us);
     (void)td_app_rx(&app, &cmd, now_us);
 #else
     (void)now_us;
@@ -176,8 +197,9 @@ static void slcan_receive(uint32_t now_us) {
             const uint8_t tick = hil.tick;
             if (td_hil_rx(&hil, &f) == 0) {
                 const uint32_t t_us = tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? hil.clock_us : now_us;
-                (void)td_app_rx(&app, &f, t_us);
-                isobus_rx(&f, t_us);
+                const uint32_t t0 = fw_micros();
+                bus_rx(&f, t_us);
+                rx_cost_us += fw_micros() - t0;
             } else if (hil.tick != tick) {
                 hil_tick_chosen();
             }
@@ -267,12 +289,12 @@ int main(void) {
             fw_wait_step();
             now = fw_micros();
             while (fw_can_read(&f)) {
-                (void)td_app_rx(&app, &f, now);
-                isobus_rx(&f, now);
+                bus_rx(&f, now);
             }
             fw_io_read(&in);
         }
-        /* the step's cost: receive and core on the board, the core alone in lockstep */
+        /* the step's cost: receive and core on the board; in lockstep the core and the time
+         * its frames took to take in (not the wait for the simulator's bytes between them) */
         const uint32_t t_start = hil_mode && hil.tick == (uint8_t)TD_HIL_TICK_LOCKSTEP ? fw_micros() : now;
         td_io_out_t out;
         isobus_before_step(now);
@@ -280,10 +302,14 @@ int main(void) {
         if (hil_mode) {
             /* the step's bus frames, then its duties and HilStep: the simulator's end of it */
             while (td_app_tx_pop(&app, &f)) {
-                slcan_send(&f);
+                td_can_frame_t b;
+                if (bus_form(&f, &b)) {
+                    slcan_send(&b);
+                }
             }
             isobus_after_step(now, slcan_send, ISOBUS_SLCAN_FRAMES_PER_STEP);
-            const uint32_t cost_us = fw_micros() - t_start;
+            const uint32_t cost_us = fw_micros() - t_start + (t_start == now ? 0u : rx_cost_us);
+            rx_cost_us = 0u;
             td_can_frame_t step_frames[2];
             td_hil_outputs(&hil, now, &out, cost_us, step_frames);
             slcan_send(&step_frames[0]);
@@ -294,7 +320,7 @@ int main(void) {
             fw_io_enable(app.have_cmd && on_crystal); /* low until the first valid command */
             while (td_app_tx_pop(&app, &f)) {
                 if (on_crystal) { /* silent on the fallback: nothing queued for the bus */
-                    (void)fw_can_write(&f);
+                    core_can_write(&f);
                 }
             }
             if (on_crystal) {

@@ -150,7 +150,9 @@ def _demo(args: argparse.Namespace) -> int:
         from topdress.cli.isobus_demo import run_isobus_demo
 
         with _sigterm_stops():
-            return run_isobus_demo(cfg, args.duration or 40.0, args.out, args.seed, sys.stdout)
+            return run_isobus_demo(
+                cfg, args.duration or 40.0, args.out, args.seed, sys.stdout, user_text
+            )
     display = display_options(cfg, args.display, args.host, args.port)
     with _sigterm_stops():
         return run_demo(

@@ -90,15 +90,27 @@ uint16_t td_tc_sections_on(const td_tc_t *tc);
 #define TD_DDOP_EL_LOWER ...
 #define TD_DDOP_EL_DEVICE ...
 
+/* td_prop.h */
+#define TD_IB_E_SOURCE ...
+#define TD_IB_E_NO_ADDRESS ...
+typedef enum { TD_PROP_TERMINAL = 0, TD_PROP_ECU = 1 } td_prop_side_t;
+int td_prop_to_bus(const td_can_frame_t *core, td_prop_side_t side, uint8_t sa, uint8_t da,
+                   td_can_frame_t *out);
+int td_prop_from_bus(const td_can_frame_t *bus, td_prop_side_t side, uint8_t peer,
+                     uint8_t my_addr, td_can_frame_t *core);
+
 /* td_isob.h */
 typedef struct { td_claim_t claim; td_tp_t tp; td_tc_t tc; td_ib_txq_t q;
-                 uint32_t rx_frames; uint32_t rx_errors; ...; } td_isob_t;
+                 uint32_t rx_frames; uint32_t rx_errors; uint32_t prop_rx;
+                 uint32_t prop_wrong_source; ...; } td_isob_t;
 int td_isob_init(td_isob_t *n, uint64_t name, uint8_t preferred, uint8_t range_lo,
                  uint8_t range_hi, uint32_t tc_timeout_us);
 int td_isob_start(td_isob_t *n, uint32_t now_us);
 int td_isob_rx(td_isob_t *n, const td_can_frame_t *f, uint32_t now_us);
 void td_isob_step(td_isob_t *n, uint32_t now_us, uint32_t distance_mm);
 bool td_isob_tx(td_isob_t *n, td_can_frame_t *out);
+int td_isob_prop_rx(td_isob_t *n, const td_can_frame_t *f, td_can_frame_t *core);
+int td_isob_prop_tx(const td_isob_t *n, const td_can_frame_t *core, td_can_frame_t *out);
 """
 
 ffibuilder = FFI()

@@ -67,6 +67,36 @@ def name_fields(name: int) -> dict[str, int]:
     return {k: int(getattr(n, k)) for k in keys}
 
 
+def _one(f: object) -> Frame:
+    return Frame(int(f.id), bytes(ffi.buffer(f.data, f.dlc)))  # type: ignore[attr-defined]
+
+
+def to_bus(frame: Frame, by_ecu: bool, sa: int, da: int | None = None) -> Frame | None:
+    """A frame of the paper's bus (its fixed identifier) sent by the ECU or the terminal, as it
+    goes on an ISOBUS from `sa` (to `da` for Proprietary A): protocol/topdress.dbc's IsobusPgn.
+    None when the frame has no ISOBUS form (the PcCommand: the Task Controller sets the rates)
+    or no address to go from or to."""
+    out = ffi.new("td_can_frame_t *")
+    side = lib.TD_PROP_ECU if by_ecu else lib.TD_PROP_TERMINAL
+    peer = lib.TD_IB_ADDR_NULL if da is None else da
+    if lib.td_prop_to_bus(_frame(frame.can_id, frame.data), side, sa, peer, out) != lib.TD_IB_OK:
+        return None
+    return _one(out)
+
+
+def from_bus(frame: Frame, by_ecu: bool, peer: int, my_address: int) -> Frame | None:
+    """An ISOBUS frame as the paper's-bus frame of the ECU or the terminal it carries, when it
+    comes from `peer` (to `my_address` for Proprietary A); None for other traffic. A private
+    frame from another address raises ProtocolError (to be counted, never acted on)."""
+    out = ffi.new("td_can_frame_t *")
+    side = lib.TD_PROP_ECU if by_ecu else lib.TD_PROP_TERMINAL
+    rc = lib.td_prop_from_bus(_frame(frame.can_id, frame.data), side, peer, my_address, out)
+    if rc == lib.TD_IB_E_SOURCE:
+        _, pgn, sa, _ = split_id(frame.can_id)
+        raise ProtocolError(f"PGN {pgn:#x} from address {sa:#x}, not from {peer:#x}: ignored")
+    return _one(out) if rc == 1 else None
+
+
 def split_id(can_id: int) -> tuple[int, int, int, int]:
     """(priority, PGN, source, destination) of a 29-bit identifier."""
     i = lib.td_ib_id_unpack(can_id)
@@ -105,6 +135,22 @@ class IsobusNode:
     def tx(self) -> list[Frame]:
         return _drain(lib.td_isob_tx, self._n)
 
+    def prop_rx(self, frame: Frame) -> Frame | None:
+        """The terminal's frame for the control core (its fixed identifier) when `frame` is one
+        from our TC's address; None otherwise (from another address: counted in
+        `counters["prop_wrong_source"]`)."""
+        out = ffi.new("td_can_frame_t *")
+        rc = lib.td_isob_prop_rx(self._n, _frame(frame.can_id, frame.data), out)
+        return _one(out) if rc == 1 else None
+
+    def prop_tx(self, frame: Frame) -> Frame | None:
+        """The control core's frame as it goes on the ISOBUS from our address; None when it has
+        no ISOBUS form or no address yet (nothing is sent)."""
+        out = ffi.new("td_can_frame_t *")
+        if lib.td_isob_prop_tx(self._n, _frame(frame.can_id, frame.data), out) != lib.TD_IB_OK:
+            return None
+        return _one(out)
+
     def set_actual(self, element: int, ddi: int, value: int) -> None:
         if lib.td_tc_set_actual(ffi.addressof(self._n.tc), element, ddi, value) != lib.TD_IB_OK:
             raise ProtocolError(f"the DDOP has no measured DDI {ddi} on element {element}")
@@ -132,6 +178,13 @@ class IsobusNode:
         return bool(self._n.tc.alarm)
 
     @property
+    def tp_send(self) -> tuple[str, int]:
+        """The state of the node's last TP/ETP send (idle, busy, done, aborted, timeout) and
+        the abort reason it got (ISO 11783-3; 0: none)."""
+        tx = self._n.tp.tx
+        return ("idle", "busy", "done", "aborted", "timeout")[int(tx.state)], int(tx.abort_reason)
+
+    @property
     def refuse_code(self) -> int:
         return int(self._n.tc.refuse_code)
 
@@ -148,9 +201,12 @@ class IsobusNode:
         tc, tp = self._n.tc, self._n.tp
         return {
             "rx_frames": int(self._n.rx_frames), "rx_errors": int(self._n.rx_errors),
+            "prop_rx": int(self._n.prop_rx),
+            "prop_wrong_source": int(self._n.prop_wrong_source),
             "tp_done": int(tp.rx_done), "tp_aborts": int(tp.rx_aborts),
             "pdacks": int(tc.pdacks_sent), "values_set": int(tc.values_set),
             "values_refused": int(tc.values_refused), "connects": int(tc.connects),
+            "tx_dropped": int(self._n.q.dropped),
             "contests_won": int(self._n.claim.contests_won),
             "contests_lost": int(self._n.claim.contests_lost),
         }  # fmt: skip

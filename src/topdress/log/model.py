@@ -98,6 +98,13 @@ EVENT_KINDS: Final = (
     "counter.reset",
     "counter.undo",
     "tank.filled",
+    "isobus.claimed",
+    "isobus.ddop",
+    "isobus.set",
+    "isobus.tc_lost",
+    "isobus.bus_load",
+    "isobus.value_refused",
+    "isobus.tp_aborted",
 )
 #: Operator actions (listed with their times by `topdress log summary`).
 OPERATOR_KINDS: Final = (

@@ -2,6 +2,10 @@
 Task Controller's rates and sections, and hands them to the control core each control period
 as the core's own command, beside it behind the same port (the core stays as it is).
 
+On the bus the core's own frames go as the node maps them (docs/isobus.md, "The private
+frames on ISOBUS"): its broadcasts on Proprietary B from the claimed address, its answers on
+Proprietary A to the TC; the terminal's frames reach the core only from the TC's address.
+
 Sections: the meters run at the TC's rate times the share of the width switched on (row
 shut-offs at the outlets close the rows switched off), and stop with every section off or no TC
 (the node's fail-safe after the cab PC's command timeout).
@@ -51,12 +55,15 @@ class IsobusMachine:
         now = w.now_us
         for f in frames_in:
             n.rx(f.can_id, f.data, now)
+            core = n.prop_rx(f)
+            if core is not None:
+                w.deliver_can((core.can_id, core.data))
         upper, lower = self.rates_kg_ha()
         self.running = upper > 0.0 or lower > 0.0
         truth = w.truth
         w.deliver_can(encode_command(self.running, self.fan_rpm, upper, lower,
                                      min(truth.v_kmh, 25.0)))  # fmt: skip
-        w.step()
+        core_out = w.step().can
         truth = w.truth
         actual = [0.0, 0.0]
         for layer, element in enumerate(ELEMENT_BINS):
@@ -69,4 +76,9 @@ class IsobusMachine:
         self.actual_kg_ha = (actual[0], actual[1])
         n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
         n.step(w.now_us, round(truth.odometer_m * 1000))
-        return n.tx()
+        out = n.tx()
+        for can_id, data in core_out:
+            bus = n.prop_tx(Frame(can_id, data))
+            if bus is not None:
+                out.append(bus)
+        return out

@@ -44,6 +44,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
             td_isob_step(&n, now, now / 100u);
         }
         (void)td_isob_rx(&n, &f, now);
+        {
+            td_can_frame_t core;
+            (void)td_isob_prop_rx(&n, &f, &core);
+        }
         while (td_isob_tx(&n, &f)) {
         }
     }
