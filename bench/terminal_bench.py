@@ -14,16 +14,28 @@ process writes RMC lines to the GNSS pty as fast as the terminal reads them, for
 seconds (40); the spy records every PcCommand on the bus, and the longest gap between two
 commands after the warm-up is reported against the 1.5 x command period target.
 
+Then ISOBUS (`--isobus` seconds, 22): the same terminal with `[can] implement = "isobus"` is the
+Task Controller of an ISOBUS implement, the topdress ECU's C ISOBUS node (address claim, DDOP
+upload over TP, process data) run by this process on the bus; the crop lines are steady, so the
+rate changes only when the terminal decides anew. With send_on_gnss each new fix sends the rate
+in force to the implement's setpoint DDI (6) at once; the latency is from writing the RMC to the
+first Set Value of DDI 6 from the TC after it (counted once the implement has been connected
+for a second); the CPU is the terminal process's over the whole run, TC and client connected.
+
 Prints:
     nmea_to_command_p50_ms: X
     nmea_to_command_p99_ms: X
     terminal_cpu_pct_of_core: X
     flood_cmd_gap_max_ms: X
+    nmea_to_rate_isobus_p50_ms: X
+    nmea_to_rate_isobus_p99_ms: X
+    terminal_cpu_pct_of_core_isobus: X
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import itertools
 import json
 import random
@@ -32,6 +44,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import can
@@ -49,6 +62,13 @@ GNSS_HZ = 10.0
 CROP_HZ = 10.0
 SENSORS = 4
 WARMUP_S = 3.0  # parameter push and first commands; latencies counted after it
+# A port of this run's own: on Linux a socket bound to a port hears every group joined on it
+# (IP_MULTICAST_ALL), so other udp_multicast buses on the machine would be heard at the default.
+UDP_PORT = random.randrange(40000, 50000)
+
+
+def udp_bus(group: str) -> can.BusABC:
+    return can.Bus(interface="udp_multicast", channel=group, port=UDP_PORT, fd=False)
 
 
 def child(config: Path, duration_s: float) -> None:
@@ -76,8 +96,8 @@ class Machine:
     def __init__(self, group: str) -> None:
         self.gnss = PtyPort()
         self.crop = PtyPort()
-        self.ecu_bus = can.Bus(interface="udp_multicast", channel=group, fd=False)
-        self.spy = can.Bus(interface="udp_multicast", channel=group, fd=False)
+        self.ecu_bus = udp_bus(group)
+        self.spy = udp_bus(group)
         self.twin = SimulatedEcu(self.ecu_bus, now=time.monotonic())
         self.stop = threading.Event()
         self.written: dict[int, float] = {}  # speed in 0.1 km/h -> time its RMC was written
@@ -139,7 +159,7 @@ class Machine:
             self.gnss.write(block)
             self.flood_lines += 64
 
-    def run_gnss(self, duration_s: float) -> None:
+    def run_gnss(self, duration_s: float, on_write: Callable[[float], None] | None = None) -> None:
         t0 = time.monotonic()
         k = 0
         while not self.stop.is_set() and time.monotonic() - t0 < duration_s:
@@ -151,11 +171,13 @@ class Machine:
             gga = nmea.gga("GN", t_utc, True, lat, lon, 12, 1.1, 210.0)
             with self.lock:
                 self.written[round(v_kmh * 10)] = time.perf_counter()
+            if on_write is not None:
+                on_write(time.perf_counter())
             self.gnss.write(rmc.encode())
             self.gnss.write(gga.encode())
             self._sleep_until(t0 + k / GNSS_HZ)
 
-    def run_crop(self, duration_s: float) -> None:
+    def run_crop(self, duration_s: float, noisy: bool = True) -> None:
         t0 = time.monotonic()
         rng = random.Random(1)
         k = 0
@@ -163,7 +185,7 @@ class Machine:
             k += 1
             lines = []
             for sid in range(1, SENSORS + 1):
-                red, edge, nir = 0.04 + rng.random() * 0.01, 0.21, 0.44
+                red, edge, nir = 0.04 + (rng.random() * 0.01 if noisy else 0.005), 0.21, 0.44
                 ndvi = (nir - red) / (nir + red)
                 lines.append(f"{sid},{red:.4f},{edge:.4f},{nir:.4f},0.3541,{ndvi:.4f}\r\n")
             self.crop.write("".join(lines).encode())
@@ -187,6 +209,7 @@ def terminal_toml(m: Machine, group: str, log_dir: str, can_extra: str = "") -> 
         f'[gnss]\nport = "{m.gnss.path}"\nbaud = 115200\n'
         f'[crop]\nport = "{m.crop.path}"\nbaud = 115200\n'
         f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\n{can_extra}'
+        f"[can.options]\nport = {UDP_PORT}\n"
         f'[log]\ndir = "{log_dir}"\n'
     )
 
@@ -278,10 +301,134 @@ def flood(flood_s: float) -> int:
     return 0
 
 
+class IsobusImplement:
+    """The topdress ECU's ISOBUS node on the bus (its C layer through cffi), stepped every
+    10 ms, and a spy on the TC's Set Value frames of DDI 6; the RMC write times for the
+    latency."""
+
+    def __init__(self, group: str) -> None:
+        from topdress.isobus.node import IsobusNode, topdress_name
+
+        self.bus = udp_bus(group)
+        self.spy_bus = udp_bus(group)
+        self.node = IsobusNode(topdress_name(0, b"bench"), tc_timeout_ms=3000)
+        self.stop = threading.Event()
+        self.lock = threading.Lock()
+        self.writes: list[float] = []  # RMC write times not yet matched
+        self.latencies_s: list[float] = []
+        self.first_rate_t: float | None = None
+        self.echo: collections.deque[tuple[int, bytes]] = collections.deque(maxlen=512)
+
+    def wrote(self, t: float) -> None:
+        with self.lock:
+            self.writes.append(t)
+
+    def run(self) -> None:
+        t0 = time.monotonic()
+        self.node.start(1)
+        next_step = 0.0
+        while not self.stop.is_set():
+            try:
+                msg = self.bus.recv(timeout=0.002)
+            except OSError:
+                return
+            now = time.monotonic() - t0
+            if msg is not None and msg.is_extended_id:
+                key = (msg.arbitration_id, bytes(msg.data))
+                if key in self.echo:
+                    self.echo.remove(key)  # our own frame looped back
+                else:
+                    self.node.rx(msg.arbitration_id, bytes(msg.data), round(now * 1e6) + 1)
+            if now >= next_step:
+                next_step = now + 0.01
+                self.node.step(round(now * 1e6) + 1, 0)
+            for f in self.node.tx():
+                self.echo.append((f.can_id, f.data))
+                self.bus.send(can.Message(arbitration_id=f.can_id, data=f.data))
+
+    def run_spy(self) -> None:
+        """The TC's frames as they arrive, on a socket of its own (the node's thread steps
+        and sends besides: its receive times would be late)."""
+        while not self.stop.is_set():
+            try:
+                msg = self.spy_bus.recv(timeout=0.1)
+            except OSError:
+                return
+            if msg is not None:
+                self._spy(msg, time.perf_counter())
+
+    def _spy(self, msg: can.Message, t: float) -> None:
+        d = bytes(msg.data)
+        pgn, sa = (msg.arbitration_id >> 8) & 0x3FF00, msg.arbitration_id & 0xFF
+        if pgn != 0xCB00 or sa != 0xF7 or len(d) != 8 or d[0] & 0x0F not in (3, 10):
+            return
+        if d[2] | d[3] << 8 != 6:  # DDI 6: setpoint mass per area
+            return
+        if self.first_rate_t is None:
+            self.first_rate_t = t
+        with self.lock:
+            before = [w for w in self.writes if w <= t]
+            if before and t - self.first_rate_t > 1.0:
+                self.latencies_s.append(t - before[-1])
+            self.writes = [w for w in self.writes if w > t]
+
+    def close(self) -> None:
+        self.stop.set()
+        time.sleep(0.15)
+        self.bus.shutdown()
+        self.spy_bus.shutdown()
+
+
+def isobus(duration_s: float) -> int:
+    """NMEA -> rate on the bus with the implement connected, and the terminal's CPU."""
+    group = f"239.76.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
+    m = Machine(group)
+    implement = IsobusImplement(group)
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "terminal.toml"
+        extra = 'send_on_gnss = true\nimplement = "isobus"\n'
+        cfg.write_text(terminal_toml(m, group, tmp, extra))
+        threading.Thread(target=implement.run, daemon=True).start()
+        threading.Thread(target=implement.run_spy, daemon=True).start()
+        proc = subprocess.Popen(
+            [sys.executable, __file__, "--child", str(cfg), "--duration", str(duration_s)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        time.sleep(0.5)  # the child opens its ports
+        feeders = [
+            threading.Thread(target=m.run_gnss, args=(duration_s, implement.wrote), daemon=True),
+            threading.Thread(target=m.run_crop, args=(duration_s, False), daemon=True),
+        ]
+        for th in feeders:
+            th.start()
+        out, _ = proc.communicate(timeout=duration_s + 60)
+        implement.close()
+        m.close()
+    if proc.returncode != 0:
+        print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
+        return 1
+    result = json.loads(out.strip().splitlines()[-1])
+    lat_ms = np.array(implement.latencies_s) * 1e3
+    if lat_ms.size < 50:
+        print(f"only {lat_ms.size} ISOBUS latencies measured", file=sys.stderr)
+        return 1
+    print(f"nmea_to_rate_isobus_p50_ms: {np.percentile(lat_ms, 50):.2f}")
+    print(f"nmea_to_rate_isobus_p99_ms: {np.percentile(lat_ms, 99):.2f}")
+    print(f"terminal_cpu_pct_of_core_isobus: {100.0 * result['cpu_s'] / result['wall_s']:.2f}")
+    print(
+        f"# {lat_ms.size} latencies; implement {implement.node.tc_state}; terminal counters "
+        f"{result['counters']}",
+        file=sys.stderr,
+    )
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--duration", type=float, default=22.0, help="seconds (>= 20 for the CPU)")
     ap.add_argument("--flood", type=float, default=40.0, help="seconds of GNSS flood (0: none)")
+    ap.add_argument("--isobus", type=float, default=22.0, help="seconds of ISOBUS (0: none)")
     ap.add_argument("--child", type=Path, metavar="CONFIG", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child is not None:
@@ -290,6 +437,8 @@ def main() -> int:
     rc = parent(args.duration) if args.duration > 0 else 0
     if args.flood > 0:
         rc = max(rc, flood(args.flood))
+    if args.isobus > 0:
+        rc = max(rc, isobus(args.isobus))
     return rc
 
 

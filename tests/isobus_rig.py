@@ -18,9 +18,17 @@ def udp_group() -> str:
     return f"239.74.{random.randrange(1, 250)}.{random.randrange(1, 250)}"
 
 
+def udp_port(group: str) -> int:
+    """A port of the group's own: a socket on python-can's default port hears every group
+    joined on this host (Linux), so two runs at once (two pytest workers) would talk to each
+    other's nodes."""
+    a, b = (int(x) for x in group.split(".")[2:])
+    return 20000 + (a * 250 + b) % 40000
+
+
 def udp_bus(group: str) -> can.BusABC:
     try:
-        return can.Bus(interface="udp_multicast", channel=group, fd=False)
+        return can.Bus(interface="udp_multicast", channel=group, port=udp_port(group), fd=False)
     except OSError as exc:
         pytest.skip(f"udp_multicast CAN unavailable here: {exc}")
 

@@ -13,7 +13,7 @@ import can
 import j1939
 import pytest
 
-from isobus_rig import Wire, udp_bus, udp_group
+from isobus_rig import Wire, udp_bus, udp_group, udp_port
 from topdress.isobus.node import ClaimNode, Frame, IsobusNode, TpEndpoint, split_id
 from topdress.protocol.dbc import frame_ids
 
@@ -34,7 +34,7 @@ def group() -> str:
 def peer(group: str) -> Iterator[j1939.ElectronicControlUnit]:
     ecu = j1939.ElectronicControlUnit()
     try:
-        ecu.connect(interface="udp_multicast", channel=group, fd=False)
+        ecu.connect(interface="udp_multicast", channel=group, port=udp_port(group), fd=False)
     except OSError as exc:
         pytest.skip(f"udp_multicast CAN unavailable here: {exc}")
     yield ecu
@@ -231,11 +231,16 @@ def test_private_frames_on_proprietary_pgns_with_the_peer(group: str, peer: Any)
     assert ecu.taken == [Frame(ids["PcParamSet"], param)]
     ecu.queue = [Frame(ids["EcuStatus"], bytes(range(8))),
                  Frame(ids["EcuParamAck"], bytes([37, 0, 0, 0, 0x2C, 0x01, 0, 0]))]  # fmt: skip
-    w.pump(1.0, until=lambda: len([g for g in got if g[1] == 0x84 and g[0] != 0xCB00]) >= 2)
-    mine = [(pgn & 0x3FF00 if pgn & 0xFF00 < 0xF000 else pgn, data)
-            for pgn, sa, data in got if sa == 0x84]  # fmt: skip
-    assert (0xFF5C, bytes(range(8))) in mine
-    assert (0xEF00, bytes([37, 0, 0, 0, 0x2C, 0x01, 0, 0])) in mine
+
+    def mine() -> list[tuple[int, bytes]]:
+        return [(pgn & 0x3FF00 if pgn & 0xFF00 < 0xF000 else pgn, data)
+                for pgn, sa, data in got if sa == 0x84]  # fmt: skip
+
+    status_b = (0xFF5C, bytes(range(8)))
+    ack_a = (0xEF00, bytes([37, 0, 0, 0, 0x2C, 0x01, 0, 0]))
+    w.pump(1.0, until=lambda: status_b in mine() and ack_a in mine())
+    assert status_b in mine()
+    assert ack_a in mine()
     # the same frame from 0x91, a node that is not the TC (sent raw on the bus)
     stranger = (2 << 26) | (0xEF84 << 8) | 0x91
     w.bus.send(can.Message(arbitration_id=stranger, data=param, is_extended_id=True))

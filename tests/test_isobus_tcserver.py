@@ -7,53 +7,18 @@ sections and take the client's measurements and PDACKs."""
 from __future__ import annotations
 
 import random
-import re
-from pathlib import Path
 
 import pytest
 
+from tc_rig import CLIENT, DATA, DDOP, TC, replay_agiso
 from topdress.errors import ProtocolError
 from topdress.isobus.node import Frame, TpEndpoint, name_fields, split_id
 from topdress.isobus.tcserver import TcServer, map_device, pd_frame, tc_name
 
-DATA = Path(__file__).parent / "data"
-TRACE = DATA / "agiso_tc_session_agiso_client.log"
-DDOP = DATA / "agiso_spreader_ddop_2bins_6sections.bin"
-CLIENT, TC = 0x80, 0xF7
-LINE = re.compile(r"\((\d+\.\d+)\) \S+ ([0-9A-F]{8})#([0-9A-F]*)")
-
-
-def _client_frames(trace: Path = TRACE) -> list[tuple[int, Frame]]:
-    out = []
-    t0 = None
-    for line in trace.read_text(encoding="ascii").splitlines():
-        m = LINE.match(line)
-        if not m:
-            continue
-        t = float(m[1])
-        t0 = t if t0 is None else t0
-        can_id = int(m[2], 16)
-        if split_id(can_id)[2] == CLIENT:
-            out.append((int((t - t0) * 1e6), Frame(can_id, bytes.fromhex(m[3]))))
-    return out
-
-
-def _replay(trace: Path = TRACE) -> tuple[TcServer, list[Frame]]:
-    tc = TcServer(tc_name(7))
-    tc.start(0)
-    sent: list[Frame] = []
-    now = 0
-    for t, f in _client_frames(trace):
-        while now + 10_000 <= t:
-            now += 10_000
-            sent += tc.step(now, [])
-        sent += tc.step(t, [f])
-    return tc, sent
-
 
 @pytest.mark.interop
 def test_agiso_client_pool_accepted_activated_and_measured() -> None:
-    tc, sent = _replay()
+    tc, sent = replay_agiso()
     assert tc.address == TC
     c = tc.client
     assert c is not None and c.address == CLIENT
@@ -81,7 +46,7 @@ def test_agiso_client_pool_accepted_activated_and_measured() -> None:
 @pytest.mark.interop
 def test_agiso_client_pool_over_etp() -> None:
     """2 bins, 16 sections: a 2667-byte pool, over the 1785 bytes of TP, so ETP."""
-    tc, sent = _replay(DATA / "agiso_tc_session_etp_agiso_client.log")
+    tc, sent = replay_agiso(DATA / "agiso_tc_session_etp_agiso_client.log")
     c = tc.client
     assert c is not None and c.active and tc.errors == []
     assert c.pool == (DATA / "agiso_spreader_ddop_2bins_16sections.bin").read_bytes()
@@ -90,11 +55,15 @@ def test_agiso_client_pool_over_etp() -> None:
 
 
 def test_second_client_refused_first_kept() -> None:
-    tc, _ = _replay()
+    tc, _ = replay_agiso()
     ignored = tc.ignored
     second = Frame(5 << 26 | 0xCB00 << 8 | TC << 8 | 0x81, bytes([0]) + b"\xff" * 7)  # version?
     out = tc.step(60_000_000, [second, second])
-    assert not [f for f in out if split_id(f.can_id)[3] == 0x81]
+    # one negative acknowledgement (J1939 ACK PGN, control 1, for PGN 0xCB00), nothing else
+    to_second = [f for f in out if split_id(f.can_id)[3] == 0x81]
+    assert [(split_id(f.can_id)[1], f.data) for f in to_second] == [
+        (0xE800, bytes([1, 0xFF, 0xFF, 0xFF, 0x81, 0x00, 0xCB, 0x00]))
+    ]
     assert tc.client is not None and tc.client.address == CLIENT and tc.client.active
     assert tc.ignored == ignored + 2 and tc.errors == [
         "client 0x81 refused: the TC serves 0x80, one at a time"
@@ -107,7 +76,7 @@ def test_second_client_refused_first_kept() -> None:
 def test_bad_values_refused_before_the_bus() -> None:
     """The values AgIsoStack++'s client acknowledged alike in a recorded run (agiso_tc_bad_values):
     not settable, no such element, no such DDI, negative rate; the topdress TC sends none."""
-    tc, _ = _replay()
+    tc, _ = replay_agiso()
     for element, ddi, value in ((3, 7, 12345), (99, 6, 15000), (2, 65000, 1), (3, 6, -5000)):
         with pytest.raises(ProtocolError):
             tc.set_value(element, ddi, value)
@@ -116,7 +85,7 @@ def test_bad_values_refused_before_the_bus() -> None:
 
 @pytest.mark.interop
 def test_rate_and_sections_commanded_after_activation() -> None:
-    tc, _ = _replay()
+    tc, _ = replay_agiso()
     tc.set_value(3, 6, 15000)  # 150 kg/ha in the DDOP's mg/m^2
     tc.set_value(2, 290, -4096 + 0x555, ack=False)
     tc.measure_every(3, 7, 1000)
@@ -128,7 +97,7 @@ def test_rate_and_sections_commanded_after_activation() -> None:
 
 
 def test_silent_client_reported_lost_and_refused_commands() -> None:
-    tc, _ = _replay()
+    tc, _ = replay_agiso()
     c = tc.client
     assert c is not None
     last = c.last_heard_us
@@ -211,7 +180,7 @@ def test_bad_pool_refused_at_activation_and_oversized_refused_for_memory() -> No
 
 
 def test_process_data_garbage_counted_never_raised() -> None:
-    tc, _ = _replay()
+    tc, _ = replay_agiso()
     rng = random.Random(31)
     t = 60_000_000
     for _ in range(2000):

@@ -13,6 +13,7 @@ from pathlib import Path
 import can
 import pytest
 
+from isobus_rig import udp_port
 from topdress.log.session import SessionReader
 from topdress.sim.live import LiveMachine
 from topdress.sim.tractor import Drive
@@ -20,7 +21,7 @@ from topdress.sim.world import World
 
 
 def _udp_bus(group: str) -> can.BusABC:
-    return can.Bus(interface="udp_multicast", channel=group, fd=False)
+    return can.Bus(interface="udp_multicast", channel=group, port=udp_port(group), fd=False)
 
 
 def _multicast_or_skip(group: str) -> None:
@@ -59,6 +60,7 @@ def test_terminal_process_drives_the_machine_over_udp_multicast(tmp_path: Path) 
         f'[gnss]\nport = "{machine.gnss_port.path}"\nbaud = 115200\n'
         f'[crop]\nport = "{machine.crop_port.path}"\nbaud = 115200\n'
         f'[can]\ninterface = "udp_multicast"\nchannel = "{group}"\n'
+        f"[can.options]\nport = {udp_port(group)}\n"
         f'[log]\ndir = "{tmp_path}"\n'
     )
     machine.start()

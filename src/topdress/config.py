@@ -193,6 +193,9 @@ class CanConfig:
     send_on_gnss: bool = False
     send_on_rate: bool = False
     ecu_timeout_s: float = _num(0.5, 0.05, 60.0)
+    # what meters on this bus: the topdress ECU (protocol/topdress.dbc), or any ISOBUS
+    # implement, with the terminal as its Task Controller ([isobus], docs/isobus.md)
+    implement: str = _choice("topdress", "topdress", "isobus")
     # the DBC's identifiers of the frames a [can.ids] table may move
     ids: Mapping[str, int] = field(
         default_factory=lambda: {k: getattr(DEFAULT_IDS, k) for k in CONFIGURABLE_IDS}
@@ -300,6 +303,15 @@ class OperatorConfig:
 
 
 @dataclass(frozen=True)
+class IsobusConfig:
+    # The terminal as an ISOBUS Task Controller (can.implement = "isobus", docs/isobus.md).
+    tc_address: int = _num(0xF7, 128, 247)  # the address it claims first (247: the TC's)
+    tc_identity: int = _num(1, 0, (1 << 21) - 1)  # its NAME's identity number (one per cab)
+    # a product set in volume per area (DDI 1, a liquid): kg/ha to L/ha by this density
+    density_kg_l: float = _num(1.0, 0.1, 5.0)
+
+
+@dataclass(frozen=True)
 class OfficeConfig:
     # The farm office's database (docs/office.md): a PostgreSQL URL ("" = no office; the cab
     # works alone). The cab sends its sessions there by itself, off the control loop.
@@ -326,6 +338,7 @@ class TerminalConfig:
     boundary: BoundaryConfig = field(default_factory=BoundaryConfig)
     lookahead: LookaheadConfig = field(default_factory=LookaheadConfig)
     office: OfficeConfig = field(default_factory=OfficeConfig)
+    isobus: IsobusConfig = field(default_factory=IsobusConfig)
 
     def ecu_params(self, lag_start_ms: int | None = None) -> dict[int, float]:
         """PcParamSet id -> physical value of every parameter to push at start, by the table
@@ -831,6 +844,7 @@ command_period_s = 0.5     # command frame period
 send_on_gnss = false       # also send a command at once on each new GNSS speed
 send_on_rate = false       # also send it at once when a rate changes (at most every 100 ms)
 ecu_timeout_s = 0.5        # no ECU status for this long = ECU lost
+implement = "topdress"     # topdress (its ECU) | isobus (any ISOBUS implement; see [isobus])
 
 [can.ids]
 """
@@ -893,5 +907,10 @@ interval_s = 300.0         # between two syncs of the log directory (a thread of
 machine = ""               # this machine's id in the office; "" = the host's name
 farm = ""                  # refuse an office database of another farm; "" = not checked
 product = "fertilizer"     # what the machine spreads, as the office's swaths name it
+
+[isobus]                   # can.implement = "isobus": the terminal is the Task Controller
+tc_address = 247           # the address claimed first (0xF7); 128..247 if it is taken
+tc_identity = 1            # the TC NAME's identity number: different in each cab on one bus
+density_kg_l = 1.0         # volume-per-area products (DDI 1): kg/ha -> L/ha by this density
 """
 )

@@ -118,6 +118,8 @@ def warnings(cfg: TerminalConfig) -> list[str]:
             out.append(f"{key}.port {src.port} does not exist on this machine (yet)")
         if src.source == "file" and not Path(src.path).is_file():
             out.append(f"{key}.path {src.path} is not a file")
+    if cfg.can.implement == "isobus" and cfg.can.bitrate != 250000:
+        out.append(f"can.bitrate {cfg.can.bitrate}: an ISOBUS runs at 250000 bit/s")
     if cfg.display.enabled and cfg.display.host not in LOCAL_HOSTS:
         out.append(f"display.host {cfg.display.host}: the display is reachable from the network")
     return out
@@ -128,6 +130,12 @@ def _describe(cfg: TerminalConfig) -> None:
     print(f"  GNSS:  {g.source} {g.port if g.source == 'serial' else g.path} @ {g.baud}")
     print(f"  crop:  {c.source} {c.port if c.source == 'serial' else c.path} @ {c.baud}")
     print(f"  CAN:   {can.interface}:{can.channel} @ {can.bitrate} bit/s")
+    if can.implement == "isobus":
+        iso = cfg.isobus
+        print(
+            f"  ISOBUS: the terminal is the Task Controller (address 0x{iso.tc_address:02X}, "
+            f"NAME identity {iso.tc_identity}) of the implement that connects"
+        )
     print(f"  log:   {cfg.log.dir}")
     d = cfg.display
     pin = ", PIN set" if d.pin else ""

@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import sys
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -131,11 +132,13 @@ def run_terminal(
     config_path: Path | None = None,
     keyboard: TextIO | None = None,
     display: DisplayOptions | None = None,
+    watch: Callable[[Snapshot, float], None] | None = None,
 ) -> RunResult:
     """Open the devices of `cfg`, run the terminal with a live console, report where data went.
 
     `start`: the meters start at once; else at the operator's start (typed on `keyboard`, or
-    from the display). `config_path`: where settings changed while running are saved."""
+    from the display). `config_path`: where settings changed while running are saved.
+    `watch(snapshot, now)`: also called each tick (a demo's own lines)."""
     # The console speaks the configured language even without the display, which may switch it.
     i18n.set_language(cfg.display.language)
     console = Console(out, period_s=cfg.display.refresh_s)
@@ -202,6 +205,8 @@ def run_terminal(
         console.update(snapshot, now)
         if shown is not None:
             shown.publish(snapshot)
+        if watch is not None:
+            watch(snapshot, now)
         if machine is not None and machine.error is not None:
             raise DeviceError(f"the simulated machine failed: {machine.error}")
 
@@ -218,13 +223,16 @@ def run_terminal(
             office.stop()
         term.port.stop()  # the bus in use (after a [can] change, not the one opened here)
         console.draw(term.snapshot)
-        if not term.link.ready:
+        if not term.can.ready:
             out.write(
                 f"the ECU never acknowledged its parameters on CAN {term.link.where}: "
                 "nothing was metered\n"
+                if term.can.tc is None
+                else f"no ISOBUS implement activated its DDOP on CAN {term.link.where}: "
+                "nothing was metered\n"
             )
         _report(out, path, session.errors + session.dropped + session.lost)
-    return RunResult(path, rows, term.snapshot, term.link.ready)
+    return RunResult(path, rows, term.snapshot, term.can.ready)
 
 
 def _report(out: TextIO, path: Path | None, errors: int) -> None:

@@ -63,7 +63,7 @@ def register(sub: Any) -> None:
     demo.add_argument(
         "--isobus",
         action="store_true",
-        help="the ECU on ISOBUS, commanded by a simulated Task Controller (docs/isobus.md)",
+        help="the ECU on ISOBUS, the terminal its Task Controller (docs/isobus.md)",
     )
     demo.set_defaults(func=_demo)
 
@@ -147,10 +147,10 @@ def _demo(args: argparse.Namespace) -> int:
         cfg = load_config(args.config)  # a bad file stops here, naming the file
         user_text = read_config_text(args.config)
     if args.isobus:
-        from topdress.cli.isobus_demo import run_isobus_demo
+        from topdress.cli.isobus_demo import run_terminal_isobus_demo
 
         with _sigterm_stops():
-            return run_isobus_demo(
+            return run_terminal_isobus_demo(
                 cfg, args.duration or 40.0, args.out, args.seed, sys.stdout, user_text
             )
     display = display_options(cfg, args.display, args.host, args.port)

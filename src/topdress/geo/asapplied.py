@@ -499,7 +499,7 @@ class _SwathMaker:
         self.s = np.concatenate([[0.0], np.cumsum(step[:-1])])
         self.comp = np.concatenate([[0], np.cumsum(~link[:-1])])
         self.metered = has & self.work & (d.dt > 0)
-        self.cover = _Cover()
+        self.cover = Cover()
         self.repaired = 0
         self.made = 0  # swaths made so far
 
@@ -812,10 +812,10 @@ def _attach(sid: npt.NDArray[np.intp], metered: npt.NDArray[np.bool_]) -> None:
 
 def _overlap_pct(geoms: npt.NDArray[np.object_]) -> FloatArray:
     """Per swath, the % of its area that earlier swaths had covered already."""
-    return _Cover().add(geoms)
+    return Cover().add(geoms)
 
 
-class _Cover:
+class Cover:
     """The ground covered so far, kept as one union per COVER_TILE_M square tile: a swath's
     overlap is its intersection with the tiles it touches, then it is added to them. The cost
     and memory grow with the ground covered, not with the time spent on it (comparing each
@@ -824,6 +824,22 @@ class _Cover:
 
     def __init__(self) -> None:
         self.tiles: dict[tuple[int, int], Any] = {}
+
+    def covered_m2(self, geoms: npt.NDArray[np.object_]) -> FloatArray:
+        """The area of each of `geoms` that the ground covered so far holds (nothing added)."""
+        out = np.zeros(geoms.size)
+        full = ~shapely.is_empty(geoms)
+        if not full.any() or not self.tiles:
+            return out
+        b = np.floor(shapely.bounds(geoms[full]) / COVER_TILE_M)
+        i0, j0 = np.nanmin(b[:, :2], axis=0).astype(int)
+        i1, j1 = np.nanmax(b[:, 2:], axis=0).astype(int)
+        earlier = [self.tiles[(i, j)] for i in range(i0, i1 + 1) for j in range(j0, j1 + 1)
+                   if (i, j) in self.tiles]  # fmt: skip
+        if earlier:
+            cut = shapely.intersection(geoms[full][:, None], np.array(earlier, dtype=object))
+            out[full] = shapely.area(cut).sum(axis=1)
+        return out
 
     def add(self, geoms: npt.NDArray[np.object_]) -> FloatArray:
         """The overlap % of each of `geoms` (in order) with what came before; then covered."""

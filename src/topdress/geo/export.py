@@ -26,7 +26,8 @@ def export_maps(
         stream = asapplied.AsAppliedStream(reader)
         asapplied.require_any_point(stream)
         if fmt == "isoxml":
-            files = isoxml.write_taskdata(stream, out, reader.path.stem)
+            implement = isoxml.implement_of(reader)
+            files = isoxml.write_taskdata(stream, out, reader.path.stem, implement)
         else:
             files = vector.write(stream, out, fmt, crs, fmis)
         lines += [str(f) for f in files]

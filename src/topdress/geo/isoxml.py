@@ -52,6 +52,7 @@ import shapely
 from topdress import __version__
 from topdress.errors import MapError
 from topdress.geo.asapplied import SPEED_SOURCE_CODES, AsApplied, AsAppliedStream
+from topdress.log.session import SessionReader
 
 DDI_SETPOINT_MASS_PER_AREA: Final = 6
 DDI_ACTUAL_MASS_PER_AREA: Final = 7
@@ -78,13 +79,34 @@ class _Dlv:
     det: str
 
 
-def _device() -> ET.Element:
+@dataclass(frozen=True)
+class Implement:
+    """The ISOBUS implement a session was worked with (its `isobus.implement` event): the
+    designator of its DDOP's device object and its NAME, 16 hex digits."""
+
+    designator: str
+    name: str
+
+
+def implement_of(reader: SessionReader) -> Implement | None:
+    """The last ISOBUS implement the session's terminal served (None: the topdress ECU)."""
+    found = None
+    for e in reader.events():
+        if e.kind == "isobus.implement":
+            found = Implement(str(e.detail.get("device", "")), str(e.detail.get("name", "")))
+    return found
+
+
+def _device(implement: Implement | None = None) -> ET.Element:
+    name = "A000860000000000"
+    if implement is not None and re.fullmatch(r"[0-9A-F]{16}", implement.name):
+        name = implement.name
     dvc = ET.Element(
         "DVC",
         A="DVC1",
-        B="topdress applicator",
+        B=implement.designator if implement is not None else "topdress applicator",
         C=__version__,
-        D="A000860000000000",
+        D=name,
         E="1",
         F="00000000000001",
         G="FF000000006E65",
@@ -140,10 +162,14 @@ def _iso_time(utc: float) -> str:
 
 
 def write_taskdata(
-    data: AsApplied | AsAppliedStream, directory: Path, task_name: str
+    data: AsApplied | AsAppliedStream,
+    directory: Path,
+    task_name: str,
+    implement: Implement | None = None,
 ) -> list[Path]:
     """TASKDATA.XML, TLG00001.XML and TLG00001.BIN in `directory` (made if missing); the time
-    log is written a batch of points at a time."""
+    log is written a batch of points at a time. `implement`: the ISOBUS implement that worked
+    (its DDOP's designator and NAME name the device), else the topdress applicator."""
     try:
         directory.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -185,7 +211,7 @@ def write_taskdata(
         TaskControllerVersion=__version__,
         DataTransferOrigin="2",
     )
-    root.append(_device())
+    root.append(_device(implement))
     tsk = ET.SubElement(root, "TSK", A="TSK1", B=task_name, G="4")
     tim = ET.SubElement(tsk, "TIM", A=_iso_time(first_utc), B=_iso_time(last_utc), D="4")
     for det, kg_total in zip(("DET2", "DET3"), layer_kg, strict=True):

@@ -399,6 +399,17 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
     ),
     "alarm.crop_lost": ("crop sensors lost: no NDVI", "作物传感器丢失：无 NDVI"),
     "alarm.ecu_lost": ("ECU lost: no status frames", "控制器丢失：无状态帧"),
+    "alarm.implement_lost": ("ISOBUS implement lost", "ISOBUS 机具丢失"),
+    "alarm.text.implement_lost": (
+        "ISOBUS implement {device} lost: silent, no rate reaches it",
+        "ISOBUS 机具 {device} 丢失：无响应，施肥量无法下发",
+    ),
+    "alarm.ddop_refused": ("implement's DDOP refused", "机具描述（DDOP）被拒绝"),
+    "alarm.text.ddop_refused": (
+        "the implement's DDOP was refused: {why}",
+        "机具描述（DDOP）被拒绝：{why}",
+    ),
+    "event.isobus": ("ISOBUS: {what}", "ISOBUS：{what}"),
     "alarm.wrong_field_prescription": (
         "far outside the prescription map: wrong field?",
         "远离处方图：地块错误？",

@@ -103,6 +103,9 @@ class Summary:
     gnss_lag: LagSummary | None = None  # None: no lag event (a session from before them)
     # who the ECU said it was (the last ecu.ident event, else the last EcuIdent in can_rx)
     ecu: dict[str, Any] | None = None
+    # the ISOBUS implement the terminal served as Task Controller (its last isobus.implement
+    # event); None: none
+    implement: dict[str, Any] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -148,6 +151,8 @@ def summarise(reader: SessionReader) -> Summary:
     s.gnss_lag = lag_summary(logged)
     idents = [dict(e.detail) for e in logged if e.kind == "ecu.ident"]
     s.ecu = idents[-1] if idents else ecu_from_frames(reader, protocol.FrameIds(**cfg.can.ids))
+    implements = [dict(e.detail) for e in logged if e.kind == "isobus.implement"]
+    s.implement = implements[-1] if implements else None
     s.area_ha = s.metering_distance_m * machine.width_m / 10_000.0
     for layer in layers:
         if s.area_ha > 0:
@@ -382,7 +387,15 @@ def format_text(s: Summary) -> str:
             f"{name + ' layer':<16} applied {layer.applied_kg:.2f} kg ({rate}), "
             f"target {layer.target_kg:.2f} kg, rate error {err}"
         )
-    lines.append(f"ECU              {ecu_text(s.ecu)}")
+    if s.implement is not None:
+        i = s.implement
+        lines.append(
+            f"ISOBUS implement {i.get('device', '?')} at 0x{i.get('address', 0):02X} "
+            f"(NAME {i.get('name', '?')}), {len(i.get('products', []))} products, "
+            f"{i.get('sections', '?')} sections; the terminal its Task Controller"
+        )
+    else:
+        lines.append(f"ECU              {ecu_text(s.ecu)}")
     if s.start_utc is not None and s.end_utc is not None:
         lines.append(f"time (GNSS)      {_utc_text(s.start_utc)} to {_utc_text(s.end_utc)} UTC")
     else:

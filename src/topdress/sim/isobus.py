@@ -13,12 +13,17 @@ shut-offs at the outlets close the rows switched off), and stop with every secti
 
 from __future__ import annotations
 
-from topdress.isobus.ddop import DDI_ACTUAL_RATE, DDI_ACTUAL_WORK_STATE
+from topdress.isobus.ddop import (
+    DDI_ACTUAL_CONDENSED_1_16,
+    DDI_ACTUAL_RATE,
+    DDI_ACTUAL_WORK_STATE,
+    condensed,
+)
 from topdress.isobus.node import Frame, IsobusNode
 from topdress.protocol.frames import encode_command
-from topdress.sim.world import World
+from topdress.sim.world import StepOutput, World
 
-ELEMENT_DEVICE, ELEMENT_BINS = 0, (3, 4)
+ELEMENT_DEVICE, ELEMENT_BOOM, ELEMENT_BINS = 0, 2, (3, 4)
 TC_STATUS_PERIOD_MS = 2000  # a TC proves itself alive only this often (ISO 11783-10)
 KG_HA_PER_RPM_KG = 600.0  # kg/ha = rpm * kg/rev * 600 / (km/h * m)
 
@@ -41,6 +46,7 @@ class IsobusMachine:
         self.fan_rpm = fan_rpm
         self.running = False
         self.actual_kg_ha = (0.0, 0.0)  # what the meters apply, as reported to the TC (DDI 7)
+        self.out: StepOutput | None = None  # the World's last step: its NMEA and crop lines
         node.start(world.now_us)
 
     def rates_kg_ha(self) -> tuple[float, float]:
@@ -63,7 +69,8 @@ class IsobusMachine:
         truth = w.truth
         w.deliver_can(encode_command(self.running, self.fan_rpm, upper, lower,
                                      min(truth.v_kmh, 25.0)))  # fmt: skip
-        core_out = w.step().can
+        self.out = w.step()
+        core_out = self.out.can
         truth = w.truth
         actual = [0.0, 0.0]
         for layer, element in enumerate(ELEMENT_BINS):
@@ -75,6 +82,8 @@ class IsobusMachine:
             actual[layer] = rate
         self.actual_kg_ha = (actual[0], actual[1])
         n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
+        on = tuple(bool(n.sections_on >> i & 1) for i in range(self.sections))
+        n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, condensed(on))
         n.step(w.now_us, round(truth.odometer_m * 1000))
         out = n.tx()
         for can_id, data in core_out:

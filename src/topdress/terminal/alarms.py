@@ -53,6 +53,9 @@ class AlarmInputs:
     operating: bool = False
     tank_low: Text | None = None  # the tank below its alarm level (the text with its figures)
     position_lost: bool = False  # the outlet dead reckoned past its limit (site.UNKNOWN)
+    # An ISOBUS implement (None: the topdress ECU): its link's state (terminal.tclink: ok,
+    # lost, refused, wait), its DDOP's designator and the last problem in words
+    isobus: tuple[str, str, str] | None = None
 
 
 @dataclass
@@ -119,7 +122,13 @@ class AlarmBook:
             yield "gnss_lost", text("alarm.gnss_lost")
         if x.crop_link in ("lost", "silent"):
             yield "crop_lost", text("alarm.text.crop_lost", state=link_state(x.crop_link))
-        if x.ecu_link == "lost":
+        if x.isobus is not None:
+            state, device, problem = x.isobus
+            if state == "lost":  # the implement's own alarm, in place of the ECU's
+                yield "implement_lost", text("alarm.text.implement_lost", device=device)
+            elif state == "refused":
+                yield "ddop_refused", text("alarm.text.ddop_refused", why=problem)
+        elif x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
         if x.metering:  # the wrong field matters only while product goes out
             for o in x.off_map:

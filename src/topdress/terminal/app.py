@@ -180,10 +180,20 @@ class Terminal:
         """Hand an operator command (topdress.view.commands) to the loop; thread-safe."""
         return self.desk.post(command)
 
+    def _lookahead_s(self) -> float:
+        """The look-ahead: `[lookahead]`'s command, meter and air-line times; with an ISOBUS
+        implement that gives its setpoint latency (DDI 142), the command time and that."""
+        la = self.cfg.lookahead
+        tc = self.can.tc
+        own = tc.setpoint_latency_s() if tc is not None else None
+        if own is None:
+            return la.total_s
+        return min(la.command_ms / 1000.0 + own, 5.0)
+
     def _take(self, section: str, new: TerminalConfig) -> None:
         """A changed section, for the loop's own parts (the others registered their own)."""
         if section in ("crop", "lookahead"):
-            self.ndvi.retune(new.crop, new.lookahead.total_s)
+            self.ndvi.retune(new.crop, self._lookahead_s())
         elif section == "rate":
             self.site.retune(new.rate)
         elif section == "gnss":
@@ -209,8 +219,7 @@ class Terminal:
 
     def _close(self) -> None:
         self.desk.close()
-        self.link.set_command(False, 0.0, 0.0, 0.0)
-        self.link.send_now()
+        self.can.stop_implement(self.clock())
         self.lines.stop()
         self.can.close()
         self.lags.keep(self.clock(), final=True)
@@ -263,7 +272,10 @@ class Terminal:
         if kind == "op":
             self.desk.handle(t, payload)
         elif kind == "nmea":
+            command = self.link.command
             self.gnss_in.on_line(t, payload, self.link, self.ndvi.odometer.distance_m)
+            if self.link.command is not command:  # a new GNSS speed
+                self.can.on_gnss(t)
         elif kind == "crop":
             self.journal.raw("crop", t, payload.decode("latin-1"))
             reading = self.ndvi.sensors.feed(t, payload)
@@ -279,6 +291,13 @@ class Terminal:
         link = self.link
         ecu = link.ecu
         v_sel = ecu.speeds.selected_kmh if ecu.speeds is not None and link.ecu_alive else 0.0
+        tc = self.can.tc
+        if tc is not None:
+            # An ISOBUS implement meters on the ground speed it is given; the NDVI queue moves
+            # with the GNSS speed, and the look-ahead is the implement's own delay (DDI 142)
+            # where its DDOP gives one.
+            v_sel = link.command.gnss_kmh or 0.0
+            self.ndvi.lookahead_s = self._lookahead_s()
         ndvi_sensors = self.ndvi.sensors.mean_ndvi(now)
         ndvi_meters = self.ndvi.update(now, v_sel)
         # Before the meters reach the first spot sensed, the nearest information is the sensors'.

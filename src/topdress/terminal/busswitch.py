@@ -7,6 +7,10 @@ section opens its bus in its own thread while the old one keeps working; once it
 ECU there is given its parameters while it is still commanded on the old bus, and the link
 moves to it when it has them (at once when nothing works on the old one). No device is opened
 on the loop's thread.
+
+With `[can] implement = "isobus"` the bus is an ISOBUS: every frame goes to the Task Controller
+(`TcLink`, terminal.tclink) and the topdress ECU's link sends nothing (it keeps the command the
+desk decided, which the TC turns into the implement's setpoints).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from topdress.terminal.ecuview import terminal_protocol
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.lines import in_background
+from topdress.terminal.tclink import TcLink
 
 log = logging.getLogger(__name__)
 
@@ -72,11 +77,30 @@ class BusSwitch:
         self._port_down_since: float | None = None
         self._failing = False  # a receive error was told; the next frame ends the spell
         self.link = self._new_link(self.port, cfg.can, cfg.machine.fan_rpm)
+        self.tc = self._new_tc(self.port, cfg)
+
+    def _new_tc(self, port: CanPort, cfg: TerminalConfig) -> TcLink | None:
+        """The Task Controller on an ISOBUS (None: the bus is the topdress ECU's)."""
+        if cfg.can.implement != "isobus":
+            return None
+        return TcLink(port, self._settings, self._journal, on_tx=self._log_tx)
 
     @property
     def ecu_state(self) -> str:
-        """The ECU link's state: the CAN link's, and `lost` while no adapter is open."""
-        return self.link.state if self.port.connected else "lost"
+        """The ECU link's state: the CAN link's, or the ISOBUS implement's (ok, lost, wait: none
+        served yet, or its pool refused), and `lost` while no adapter is open."""
+        if not self.port.connected:
+            return "lost"
+        if self.tc is not None:
+            state = self.tc.state
+            return state if state in ("ok", "lost") else "wait"
+        return self.link.state
+
+    @property
+    def ready(self) -> bool:
+        """The machine has worked for this terminal: the ECU took every parameter, or an ISOBUS
+        implement activated its pool."""
+        return self.tc.connected_once if self.tc is not None else self.link.ready
 
     def params(self, cfg: TerminalConfig) -> dict[int, float]:
         """The ECU parameters pushed at start, the GNSS lag's start value included."""
@@ -94,12 +118,27 @@ class BusSwitch:
         )
 
     def begin(self, now: float) -> None:
-        """The parameter push at open."""
-        self.link.begin(self.params(self._settings.cfg), now)
+        """The parameter push at open (the topdress ECU's; an ISOBUS implement has none)."""
+        if self.tc is None:
+            self.link.begin(self.params(self._settings.cfg), now)
 
     def start(self) -> None:
         """The port's reader thread (a caller driving the loop itself hands frames in)."""
         self.port.start(self.sink(self.port))
+
+    def on_gnss(self, now: float) -> None:
+        """A new GNSS speed was set on the link (sent at once with send_on_gnss there): with
+        send_on_gnss an ISOBUS implement gets its setpoints at once too."""
+        if self.tc is not None and self._settings.cfg.can.send_on_gnss:
+            self.tc.send_now(now)
+
+    def stop_implement(self, now: float) -> None:
+        """The terminal closes: the stop command to whichever implement it commands."""
+        self.link.set_command(False, 0.0, 0.0, 0.0)
+        if self.tc is not None:
+            self.tc.send_stop(now)
+        else:
+            self.link.send_now()
 
     def close(self) -> None:
         if self._opening is not None:
@@ -140,7 +179,10 @@ class BusSwitch:
         if kind == "can":
             self._failing = False
             self._journal.raw("can_rx", t, (payload.arbitration_id, bytes(payload.data)))
-            self.link.on_frame(payload, t)
+            if self.tc is not None:
+                self.tc.on_frame(payload, t)
+            else:
+                self.link.on_frame(payload, t)
         elif kind == "can_error":
             self._journal.counters["can_rx_errors"] += 1
             if not self._failing:  # once per failure spell (the reader retries)
@@ -157,7 +199,10 @@ class BusSwitch:
         now)."""
         self.link.set_command(*command)
         self._poll_new_bus(now)
-        self.link.poll(now)
+        if self.tc is not None:
+            self.tc.poll(now, command)
+        else:
+            self.link.poll(now)
 
     def _on_port(self, t: float, port: CanPort, what: str, detail: Any) -> None:
         if port is self.port:
@@ -169,7 +214,8 @@ class BusSwitch:
         if what == "open_failed":
             self._give_up(str(detail))
         elif what == "open" and opening.next is None:
-            if self.port.connected and self.link.ready and self.link.ecu_alive:
+            isobus = "isobus" in (opening.cfg.can.implement, self._settings.cfg.can.implement)
+            if not isobus and self.port.connected and self.link.ready and self.link.ecu_alive:
                 # The ECU works on the old bus: commanded there until it has its parameters
                 # on the new one, so the change never leaves it without a command.
                 opening.next = self._new_link(port, opening.cfg.can, self.link.command.fan_rpm)
@@ -204,7 +250,12 @@ class BusSwitch:
         assert opening is not None
         self._opening = None
         old, self.port = self.port, opening.port
-        if opening.next is not None:
+        # An ISOBUS TC starts over on the new bus (it claims its address there); no ECU
+        # parameters go to an ISOBUS.
+        self.tc = self._new_tc(self.port, opening.cfg)
+        if self.tc is not None:
+            self.link = self._new_link(self.port, opening.cfg.can, self.link.command.fan_rpm)
+        elif opening.next is not None:
             opening.next.command = self.link.command  # what the ECU is doing carries on
             self.link = opening.next
         else:

@@ -236,10 +236,13 @@ class OperatorDesk:
         return op.CommandResult(True, message)
 
     def _send_command_now(self) -> None:
-        link = self._parts.can.link
+        can = self._parts.can
         cmd = self.command()
-        if not link.set_command(cmd[0], cmd[1], cmd[2], cmd[3]):
-            link.send_now()
+        if can.tc is not None:  # an ISOBUS implement: its setpoints and work state now
+            can.tc.poll(self._journal.clock(), cmd)
+            return
+        if not can.link.set_command(cmd[0], cmd[1], cmd[2], cmd[3]):
+            can.link.send_now()
 
     # ---- the command and the tick ------------------------------------------------------------
     def command(self) -> tuple[bool, float, float, float]:
@@ -292,6 +295,11 @@ class OperatorDesk:
             display_lost=self.display.lost,
             operating=self.op.state in (op.RUNNING, op.PAUSED),
             position_lost=snap.zone == UNKNOWN,
+            isobus=(
+                None
+                if snap.isobus is None
+                else (snap.isobus.state, snap.isobus.implement, snap.isobus.problem)
+            ),
             tank_low=(
                 text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0)) if low else None
             ),

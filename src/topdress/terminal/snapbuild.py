@@ -57,9 +57,15 @@ class SnapshotBuilder:
         ecu = link.ecu if live else EcuView()
         pos = self._gnss.tracker.position
         ident = link.ecu.ident  # who the ECU is stays known while it is not heard
+        tc = self._bus.tc
+        if tc is not None:  # an ISOBUS implement: its reports in the ECU's fields
+            machine = tc.machine_values(link.command.gnss_kmh)
+            live = tc.state == "ok"
+        else:
+            machine = ecu_values(ecu.status, ecu.diag, ecu.speeds, ecu.targets)
         return Snapshot(
             t_s=t_s,
-            **ecu_values(ecu.status, ecu.diag, ecu.speeds, ecu.targets),
+            **machine,
             gnss_kmh=link.command.gnss_kmh,
             ndvi_sensors=ndvi_sensors,
             ndvi=ndvi,
@@ -82,11 +88,13 @@ class SnapshotBuilder:
             counters=self.counters(),
             last_event=self._journal.last_event,
             gnss_lag=lag,
+            isobus=None if tc is None else tc.view(self._ndvi.lookahead_s),
             **site,
         )
 
     def counters(self) -> dict[str, int]:
-        lc = self._bus.link.counters
+        tc = self._bus.tc
+        lc = self._bus.link.counters if tc is None else tc.counters
         nmea = self._gnss.nmea.counters
         # a sentence decoded without a malformed optional field (bad_field) is also "ok"
         nmea_other = ("ok", "resync", "bad_field")
@@ -97,7 +105,7 @@ class SnapshotBuilder:
             "nmea_bad": bad_nmea,
             "crop": crop["ok"],
             "crop_bad": sum(v for k, v in crop.items() if k not in ("ok", "stale")),
-            "can_rx": lc.rx_frames,
+            "can_rx": lc.rx_frames,  # the topdress ECU's link, or the ISOBUS TC's
             "can_bad": lc.rx_foreign + lc.rx_malformed + lc.rx_implausible,
             "cmd_tx": lc.tx_commands,
             "tx_err": lc.tx_errors,

@@ -104,6 +104,51 @@ class LagView:
 
 
 @dataclass(frozen=True)
+class ControlFunctionView:
+    """A control function heard claiming an address on ISOBUS, its NAME decoded (ISO 11783-5)."""
+
+    address: int
+    name: int  # the 64-bit NAME
+    function: int  # 130 task controller, 29 virtual terminal, 128+ by device class
+    device_class: int  # with industry group 2: 4 fertilizers, 5 sprayers, ...
+    industry_group: int
+    manufacturer_code: int
+    identity_number: int
+    what: str  # "task controller (this terminal)", "implement (served)", "function 130", ...
+
+
+@dataclass(frozen=True)
+class ProductView:
+    """One product (a bin element of the implement's DDOP) and its rates: in kg/ha for a
+    mass-per-area setpoint (DDI 6), in L/ha for volume per area (DDI 1)."""
+
+    element: int
+    setpoint_ddi: int  # 6 or 1
+    unit: str  # kg/ha | L/ha
+    setpoint: float  # what the terminal sent last
+    actual: float | None = None  # what the implement reports (DDI 7 or 2); None: not yet
+    total: float | None = None  # its total (DDI 81 kg, DDI 80 L); None: not reported
+
+
+@dataclass(frozen=True)
+class IsobusView:
+    """The terminal as a Task Controller, and the implement it serves (can.implement isobus)."""
+
+    tc_address: int | None = None  # None while claiming, or no address could be claimed
+    state: str = "wait"  # wait (no implement with an active pool), ok, lost, refused
+    implement_address: int | None = None
+    implement: str = ""  # the DDOP's device designator
+    products: tuple[ProductView, ...] = ()
+    sections: tuple[bool, ...] = ()  # the implement's sections (DDI 161), on/off in pool order
+    work_state: bool | None = None  # DDI 141; None: not reported
+    setpoint_latency_ms: int | None = None  # DDI 142 in its DDOP (None: the [lookahead] times)
+    actual_latency_ms: int | None = None  # DDI 143
+    lookahead_s: float = 0.0  # the look-ahead in force
+    functions: tuple[ControlFunctionView, ...] = ()  # every control function heard, by address
+    problem: str = ""  # the last thing that went wrong, in words
+
+
+@dataclass(frozen=True)
 class Snapshot:
     """The loop's state at one tick: what the console and the display show and the session log's
     state row records (topdress.log.rows.state_row)."""
@@ -170,6 +215,8 @@ class Snapshot:
     zone: str | None = None
     prescription_kg_ha: float | None = None  # the prescription map's rate at the outlet
     gnss_lag: LagView | None = None  # the ECU's GNSS lag (None: no EcuGnssLag heard)
+    # can.implement isobus: the Task Controller and its implement (None: the topdress ECU)
+    isobus: IsobusView | None = None
 
 
 def ecu_values(

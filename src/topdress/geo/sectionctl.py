@@ -1,0 +1,166 @@
+"""Section control from the field boundary and the ground already covered (ISO 11783-10
+TC-SC): which of an implement's sections should work now, so that sections go off over ground
+covered before and outside the field, and on again over ground still to do.
+
+Each section is where its client's DDOP puts it (DDI 134 X forward, 135 Y right, 67 width, mm
+from the device reference point; `Device.section_geometry_mm`), and the device reference point
+is where the terminal's configuration puts it from the GNSS antenna. A section looks at the
+ground just ahead of it: a strip its width wide and `look_m` long, starting `lead_m` ahead (the
+distance the machine drives while a section switches, speed x the DDOP's latency, DDI 142/143).
+It goes off when more than `off_pct` % of that strip is outside the field or already covered.
+
+Coverage is built from the sections the implement reports working (DDI 161): the ground between
+a section's last footprint and its present one, kept in the as-applied map's tiles (`Cover`);
+as-applied swaths of an earlier session can be added. Work is done in the field's UTM zone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import shapely
+from pyproj import Transformer
+
+from topdress.geo.asapplied import WGS84, Cover, utm_crs
+from topdress.geo.boundary import FieldBoundary
+from topdress.geo.outlet import offset_position
+from topdress.isobus.devicemap import Device
+
+FLUSH_EVERY = 10  # positions whose covered quads go into the coverage together
+MAX_STEP_M = 5.0  # a longer jump between two positions is a gap: nothing is counted covered
+
+
+@dataclass(frozen=True)
+class Section:
+    """One section's place: metres from the device reference point, forward and right."""
+
+    x_m: float
+    y_m: float
+    width_m: float
+
+
+def sections_from_device(device: Device) -> list[Section]:
+    """The sections of a client's DDOP, in its order (section 1 first)."""
+    return [Section(x / 1000, y / 1000, w / 1000) for x, y, w in device.section_geometry_mm()]
+
+
+class SectionControl:
+    """Section setpoints for one implement; what `decide` answers depends only on the position
+    and the ground covered so far, `cover` adds what the implement reports it worked."""
+
+    def __init__(
+        self,
+        sections: list[Section],
+        boundary: FieldBoundary | None,
+        drp_along_m: float = 0.0,
+        drp_across_m: float = 0.0,
+        off_pct: float = 50.0,
+        look_m: float = 1.0,
+    ) -> None:
+        if not sections:
+            raise ValueError("section control needs at least one section")
+        if not 0.0 <= off_pct < 100.0 or look_m <= 0.0:
+            raise ValueError(f"off_pct {off_pct} must be in 0..100, look_m {look_m} above 0")
+        self.sections = sections
+        self.boundary = boundary
+        self.drp = (drp_along_m, drp_across_m)
+        self.off_pct = off_pct
+        self.look_m = look_m
+        self.coverage = Cover()
+        self._fwd: Transformer | None = None
+        self._last: list[tuple[Any, Any]] | None = None  # each section's footprint ends, UTM
+        self._quads: list[tuple[Any, Any, Any, Any]] = []  # covered, not yet in `coverage`
+        self._since = 0
+        if boundary is not None:
+            self._fwd = Transformer.from_crs(WGS84, boundary.crs, always_xy=True)
+
+    def _utm(self, lat: float, lon: float) -> np.ndarray:
+        if self._fwd is None:
+            self._fwd = Transformer.from_crs(WGS84, utm_crs(lat, lon), always_xy=True)
+        x, y = self._fwd.transform(lon, lat)
+        return np.array([x, y])
+
+    def _frame(self, lat: float, lon: float, heading_deg: float) -> tuple[Any, Any, Any]:
+        """The device reference point and the unit vectors forward and right, in UTM metres
+        (forward from a point 10 m ahead, so the grid's convergence is taken into account)."""
+        along, across = self.drp
+        p = self._utm(*offset_position(lat, lon, heading_deg, along, across))
+        ahead = self._utm(*offset_position(lat, lon, heading_deg, along + 10.0, across))
+        fwd = (ahead - p) / np.linalg.norm(ahead - p)
+        return p, fwd, np.array([fwd[1], -fwd[0]])
+
+    def footprints(self, lat: float, lon: float, heading_deg: float) -> list[tuple[Any, Any]]:
+        """Each section's left and right end on the ground, UTM metres."""
+        return self._ends(*self._frame(lat, lon, heading_deg))
+
+    def _ends(self, p: Any, fwd: Any, right: Any) -> list[tuple[Any, Any]]:
+        out = []
+        for s in self.sections:
+            c = p + s.x_m * fwd + s.y_m * right
+            out.append((c - right * s.width_m / 2, c + right * s.width_m / 2))
+        return out
+
+    def decide(self, lat: float, lon: float, heading_deg: float, lead_m: float = 0.0) -> list[bool]:
+        """Each section's setpoint work state (True: work) at this antenna position."""
+        self._flush()
+        p, fwd, right = self._frame(lat, lon, heading_deg)
+        start, end = fwd * max(lead_m, 0.0), fwd * (max(lead_m, 0.0) + self.look_m)
+        ends = self._ends(p, fwd, right)
+        looks = shapely.polygons(
+            np.array([[a + start, b + start, b + end, a + end] for a, b in ends])
+        )
+        whole = shapely.area(looks)
+        inside = (
+            looks if self.boundary is None else shapely.intersection(looks, self.boundary.outer)
+        )
+        todo = np.maximum(shapely.area(inside) - self.coverage.covered_m2(inside), 0.0)
+        need = whole * (1.0 - self.off_pct / 100.0)
+        return [bool(w > 0.0 and t >= n) for t, w, n in zip(todo, whole, need, strict=True)]
+
+    def cover(self, lat: float, lon: float, heading_deg: float, working: list[bool | None]) -> None:
+        """The implement reports `working` (DDI 161, section 1 first) at this position: the ground
+        each working section passed since the last call is covered (added to the coverage with
+        the next `decide`, or every FLUSH_EVERY positions)."""
+        now = self.footprints(lat, lon, heading_deg)
+        last, self._last = self._last, now
+        if last is None:
+            return
+        for (a0, b0), (a1, b1), on in zip(last, now, working, strict=False):
+            moved = max(np.linalg.norm(a1 - a0), np.linalg.norm(b1 - b0))
+            if not (on and 0.0 < moved <= MAX_STEP_M):
+                continue
+            prev = self._quads[-1] if self._quads else None
+            if prev is not None and np.linalg.norm(prev[1] - a0) < 0.05:
+                self._quads[-1] = (prev[0], b0, b1, prev[3])  # neighbours make one quad
+            else:
+                self._quads.append((a0, b0, b1, a1))
+        self._since += 1
+        if self._since >= FLUSH_EVERY:
+            self._flush()
+
+    def _flush(self) -> None:
+        """Adds the quads gathered since the last flush to the coverage at once: the union into
+        the tiles is the cost, so once a second, not ten times."""
+        self._since = 0
+        if not self._quads:
+            return
+        quads = shapely.make_valid(shapely.polygons(np.array(self._quads)))
+        self._quads = []
+        self.coverage.add(np.asarray(quads, dtype=object))
+
+    def add_covered_wgs84(self, geoms: Any) -> None:
+        """Ground covered before (as-applied swaths in WGS 84, e.g. of an earlier session)."""
+        parts = [g for g in shapely.get_parts(np.atleast_1d(geoms)) if not g.is_empty]
+        if not parts:
+            return
+        c = parts[0].centroid
+        self._utm(c.y, c.x)  # the frame is the boundary's, or the first position's zone
+        fwd = self._fwd
+        assert fwd is not None
+        utm = shapely.transform(
+            np.array(parts, dtype=object),
+            lambda xy: np.column_stack(fwd.transform(xy[:, 0], xy[:, 1])),
+        )
+        self.coverage.add(utm)
