@@ -81,6 +81,14 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define STEP_LEVEL_REL 0.035f /* the wheel level since within this share: the slip stepped */
 #define STEP_AFTER_N 4u     /* the buckets newer than this are after the step when it is judged */
 #define STEP_GNSS_S 1.5f    /* GNSS this recent backs the hold */
+/* a ramp of the wheel (wheel_trend): a brake or a launch the cruise must not wait for */
+#define TREND_REL 0.06f     /* the wheel's newest 0.3 s beyond this share of the estimate's wheel speed */
+#define TREND_MIN_REL 0.03f /* moved by this share in each of the last two 0.3 s, the same way */
+#define TREND_K 1.5f       /* or by this many sigmas of a mean's bounce */
+#define TREND_EVEN 0.2f    /* and evenly: |d1 - d2| below this share of d1 + d2 (a step straddling the middle
+                            * mean moves the two by 1/3 and 2/3 of it: 1/3) */
+#define TREND_MAX_REL 0.4f /* a wheel further off is a cut cable (the gate's), no brake */
+#define TREND_KEEP 10u      /* then the whole jerk and no cruise for this many buckets (1 s) after it */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -121,6 +129,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->bounce_var = STEP_BOUNCE0;
     f->wheel_dev = 0.0f;
     f->departed = 0u;
+    f->trend_n = 0u;
     f->hist_head = 0u;
     f->hist_n = 0u;
     f->hist_sum = 0.0f;
@@ -326,6 +335,25 @@ static void rescale_history(td_fused_t *f, unsigned i0, float ratio) {
     }
 }
 
+/* The wheel ramps away from the estimate: three means of STEP_N buckets each moving the same way
+ * by TREND_MIN_REL, the newest beyond TREND_REL (and within TREND_MAX_REL: a cut cable is the
+ * gate's), and evenly. A slip step moves one of them only, or two unevenly. */
+static bool wheel_trend(const td_fused_t *f, float pred) {
+    if (f->hist_n < 3u * STEP_N) {
+        return false;
+    }
+    const float m0 = hist_mean(f, 0u, STEP_N - 1u);
+    const float m1 = hist_mean(f, STEP_N, 2u * STEP_N - 1u);
+    const float d1 = m0 - m1;
+    const float d2 = m1 - hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u);
+    /* each move beyond the bounce of a mean too (a wheel that bounces harder needs a steeper ramp) */
+    const float k = TREND_K * sqrtf(f->bounce_var / (float)STEP_N);
+    const float min = (k > TREND_MIN_REL ? k : TREND_MIN_REL) * pred;
+    return d1 * d2 > 0.0f && (m0 - pred) * d1 > 0.0f && fabsf(m0 - pred) > TREND_REL * pred &&
+           fabsf(m0 - pred) < TREND_MAX_REL * pred && fabsf(d1) > min && fabsf(d2) > min &&
+           fabsf(d1 - d2) < TREND_EVEN * fabsf(d1 + d2);
+}
+
 /* The speed changed after all: the estimate restarts from the wheel at scale s, with the
  * acceleration it saw from w0 to w over span_s. */
 static void snap_to_wheel(td_fused_t *f, float w, float w0, float span_s) {
@@ -390,6 +418,22 @@ static void step_check(td_fused_t *f) {
         f->p[VS] = 0.0f;
         f->p[AS] = 0.0f;
         f->p[SS] = f->p[SS] > RAMP_P_S ? f->p[SS] : RAMP_P_S;
+        return;
+    }
+    if (f->v_ms > CRUISE_MIN_MS && wheel_trend(f, pred)) {
+        /* a brake or a launch: the wheel leads, the estimate follows it with the whole jerk */
+        if (f->trend_n == 0u) {
+            snap_to_wheel(f, hist_mean(f, 0u, STEP_N - 1u), hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u),
+                          2.0f * (float)STEP_N * TD_FUSED_BUCKET_S);
+        }
+        f->trend_n = TREND_KEEP;
+        f->cruise = false;
+        f->q_share = 1.0f;
+        return;
+    }
+    if (f->trend_n > 0u) {
+        f->trend_n--;
+        f->q_share = 1.0f;
         return;
     }
     if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) ||
