@@ -423,8 +423,13 @@ static void step_check(td_fused_t *f) {
     if (f->v_ms > CRUISE_MIN_MS && wheel_trend(f, pred)) {
         /* a brake or a launch: the wheel leads, the estimate follows it with the whole jerk */
         if (f->trend_n == 0u) {
-            snap_to_wheel(f, hist_mean(f, 0u, STEP_N - 1u), hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u),
-                          2.0f * (float)STEP_N * TD_FUSED_BUCKET_S);
+            const float sg = f->scale * td_fused_shape(f, f->v_ms, NULL);
+            const float m0 = hist_mean(f, 0u, STEP_N - 1u);
+            const float y = m0 / sg - f->v_ms;
+            f->a_ms2 = (m0 - hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u)) / (sg * 2.0f * (float)STEP_N * TD_FUSED_BUCKET_S);
+            f->p[VV] = f->p[VV] > y * y ? f->p[VV] : y * y;
+            f->p[VA] = 0.0f;
+            f->p[AA] = P0_A;
         }
         f->trend_n = TREND_KEEP;
         f->cruise = false;
