@@ -26,9 +26,10 @@
  * A ramp of the wheel above 6 km/h (td_fused_record, every 100 ms bucket, before the step
  *   check): three 0.3 s means each moving the same way by 3 % of the estimate's wheel speed (or
  *   1.5 sigmas of a mean's bounce), evenly (|d1 - d2| < 0.2 (d1 + d2): a slip step moves one, or
- *   two by 1/3 and 2/3), the newest beyond 6 % and within 40 %: a brake or a launch. v and a
- *   restart from the wheel (its newest mean, the three's slope), and for 1 s after the last
- *   bucket that shows it there is no cruise and the whole jerk.
+ *   two by 1/3 and 2/3), the newest beyond 6 % and within 40 %: a brake or a launch. a takes
+ *   the three's slope with its whole variance, v's variance opens to its distance from the
+ *   wheel's newest mean, and for 1 s after the last bucket that shows it there is no cruise and
+ *   the whole jerk.
  * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket): the
  *   estimate flat (|a| < 0.1 m/s^2), the newest bucket beyond 5 % of the estimate's wheel speed,
  *   moved by 7 % (or 3 sigmas of the wheel's own bucket-to-bucket bounce) against the buckets
