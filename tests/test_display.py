@@ -29,9 +29,12 @@ from topdress.view.commands import CommandResult, ManualView
 from topdress.view.snapshot import (
     AlarmView,
     CalibrationView,
+    ControlFunctionView,
     CounterView,
     DeviceLine,
+    IsobusView,
     LagView,
+    ProductView,
     Snapshot,
 )
 
@@ -1074,3 +1077,129 @@ def test_only_values_shown_with_their_unit_word_change_units() -> None:
     far = text("alarm.text.wrong_field_boundary", distance_m=12, file="f.geojson", limit_m=5.0)
     assert imperial.shown(far) == far
     assert imperial.shown("plain words") == "plain words" and imperial.shown(None) is None
+
+
+def isobus_view(**kw: object) -> IsobusView:
+    """A spreader served as Task Controller: two products, six sections (two off), three
+    control functions (the terminal, the implement, a virtual terminal)."""
+    base: dict[str, object] = dict(
+        tc_address=247,
+        state="ok",
+        implement_address=134,
+        implement="Spreader 2400",
+        products=(
+            ProductView(1, 6, "kg/ha", 138.9, 141.2, 52.4),
+            ProductView(2, 1, "L/ha", 80.0, None, None),
+        ),
+        sections=(True, True, False, True, False, True),
+        work_state=True,
+        setpoint_latency_ms=650,
+        actual_latency_ms=None,
+        lookahead_s=1.25,
+        functions=(
+            ControlFunctionView(38, 0xA00A8C00_4BE00017, 29, 0, 2, 607, 23, "virtual terminal"),
+            ControlFunctionView(134, 0xA0048000_000001A2, 128, 4, 2, 0, 418, "implement (served)"),
+            ControlFunctionView(
+                247, 0xA0008200_000000C8, 130, 0, 2, 0, 200, "task controller (this terminal)"
+            ),
+        ),
+    )
+    base.update(kw)
+    return IsobusView(**base)  # type: ignore[arg-type]
+
+
+async def test_communication_screen_shows_the_isobus_implement(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(isobus=isobus_view()))
+    register_pages(hub)
+    await user.open("/communication")
+    await shows(user, "isobus_tc", "task controller at address 247: ok")
+    assert text_of(user, "isobus_implement") == "implement Spreader 2400 at address 134 · working"
+    assert text_of(user, "isobus_sections") == "sections ■■□■□■ (4 of 6 on)"
+    assert text_of(user, "isobus_timing") == (
+        "look-ahead 1.25 s · implement's delays: setpoint 650 ms, actual -- ms"
+    )
+    assert text_of(user, "isobus_problem") == ""
+    (products,) = user.find(marker="isobus_products").elements
+    assert products.rows == [  # type: ignore[attr-defined]
+        {
+            "element": "1",
+            "unit": "kg/ha",
+            "setpoint": "138.9",
+            "actual": "141.2",
+            "total": "52.4 kg",
+        },
+        {"element": "2", "unit": "L/ha", "setpoint": "80.0", "actual": "--", "total": "--"},
+    ]
+    (functions,) = user.find(marker="isobus_functions").elements
+    rows = functions.rows  # type: ignore[attr-defined]
+    assert [(r["address"], r["name"], r["what"]) for r in rows] == [
+        ("38", "A00A8C004BE00017", "virtual terminal"),
+        ("134", "A0048000000001A2", "implement (served)"),
+        ("247", "A0008200000000C8", "task controller (this terminal)"),
+    ]
+    assert rows[1]["decoded"] == ("function 128, class 4, group 2, manufacturer 0, identity 418")
+    # the implement lost, with the terminal's words for it
+    hub.publish(working(isobus=isobus_view(state="lost", problem="implement 134 silent 3.0 s")))
+    await shows(user, "isobus_tc", "task controller at address 247: lost")
+    assert text_of(user, "isobus_problem") == "implement 134 silent 3.0 s"
+    # in US units: kg/ha as lb/ac, kg as lb; a volume rate stays L/ha
+    hub.set_prefs(units="imperial")
+    await shows(user, "isobus_tc", "task controller at address 247: lost")
+    for _ in range(40):
+        with contextlib.suppress(AssertionError):  # the screen is built anew, then drawn
+            (products,) = user.find(marker="isobus_products").elements
+            if products.rows and products.rows[0]["unit"] == "lb/ac":  # type: ignore[attr-defined]
+                break
+        await asyncio.sleep(0.05)
+    assert products.rows == [  # type: ignore[attr-defined]
+        {
+            "element": "1",
+            "unit": "lb/ac",
+            "setpoint": "123.9",
+            "actual": "126.0",
+            "total": "115.5 lb",
+        },
+        {"element": "2", "unit": "L/ha", "setpoint": "80.0", "actual": "--", "total": "--"},
+    ]
+    hub.set_prefs(units="metric")
+    i18n.set_language("zh")
+    await shows(user, "isobus_tc", "任务控制器地址 247：丢失")
+    assert text_of(user, "isobus_sections") == "作业段 ■■□■□■（6 段中 4 段开）"
+    assert text_of(user, "isobus_implement") == "机具 Spreader 2400，地址 134 · 作业中"
+    i18n.set_language("en")
+
+
+async def test_no_isobus_card_with_the_topdress_ecu(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working())
+    register_pages(hub)
+    await user.open("/communication")
+    await shows(user, "state_can", "state: ok")
+    await user.should_not_see("ISOBUS (Task Controller)")
+    await user.should_not_see(marker="isobus_tc")
+    await user.open("/")
+    await user.should_not_see(marker="implement")
+    await shows(user, "source_why", "GNSS: CV 2.51 % < 4.2 %, GNSS 8.0 km/h > 6 km/h")
+    # an implement waiting for its pool: the card with no implement in it
+    hub.publish(working(isobus=IsobusView(tc_address=None)))
+    await user.open("/communication")
+    await shows(user, "isobus_tc", "task controller at address --: waiting")
+    assert text_of(user, "isobus_implement") == "no implement connected"
+    assert text_of(user, "isobus_sections") == ""
+
+
+async def test_main_screen_shows_the_implement_and_its_sections(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(isobus=isobus_view()))
+    register_pages(hub)
+    await user.open("/")
+    await shows(user, "implement", "Spreader 2400: ok · ■■□■□■")
+    assert text_of(user, "rate_upper") == "138.9"  # the rates as for the topdress ECU
+    # the ECU's speed-source rule does not apply to it: its line gives the implement room
+    await user.should_not_see(marker="source_why")
+    hub.publish(working(isobus=isobus_view(state="refused", implement="", sections=())))
+    await shows(user, "implement", "ISOBUS: refused")
+    i18n.set_language("zh")
+    await shows(user, "implement", "ISOBUS：被拒绝")
+    i18n.set_language("en")

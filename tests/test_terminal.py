@@ -10,6 +10,7 @@ from pathlib import Path
 import can
 import pytest
 
+from term_rig import TerminalParts
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.crop.rate import build_rate_model, split_layers
@@ -27,28 +28,12 @@ from topdress.view.snapshot import Snapshot
 _channels = itertools.count()
 
 
-class VirtualRig:
+class VirtualRig(TerminalParts):
     """Terminal + World on one virtual clock (10 ms steps, terminal tick every 100 ms)."""
 
     def __init__(self, cfg: TerminalConfig, drive: Drive, session: SessionLog | None = None):
-        channel = f"test-terminal-{next(_channels)}"
-        self.cfg = replace(cfg, can=replace(cfg.can, channel=channel))
         self.world = World(seed=3, drive=drive)
-        self.gnss = FakeLineSource()
-        self.crop = FakeLineSource()
-        self.pc_bus = open_bus(self.cfg.can)
-        self.ecu_bus = open_bus(self.cfg.can)
-        self.events: list[tuple[float, str]] = []
-        self.term = Terminal(
-            self.cfg,
-            self.gnss,
-            self.crop,
-            self.pc_bus,
-            session,
-            clock=lambda: self.world.t_s,
-            on_event=lambda e: self.events.append((self.world.t_s, str(e))),
-        )
-        self.term.open()
+        super().__init__(cfg, lambda: self.world.t_s, session)
         self.snapshots: list[tuple[float, Snapshot]] = []
         self.ecu_silent = False  # its frames do not reach the terminal
         self.ecu_off = False  # not on the bus at all: hears nothing, says nothing
@@ -73,11 +58,6 @@ class VirtualRig:
             if round(t * 100) % 10 == 0:
                 term.tick(t)
                 self.snapshots.append((t, term.snapshot))
-
-    def close(self) -> None:
-        self.term.close()
-        self.pc_bus.shutdown()
-        self.ecu_bus.shutdown()
 
 
 def _drive(speed_kmh: float, length_m: float) -> Drive:

@@ -5,7 +5,6 @@ into the Snapshot, the alarms and the session log."""
 
 from __future__ import annotations
 
-import itertools
 import struct
 import xml.etree.ElementTree as ET
 from dataclasses import replace
@@ -14,11 +13,10 @@ from pathlib import Path
 import can
 import pytest
 
+from term_rig import TerminalParts
 from topdress.cli.isobus_demo import DEMO_PASS_M, DEMO_PASSES, DEMO_SPEED_KMH
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
-from topdress.devices.can import open_bus
-from topdress.devices.lines import FakeLineSource
 from topdress.errors import ConfigError
 from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
@@ -31,17 +29,15 @@ from topdress.sim.isobus import ELEMENT_BINS, IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
 from topdress.terminal.alarms import AlarmBook, AlarmInputs
-from topdress.terminal.app import Terminal
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.tclink import TcLink, known_ddis, pool_ddis
 from topdress.view.commands import ApplySettings, Stop
 from topdress.view.snapshot import Snapshot
 
-_channels = itertools.count()
 _QUIET = AlarmInputs(False, (0.0, 0.0), (0.0, 0.0), 0, "ok", "ok", "ok")
 
 
-class IsobusRig:
+class IsobusRig(TerminalParts):
     """Terminal (the TC) + the ECU on ISOBUS + the plant, on one virtual clock (10 ms steps,
     the terminal's tick every 100 ms)."""
 
@@ -52,31 +48,15 @@ class IsobusRig:
         session: SessionLog | None = None,
         implement: str = "isobus",
     ):
-        channel = f"test-isobus-{next(_channels)}"
-        self.cfg = replace(cfg, can=replace(cfg.can, channel=channel, implement=implement))
-        self.world = World(SimConfig.of_machine(self.cfg), seed=3, drive=drive)
+        self.world = World(SimConfig.of_machine(cfg), seed=3, drive=drive)
         node = IsobusNode(
             topdress_name(0, b"rig"),
             tc_timeout_ms=tc_timeout_ms(self.world.ecu.params.cmd_timeout_ms),
         )
-        sections = Machine.from_config(self.cfg.machine).sections
-        m = self.cfg.machine
+        sections = Machine.from_config(cfg.machine).sections
+        m = cfg.machine
         self.sim = IsobusMachine(self.world, node, m.width_m, sections, m.fan_rpm)
-        self.gnss = FakeLineSource()
-        self.crop = FakeLineSource()
-        self.pc_bus = open_bus(self.cfg.can)
-        self.ecu_bus = open_bus(self.cfg.can)
-        self.events: list[tuple[float, str]] = []
-        self.term = Terminal(
-            self.cfg,
-            self.gnss,
-            self.crop,
-            self.pc_bus,
-            session,
-            clock=lambda: self.world.t_s,
-            on_event=lambda e: self.events.append((self.world.t_s, str(e))),
-        )
-        self.term.open()
+        super().__init__(cfg, lambda: self.world.t_s, session, implement)
         self.snapshots: list[tuple[float, Snapshot]] = []
         self.node_rates: list[tuple[float, float, float]] = []  # t, what the node was set
         self.implement_off = False  # the implement unplugged: hears nothing, says nothing
@@ -108,11 +88,6 @@ class IsobusRig:
                 self.snapshots.append((t, term.snapshot))
                 node = self.sim.node
                 self.node_rates.append((t, node.rate_kg_ha(0), node.rate_kg_ha(1)))
-
-    def close(self) -> None:
-        self.term.close()
-        self.pc_bus.shutdown()
-        self.ecu_bus.shutdown()
 
 
 def _drive(speed_kmh: float, length_m: float) -> Drive:

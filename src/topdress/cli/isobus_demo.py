@@ -60,6 +60,22 @@ def _record(log: SessionLog, kind: str, t: float, frames: list[Frame]) -> None:
         log.raw(kind, t, (f.can_id, f.data))
 
 
+def _demo_machine(cfg: TerminalConfig, seed: int) -> tuple[World, IsobusNode, IsobusMachine]:
+    """The demo's field passes and the topdress implement on ISOBUS driving them."""
+    drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
+    world = World(SimConfig.of_machine(cfg), seed=seed, drive=drive)
+    sections = Machine.from_config(cfg.machine).sections
+    node = IsobusNode(
+        topdress_name(MANUFACTURER_CODE, DEMO_UID),
+        tc_timeout_ms=tc_timeout_ms(world.ecu.params.cmd_timeout_ms),  # the core's own
+    )
+    return (
+        world,
+        node,
+        IsobusMachine(world, node, cfg.machine.width_m, sections, cfg.machine.fan_rpm),
+    )
+
+
 def run_isobus_demo(
     cfg: TerminalConfig,
     duration_s: float,
@@ -70,14 +86,8 @@ def run_isobus_demo(
     *,
     pace: bool = True,
 ) -> int:
-    drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
-    world = World(SimConfig.of_machine(cfg), seed=seed, drive=drive)
-    machine = Machine.from_config(cfg.machine)
-    node = IsobusNode(
-        topdress_name(MANUFACTURER_CODE, DEMO_UID),
-        tc_timeout_ms=tc_timeout_ms(world.ecu.params.cmd_timeout_ms),  # the core's own
-    )
-    sim = IsobusMachine(world, node, cfg.machine.width_m, machine.sections, cfg.machine.fan_rpm)
+    world, node, sim = _demo_machine(cfg, seed)
+    ddop_bytes = len(build(Machine.from_config(cfg.machine))[0])
     tc = MiniTc()
     log = SessionLog.create(out_dir, redacted_text(config_toml), name="isobus")
     if not log.ok:
@@ -87,7 +97,7 @@ def run_isobus_demo(
     pending: list[Frame] = []
     t0 = time.monotonic()
     with log:
-        print(f"ISOBUS demo: NAME {node.name:016X}, DDOP {len(build(machine)[0])} bytes; "
+        print(f"ISOBUS demo: NAME {node.name:016X}, DDOP {ddop_bytes} bytes; "
               f"session log {log.path}", file=out)  # fmt: skip
         for n in range(round(duration_s / world.dt)):
             frames = sim.step(pending)
@@ -211,14 +221,8 @@ def run_terminal_isobus_demo(
 ) -> int:
     """The machine on ISOBUS in a thread, the terminal as its TC in front of it; exit code."""
     _check_out_dir(out_dir)
-    drive = Drive.field_passes(DEMO_PASSES, DEMO_PASS_M, DEMO_SPEED_KMH)
-    world = World(SimConfig.of_machine(cfg), seed=seed, drive=drive)
-    machine = Machine.from_config(cfg.machine)
-    node = IsobusNode(
-        topdress_name(MANUFACTURER_CODE, DEMO_UID),
-        tc_timeout_ms=tc_timeout_ms(world.ecu.params.cmd_timeout_ms),  # the core's own
-    )
-    sim = IsobusMachine(world, node, cfg.machine.width_m, machine.sections, cfg.machine.fan_rpm)
+    world, node, sim = _demo_machine(cfg, seed)
+    ddop_bytes = len(build(Machine.from_config(cfg.machine))[0])
     channel = f"topdress-isobus-{os.getpid()}"
     sim_bus = open_bus(loads_config(f'[can]\nchannel = "{channel}"\n').can)
     log = SessionLog.create(out_dir, redacted_text(user_text), name="isobus")
@@ -238,7 +242,7 @@ def run_terminal_isobus_demo(
         config_path.write_text(text, encoding="utf-8")
         print(
             f"topdress demo --isobus: the terminal is the Task Controller; the topdress ECU "
-            f"on ISOBUS (NAME {node.name:016X}, DDOP {len(build(machine)[0])} bytes); "
+            f"on ISOBUS (NAME {node.name:016X}, DDOP {ddop_bytes} bytes); "
             f"GNSS {live.gnss_port.path}, crop sensors {live.crop_port.path}, "
             f"CAN virtual:{channel}; the implement's session log {log.path}",
             file=out,

@@ -8,7 +8,7 @@ from topdress.i18n import tr
 from topdress.view.links import fault_texts, link_text
 from topdress.view.snapshot import Snapshot
 
-__all__ = ["ecu", "faults_text", "link_text", "num", "restyle"]
+__all__ = ["ecu", "faults_text", "link_text", "marks", "num", "restyle"]
 
 
 def num(value: float | None, spec: str) -> str:
@@ -25,6 +25,11 @@ def faults_text(s: Snapshot) -> str:
     if not s.ecu_live:
         return "--"
     return "; ".join(fault_texts(s.faults)) or tr("fault.none")
+
+
+def marks(sections: tuple[bool, ...]) -> str:
+    """Sections as a row of on/off marks in pool order: "■■□■■■" (■ on, □ off)."""
+    return "".join("■" if on else "□" for on in sections)
 
 
 def restyle(element: ui.element, classes: str) -> None:

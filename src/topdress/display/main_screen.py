@@ -134,6 +134,9 @@ class MainScreen:
                 ui.label("").classes("text-sm font-bold px-1 rounded").mark("manual_state")
             )
             self.rx = ui.label("").classes("text-sm td-muted").mark("prescription")
+            # can.implement isobus: the implement metering these rates, its state and sections
+            self.implement = ui.label("").classes("text-sm truncate").mark("implement")
+            self.implement.set_visibility(False)
 
     async def _step(self, up: bool) -> None:
         await self.actions.send(rate_step(self._last.manual, up))
@@ -394,11 +397,15 @@ class MainScreen:
         if self.source.props.get("color") != colour:
             self.source.props["color"] = colour
             self.source.update()
-        self.why.set_text(render(u.shown(s.speed_why)) if live else "")
+        # An ISOBUS implement meters on the GNSS speed the terminal sends: the ECU's rule for
+        # its speed source does not apply, and its line makes room for the implement's.
+        self.why.set_visibility(s.isobus is None)
+        self.why.set_text(render(u.shown(s.speed_why)) if live and s.isobus is None else "")
         for i, layer in enumerate(op.LAYERS):
             self.rate[layer].set_text(fmt.num(u.rate(s.rate_kg_ha[i]), ".1f"))
             self.applied[layer].set_text(fmt.ecu(s, u.rate(s.applied_kg_ha[i]), ".1f"))
         self._update_manual(s)
+        self._update_implement(s)
         self._update_tank(s)
         self._update_details(s)
         self._update_counters(s)
@@ -454,6 +461,19 @@ class MainScreen:
         if s.zone is not None:
             rx.append(tr(f"zone.{s.zone}"))
         self.rx.set_text(" · ".join(rx))
+
+    def _update_implement(self, s: Snapshot) -> None:
+        v = s.isobus
+        self.implement.set_visibility(v is not None)
+        if v is None:
+            return
+        line = tr("main.implement", name=v.implement or "ISOBUS", state=fmt.link_text(v.state))
+        if v.sections:
+            line += " · " + fmt.marks(v.sections)
+        self.implement.set_text(line)
+        fmt.restyle(
+            self.implement, "text-sm truncate " + ("td-ok" if v.state == "ok" else "td-bad")
+        )
 
     def _update_tank(self, s: Snapshot) -> None:
         u = self.units

@@ -20,10 +20,11 @@ from topdress.display import fmt
 from topdress.display.actions import Actions
 from topdress.display.forms import SectionForm
 from topdress.display.hub import DisplayHub
+from topdress.display.units import Units
 from topdress.errors import ConfigError
 from topdress.i18n import render, tr
 from topdress.view import commands as op
-from topdress.view.snapshot import Snapshot
+from topdress.view.snapshot import IsobusView, ProductView, Snapshot
 
 BAUDS = [4800, 9600, 19200, 38400, 57600, 115200]
 CAN_INTERFACES = [
@@ -183,6 +184,7 @@ class CommunicationScreen:
                     )
                     SectionCard(hub, actions, section, form)
                     self._test_view(section)
+            self.isobus = IsobusCard(Units(hub.prefs.units))
 
     def _test_view(self, device: str) -> None:
         table = (
@@ -228,6 +230,134 @@ class CommunicationScreen:
             if section == "can" and s.ecu_can_health is not None:  # a firmware's controller
                 line += " · " + render(s.ecu_can_health)
             self.links[section].set_text(line)
+        self.isobus.update(s.isobus)
+
+
+def _column(name: str, key: str, align: str = "left") -> dict[str, str]:
+    return {"name": name, "label": tr(key), "field": name, "align": align}
+
+
+class IsobusCard:
+    """The terminal as a Task Controller on ISOBUS: its address and state, the implement it
+    serves with its products, sections and delays, and every control function heard. Shown only
+    with can.implement isobus (Snapshot.isobus set)."""
+
+    def __init__(self, units: Units) -> None:
+        self.units = units
+        self._products: list[dict[str, str]] = []
+        self._functions: list[dict[str, str]] = []
+        with ui.card().classes("w-full gap-1") as self.card:
+            _title("comm.isobus")
+            self.tc = ui.label("").classes("text-sm").mark("isobus_tc")
+            self.implement = ui.label("").classes("text-sm").mark("isobus_implement")
+            self.products = (
+                ui.table(
+                    columns=[
+                        _column("element", "isobus.element", "right"),
+                        _column("unit", "isobus.unit"),
+                        _column("setpoint", "isobus.setpoint", "right"),
+                        _column("actual", "isobus.actual", "right"),
+                        _column("total", "isobus.total", "right"),
+                    ],
+                    rows=[],
+                )
+                .props("dense flat")
+                .classes("text-sm")
+                .mark("isobus_products")
+            )
+            self.sections = ui.label("").classes("text-sm font-mono").mark("isobus_sections")
+            self.timing = ui.label("").classes("text-sm").mark("isobus_timing")
+            self.problem = ui.label("").classes("text-sm td-bad").mark("isobus_problem")
+            ui.label(tr("isobus.functions")).classes("text-sm font-bold")
+            self.functions = (
+                ui.table(
+                    columns=[
+                        _column("address", "isobus.address", "right"),
+                        _column("name", "isobus.name"),
+                        _column("decoded", "comm.decoded"),
+                        _column("what", "isobus.what"),
+                    ],
+                    rows=[],
+                )
+                .props("dense flat wrap-cells")
+                .classes("w-full text-xs")
+                .mark("isobus_functions")
+            )
+        self.card.set_visibility(False)
+
+    def update(self, v: IsobusView | None) -> None:
+        self.card.set_visibility(v is not None)
+        if v is None:
+            return
+        address = "--" if v.tc_address is None else str(v.tc_address)
+        self.tc.set_text(tr("isobus.tc", address=address, state=fmt.link_text(v.state)))
+        if v.implement_address is None:
+            self.implement.set_text(tr("isobus.no_implement"))
+        else:
+            name = v.implement or "--"
+            work = "" if v.work_state is None else " · " + tr(f"isobus.work_{v.work_state}")
+            self.implement.set_text(
+                tr("isobus.implement", name=name, address=v.implement_address) + work
+            )
+        self._rows(self.products, "_products", [self._product(p) for p in v.products])
+        on = sum(v.sections)
+        self.sections.set_text(
+            tr("isobus.sections", marks=fmt.marks(v.sections), on=on, n=len(v.sections))
+            if v.sections
+            else ""
+        )
+        self.timing.set_text(
+            tr(
+                "isobus.timing",
+                lookahead=f"{v.lookahead_s:.2f}",
+                setpoint=fmt.num(v.setpoint_latency_ms, "d"),
+                actual=fmt.num(v.actual_latency_ms, "d"),
+            )
+        )
+        self.problem.set_text(v.problem)
+        self._rows(
+            self.functions,
+            "_functions",
+            [
+                {
+                    "address": str(f.address),
+                    "name": f"{f.name:016X}",
+                    "decoded": tr(
+                        "isobus.decoded",
+                        function=f.function,
+                        device_class=f.device_class,
+                        group=f.industry_group,
+                        manufacturer=f.manufacturer_code,
+                        identity=f.identity_number,
+                    ),
+                    "what": f.what,
+                }
+                for f in v.functions
+            ],
+        )
+
+    def _product(self, p: ProductView) -> dict[str, str]:
+        """A product's rates in the operator's units where they are mass per area."""
+        u = self.units
+        mass = p.unit == "kg/ha"
+        rate = u.rate if mass else float
+        total = u.mass if mass else float
+        return {
+            "element": str(p.element),
+            "unit": u.rate_unit if mass else tr("unit.lha"),
+            "setpoint": f"{rate(p.setpoint):.1f}",
+            "actual": "--" if p.actual is None else f"{rate(p.actual):.1f}",
+            "total": "--"
+            if p.total is None
+            else f"{total(p.total):.1f} " + (u.mass_unit if mass else tr("unit.l")),
+        }
+
+    def _rows(self, table: ui.table, attr: str, rows: list[dict[str, str]]) -> None:
+        """New rows only when they changed: every change is a message to the browser."""
+        if rows != getattr(self, attr):
+            setattr(self, attr, rows)
+            table.rows = rows
+            table.update()
 
 
 class ControlScreen:
