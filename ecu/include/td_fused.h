@@ -15,10 +15,32 @@
  * Wheel (every step):   z_w = s * g(v) * v + noise,  H = [s (g + v g'), 0, g v], with g = 1 the
  *   scale is a constant; with the slip shape on, g(v) = 1 - eq. 5 slip(v) / 100 and s learns how
  *   far this soil is from the paper's wheat stubble (the slip then follows the speed at once),
- *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports); 30 times that in
+ *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports); 1000 times that in
  *   flat motion (jerk share < 0.3) while GNSS backs the estimate and the wheel is within 5 % of
  *   it: the bounce wanders over seconds, no white noise, so GNSS holds the level; a wheel beyond
  *   5 % (a brake, a launch) weighs in full at once.
+ * Cruise (the last fix was settled and flat, below) above 6 km/h, while the wheel's innovation
+ *   (its mean over ~0.3 s) stays within 5 %: a decays with a time constant of 0.5 s, so a fix's
+ *   noise left in a does not ramp v until the next fix (a Gauss-Markov acceleration). Below
+ *   6 km/h the wheel measures well and a brake from a slow pass shows in it first.
+ * A ramp of the wheel above 6 km/h (td_fused_record, every 100 ms bucket, before the step
+ *   check): three 0.3 s means each moving the same way by 3 % of the estimate's wheel speed (or
+ *   1.5 sigmas of a mean's bounce), evenly (|d1 - d2| < 0.2 (d1 + d2): a slip step moves one, or
+ *   two by 1/3 and 2/3), the newest beyond 6 % and within 40 %: a brake or a launch. a takes
+ *   the three's slope with its whole variance, v's variance opens to its distance from the
+ *   wheel's newest mean, and for 1 s after the last bucket that shows it there is no cruise and
+ *   the whole jerk.
+ * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket): the
+ *   estimate flat (|a| < 0.1 m/s^2), the newest bucket beyond 5 % of the estimate's wheel speed,
+ *   moved by 7 % (or 3 sigmas of the wheel's own bucket-to-bucket bounce) against the buckets
+ *   0.2-0.5 s before, on the first two buckets beyond 5 % (a ramp that went on is no step), and
+ *   within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
+ *   judged on two 3-bucket means: back near where it was, a bounce; level (within 3.5 %), a
+ *   slip step: the scale takes it, v holds, the history before the step is rescaled to the new
+ *   scale; still moving the same way, a speed change: v and a restart from the wheel. A scale
+ *   step is undone (scale and history back, v from the wheel) by a second sharp step the same
+ *   way, or by GNSS's 1 s mean moving half the step the same way (beyond 3 GNSS sigmas) within
+ *   the delay + 0.5 s; confirmed after the delay + 1.5 s.
  * GNSS (delayed by d = age + lag) enters twice:
  *   1. the scale, against the wheel's own history at the fix's time of validity (100 ms means
  *      kept for 3.6 s in mm/s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
@@ -29,10 +51,11 @@
  *      R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it in steady motion), with
  *      the scale's row of the gain zeroed. Beyond the history (a delay over ~3.5 s, or no wheel)
  *      the scale is learned through this update instead.
- *   3. settled (below) and flat (jerk share < 0.3), not re-opened: the speed then was the speed
- *      now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 + (0.2 m/s^2 d)^2
- *      (an acceleration the wheel may not show yet): through v - a d, an acceleration left by
- *      the wheel's bounce took up GNSS's difference and held v 2-5 % off for seconds.
+ *   3. settled (below) and flat (jerk share < 0.3), not re-opened (cruise): the speed then was
+ *      the speed now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 +
+ *      (0.02 m/s^2 d)^2 (an acceleration the wheel may not show yet): through v - a d, an
+ *      acceleration left by the wheel's bounce took up GNSS's difference and held v 2-5 % off
+ *      for seconds.
  *   4. a speed change GNSS does not show: the estimate's acceleration went beyond 0.1 m/s^2
  *      longer than d + 0.2 s ago, its speed has moved by more than 0.1 m/s since, GNSS's 1 s mean
  *      has not (within 0.1 m/s), and GNSS stands apart from the wheel at the fix's time against
@@ -50,7 +73,7 @@
  * below 0.1 m/s^2 (with a short lag, ~0.6 s at 3-4 m/s, a takes up a slip step's difference
  * beyond 0.3 m/s^2; the wheel says the speed holds). Settled: the scale learns (either way) only
  * once GNSS has stayed within 0.1 m/s of its 1 s mean for the delay + 1 s (a receiver's filter
- * still settling after a brake taught a wrong slip). A fix after a period longer than 0.25 s
+ * still settling after a brake taught a wrong slip); one fix beyond is noise, two in a row end it. A fix after a period longer than 0.25 s
  * teaches the scale as period / 0.25 s fixes (at most 4). At 2 m/s with GNSS 1.3 s late, a 15 %
  * slip step is learned to within 1.5 % in ~4 s; at 3.5 m/s with GNSS 0.6 s late, 3 % in 4 s.
  * eq. 5's shape g(v) is held at its 12 km/h value above 12 km/h: the fit's g(v) v falls again
@@ -58,8 +81,8 @@
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations; 176 bytes (92 of state, 84 of wheel history). No heap,
- * no globals.
+ * Costs per step: ~120 float operations (a bucket's step check ~60 more); 220 bytes (136 of
+ * state, 84 of wheel history; it was 180). No heap, no globals.
  */
 #ifndef TD_FUSED_H
 #define TD_FUSED_H
@@ -91,11 +114,23 @@ typedef struct {
     float run_sum;             /**< its integral over that time, m */
     int8_t run_sign;           /**< their sign (0: none) */
     float quiet_s;             /**< how long GNSS has stayed within 0.1 m/s of its 1 s mean, s (counted at the fixes) */
+    uint8_t moves_n;           /**< fixes in a row beyond 0.1 m/s of that mean, 0..2 (2 ends the quiet) */
     float gnss_avg_ms;         /**< GNSS speed, its mean over ~1 s, m/s */
     float ramp_s;              /**< time since the estimate's acceleration went beyond 0.1 m/s^2, s (0: none) */
     float ramp_v0_ms;          /**< the estimate's speed then, m/s */
     float ramp_z0_ms;          /**< and GNSS's 1 s mean, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
+    bool cruise;               /**< the last fix found the motion flat and settled: GNSS holds the level */
+    float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none) */
+    float hold_w0_ms;          /**< the wheel's speed before that step, m/s */
+    float stepped_s;           /**< time since the scale took a wheel's step, s (0: none pending GNSS's check) */
+    float step_scale0;         /**< the scale before it */
+    float step_dv_ms;          /**< the step, as a speed, m/s */
+    float step_z0_ms;          /**< GNSS's 1 s mean then, m/s */
+    float wheel_dev;           /**< the wheel's innovation, share of its speed, mean over ~0.3 s */
+    float bounce_var;          /**< the wheel's bucket-to-bucket change in cruise, its mean square, share of speed ^2 */
+    uint8_t trend_n;           /**< buckets left of a wheel's ramp (no cruise, the whole jerk), 0..10 */
+    uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
     uint8_t hist_head;         /**< index of the newest complete bucket */

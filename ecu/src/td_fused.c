@@ -52,8 +52,12 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_A_MS2 0.2f   /* the wheel's own acceleration at which the whole jerk is back */
 #define Q_FLAT_SHARE 0.05f  /* the least share */
 #define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
-#define WHEEL_FLAT_GAIN 30.0f /* and weighs this much less */
+#define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
+#define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
+#define CRUISE_MIN_MS 1.67f /* and above the paper's 6 km/h: slower, the wheel measures well and a brake
+                              * from a slow pass shows in it first (Table 2's stop at 3.5 km/h) */
+#define WHEEL_DEV_K 0.03f   /* that mean: over ~0.3 s of 10 ms steps */
 /* a ramp GNSS does not confirm (td_fused_gnss): the wheel's scale stepped */
 #define RAMP_A_MS2 0.1f     /* the estimate's acceleration beyond this is a ramp it believes in */
 #define RAMP_MARGIN_S 0.2f   /* GNSS shows a change this long after the delay, or it was none */
@@ -62,7 +66,29 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define RAMP_P_A 0.01f       /* and the acceleration's, (0.1 m/s^2)^2 */
 #define RAMP_SIGMA2 9.0f     /* GNSS apart from the scaled wheel by 3 GNSS sigmas */
 #define RAMP_W_S 0.5f        /* the wheel's mean over its last this long */   /* flat: a fix corrects v itself while the jerk's share is below this */
-#define CRUISE_A_MS2 0.2f    /* an acceleration the wheel may not have shown yet, over the delay */
+#define CRUISE_A_MS2 0.02f    /* an acceleration the wheel may not have shown yet, over the delay */
+/* a sharp step of the wheel in cruise (step_check): a slip step or a speed change */
+#define STEP_REL 0.05f      /* the wheel's newest 0.2 s beyond this share of the estimate's wheel speed */
+#define STEP_SHARP_REL 0.07f /* and moved by this share since 0.2-0.5 s ago: sharper than a machine's ramp */
+#define STEP_MAX_REL 0.25f  /* a wheel further off is no slip step (a cut cable, a stop): the gate's */
+#define STEP_SHARP_K 3.0f   /* or by this many sigmas of the wheel's bucket-to-bucket bounce */
+#define STEP_BOUNCE_K 0.02f /* that bounce's variance, a running mean over ~5 s of buckets */
+#define STEP_BOUNCE0 0.0009f /* and its start, (3 %)^2 */
+#define STEP_HOLD_S 0.6f    /* then the wheel waits this long before it weighs again */
+#define STEP_N 3u           /* and is judged on two means of this many buckets */
+#define STEP_VERIFY_S 0.5f  /* GNSS checks a scale step this long after its delay ... */
+#define STEP_CONFIRM_S 1.5f /* ... and has confirmed it this long after */    /* then the wheel waits this long before it weighs again */
+#define STEP_LEVEL_REL 0.035f /* the wheel level since within this share: the slip stepped */
+#define STEP_AFTER_N 4u     /* the buckets newer than this are after the step when it is judged */
+#define STEP_GNSS_S 1.5f    /* GNSS this recent backs the hold */
+/* a ramp of the wheel (wheel_trend): a brake or a launch the cruise must not wait for */
+#define TREND_REL 0.06f     /* the wheel's newest 0.3 s beyond this share of the estimate's wheel speed */
+#define TREND_MIN_REL 0.03f /* moved by this share in each of the last two 0.3 s, the same way */
+#define TREND_K 1.5f       /* or by this many sigmas of a mean's bounce */
+#define TREND_EVEN 0.2f    /* and evenly: |d1 - d2| below this share of d1 + d2 (a step straddling the middle
+                            * mean moves the two by 1/3 and 2/3 of it: 1/3) */
+#define TREND_MAX_REL 0.4f /* a wheel further off is a cut cable (the gate's), no brake */
+#define TREND_KEEP 10u      /* then the whole jerk and no cruise for this many buckets (1 s) after it */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
 #define LEAD_A_MAX 3.0f
@@ -87,11 +113,23 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->run_sum = 0.0f;
     f->run_sign = 0;
     f->quiet_s = 0.0f;
+    f->moves_n = 0u;
     f->gnss_avg_ms = 0.0f;
     f->ramp_s = 0.0f;
     f->reopened = false;
     f->wheel_rejects = 0u;
     f->slip_shape = false;
+    f->cruise = false;
+    f->hold_s = 0.0f;
+    f->hold_w0_ms = 0.0f;
+    f->stepped_s = 0.0f;
+    f->step_scale0 = 1.0f;
+    f->step_dv_ms = 0.0f;
+    f->step_z0_ms = 0.0f;
+    f->bounce_var = STEP_BOUNCE0;
+    f->wheel_dev = 0.0f;
+    f->departed = 0u;
+    f->trend_n = 0u;
     f->hist_head = 0u;
     f->hist_n = 0u;
     f->hist_sum = 0.0f;
@@ -129,8 +167,21 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
     }
+    if (f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < WHEEL_FLAT_REL &&
+        f->v_ms > CRUISE_MIN_MS) {
+        /* in cruise the acceleration is a short-lived correction (a Gauss-Markov one of time
+         * constant CRUISE_TAU_S): a GNSS fix's noise left in a would ramp v until the next */
+        const float k = dt_s < CRUISE_TAU_S ? 1.0f - dt_s / CRUISE_TAU_S : 0.0f;
+        f->a_ms2 *= k;
+        p[VA] *= k;
+        p[AS] *= k;
+        p[AA] = p[AA] * k * k > 1.0e-8f ? p[AA] * k * k : 1.0e-8f;
+    }
     if (f->since_gnss_s < 60.0f) {
         f->since_gnss_s += dt_s;
+    }
+    if (f->stepped_s > 0.0f && f->stepped_s < 60.0f) {
+        f->stepped_s += dt_s;
     }
     /* a speed change the estimate believes in: from where a went beyond RAMP_A_MS2, for at most
      * RAMP_MAX_S (td_fused_gnss checks it against GNSS) */
@@ -207,12 +258,19 @@ float td_fused_shape(const td_fused_t *f, float v_ms, float *slope) {
 }
 
 td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool learn, bool gnss_backs) {
+    if (f->hold_s > 0.0f) {
+        /* a sharp step of the wheel is being judged (step_check): it weighs nothing meanwhile */
+        return TD_FUSED_ACCEPTED;
+    }
     float dg = 0.0f;
     const float g = td_fused_shape(f, f->v_ms, &dg);
     /* z = s * g(v) * v: dz/dv = s * (g + v * g'), dz/ds = g * v */
     const float h[3] = { f->scale * (g + f->v_ms * dg), 0.0f, g * f->v_ms };
     const float sd = f->wheel_rel * z_ms;
     const float y = z_ms - f->scale * g * f->v_ms;
+    if (z_ms > SCALE_MIN_MS) {
+        f->wheel_dev += WHEEL_DEV_K * (y / z_ms - f->wheel_dev);
+    }
     float r = sd * sd + WHEEL_FLOOR_MS * WHEEL_FLOOR_MS + r_extra;
     if (gnss_backs && f->q_share < CRUISE_SHARE && fabsf(y) < WHEEL_FLAT_REL * z_ms) {
         /* flat motion, the wheel within its bounce: the bounce wanders over seconds and is no
@@ -259,6 +317,164 @@ static void set_q_share(td_fused_t *f) {
     f->q_share = share < Q_FLAT_SHARE ? Q_FLAT_SHARE : (share > 1.0f ? 1.0f : share);
 }
 
+/* Mean of the history's buckets i0..i1 (0 = newest), m/s. */
+static float hist_mean(const td_fused_t *f, unsigned i0, unsigned i1) {
+    uint32_t sum = 0u;
+    for (unsigned i = i0; i <= i1; i++) {
+        sum += f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+    }
+    return (float)sum * TD_FUSED_HIST_MM_S / (float)(i1 - i0 + 1u);
+}
+
+/* Rescales the wheel's history older than bucket i0 by ratio (clamped to 16 bits). */
+static void rescale_history(td_fused_t *f, unsigned i0, float ratio) {
+    for (unsigned i = i0; i < f->hist_n; i++) {
+        uint16_t *b = &f->hist_mms[(f->hist_head + TD_FUSED_HIST - i) % TD_FUSED_HIST];
+        const float x = (float)*b * ratio + 0.5f;
+        *b = (uint16_t)(x < 65535.0f ? x : 65535.0f);
+    }
+}
+
+/* The wheel ramps away from the estimate: three means of STEP_N buckets each moving the same way
+ * by TREND_MIN_REL, the newest beyond TREND_REL (and within TREND_MAX_REL: a cut cable is the
+ * gate's), and evenly. A slip step moves one of them only, or two unevenly. */
+static bool wheel_trend(const td_fused_t *f, float pred) {
+    if (f->hist_n < 3u * STEP_N) {
+        return false;
+    }
+    const float m0 = hist_mean(f, 0u, STEP_N - 1u);
+    const float m1 = hist_mean(f, STEP_N, 2u * STEP_N - 1u);
+    const float d1 = m0 - m1;
+    const float d2 = m1 - hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u);
+    /* each move beyond the bounce of a mean too (a wheel that bounces harder needs a steeper ramp) */
+    const float k = TREND_K * sqrtf(f->bounce_var / (float)STEP_N);
+    const float min = (k > TREND_MIN_REL ? k : TREND_MIN_REL) * pred;
+    return d1 * d2 > 0.0f && (m0 - pred) * d1 > 0.0f && fabsf(m0 - pred) > TREND_REL * pred &&
+           fabsf(m0 - pred) < TREND_MAX_REL * pred && fabsf(d1) > min && fabsf(d2) > min &&
+           fabsf(d1 - d2) < TREND_EVEN * fabsf(d1 + d2);
+}
+
+/* The speed changed after all: the estimate restarts from the wheel at scale s, with the
+ * acceleration it saw from w0 to w over span_s. */
+static void snap_to_wheel(td_fused_t *f, float w, float w0, float span_s) {
+    const float sg = f->scale * td_fused_shape(f, f->v_ms, NULL);
+    f->cruise = false;
+    f->v_ms = w / sg;
+    f->a_ms2 = (w - w0) / (sg * span_s);
+    f->p[VV] = f->p[VV] > f->r_gnss ? f->p[VV] : f->r_gnss;
+    f->p[VA] = 0.0f;
+    f->p[AA] = P0_A;
+    f->q_share = 1.0f;
+}
+
+/* A scale step taken from the wheel proved a speed change: the scale and the history back. */
+static void undo_step(td_fused_t *f) {
+    const unsigned since_n = (unsigned)(f->stepped_s / TD_FUSED_BUCKET_S);
+    rescale_history(f, STEP_AFTER_N + since_n, f->step_scale0 / f->scale);
+    f->scale = f->step_scale0;
+    f->stepped_s = 0.0f;
+}
+
+/* In cruise above 6 km/h a wheel that steps away from the estimate within a few tenths of a
+ * second is held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet
+ * patch changes the wheel's slip so. Level since: the scale takes the step and the speed holds
+ * (GNSS would show the truth only a lag later, and td_fused_gnss checks it then). Still moving
+ * the same way: a speed change after all, and the estimate restarts from the wheel. Back where
+ * it was: a bounce. A second step the same way soon after a scale step undoes it: a brake. */
+static void step_check(td_fused_t *f) {
+    if (f->hist_n < 2u * STEP_N) {
+        f->hold_s = 0.0f;
+        return;
+    }
+    const float g = td_fused_shape(f, f->v_ms, NULL);
+    const float pred = f->scale * g * f->v_ms;
+    if (f->hold_s > 0.0f) {
+        f->hold_s += TD_FUSED_BUCKET_S;
+        if (f->hold_s < STEP_HOLD_S - 0.5f * TD_FUSED_BUCKET_S) {
+            return;
+        }
+        f->hold_s = 0.0f;
+        const float w_new = hist_mean(f, 0u, STEP_N - 1u);
+        const float since = w_new - hist_mean(f, STEP_N, 2u * STEP_N - 2u);
+        const float step = w_new - f->hold_w0_ms;
+        if (!(fabsf(step) > STEP_REL * pred) || (fabsf(since) >= STEP_LEVEL_REL * pred && since * step < 0.0f)) {
+            return; /* the wheel came back: a bounce, nothing changed */
+        }
+        if (fabsf(since) >= STEP_LEVEL_REL * pred) {
+            snap_to_wheel(f, w_new, f->hold_w0_ms, STEP_HOLD_S + 2.0f * TD_FUSED_BUCKET_S);
+            return;
+        }
+        float s_new = w_new / (g * f->v_ms);
+        s_new = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
+        /* the wheel's history before the step as the new scale would have read it: GNSS
+         * against it, and the wheel's own acceleration, then see no step */
+        rescale_history(f, STEP_AFTER_N, s_new / f->scale);
+        f->step_scale0 = f->scale;
+        f->step_dv_ms = step / (f->scale * g);
+        f->step_z0_ms = f->gnss_avg_ms;
+        f->stepped_s = TD_FUSED_BUCKET_S;
+        f->scale = s_new;
+        set_q_share(f);
+        f->p[VS] = 0.0f;
+        f->p[AS] = 0.0f;
+        f->p[SS] = f->p[SS] > RAMP_P_S ? f->p[SS] : RAMP_P_S;
+        return;
+    }
+    if (f->v_ms > CRUISE_MIN_MS && wheel_trend(f, pred)) {
+        /* a brake or a launch: the wheel leads, the estimate follows it with the whole jerk */
+        if (f->trend_n == 0u) {
+            const float sg = f->scale * td_fused_shape(f, f->v_ms, NULL);
+            const float m0 = hist_mean(f, 0u, STEP_N - 1u);
+            const float y = m0 / sg - f->v_ms;
+            f->a_ms2 = (m0 - hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u)) / (sg * 2.0f * (float)STEP_N * TD_FUSED_BUCKET_S);
+            f->p[VV] = f->p[VV] > y * y ? f->p[VV] : y * y;
+            f->p[VA] = 0.0f;
+            f->p[AA] = P0_A;
+        }
+        f->trend_n = TREND_KEEP;
+        f->cruise = false;
+        f->q_share = 1.0f;
+        return;
+    }
+    if (f->trend_n > 0u) {
+        f->trend_n--;
+        f->q_share = 1.0f;
+        return;
+    }
+    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) ||
+        !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
+        return;
+    }
+    const float b0 = hist_mean(f, 0u, 0u);
+    /* the wheel's bounce from one bucket to the next (share of the speed): a step stands out
+     * of it by STEP_SHARP_K of its sigmas (a wheel that bounces harder needs a larger one) */
+    const float d01 = (b0 - hist_mean(f, 1u, 1u)) / pred;
+    f->bounce_var += STEP_BOUNCE_K * (d01 * d01 - f->bounce_var);
+    if (!(fabsf(b0 - pred) > STEP_REL * pred)) {
+        f->departed = 0u;
+        return;
+    }
+    /* judged on the first two buckets beyond: a ramp that went on is no step */
+    if (f->departed >= 2u) {
+        return;
+    }
+    f->departed++;
+    const float w_old = hist_mean(f, 2u, 4u);
+    const float sharp = STEP_SHARP_K * sqrtf(f->bounce_var);
+    if (!(fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred) ||
+        !(fabsf(b0 - pred) < STEP_MAX_REL * pred)) {
+        return;
+    }
+    if (f->stepped_s > 0.0f && (b0 - w_old) * f->step_dv_ms > 0.0f) {
+        /* the wheel went on the same way: the first step was a brake (or a launch) too */
+        undo_step(f);
+        snap_to_wheel(f, b0, w_old, 3.0f * TD_FUSED_BUCKET_S);
+        return;
+    }
+    f->hold_s = TD_FUSED_BUCKET_S;
+    f->hold_w0_ms = w_old;
+}
+
 void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
     if (!(z_ms >= 0.0f && z_ms < HIST_Z_MAX_MS) || !(dt_s <= HIST_DT_MAX_S)) {
         /* no wheel (encoder fault), or no number: the history says nothing any more, and a
@@ -268,6 +484,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->hist_s = 0.0f;
         f->reopened = false;
         f->q_share = 1.0f;
+        f->hold_s = 0.0f;
         return;
     }
     f->hist_sum += z_ms * dt_s;
@@ -283,6 +500,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->hist_s -= TD_FUSED_BUCKET_S;
         f->hist_sum = z_ms * f->hist_s;
         set_q_share(f);
+        step_check(f);
     }
 }
 
@@ -374,7 +592,30 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     const bool gnss_moves = fabsf(z_ms - f->gnss_avg_ms) > GNSS_MOVES_MS;
     const float k_avg = f->since_gnss_s < GNSS_AVG_S ? f->since_gnss_s / GNSS_AVG_S : 1.0f;
     f->gnss_avg_ms += k_avg * (z_ms - f->gnss_avg_ms);
-    f->quiet_s = gnss_moves ? 0.0f : f->quiet_s + f->since_gnss_s;
+    /* one fix off its mean is noise (at 5 Hz one in ~60 is 2.5 sigmas out); two in a row, a
+     * moving speed */
+    f->moves_n = gnss_moves ? (uint8_t)(f->moves_n < 2u ? f->moves_n + 1u : 2u) : 0u;
+    f->quiet_s = f->moves_n >= 2u ? 0.0f : f->quiet_s + f->since_gnss_s;
+    /* a scale step taken from the wheel (step_check), checked once GNSS shows its time: GNSS's
+     * mean moved half the step the same way, it was a speed change */
+    if (f->stepped_s > d + STEP_VERIFY_S) {
+        const float moved = f->gnss_avg_ms - f->step_z0_ms;
+        float w_now = 0.0f;
+        if (moved * f->step_dv_ms > 0.0f && fabsf(moved) > 0.5f * fabsf(f->step_dv_ms) &&
+            moved * moved > RAMP_SIGMA2 * f->r_gnss &&
+            wheel_over(f, RAMP_W_S, RAMP_W_S, &w_now)) {
+            undo_step(f);
+            f->v_ms = w_now / (f->scale * td_fused_shape(f, f->v_ms, NULL));
+            f->a_ms2 = 0.0f;
+            f->p[VV] = f->p[VV] > f->r_gnss ? f->p[VV] : f->r_gnss;
+            f->p[VA] = 0.0f;
+            f->p[AA] = P0_A;
+            f->q_share = 1.0f;
+            f->cruise = false;
+        } else if (f->stepped_s > d + STEP_CONFIRM_S) {
+            f->stepped_s = 0.0f;
+        }
+    }
     /* a speed change GNSS should show by now (it began longer than the delay ago): GNSS moved,
      * it was one; GNSS held still and stands apart from the wheel at the fix's time against it,
      * the wheel's scale stepped (a wet patch) and the speed did not. The scale then takes the
@@ -429,6 +670,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
     /* flat and settled: the speed then was the speed now, so the fix corrects v itself; through
      * v - a d an acceleration could take up GNSS's difference and hold v off for seconds */
     const bool cruise = learning && !f->reopened && f->q_share < CRUISE_SHARE;
+    f->cruise = cruise || f->hold_s > 0.0f;
     if (cruise) {
         h[1] = 0.0f;
         r = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
@@ -456,6 +698,8 @@ void td_fused_standstill(td_fused_t *f) {
     f->run_sum = 0.0f;
     f->run_sign = 0;
     f->ramp_s = 0.0f;
+    f->cruise = false;
+    f->hold_s = 0.0f;
 }
 
 float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
