@@ -241,22 +241,7 @@ def parent(duration_s: float) -> int:
             th.start()
         out, _ = proc.communicate(timeout=duration_s + 60)
         m.close()
-    if proc.returncode != 0:
-        print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
-        return 1
-    result = json.loads(out.strip().splitlines()[-1])
-    lat_ms = np.array(m.latencies_s) * 1e3
-    if lat_ms.size < 50:
-        print(f"only {lat_ms.size} latencies measured", file=sys.stderr)
-        return 1
-    print(f"nmea_to_command_p50_ms: {np.percentile(lat_ms, 50):.2f}")
-    print(f"nmea_to_command_p99_ms: {np.percentile(lat_ms, 99):.2f}")
-    print(f"terminal_cpu_pct_of_core: {100.0 * result['cpu_s'] / result['wall_s']:.2f}")
-    print(
-        f"# {lat_ms.size} latencies; terminal counters {result['counters']}",
-        file=sys.stderr,
-    )
-    return 0
+    return _figures(proc, out, m.latencies_s, ("nmea_to_command", "terminal_cpu_pct_of_core"), "")
 
 
 def flood(flood_s: float) -> int:
@@ -405,21 +390,34 @@ def isobus(duration_s: float) -> int:
         out, _ = proc.communicate(timeout=duration_s + 60)
         implement.close()
         m.close()
+    names = ("nmea_to_rate_isobus", "terminal_cpu_pct_of_core_isobus")
+    return _figures(
+        proc, out, implement.latencies_s, names, f"implement {implement.node.tc_state}; "
+    )
+
+
+def _figures(
+    proc: subprocess.Popen[str],
+    out: str,
+    latencies_s: list[float],
+    names: tuple[str, str],
+    said: str,
+) -> int:
+    """The run's latency percentiles and the terminal's CPU share as figures `names`; 1 when
+    the terminal failed or too few latencies were measured."""
     if proc.returncode != 0:
         print(f"terminal process failed with exit code {proc.returncode}", file=sys.stderr)
         return 1
     result = json.loads(out.strip().splitlines()[-1])
-    lat_ms = np.array(implement.latencies_s) * 1e3
+    lat_ms = np.array(latencies_s) * 1e3
     if lat_ms.size < 50:
-        print(f"only {lat_ms.size} ISOBUS latencies measured", file=sys.stderr)
+        print(f"only {lat_ms.size} latencies measured ({names[0]})", file=sys.stderr)
         return 1
-    print(f"nmea_to_rate_isobus_p50_ms: {np.percentile(lat_ms, 50):.2f}")
-    print(f"nmea_to_rate_isobus_p99_ms: {np.percentile(lat_ms, 99):.2f}")
-    print(f"terminal_cpu_pct_of_core_isobus: {100.0 * result['cpu_s'] / result['wall_s']:.2f}")
+    print(f"{names[0]}_p50_ms: {np.percentile(lat_ms, 50):.2f}")
+    print(f"{names[0]}_p99_ms: {np.percentile(lat_ms, 99):.2f}")
+    print(f"{names[1]}: {100.0 * result['cpu_s'] / result['wall_s']:.2f}")
     print(
-        f"# {lat_ms.size} latencies; implement {implement.node.tc_state}; terminal counters "
-        f"{result['counters']}",
-        file=sys.stderr,
+        f"# {lat_ms.size} latencies; {said}terminal counters {result['counters']}", file=sys.stderr
     )
     return 0
 
