@@ -137,7 +137,7 @@ def test_emulated_isobus_ecu_meters_the_tcs_rate() -> None:
     rate the TC sets reaches the meters (metered on the simulated ground), sections off stop
     them. The terminal's GNSS speed goes as PcGnssTime on Proprietary B from the TC's address
     (the firmware's core would otherwise run on its slipping wheel alone). Then 100 % bus load
-    on the link for 8 s: no step late or missed (no reset), the rate held."""
+    on the link for 6 s: no step late or missed (no reset), the rate held."""
     from topdress.isobus.node import Frame, to_bus
     from topdress.protocol.frames import encode_gnss_time
     from topdress.sim.qemu_ecu import QemuWorld
@@ -176,9 +176,9 @@ def test_emulated_isobus_ecu_meters_the_tcs_rate() -> None:
         for element, ddi, value in ((2, 160, 1), (2, 289, 1), (3, 6, 15000), (4, 6, 10000),
                                     (2, 290, -4096 + 0x555)):  # fmt: skip
             tc.command(element, ddi, value)
-        run(16.0)
+        run(10.0)
         kg0, dist = (world.metered_kg(0), world.metered_kg(1)), [0.0]
-        run(8.0, dist)
+        run(6.0, dist)
         area_ha = dist[0] * 3.6 / 10_000
         rates = [(world.metered_kg(i) - kg0[i]) / area_ha for i in (0, 1)]
         print(f"emulated ISOBUS ECU metered {rates[0]:.1f} / {rates[1]:.1f} kg/ha (TC 150 / 100)")
@@ -191,7 +191,7 @@ def test_emulated_isobus_ecu_meters_the_tcs_rate() -> None:
                  for i in range(19)]  # fmt: skip
         late = world.timing.late_inputs
         kg0, dist = (world.metered_kg(0), world.metered_kg(1)), [0.0]
-        run(8.0, dist, tuple(flood))
+        run(6.0, dist, tuple(flood))
         area_ha = dist[0] * 3.6 / 10_000
         loaded = [(world.metered_kg(i) - kg0[i]) / area_ha for i in (0, 1)]
         print(f"at 100 % load: {loaded[0]:.1f} / {loaded[1]:.1f} kg/ha")
