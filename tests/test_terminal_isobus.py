@@ -520,5 +520,5 @@ def test_a_stored_pools_mapping_gives_what_the_link_needs() -> None:
     ddis = known_ddis(map_device(pool))
     assert {6, 7, 81} <= ddis[3] and {6, 7, 81} <= ddis[4]
     assert {160, 161, 289, 290} <= ddis[2]  # the boom: section control, work states
-    full, _ = pool_ddis(pool)
+    full, _ = pool_ddis(map_device(pool))
     assert all(v <= full[e] for e, v in ddis.items())  # nothing the pool does not carry

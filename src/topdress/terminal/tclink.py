@@ -35,7 +35,7 @@ from topdress.errors import DeviceError, ProtocolError
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.sectionctl import SectionControl, sections_from_device
 from topdress.i18n import text
-from topdress.isobus.ddop import condensed, parse, sections_of
+from topdress.isobus.ddop import condensed, sections_of
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
 from topdress.isobus.tcserver import Client, Device, TcServer, map_device, tc_name
@@ -92,25 +92,17 @@ def known_ddis(d: Device) -> dict[int, set[int]]:
     return ddis
 
 
-def pool_ddis(pool: bytes) -> tuple[dict[int, set[int]], dict[int, int]]:
-    """Per element, the DDIs its objects carry; and the DPT values of the delays (142, 143)
-    wherever the pool gives them (an implement names one delay for the machine)."""
-    objs = parse(pool)
-    by_id = {o.object_id: o for o in objs}
+def pool_ddis(d: Device) -> tuple[dict[int, set[int]], dict[int, int]]:
+    """Per element, the DDIs its objects carry (its process data and properties, as the
+    device's mapping read them from the pool); and the delays (142, 143) wherever the pool
+    gives them (an implement names one delay for the machine)."""
     ddis: dict[int, set[int]] = {}
+    for element, ddi in (*d.triggers, *d.properties):
+        ddis.setdefault(element, set()).add(ddi)
     fixed: dict[int, int] = {}
-    for o in objs:
-        if o.table != "DET":
-            continue
-        mine = ddis.setdefault(int(o.fields["element"]), set())
-        for child in o.fields["children"]:
-            c = by_id.get(child)
-            if c is None or c.table not in ("DPD", "DPT"):
-                continue
-            ddi = int(c.fields["ddi"])
-            mine.add(ddi)
-            if c.table == "DPT" and ddi in (SETPOINT_LATENCY, ACTUAL_LATENCY):
-                fixed.setdefault(ddi, int(c.fields["value"]))
+    for (_, ddi), value in d.properties.items():
+        if ddi in (SETPOINT_LATENCY, ACTUAL_LATENCY):
+            fixed.setdefault(ddi, value)
     return ddis, fixed
 
 
@@ -308,7 +300,7 @@ class TcLink:
             self._sc = None  # another implement: its own sections and coverage
         self.section_on = None
         if c.pool is not None:
-            self._ddis, self.latency_ms = pool_ddis(c.pool)
+            self._ddis, self.latency_ms = pool_ddis(c.device)
         else:  # a pool the TC had stored: what its mapping kept (no delays)
             self._ddis, self.latency_ms = known_ddis(c.device), {}
         settable = c.device.settable
