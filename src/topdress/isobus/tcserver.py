@@ -145,6 +145,7 @@ class Client:
     name: int | None = None  # its NAME, from its address claim
     from_store: bool = False  # the pool is the one kept from an earlier connection
     awaiting: dict[tuple[int, int], int] = field(default_factory=dict)  # acks due, by sent time
+    pool_error: str = ""  # why its last pool could not be mapped ("" when it could)
 
     @property
     def options(self) -> int:
@@ -566,10 +567,12 @@ class TcServer:
 
     def _pool(self, c: Client, pool: bytes) -> None:
         c.pool, c.device, c.active, c.from_store = pool, None, False, False
+        c.pool_error = ""
         try:
             c.device = map_device(pool)
             err = 0
         except ProtocolError as exc:
+            c.pool_error = str(exc)
             self.counters["pools_refused"] += 1
             self._error(f"client {c.address:#x}: {exc}")
             err = 1 if len(pool) > MAX_POOL_BYTES else 0  # a bad pool is refused at activation

@@ -38,7 +38,7 @@ from topdress.i18n import text
 from topdress.isobus.ddop import condensed, sections_of
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
-from topdress.isobus.tcserver import Client, Device, TcServer, map_device, tc_name
+from topdress.isobus.tcserver import Client, Device, TcServer, tc_name
 from topdress.terminal.ecuview import LinkCounters
 from topdress.terminal.journal import Journal, Settings
 from topdress.view.snapshot import ControlFunctionView, IsobusView, ProductView
@@ -272,10 +272,7 @@ class TcLink:
         sc = self.server.client
         if sc is not None and sc.device is None and sc.pool is not None and not self.refused:
             self.refused = True  # its pool failed to parse or map: the TC refuses to activate
-            try:
-                map_device(sc.pool)
-            except ProtocolError as exc:  # what is wrong with it, for the operator's alarm
-                self.refusal = str(exc)
+            self.refusal = sc.pool_error  # what is wrong with it, for the operator's alarm
         elif sc is not None and sc.active:
             self.refused = False
         state = self.state
