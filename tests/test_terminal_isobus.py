@@ -20,9 +20,10 @@ from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.errors import ConfigError
 from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
-from topdress.isobus.ddop import Machine, build, condensed, sections_of
+from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
 from topdress.isobus.tcserver import map_device, tc_name
+from topdress.isobus.workstate import condensed_states, condensed_value
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import format_text, summarise
 from topdress.sim.isobus import ELEMENT_BINS, IsobusMachine, tc_timeout_ms
@@ -102,10 +103,10 @@ def _drive(speed_kmh: float, length_m: float) -> Drive:
 
 def test_condensed_work_state_round_trip() -> None:
     # 6 sections on, 7..16 not installed: the value the AgIsoStack++ examples send
-    assert condensed((True,) * 6) == -4096 + 0x555
-    assert condensed((False,) * 6) == -4096
-    assert sections_of(condensed((True, False, True)), 3) == (True, False, True)
-    assert sections_of(-4096 + 0x555, 6) == (True,) * 6
+    assert condensed_value([True] * 6) == -4096 + 0x555
+    assert condensed_value([False] * 6) == -4096
+    assert condensed_states(condensed_value([True, False, True]), 3) == [True, False, True]
+    assert condensed_states(-4096 + 0x555, 6) == [True] * 6
 
 
 def test_implement_is_a_checked_choice() -> None:

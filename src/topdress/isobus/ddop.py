@@ -54,21 +54,6 @@ MG_M2_PER_KG_HA = 100  # 1 kg/ha = 100 mg/m^2
 NAME_PLACEHOLDER = b"\x00" * 8
 
 
-def condensed(on: tuple[bool, ...]) -> int:
-    """A condensed work state's value (DDI 161/290, sections 1-16): 2 bits per section, 01 on,
-    00 off, 11 not installed (sections past `on`), as a signed 32-bit process-data value."""
-    v = 0
-    for i in range(16):
-        v |= (int(on[i]) if i < len(on) else 3) << 2 * i
-    return v - (1 << 32) if v >= 1 << 31 else v
-
-
-def sections_of(value: int, n: int) -> tuple[bool, ...]:
-    """The first `n` sections of a condensed work state: on where their 2 bits are 01."""
-    u = value & 0xFFFFFFFF
-    return tuple((u >> 2 * i) & 3 == 1 for i in range(n))
-
-
 def _text(s: str) -> bytes:
     raw = s.encode("utf-8")
     if len(raw) > 32:

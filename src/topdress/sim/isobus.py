@@ -17,9 +17,9 @@ from topdress.isobus.ddop import (
     DDI_ACTUAL_CONDENSED_1_16,
     DDI_ACTUAL_RATE,
     DDI_ACTUAL_WORK_STATE,
-    condensed,
 )
 from topdress.isobus.node import Frame, IsobusNode
+from topdress.isobus.workstate import condensed_value
 from topdress.protocol.frames import encode_command
 from topdress.sim.world import StepOutput, World
 
@@ -82,8 +82,8 @@ class IsobusMachine:
             actual[layer] = rate
         self.actual_kg_ha = (actual[0], actual[1])
         n.set_actual(ELEMENT_DEVICE, DDI_ACTUAL_WORK_STATE, 1 if self.running else 0)
-        on = tuple(bool(n.sections_on >> i & 1) for i in range(self.sections))
-        n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, condensed(on))
+        on: list[bool | None] = [bool(n.sections_on >> i & 1) for i in range(self.sections)]
+        n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, condensed_value(on))
         n.step(w.now_us, round(truth.odometer_m * 1000))
         out = n.tx()
         for can_id, data in core_out:

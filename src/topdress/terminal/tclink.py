@@ -35,10 +35,10 @@ from topdress.errors import DeviceError, ProtocolError
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.sectionctl import SectionControl, sections_from_device
 from topdress.i18n import text
-from topdress.isobus.ddop import condensed, sections_of
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
 from topdress.isobus.tcserver import Client, Device, TcServer, tc_name
+from topdress.isobus.workstate import SECTIONS_PER_DDI, condensed_states, condensed_value
 from topdress.terminal.ecuview import LinkCounters
 from topdress.terminal.journal import Journal, Settings
 from topdress.view.snapshot import ControlFunctionView, IsobusView, ProductView
@@ -378,8 +378,9 @@ class TcLink:
             self._set(c, now, element, SETPOINT_WORK_STATE, int(working))
         chosen = self.section_on
         for element in self._carrying(SETPOINT_CONDENSED):
-            on = tuple(working and (chosen is None or chosen[i]) for i in range(self.sections))
-            self._set(c, now, element, SETPOINT_CONDENSED, condensed(on))
+            n = min(self.sections, SECTIONS_PER_DDI)  # sections 17 and up are not switched
+            on: list[bool | None] = [working and (chosen is None or chosen[i]) for i in range(n)]
+            self._set(c, now, element, SETPOINT_CONDENSED, condensed_value(on))
 
     def on_position(
         self,
@@ -501,7 +502,7 @@ class TcLink:
         for element in self._carrying(ACTUAL_CONDENSED):
             v = self._value(element, ACTUAL_CONDENSED)
             if v is not None:
-                return sections_of(v, self.sections)
+                return tuple(s is True for s in condensed_states(v, self.sections))
         return ()
 
     def _work_state(self) -> bool | None:
