@@ -56,6 +56,18 @@ def topdress_name(manufacturer_code: int, uid: bytes) -> int:
     return int(out[0])
 
 
+def name_of(**fields: int) -> int:
+    """A NAME from its ISO 11783-5 fields (those of `name_fields`; the others 0), encoded by
+    the C layer; ProtocolError for a field out of its range."""
+    n = ffi.new("td_ibname_t *")
+    for key, value in fields.items():
+        setattr(n, key, value)
+    out = ffi.new("uint64_t *")
+    if lib.td_ibname_encode(n, out) != lib.TD_IB_OK:
+        raise ProtocolError(f"NAME fields out of range: {fields}")
+    return int(out[0])
+
+
 def name_fields(name: int) -> dict[str, int]:
     """The fields of a NAME, by their ISO 11783-5 names."""
     n = ffi.new("td_ibname_t *")

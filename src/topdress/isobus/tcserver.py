@@ -32,7 +32,7 @@ from topdress.isobus.devicemap import (
     Device,
     map_device,
 )
-from topdress.isobus.node import ClaimNode, Frame, TpEndpoint, name_fields, split_id
+from topdress.isobus.node import ClaimNode, Frame, TpEndpoint, name_fields, name_of, split_id
 from topdress.isobus.poolstore import PoolStore
 from topdress.isobus.workstate import condensed_states, condensed_value
 
@@ -95,13 +95,13 @@ def tc_name(identity: int, manufacturer_code: int = 1407, function_instance: int
         raise ProtocolError("TC NAME: identity 0..2^21-1, manufacturer 0..2047")
     if not 0 <= function_instance < 32:
         raise ProtocolError("TC NAME: function instance 0..31")
-    return (
-        identity
-        | manufacturer_code << 21
-        | function_instance << 35
-        | TC_FUNCTION << 40
-        | 2 << 60  # industry group: agriculture
-        | 1 << 63
+    return name_of(
+        identity_number=identity,
+        manufacturer_code=manufacturer_code,
+        function_instance=function_instance,
+        function=TC_FUNCTION,
+        industry_group=2,  # agriculture
+        self_configurable=1,
     )
 
 
