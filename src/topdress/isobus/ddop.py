@@ -109,6 +109,38 @@ class Layout:
     structure_label: bytes = b""
 
 
+def det_object(oid: int, kind: int, designator: bytes, element: int, parent: int,
+               kids: list[int]) -> bytes:  # fmt: skip
+    """A device element object (DET); `designator` as a pool writes it (its length first)."""
+    return (
+        b"DET"
+        + struct.pack("<HB", oid, kind)
+        + designator
+        + struct.pack("<HHH", element, parent, len(kids))
+        + b"".join(struct.pack("<H", k) for k in kids)
+    )
+
+
+def dpd_object(oid: int, ddi: int, props: int, triggers: int, designator: bytes, dvp: int) -> bytes:
+    """A device process data object (DPD)."""
+    return (
+        b"DPD"
+        + struct.pack("<HHBB", oid, ddi, props, triggers)
+        + designator
+        + struct.pack("<H", dvp)
+    )
+
+
+def dpt_object(oid: int, ddi: int, value: int, designator: bytes, dvp: int) -> bytes:
+    """A device property object (DPT)."""
+    return b"DPT" + struct.pack("<HHi", oid, ddi, value) + designator + struct.pack("<H", dvp)
+
+
+def dvp_object(oid: int, offset: int, scale: float, decimals: int, unit: bytes) -> bytes:
+    """A device value presentation object (DVP)."""
+    return b"DVP" + struct.pack("<Hifb", oid, offset, scale, decimals) + unit
+
+
 @dataclass
 class _Pool:
     objects: list[bytes] = field(default_factory=list)
@@ -121,38 +153,23 @@ class _Pool:
 
     def dpd(self, ddi: int, props: int, triggers: int, name: str, dvp: int) -> int:
         oid = self.new_id()
-        self.objects.append(
-            b"DPD"
-            + struct.pack("<HHBB", oid, ddi, props, triggers)
-            + _text(name)
-            + struct.pack("<H", dvp)
-        )
+        self.objects.append(dpd_object(oid, ddi, props, triggers, _text(name), dvp))
         return oid
 
     def dpt(self, ddi: int, value: int, name: str, dvp: int) -> int:
         oid = self.new_id()
-        self.objects.append(
-            b"DPT" + struct.pack("<HHi", oid, ddi, value) + _text(name) + struct.pack("<H", dvp)
-        )
+        self.objects.append(dpt_object(oid, ddi, value, _text(name), dvp))
         return oid
 
     def dvp(self, offset: int, scale: float, decimals: int, unit: str) -> int:
         oid = self.new_id()
-        self.objects.append(
-            b"DVP" + struct.pack("<Hifb", oid, offset, scale, decimals) + _text(unit)
-        )
+        self.objects.append(dvp_object(oid, offset, scale, decimals, _text(unit)))
         return oid
 
     def det(
         self, oid: int, kind: int, name: str, element: int, parent: int, kids: list[int]
     ) -> bytes:
-        return (
-            b"DET"
-            + struct.pack("<HB", oid, kind)
-            + _text(name)
-            + struct.pack("<HHH", element, parent, len(kids))
-            + b"".join(struct.pack("<H", k) for k in kids)
-        )
+        return det_object(oid, kind, _text(name), element, parent, kids)
 
 
 def _kg_ha(v: float) -> int:

@@ -15,8 +15,7 @@ import struct
 import xml.etree.ElementTree as ET
 
 from topdress.errors import ProtocolError
-
-NO_DVP = 0xFFFF
+from topdress.isobus.ddop import NO_DVP, det_object, dpd_object, dpt_object, dvp_object
 
 
 def _text(s: str, what: str) -> bytes:
@@ -49,10 +48,6 @@ def _hex(e: ET.Element, key: str, size: int) -> bytes:
     return raw
 
 
-def _dvp_ref(e: ET.Element, key: str) -> bytes:
-    return struct.pack("<H", _int(e, key, NO_DVP))
-
-
 def _ddi(e: ET.Element) -> int:
     v = e.get("B", "")
     try:
@@ -68,37 +63,22 @@ def _object(e: ET.Element) -> bytes:
     """One child of the DVC as its binary object."""
     if e.tag == "DET":
         kids = [_int(d, "A") for d in e.findall("DOR")]
-        return (
-            b"DET"
-            + struct.pack("<HB", _int(e, "B"), _int(e, "C"))
-            + _text(e.get("D", ""), "DET designator")
-            + struct.pack("<HHH", _int(e, "E"), _int(e, "F"), len(kids))
-            + b"".join(struct.pack("<H", k) for k in kids)
-        )
+        designator = _text(e.get("D", ""), "DET designator")
+        return det_object(_int(e, "B"), _int(e, "C"), designator, _int(e, "E"), _int(e, "F"), kids)
     if e.tag == "DPD":
-        return (
-            b"DPD"
-            + struct.pack("<HHBB", _int(e, "A"), _ddi(e), _int(e, "C"), _int(e, "D"))
-            + _text(e.get("E", ""), "DPD designator")
-            + _dvp_ref(e, "F")
-        )
+        designator = _text(e.get("E", ""), "DPD designator")
+        return dpd_object(_int(e, "A"), _ddi(e), _int(e, "C"), _int(e, "D"), designator,
+                          _int(e, "F", NO_DVP))  # fmt: skip
     if e.tag == "DPT":
-        return (
-            b"DPT"
-            + struct.pack("<HHi", _int(e, "A"), _ddi(e), _int(e, "C"))
-            + _text(e.get("D", ""), "DPT designator")
-            + _dvp_ref(e, "E")
-        )
+        designator = _text(e.get("D", ""), "DPT designator")
+        return dpt_object(_int(e, "A"), _ddi(e), _int(e, "C"), designator, _int(e, "E", NO_DVP))
     if e.tag == "DVP":
         try:
             scale = float(e.get("C", ""))
         except ValueError:
             raise ProtocolError(f"DVP {e.get('A')} scale {e.get('C')!r}") from None
-        return (
-            b"DVP"
-            + struct.pack("<Hifb", _int(e, "A"), _int(e, "B"), scale, _int(e, "D"))
-            + _text(e.get("E", ""), "DVP unit")
-        )
+        unit = _text(e.get("E", ""), "DVP unit")
+        return dvp_object(_int(e, "A"), _int(e, "B"), scale, _int(e, "D"), unit)
     raise ProtocolError(f"DVC child <{e.tag}> is no device object")
 
 
