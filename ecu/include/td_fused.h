@@ -130,6 +130,7 @@ typedef struct {
     float wheel_dev;           /**< the wheel's innovation, share of its speed, mean over ~0.3 s */
     float bounce_var;          /**< the wheel's bucket-to-bucket change in cruise, its mean square, share of speed ^2 */
     uint8_t trend_n;           /**< buckets left of a wheel's ramp (no cruise, the whole jerk), 0..10 */
+    float trend_w_ms;          /**< the wheel's newest 0.3 s mean when the ramp last showed, m/s (negative: a ramp down) */
     uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */

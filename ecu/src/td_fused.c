@@ -88,6 +88,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define TREND_EVEN 0.2f    /* and evenly: |d1 - d2| below this share of d1 + d2 (a step straddling the middle
                             * mean moves the two by 1/3 and 2/3 of it: 1/3) */
 #define TREND_MAX_REL 0.4f /* a wheel further off is a cut cable (the gate's), no brake */
+#define TREND_BACK_REL 0.015f
 #define TREND_KEEP 10u      /* then the whole jerk and no cruise for this many buckets (1 s) after it */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
@@ -130,6 +131,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->wheel_dev = 0.0f;
     f->departed = 0u;
     f->trend_n = 0u;
+    f->trend_w_ms = 0.0f;
     f->hist_head = 0u;
     f->hist_n = 0u;
     f->hist_sum = 0.0f;
@@ -167,8 +169,8 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
     }
-    if (f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < WHEEL_FLAT_REL &&
-        f->v_ms > CRUISE_MIN_MS) {
+    if ((f->cruise || (f->p[SS] < P_S_REOPEN && !(f->ramp_s > 0.0f))) && f->q_share < CRUISE_SHARE &&
+        fabsf(f->wheel_dev) < WHEEL_FLAT_REL && f->v_ms > CRUISE_MIN_MS) {
         /* in cruise the acceleration is a short-lived correction (a Gauss-Markov one of time
          * constant CRUISE_TAU_S): a GNSS fix's noise left in a would ramp v until the next */
         const float k = dt_s < CRUISE_TAU_S ? 1.0f - dt_s / CRUISE_TAU_S : 0.0f;
@@ -424,19 +426,25 @@ static void step_check(td_fused_t *f) {
         /* a brake or a launch: the wheel leads, the estimate follows it with the whole jerk */
         if (f->trend_n == 0u) {
             const float sg = f->scale * td_fused_shape(f, f->v_ms, NULL);
-            const float m0 = hist_mean(f, 0u, STEP_N - 1u);
-            const float y = m0 / sg - f->v_ms;
-            f->a_ms2 = (m0 - hist_mean(f, 2u * STEP_N, 3u * STEP_N - 1u)) / (sg * 2.0f * (float)STEP_N * TD_FUSED_BUCKET_S);
+            const float y = hist_mean(f, 0u, STEP_N - 1u) / sg - f->v_ms;
             f->p[VV] = f->p[VV] > y * y ? f->p[VV] : y * y;
             f->p[VA] = 0.0f;
             f->p[AA] = P0_A;
         }
+        const float m0 = hist_mean(f, 0u, STEP_N - 1u);
+        f->trend_w_ms = m0 > pred ? m0 : -m0;
         f->trend_n = TREND_KEEP;
         f->cruise = false;
         f->q_share = 1.0f;
         return;
     }
     if (f->trend_n > 0u) {
+        /* the wheel went back against the ramp: it was the bounce's (a brake goes on) */
+        const float back = (hist_mean(f, 0u, STEP_N - 1u) - fabsf(f->trend_w_ms)) * (f->trend_w_ms > 0.0f ? 1.0f : -1.0f);
+        if (back < -TREND_BACK_REL * pred) {
+            f->trend_n = 0u;
+            return;
+        }
         f->trend_n--;
         f->q_share = 1.0f;
         return;
