@@ -55,6 +55,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
 #define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
+#define GNSS_UNSETTLED_K 10.0f
+#define FLAT_GNSS_S 0.5f
 #define CRUISE_MIN_MS 1.67f /* and above the paper's 6 km/h: slower, the wheel measures well and a brake
                               * from a slow pass shows in it first (Table 2's stop at 3.5 km/h) */
 #define WHEEL_DEV_K 0.03f   /* that mean: over ~0.3 s of 10 ms steps */
@@ -169,7 +171,7 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
     }
-    if ((f->cruise || (f->p[SS] < P_S_REOPEN && !(f->ramp_s > 0.0f))) && f->q_share < CRUISE_SHARE &&
+    if ((f->cruise || (f->p[SS] < P_S_REOPEN && !(f->ramp_s > 0.0f) && f->since_gnss_s < FLAT_GNSS_S)) && f->q_share < CRUISE_SHARE &&
         fabsf(f->wheel_dev) < WHEEL_FLAT_REL && f->v_ms > CRUISE_MIN_MS) {
         /* in cruise the acceleration is a short-lived correction (a Gauss-Markov one of time
          * constant CRUISE_TAU_S): a GNSS fix's noise left in a would ramp v until the next */
@@ -683,6 +685,8 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
         h[1] = 0.0f;
         r = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
         f->innov_ms = z_ms - f->v_ms;
+    } else if (f->q_share < CRUISE_SHARE && f->quiet_s < d) {
+        r *= GNSS_UNSETTLED_K;
     }
     if (!update(f, h, f->innov_ms, r, learning && !have_w && !cruise)) {
         return TD_FUSED_REJECTED; /* a refused GNSS speed teaches the scale nothing either */

@@ -340,10 +340,10 @@ static double v_turn(double t) {
 
 /* After the ramp up out of a turn, GNSS 1.3 s late and the caller's learning not back yet: the
  * wheel says the speed holds, so the acceleration left from the ramp decays as in cruise
- * (once the scale has learned, and no change GNSS has yet to confirm). Measured 2.75 s after
- * the ramp's end: a 0.003 m/s^2 (0.030 when it decayed only in cruise, where GNSS through
- * v - a d kept it and v climbed again to +4.3 % 2.3 s after the ramp); the mean error over
- * 60-62 s +2.0 % (+2.8 %). */
+ * (once the scale has learned, with a fix in the last 0.5 s, and no change GNSS has yet to
+ * confirm). Measured 2.15 / 2.75 s after the ramp's end: a 0.017 / 0.005 m/s^2 (0.052 / 0.030
+ * when it decayed only in cruise: GNSS through v - a d kept it), and v at most +3.5 % over
+ * 60-62 s (+4.3 %: the kept acceleration took it up again). */
 static void test_the_ramps_acceleration_decays_after_it(void **state) {
     (void)state;
     run_t r;
@@ -352,15 +352,19 @@ static void test_the_ramps_acceleration_decays_after_it(void **state) {
     r.f.slip_shape = true;
     run(&r, 40.0, v_turn, 0.98, true, 1.3, 1.3, true);
     run(&r, 20.0, v_turn, 0.98, true, 1.3, 1.3, false);
-    double sum = 0.0;
+    double worst = 0.0;
     for (int k = 0; k < 10; k++) {
         run(&r, 0.2, v_turn, 0.98, true, 1.3, 1.3, false);
-        sum += r.f.v_ms / v_turn(r.t) - 1.0;
+        const double err = r.f.v_ms / v_turn(r.t) - 1.0;
+        worst = err > worst ? err : worst;
+        if (k == 1) { /* 60.4 s */
+            assert_float_equal(r.f.a_ms2, 0.0, 0.025);
+        }
         if (k == 4) { /* 61.0 s */
             assert_float_equal(r.f.a_ms2, 0.0, 0.01);
         }
     }
-    assert_true(fabs(sum / 10.0) < 0.024);
+    assert_true(worst < 0.04);
 }
 
 /* In cruise the wheel rises 10 % in 0.9 s as evenly as a launch, and goes back in 0.6 s (a
