@@ -195,6 +195,16 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "the ECU is {state}: calibration needs it",
         "控制器{state}：标定需要控制器",
     ),
+    # calibrations on an ISOBUS (terminal/proplink.py): only with a topdress ECU served
+    "op.error.cal_isobus_not_topdress": (
+        "calibration needs the topdress ECU; the ISOBUS implement is not one ({why})",
+        "标定需要topdress控制器；该ISOBUS机具不是（{why}）",
+    ),
+    "op.error.cal_isobus_fans": (
+        "the fan check and the look-ahead calibration need the fans started by the terminal's "
+        "command, which an ISOBUS does not carry: run them on the ECU's own bus",
+        "风机检查和前视标定需要终端命令启动风机，ISOBUS不传送该命令：请在控制器自己的总线上进行",
+    ),
     "op.error.no_device": (
         "no device {device!r} (gnss, crop, can)",
         "没有设备 {device!r}（gnss、crop、can）",

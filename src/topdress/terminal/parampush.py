@@ -64,13 +64,15 @@ def _impossible_ack(
 
 
 class ParamPusher:
-    """The parameter push of one link on one bus. `send(msg)` sends (False: not sent); `ecu()`
+    """The parameter push of one link on one bus. `send(msg)` sends (False: not sent); `stop()`
+    stops a running ECU (False: not sent, it is stopped another way); `ecu()`
     is the link's view of the ECU's frames; `counters` the link's (tx_params, param_retries,
     rx_implausible, ecu_restarts)."""
 
     def __init__(
         self,
         send: Callable[[can.Message], bool],
+        stop: Callable[[], bool],
         ids: FrameIds,
         where: str,
         counters: LinkCounters,
@@ -82,6 +84,7 @@ class ParamPusher:
         backoff_s: tuple[float, ...],
     ) -> None:
         self._send = send
+        self._stop = stop
         self.ids = ids
         self._where = where
         self.counters = counters
@@ -162,10 +165,15 @@ class ParamPusher:
         if ack.result is AckResult.BUSY and busy_other and not self._lag_learned(param_id, push):
             # Running with another value (the terminal restarted mid-field with a new file):
             # stop it, then write again. Busy with the value already in force is as good as Ok.
-            self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
+            # Where the stop goes another way (an ISOBUS: the Task Controller's work state), the
+            # parameter is asked again after the acknowledge's timeout, not Busy on Busy at once.
             push.tries = 0
-            self._send_param(now)
+            if self._stop():
+                self._send_param(now)
+            else:
+                push.sent_t = now
             return
+
         if ack.result is AckResult.INCONSISTENT and self._defer(push, now):
             return
         if ack.result not in (AckResult.OK, AckResult.BUSY):
