@@ -76,6 +76,7 @@ class PropRig(TerminalParts):
         self.extra: list[Frame] = []  # frames of other nodes, put on the bus at the next step
         self.snapshots: list[tuple[float, Snapshot]] = []
         self.node_rates: list[tuple[float, float, float]] = []
+        self.peak_kg_ha = 0.0  # the highest rate the ECU's core was told, any step
         self._held: list[tuple[str, float, object]] = []
         super().__init__(cfg, lambda: self.world.t_s, None, "isobus")
 
@@ -114,6 +115,8 @@ class PropRig(TerminalParts):
             passed, answers = self._to_ecu(heard)
             frames = self.sim.step([] if self.off else passed) + answers + self.extra
             self.extra = []
+            node = self.sim.node
+            self.peak_kg_ha = max(self.peak_kg_ha, node.rate_kg_ha(0), node.rate_kg_ha(1))
             out = self.sim.out
             assert out is not None
             t = out.t_s
@@ -295,7 +298,9 @@ def test_an_ecu_that_does_not_answer_is_waited_for_and_the_push_goes_on() -> Non
         said = [e for _, e in rig.events]
         wait = "ECU wait: WorkingWidth unacknowledged after 4 tries"
         assert any(e.startswith(wait) and "does not answer" in e for e in said), said
-        assert all(u == 0.0 for _, u, _ in rig.node_rates)  # held at rate 0 meanwhile
+        # held at rate 0 meanwhile, also when the operator starts again (sent off the tick)
+        assert rig.post(op.Stop()).ok and rig.post(op.Start()).ok
+        assert rig.peak_kg_ha == 0.0
         rig.deaf = False
         rig.run(9.0)
         assert link.params_done

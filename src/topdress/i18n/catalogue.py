@@ -322,6 +322,12 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "等待控制器：参数 {name} 在 CAN {where} 上发送 {tries} 次未确认；控制器发送状态帧但不应答"
         "（请检查 [can.ids]）；继续重试",
     ),
+    "event.ecu_wait_deaf_isobus": (
+        "ECU wait: {name} unacknowledged after {tries} tries on the ISOBUS ({where}); the ECU "
+        "sends status but does not answer the Task Controller; still trying",
+        "等待控制器：参数 {name} 在ISOBUS（{where}）上发送 {tries} 次未确认；"
+        "控制器发送状态帧但不应答任务控制器；继续重试",
+    ),
     "event.udp_multicast": (
         "warning: CAN over udp_multicast: any host on this network can read and inject frames "
         "(no authentication); use it only on a private network or this machine",

@@ -234,10 +234,15 @@ class BusSwitch:
         assert self.prop is not None
         if self.prop.watch():  # a topdress ECU served: its parameters, then it may meter
             self.link.begin(self.params(self._settings.cfg), now)
-        if self.prop.serving and not self.link.params_done:
-            command = (False, command[1], 0.0, 0.0)
-        self.tc.poll(now, command)
+        self.tc.poll(now, self.held(command))
         self.link.poll(now)
+
+    def held(self, command: tuple[bool, float, float, float]) -> tuple[bool, float, float, float]:
+        """The command for the Task Controller: the stop while a topdress ECU served has not all
+        its parameters in force (on its own bus no PcCommand goes out before them)."""
+        if self.prop is not None and self.prop.serving and not self.link.params_done:
+            return (False, command[1], 0.0, 0.0)
+        return command
 
     def _on_port(self, t: float, port: CanPort, what: str, detail: Any) -> None:
         if port is self.port:

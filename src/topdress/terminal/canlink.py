@@ -134,6 +134,7 @@ class CanLink:
             self._ack_timeout_s,
             self._retries,
             self._backoff_s,
+            self.isobus,
         )
         self._next_cmd_t: float | None = None
         self._alive = False

@@ -82,7 +82,9 @@ class ParamPusher:
         ack_timeout_s: float,
         retries: int,
         backoff_s: tuple[float, ...],
+        isobus: bool = False,
     ) -> None:
+        self._isobus = isobus  # on an ISOBUS: no [can.ids] to blame for a deaf ECU
         self._send = send
         self._stop = stop
         self.ids = ids
@@ -296,7 +298,7 @@ class ParamPusher:
         if self._ecu().status_t is None:
             return text("event.ecu_wait_silent", **head)
         # It talks but does not answer: other frame identifiers, or a firmware without them.
-        return text("event.ecu_wait_deaf", **head)
+        return text("event.ecu_wait_deaf_isobus" if self._isobus else "event.ecu_wait_deaf", **head)
 
     def restarted(self, now: float, had: bool, lost: bool) -> None:
         """The ECU says it runs on its firmware defaults (EcuIdent.OnDefaults) after it said it
