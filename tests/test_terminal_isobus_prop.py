@@ -28,6 +28,7 @@ from topdress.isobus.node import (
 )
 from topdress.protocol import AckResult
 from topdress.protocol.dbc import frame_ids
+from topdress.sim.actuators import MeterParams
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
@@ -59,8 +60,10 @@ class PropRig(TerminalParts):
         drive: Drive,
         manufacturer: int = 0,
         refuse: dict[int, AckResult] | None = None,
+        meter: tuple[MeterParams, MeterParams] | None = None,
     ) -> None:
-        self.world = World(SimConfig.of_machine(cfg), seed=5, drive=drive)
+        sim = SimConfig.of_machine(cfg) if meter is None else SimConfig.of_machine(cfg, meter=meter)
+        self.world = World(sim, seed=5, drive=drive)
         node = IsobusNode(
             topdress_name(manufacturer, b"prop-rig"),
             tc_timeout_ms=tc_timeout_ms(self.world.ecu.params.cmd_timeout_ms),
@@ -240,6 +243,21 @@ def test_parameters_pushed_on_proprietary_a_and_acknowledged_then_the_ecus_frame
     assert min(s.fan_rpm) > 1000.0 and s.faults == 0
     assert s.v_kmh == pytest.approx(8.0, abs=0.5)
     assert s.counters["prop_rx"] > 100 and "prop_wrong_source" not in s.counters
+
+
+def test_the_ecus_fault_word_on_proprietary_b_raises_its_alarm() -> None:
+    # the lower meter jams 12 s in: the ECU latches "blocked" in its EcuDiag (Proprietary B),
+    # which the TC's process data does not carry
+    rig = PropRig(_cfg(""), _drive(8.0, 80.0), meter=(MeterParams(), MeterParams(jammed_at_s=12.0)))
+    try:
+        rig.run(16.0)
+        snap = rig.term.snapshot
+    finally:
+        rig.close()
+    assert snap.faults != 0
+    alarms = {a.name: a.state for a in snap.alarms}
+    assert alarms.get("blocked_lower") == "active", alarms
+    assert "blocked_upper" not in alarms
 
 
 def test_the_gnss_speed_goes_with_the_fixs_true_age() -> None:
