@@ -11,10 +11,12 @@ from typing import Any
 
 import can
 import pytest
+from topdress.ecu._core import lib as ecu_lib
 
 from term_rig import TerminalParts
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
+from topdress.ecu.params import EcuParams, check
 from topdress.errors import EcuParamError
 from topdress.isobus.ddop import Machine
 from topdress.isobus.node import (
@@ -137,6 +139,13 @@ class PropRig(TerminalParts):
                 self.snapshots.append((t, term.snapshot))
                 node = self.sim.node
                 self.node_rates.append((t, node.rate_kg_ha(0), node.rate_kg_ha(1)))
+
+    def reboot(self) -> None:
+        """The ECU restarts at once (a watchdog reset): core on its defaults, node unclaimed."""
+        w, node = self.world, self.sim.node
+        check(ecu_lib.td_app_init(w.ecu._app, EcuParams.defaults().to_c(), w.now_us), "reboot")
+        node.__init__(node.name, tc_timeout_ms=tc_timeout_ms(w.ecu.params.cmd_timeout_ms))  # type: ignore[misc]
+        node.start(w.now_us)
 
     def _handle(self, t: float) -> None:
         term = self.term
@@ -344,6 +353,28 @@ def test_an_ecu_lost_and_back_is_given_its_parameters_again() -> None:
         assert link.counters.tx_params >= 2 * pushed  # every parameter again
         said = [e for _, e in rig.events]
         assert any("ECU lost" in e for e in said) and any("ECU back" in e for e in said), said
+    finally:
+        rig.close()
+
+
+def test_an_ecu_that_rebooted_faster_than_its_loss_is_given_its_parameters_again() -> None:
+    # its EcuIdent (OnDefaults) is sent before it has an address: not heard on an ISOBUS; its
+    # new connection to the TC is what says it
+    cfg = _cfg("")
+    rig = PropRig(replace(cfg, machine=replace(cfg.machine, kg_per_rev_lower=0.25)), _drive())
+    try:
+        rig.run(3.0)
+        link = rig.term.link
+        assert link.params_done and rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.25)
+        rig.reboot()
+        rig.run(3.3)
+        assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.3)  # on its defaults
+        rig.run(6.0)
+        assert link.counters.ecu_lost == 0  # never unheard for ecu_timeout_s
+        assert link.counters.ecu_restarts == 1 and link.params_done
+        assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.25)
+        said = [e for _, e in rig.events]
+        assert "ECU connected to the Task Controller again: its parameters are sent again" in said
     finally:
         rig.close()
 

@@ -281,6 +281,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",
     ),
     "event.ecu_back": ("ECU back", "控制器已恢复"),
+    "event.ecu_reconnected": (
+        "ECU connected to the Task Controller again: its parameters are sent again",
+        "控制器重新连接任务控制器：重新发送参数",
+    ),
     "event.ecu_restarted": (
         "ECU restarted on its defaults: its parameters are sent again",
         "控制器已重启并使用默认参数：重新发送参数",

@@ -232,8 +232,11 @@ class BusSwitch:
             self.link.poll(now)
             return
         assert self.prop is not None
-        if self.prop.watch():  # a topdress ECU served: its parameters, then it may meter
+        served = self.prop.watch()
+        if served == "first":  # a topdress ECU served: its parameters, then it may meter
             self.link.begin(self.params(self._settings.cfg), now)
+        elif served == "again":  # connected again (a reboot is not heard otherwise)
+            self.link.reconnected(now)
         self.tc.poll(now, self.held(command))
         self.link.poll(now)
 

@@ -370,6 +370,14 @@ class CanLink:
         if self._on_ident is not None:
             self._on_ident(ident, now)
 
+    def reconnected(self, now: float) -> None:
+        """On an ISOBUS: the ECU connected to the Task Controller again. Its EcuIdent is not
+        heard there (sent before its address is claimed), so a reboot within `ecu_timeout_s`
+        shows only so: what it took may be gone, and the parameters in force are pushed again
+        (not while a push is under way: that one gives them)."""
+        if self._params.done:
+            self._params.restarted(now, True, self._lost, "event.ecu_reconnected")
+
     def _on_heard(self, now: float, back: bool) -> None:
         """The first status frame, or the first after a loss."""
         if back:

@@ -300,22 +300,24 @@ class ParamPusher:
         # It talks but does not answer: other frame identifiers, or a firmware without them.
         return text("event.ecu_wait_deaf_isobus" if self._isobus else "event.ecu_wait_deaf", **head)
 
-    def restarted(self, now: float, had: bool, lost: bool) -> None:
+    def restarted(
+        self, now: float, had: bool, lost: bool, said: str = "event.ecu_restarted"
+    ) -> None:
         """The ECU says it runs on its firmware defaults (EcuIdent.OnDefaults) after it said it
         had parameters (`had`), or amid a push it took some of: it restarted, and whatever it
         took is gone, though it was never unheard long enough to be lost (it rebooted within
         ecu_timeout_s). The parameters in force are pushed again from the first; a settings
-        change under way is refused."""
+        change under way is refused. `said`: the event's key (why it is thought restarted)."""
         push = self._push
         if push is None or lost:
             return  # nothing to push yet, or lost: the status that ends the loss pushes them
         if not (had or (not push.done and push.index > 0)):
             return
         self.counters.ecu_restarts += 1
-        self._event(text("event.ecu_restarted"))
+        self._event(text(said))
         if push.on_done is not None and not push.done:
             self._push = None
-            push.on_done(str(text("event.ecu_restarted")), [])
+            push.on_done(str(text(said)), [])
         again = self.ready or push.again
         self._push = _ParamPush(list(self._params), again=again)
         self._send_param(now)

@@ -25,7 +25,7 @@ other implements' traffic and not looked at.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -49,13 +49,17 @@ class Sender(Protocol):
 
 
 class Served(Protocol):
-    """What the link needs of the Task Controller: its address and the client it serves."""
+    """What the link needs of the Task Controller: its address, the client it serves and its
+    counters (`activations`: each pool activated)."""
 
     @property
     def address(self) -> int | None: ...
 
     @property
     def client(self) -> Client | None: ...
+
+    @property
+    def counters(self) -> Mapping[str, int]: ...
 
 
 def not_topdress(name: int | None, designator: str, manufacturer: int) -> str | None:
@@ -108,29 +112,34 @@ class PropLink:
         self.why = ""  # why the implement served is not a topdress ECU ("" when none served)
         self.recognised = False  # a topdress ECU was served once (its parameters pushed)
         self._judged: tuple[int, int | None, str] | None = None  # address, NAME, designator
+        self._activations = 0  # the TC's, when the topdress ECU was last judged or heard of
 
     # ---- who is served ----------------------------------------------------------------------
-    def watch(self) -> bool:
-        """The client the TC serves, judged once per address, NAME and DDOP: True when a topdress
-        ECU has just been recognised for the first time (its parameters are to be pushed)."""
+    def watch(self) -> str | None:
+        """The client the TC serves, judged once per address, NAME and DDOP: `first` when a
+        topdress ECU has just been recognised for the first time (its parameters are to be
+        pushed), `again` when the topdress ECU served has activated its pool again (it
+        connected again: it may have restarted), else None."""
         c = self._tc.client
         if c is None or not c.active or c.lost or c.device is None:
-            return False  # none served now: the last one's address is kept (it may be back)
+            return None  # none served now: the last one's address is kept (it may be back)
+        activations = self._tc.counters.get("activations", 0)
         key = (c.address, c.name, c.device.designator)
         if key == self._judged:
-            return False
+            again = self.serving and activations > self._activations
+            self._activations = activations
+            return "again" if again else None
         self._judged = key
+        self._activations = activations
         why = not_topdress(c.name, c.device.designator, self.manufacturer)
-        first = False
-        if why is None:
-            first = not self.recognised
-            self.recognised = True
-            self.peer, self.why = c.address, ""
-            self._tell(f"implement at 0x{c.address:02X} is a topdress ECU: its private frames")
-        else:
+        if why is not None:
             self.peer, self.why = None, why
             self._tell(f"implement at 0x{c.address:02X} is not a topdress ECU ({why})")
-        return first
+            return None
+        was, self.recognised = self.recognised, True
+        self.peer, self.why = c.address, ""
+        self._tell(f"implement at 0x{c.address:02X} is a topdress ECU: its private frames")
+        return "again" if was else "first"
 
     @property
     def serving(self) -> bool:
