@@ -407,6 +407,29 @@ def test_a_catch_test_runs_over_isobus_end_to_end() -> None:
     assert rig.world.truth.v_kmh == 0.0
 
 
+def test_a_wheel_calibration_counts_the_ecus_pulses_from_proprietary_b() -> None:
+    rig = PropRig(_cfg(""), _drive(6.0, 40.0))  # 4 s standing, then about 40 m
+    try:
+        rig.run(3.0)
+        assert rig.post(op.Stop()).ok
+        assert rig.post(op.StartWheelCal(distance_m=40.0)).ok
+        y0 = rig.world.truth.y_m
+        rig.run(10.0)
+        while rig.world.truth.v_kmh > 0.0 and rig.world.t_s < 60.0:
+            rig.run(rig.world.t_s + 0.5)
+        driven_m = rig.world.truth.y_m - y0  # as the operator measures it on the ground
+        assert rig.post(op.FinishWheelCal(distance_m=driven_m)).ok
+        cal = rig.term.snapshot.calibration
+    finally:
+        rig.close()
+    assert cal is not None and cal.step == "done", cal
+    assert driven_m > 35.0
+    radius = rig.cfg.machine.wheel_radius_m
+    # the ECU's pulses (EcuDiag) give the wheel's radius within its slip; GNSS the distance
+    assert cal.result["pulses"] > 0 and cal.result["radius_m"] == pytest.approx(radius, rel=0.12)
+    assert cal.result["gnss_distance_m"] == pytest.approx(driven_m, rel=0.03)
+
+
 def test_an_implement_that_is_not_a_topdress_ecu_gets_no_private_frame() -> None:
     rig = PropRig(_cfg(""), _drive(), manufacturer=7)  # another maker's code in its NAME
     try:
