@@ -471,6 +471,6 @@ def test_private_frames_from_other_addresses_and_bad_frames_are_counted_not_take
         assert link.counters.rx_malformed == 1
         assert link.params_done  # the forged refusal did not stop the push
         snap = rig.term.snapshot
-        assert snap.counters["prop_wrong_source"] == 6
+        assert snap.counters["prop_wrong_source"] == 6 and snap.counters["prop_bad"] == 1
     finally:
         rig.close()

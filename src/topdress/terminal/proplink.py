@@ -34,7 +34,7 @@ import can
 from topdress.errors import DeviceError, ProtocolError
 from topdress.isobus.node import Frame, from_bus, name_fields, split_id, to_bus
 from topdress.isobus.tcserver import Client
-from topdress.terminal.ecuview import EcuView
+from topdress.terminal.ecuview import EcuView, LinkCounters
 from topdress.view.snapshot import ecu_values
 
 DESIGNATOR = "topdress"  # the DDOP's device designator (isobus.ddop.build)
@@ -190,13 +190,15 @@ class PropLink:
             arbitration_id=f.can_id, data=f.data, is_extended_id=True, timestamp=msg.timestamp
         )
 
-    def counter_view(self) -> dict[str, int]:
-        """For the Snapshot's counters, those that are not 0."""
+    def counter_view(self, link: LinkCounters) -> dict[str, int]:
+        """For the Snapshot's counters, those that are not 0; `link`: the ECU link's, whose
+        malformed and implausible frames (from the ECU's address) are `prop_bad`."""
         c = self.counters
         named = {
             "prop_rx": c.rx,
             "prop_tx": c.tx,
             "prop_wrong_source": c.wrong_source,
+            "prop_bad": link.rx_malformed + link.rx_implausible,
             "prop_tx_refused": c.tx_refused,
         }
         return {k: v for k, v in named.items() if v}

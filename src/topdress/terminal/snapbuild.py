@@ -116,7 +116,7 @@ class SnapshotBuilder:
         if session is not None:
             out["log_err"] = session.errors
         if self._bus.prop is not None:  # the topdress ECU's private frames on the ISOBUS
-            out.update(self._bus.prop.counter_view())
+            out.update(self._bus.prop.counter_view(self._bus.link.counters))
         if nmea["bad_field"]:
             out["nmea_bad_field"] = nmea["bad_field"]
         # The loop's own anomalies (no NDVI, CAN receive errors) only when they happen.
