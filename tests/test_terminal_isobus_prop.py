@@ -78,6 +78,7 @@ class PropRig(TerminalParts):
         self.off = False
         self.nmea_hold_s = 0.0
         self.bus_log: list[tuple[float, Frame]] = []  # every frame the terminal sent
+        self.ecu_log: list[tuple[float, Frame]] = []  # every frame the implement sent
         self.extra: list[Frame] = []  # frames of other nodes, put on the bus at the next step
         self.snapshots: list[tuple[float, Snapshot]] = []
         self.node_rates: list[tuple[float, float, float]] = []
@@ -120,6 +121,7 @@ class PropRig(TerminalParts):
             passed, answers = self._to_ecu(heard)
             frames = self.sim.step([] if self.off else passed) + answers + self.extra
             self.extra = []
+            self.ecu_log += [(w.t_s, f) for f in frames]
             node = self.sim.node
             self.peak_kg_ha = max(self.peak_kg_ha, node.rate_kg_ha(0), node.rate_kg_ha(1))
             out = self.sim.out
@@ -279,6 +281,34 @@ def test_the_gnss_speed_goes_with_the_fixs_true_age() -> None:
     ages = [d.age_ms for _, d in _decoded(rig, GNSS_TIME_PGN)]
     assert len(ages) > 20
     assert all(290 <= a <= 310 for a in ages), ages[:10]
+
+
+def test_an_ecu_busy_metering_is_stopped_by_the_tcs_work_state_then_takes_the_value() -> None:
+    rig = PropRig(_cfg(""), _drive(8.0, 80.0))
+    try:
+        rig.run(12.0)
+        assert rig.sim.running  # metering at the TC's rate
+        told: list[str | None] = []
+        switch = protocol.param("SwitchSpeed").id
+        rig.term.link.push_params({switch: 7.0}, 12.0, lambda why, ids: told.append(why))
+        pushed_at = len(rig.node_rates)
+        rig.run(14.0)
+    finally:
+        rig.close()
+    acks = []
+    for t, f in rig.ecu_log:
+        if split_id(f.can_id)[1] == PROP_A and t >= 12.0:
+            core = from_bus(f, by_ecu=True, peer=ECU, my_address=TC)
+            assert core is not None
+            acks.append(protocol.decode((core.can_id, core.data)))
+    # Busy while metering: no PcCommand on an ISOBUS; the TC's rate 0 stopped it, then Ok
+    results = [a.result for a in acks if isinstance(a, protocol.EcuParamAck)]
+    assert results[0] is AckResult.BUSY and results[-1] is AckResult.OK, results
+    assert results.count(AckResult.BUSY) <= 2, results  # asked again after 0.2 s, not at once
+    assert told == [None] and rig.world.ecu.params.switch_speed_kmh == pytest.approx(7.0)
+    after = rig.node_rates[pushed_at:]
+    assert min(u for _, u, _ in after) == 0.0 and after[-1][1] > 50.0  # held, then metering
+    assert not [f for _, f in rig.bus_log if f.can_id in PAPER_IDS]
 
 
 def test_a_refused_parameter_stops_the_terminal_naming_it() -> None:
