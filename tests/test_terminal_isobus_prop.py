@@ -63,6 +63,7 @@ class PropRig(TerminalParts):
         manufacturer: int = 0,
         refuse: dict[int, AckResult] | None = None,
         meter: tuple[MeterParams, MeterParams] | None = None,
+        gnss_from_tc: bool = False,
     ) -> None:
         sim = SimConfig.of_machine(cfg) if meter is None else SimConfig.of_machine(cfg, meter=meter)
         self.world = World(sim, seed=5, drive=drive)
@@ -72,7 +73,7 @@ class PropRig(TerminalParts):
         )
         m = cfg.machine
         sections = Machine.from_config(m).sections
-        self.sim = IsobusMachine(self.world, node, m.width_m, sections, m.fan_rpm)
+        self.sim = IsobusMachine(self.world, node, m.width_m, sections, m.fan_rpm, gnss_from_tc)
         self.refuse = refuse or {}
         self.deaf = False
         self.off = False
@@ -269,6 +270,29 @@ def test_the_ecus_fault_word_on_proprietary_b_raises_its_alarm() -> None:
     alarms = {a.name: a.state for a in snap.alarms}
     assert alarms.get("blocked_lower") == "active", alarms
     assert "blocked_upper" not in alarms
+
+
+def _applied_error_pct(manufacturer: int) -> float:
+    """What the implement applied (its DDI 7, from the plant's truth) against the TC's setpoint
+    over a steady 8 km/h pass, the ECU's core given only what the ISOBUS firmware gives it."""
+    rig = PropRig(_cfg(""), _drive(8.0, 80.0), manufacturer=manufacturer, gnss_from_tc=True)
+    try:
+        rig.run(36.0)
+    finally:
+        rig.close()
+    steady = [s.isobus.products for t, s in rig.snapshots if t >= 15.0 and s.isobus is not None]
+    assert len(steady) > 150
+    actual = sum(p.actual or 0.0 for ps in steady for p in ps)
+    setpoint = sum(p.setpoint for ps in steady for p in ps)
+    return 100.0 * (actual / setpoint - 1.0)
+
+
+def test_the_terminals_gnss_speed_lets_the_ecu_meter_through_wheel_slip() -> None:
+    # the firmware's command carries the terminal's PcGnssTime from the TC (fw_isobus.c): a
+    # topdress ECU recognised gets it and meters the set rate; the same ECU under another
+    # manufacturer code gets no private frame and runs on its slipping wheel
+    assert abs(_applied_error_pct(0)) < 1.0
+    assert _applied_error_pct(7) < -5.0
 
 
 def test_the_gnss_speed_goes_with_the_fixs_true_age() -> None:
