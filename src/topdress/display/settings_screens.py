@@ -16,7 +16,7 @@ from topdress.config import ECU_KEYS, SPEED_MODE_IDS, SWITCH_COMPARE_IDS, Termin
 from topdress.config_edit import section_values, section_version, validate_section
 from topdress.crop.rate import rate_curve
 from topdress.devices.ports import list_serial_ports
-from topdress.display import fmt
+from topdress.display import fmt, isobus_names
 from topdress.display.actions import Actions
 from topdress.display.forms import SectionForm
 from topdress.display.hub import DisplayHub
@@ -327,10 +327,10 @@ class IsobusCard:
                         function=f.function,
                         device_class=f.device_class,
                         group=f.industry_group,
-                        manufacturer=f.manufacturer_code,
+                        manufacturer=isobus_names.maker(f.manufacturer_code),
                         identity=f.identity_number,
                     ),
-                    "what": f.what,
+                    "what": isobus_names.what(f, v),
                 }
                 for f in v.functions
             ],
