@@ -272,7 +272,11 @@ class IsobusCard:
             self.functions = (
                 ui.table(
                     columns=[
-                        _column("address", "isobus.address", "right"),
+                        # "地址" kept on one line: the narrow column would break it in two
+                        {
+                            **_column("address", "isobus.address", "right"),
+                            "headerClasses": "text-no-wrap",
+                        },
                         _column("name", "isobus.name"),
                         _column("decoded", "comm.decoded"),
                         _column("what", "isobus.what"),
