@@ -8,7 +8,7 @@ Wireshark carries it in ``epan/dissectors/packet-isobus-parameters.h`` (generate
 code-to-name assignments of the public listing are taken, no code of Wireshark's
 (GPL-2.0-or-later). The names are as published; none is made up. The table holds the makers
 met on a farm's ISOBUS and its makers of ISOBUS software and electronics (tractor and implement
-makers, terminals, GNSS, crop sensors, ISOBUS test bodies): about 190 of the listing's 1,500
+makers, terminals, GNSS, crop sensors, ISOBUS test bodies): about 220 of the listing's 1,470
 codes. A code not here is shown as its number; one the listing adds later is added here from a
 newer export.
 """
