@@ -248,7 +248,8 @@ MANUFACTURERS: Final[Mapping[int, str]] = {
     1856: "Trimble",
 }
 
-_FORMERLY = re.compile(r"\s*\(formerly [^)]*\)")
+# the names in use, made once (the display asks for them five times a second)
+_IN_USE = {code: re.sub(r"\s*\(formerly [^)]*\)", "", n) for code, n in MANUFACTURERS.items()}
 
 
 def manufacturer(code: int) -> str | None:
@@ -257,5 +258,4 @@ def manufacturer(code: int) -> str | None:
     ProtocolError for a code no NAME can carry (outside 0..2047)."""
     if not 0 <= code < 1 << CODE_BITS:
         raise ProtocolError(f"manufacturer code {code} outside 0..{(1 << CODE_BITS) - 1}")
-    name = MANUFACTURERS.get(code)
-    return None if name is None else _FORMERLY.sub("", name)
+    return _IN_USE.get(code)
