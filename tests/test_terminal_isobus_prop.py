@@ -382,10 +382,12 @@ def test_an_ecu_that_does_not_answer_is_waited_for_and_the_push_goes_on() -> Non
         # held at rate 0 meanwhile, also when the operator starts again (sent off the tick)
         assert rig.post(op.Stop()).ok and rig.post(op.Start()).ok
         assert rig.peak_kg_ha == 0.0
+        assert rig.term.snapshot.ecu_link == "wait"  # the TC serves it, its parameters are not in
         rig.deaf = False
         rig.run(9.0)
         assert link.params_done
         assert any(e.startswith("ECU ready: every parameter") for _, e in rig.events)
+        assert rig.term.snapshot.ecu_link == "ok"
         assert rig.node_rates[-1][1] > 0.0  # the implement meters now
     finally:
         rig.close()

@@ -104,11 +104,15 @@ class BusSwitch:
     @property
     def ecu_state(self) -> str:
         """The ECU link's state: the CAN link's, or the ISOBUS implement's (ok, lost, wait: none
-        served yet, or its pool refused), and `lost` while no adapter is open."""
+        served yet, or its pool refused; a topdress ECU served is ok once its own link is, its
+        parameters in force and its status heard, as on its own bus), and `lost` while no
+        adapter is open."""
         if not self.port.connected:
             return "lost"
         if self.tc is not None:
             state = self.tc.state
+            if state == "ok" and self.prop is not None and self.prop.serving:
+                return self.link.state
             return state if state in ("ok", "lost") else "wait"
         return self.link.state
 
