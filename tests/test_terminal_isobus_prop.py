@@ -530,3 +530,27 @@ def test_private_frames_from_other_addresses_and_bad_frames_are_counted_not_take
         assert snap.counters["prop_wrong_source"] == 6 and snap.counters["prop_bad"] == 1
     finally:
         rig.close()
+
+
+def test_a_can_change_from_isobus_to_the_ecus_own_bus_pushes_there_with_the_paper_frames() -> None:
+    import time as wall
+
+    rig = PropRig(_cfg(""), _drive(0.0, 0.0))
+    try:
+        rig.run(2.0)
+        assert rig.term.link.isobus and rig.term.link.params_done
+        fut = rig.term.post(op.ApplySettings("can", {"implement": "topdress"}))
+        deadline = wall.monotonic() + 10.0
+        while not fut.done() and wall.monotonic() < deadline:  # the bus opens in its thread
+            rig.run(rig.world.t_s + 0.1)
+            wall.sleep(0.005)
+        assert fut.done() and fut.result().ok, fut.result()
+        since = rig.world.t_s
+        rig.run(since + 1.0)
+        link = rig.term.link
+    finally:
+        rig.close()
+    assert rig.term.can.tc is None and rig.term.can.prop is None and not link.isobus
+    # its own push, with the paper's identifiers (the ISOBUS ECU there does not answer them)
+    sets = [f for t, f in rig.bus_log if t >= since and f.can_id == frame_ids()["PcParamSet"]]
+    assert sets and not link.params_done and rig.term.snapshot.ecu_link == "wait"
