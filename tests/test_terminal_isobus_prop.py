@@ -413,9 +413,23 @@ def test_an_ecu_lost_and_back_is_given_its_parameters_again() -> None:
         rig.close()
 
 
+def test_the_ecu_says_who_it_is_once_connected_to_the_tc() -> None:
+    # its core's first EcuIdent goes out before the node has an address, to no one: the port
+    # announces it again once the node is connected to its TC (td_app_announce)
+    rig = PropRig(_cfg(""), _drive())
+    try:
+        rig.run(3.0)
+        ident = rig.term.link.ecu.ident
+        said = [e for _, e in rig.events]
+    finally:
+        rig.close()
+    assert ident is not None and ident.target == "host" and ident.transport == "in-process"
+    assert ident.protocol == protocol.protocol_version()
+    assert f"ECU: host firmware {ident.firmware_version}, protocol 1.1 (in-process)" in said, said
+
+
 def test_an_ecu_that_rebooted_faster_than_its_loss_is_given_its_parameters_again() -> None:
-    # its EcuIdent (OnDefaults) is sent before it has an address: not heard on an ISOBUS; its
-    # new connection to the TC is what says it
+    # its new connection to the TC says it (and its EcuIdent, on its defaults, after that)
     cfg = _cfg("")
     rig = PropRig(replace(cfg, machine=replace(cfg.machine, kg_per_rev_lower=0.25)), _drive())
     try:

@@ -59,6 +59,7 @@ class IsobusMachine:
         self.running = False
         self.actual_kg_ha = (0.0, 0.0)  # what the meters apply, as reported to the TC (DDI 7)
         self.out: StepOutput | None = None  # the World's last step: its NMEA and crop lines
+        self._connected = False  # the node connected to its TC at the last step
         node.start(world.now_us)
 
     def rates_kg_ha(self) -> tuple[float, float]:
@@ -116,6 +117,10 @@ class IsobusMachine:
         on: list[bool | None] = [bool(n.sections_on >> i & 1) for i in range(self.sections)]
         n.set_actual(ELEMENT_BOOM, DDI_ACTUAL_CONDENSED_1_16, condensed_value(on))
         n.step(w.now_us, round(truth.odometer_m * 1000))
+        connected = n.tc_state == "connected"
+        if connected and not self._connected:
+            w.ecu.announce()  # its EcuIdent went out before the claim, to no one: say it again
+        self._connected = connected
         out = n.tx()
         for can_id, data in core_out:
             bus = n.prop_tx(Frame(can_id, data))
