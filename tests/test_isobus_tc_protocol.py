@@ -190,6 +190,41 @@ def test_pdack_errors_read_and_a_missing_acknowledge_reported() -> None:
     assert "did not acknowledge DDI 6 of element 3 within 1000 ms" in tc.errors[-1]
 
 
+def test_missing_acknowledges_said_once_per_silence_and_the_answer_again_said() -> None:
+    """A client that stops hearing the TC misses the acknowledges of the values set (two rates
+    every 0.5 s for 4 s): counted each, said once; when it acknowledges again, that is said."""
+    bus = connected(TcServer(tc_name(7)))
+    tc = bus.tc
+    c = tc.client
+    assert c is not None
+    said = len(tc.errors)
+    for k in range(8):  # its frames no longer reach it (the bus is not run)
+        tc.set_value(3, 6, 12000 + k)
+        tc.set_value(4, 6, 12000 + k)
+        for _ in range(50):
+            bus.now += STEP_US
+            tc.step(bus.now, [])
+    missing = tc.counters["pdacks_missing"]
+    # an awaited acknowledge is due 1 s after the first set of its DDI: at 1 s and 2.5 s each
+    assert missing == 4
+    new = tc.errors[said:]
+    assert new == ["client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"]
+    bus.run(0.2)  # it hears the TC again within its 6 s (the two set at 3 s are missed too)
+    missing = tc.counters["pdacks_missing"]
+    assert missing == 6 and tc.errors[said + 1 :] == []
+    tc.set_value(3, 6, 15000)
+    bus.run(0.3)
+    assert tc.errors[said + 1 :] == [
+        f"client 0x84 acknowledges again ({missing} acknowledges were missing)"
+    ]
+    assert c.unanswered == 0 and not c.lost
+    tc.set_value(3, 6, 15500)  # a later miss is a new silence: said again
+    for _ in range(120):
+        bus.now += STEP_US
+        tc.step(bus.now, [])
+    assert tc.errors[-1] == "client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"
+
+
 def test_pdack_error_bits_in_words() -> None:
     assert pdack_errors(0) == [] and pdack_errors(0xFF) == []  # AgIsoStack++: no code given
     assert pdack_errors(0x04) == ["DDI not supported by the element"]

@@ -146,6 +146,7 @@ class Client:
     from_store: bool = False  # the pool is the one kept from an earlier connection
     awaiting: dict[tuple[int, int], int] = field(default_factory=dict)  # acks due, by sent time
     pool_error: str = ""  # why its last pool could not be mapped ("" when it could)
+    unanswered: int = 0  # acknowledges missed since it last acknowledged (said at the first)
 
     @property
     def options(self) -> int:
@@ -358,10 +359,12 @@ class TcServer:
             elif now_us - sent > PDACK_TIMEOUT_US:
                 del c.awaiting[key]
                 self.counters["pdacks_missing"] += 1
-                self._error(
-                    f"client {c.address:#x} did not acknowledge DDI {key[1]} of element {key[0]}"
-                    f" within {PDACK_TIMEOUT_US // 1000} ms"
-                )
+                c.unanswered += 1
+                if c.unanswered == 1:  # once per silence: the rest are counted
+                    self._error(
+                        f"client {c.address:#x} did not acknowledge DDI {key[1]} of element "
+                        f"{key[0]} within {PDACK_TIMEOUT_US // 1000} ms"
+                    )
 
     def _rx(self, f: Frame, now_us: int) -> None:
         self._claim.rx(f.can_id, f.data, now_us)
@@ -623,6 +626,10 @@ class TcServer:
         c.pdacks.append((element, ddi, d[4]))
         del c.pdacks[:-KEEP_PDACKS]
         c.awaiting.pop((element, ddi), None)
+        if c.unanswered:
+            self._error(f"client {c.address:#x} acknowledges again ({c.unanswered} "
+                        "acknowledges were missing)")  # fmt: skip
+            c.unanswered = 0
         words = pdack_errors(d[4])
         if words:
             self.counters["pdack_errors"] += 1
