@@ -4,6 +4,7 @@ the first by two of its six 0.6 m sections, in a field whose west edge cuts two 
 
 from __future__ import annotations
 
+import itertools
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 from test_terminal_isobus import IsobusRig
 from topdress.config import DEFAULT_TOML, ConfigError, TerminalConfig, loads_config
 from topdress.geo.outlet import offset_position
+from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.gnss import GnssParams
 from topdress.sim.tractor import Drive, Segment
 
@@ -45,10 +47,12 @@ def _boundary(tmp_path: Path) -> str:
     return str(path)
 
 
-def _run(cfg: TerminalConfig) -> list[tuple[float, tuple[bool, ...], tuple[bool, ...]]]:
+def _run(
+    cfg: TerminalConfig, session: SessionLog | None = None
+) -> list[tuple[float, tuple[bool, ...], tuple[bool, ...]]]:
     """(time, the sections the terminal reports from DDI 161, the sim's sections) at each tick
     of the way back, once well clear of the turn."""
-    rig = IsobusRig(cfg, _drive())
+    rig = IsobusRig(cfg, _drive(), session)
     out = []
     try:
         while rig.world.t_s < 58.0:
@@ -81,6 +85,27 @@ def test_way_back_sections_off_over_the_first_pass_and_outside_the_field(tmp_pat
     for _, _, sim in back:
         assert not (sim[0] or sim[1])  # over the first pass: off
         assert not sim[5]  # outside the field: off
+
+
+def test_the_decisions_are_in_the_session_log_on_change_only(tmp_path: Path) -> None:
+    """Each switch of the sections commanded is an `isobus.sections` event with why each one
+    off is off; nothing between two switches."""
+    session = SessionLog.create(tmp_path / "logs", DEFAULT_TOML)
+    _run(_cfg(tmp_path), session)
+    with SessionReader(session.path) as reader:
+        events = [e for e in reader.events() if e.kind == "isobus.sections"]
+    assert 5 <= len(events) < 60  # one per switch, not one per position (about 530)
+    ons = [e.detail["on"] for e in events]
+    assert all(a != b for a, b in itertools.pairwise(ons))  # only on a change
+    for e in events:  # a reason for each section off, none for one on
+        on, why = e.detail["on"], e.detail["why"]
+        assert [w == "" for w in why] == on
+    assert ons[0] == [True] * 6
+    # the way back: over the first pass covered, past the west edge outside
+    back = [e.detail["why"] for e in events if 40.0 < e.t < 56.0]
+    assert back and all(w[:2] == ["covered"] * 2 and w[5] == "outside" for w in back)
+    # the terminal closes: the operator's stop puts every section off
+    assert events[-1].detail == {"on": [False] * 6, "why": ["operator"] * 6}
 
 
 def test_without_a_boundary_only_the_overlap_goes_off() -> None:

@@ -30,6 +30,7 @@ from topdress.isobus.devicemap import Device
 
 FLUSH_EVERY = 10  # positions whose covered quads go into the coverage together
 MAX_STEP_M = 5.0  # a longer jump between two positions is a gap: nothing is counted covered
+OUTSIDE, COVERED = "outside", "covered"  # why `decide` put a section off (`SectionControl.why`)
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,7 @@ class SectionControl:
         self._last: list[tuple[Any, Any]] | None = None  # each section's footprint ends, UTM
         self._quads: list[tuple[Any, Any, Any, Any]] = []  # covered, not yet in `coverage`
         self._since = 0
+        self.why: tuple[str, ...] = ()  # per section, why the last `decide` put it off ("": on)
         if boundary is not None:
             self._fwd = Transformer.from_crs(WGS84, boundary.crs, always_xy=True)
 
@@ -115,9 +117,16 @@ class SectionControl:
         inside = (
             looks if self.boundary is None else shapely.intersection(looks, self.boundary.outer)
         )
-        todo = np.maximum(shapely.area(inside) - self.coverage.covered_m2(inside), 0.0)
+        field = shapely.area(inside)
+        todo = np.maximum(field - self.coverage.covered_m2(inside), 0.0)
         need = whole * (1.0 - self.off_pct / 100.0)
-        return [bool(w > 0.0 and t >= n) for t, w, n in zip(todo, whole, need, strict=True)]
+        on = [bool(w > 0.0 and t >= n) for t, w, n in zip(todo, whole, need, strict=True)]
+        # why each is off: too little of its ground in the field, else too much of it covered
+        self.why = tuple(
+            "" if o else OUTSIDE if f < n else COVERED
+            for o, f, n in zip(on, field, need, strict=True)
+        )
+        return on
 
     def cover(self, lat: float, lon: float, heading_deg: float, working: list[bool | None]) -> None:
         """The implement reports `working` (DDI 161, section 1 first) at this position: the ground

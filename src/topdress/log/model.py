@@ -103,6 +103,7 @@ EVENT_KINDS: Final = (
     "isobus.refused",
     "isobus.problem",
     "isobus.totals",
+    "isobus.sections",
     "isobus.claimed",
     "isobus.ddop",
     "isobus.set",

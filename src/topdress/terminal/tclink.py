@@ -59,6 +59,8 @@ ACTUAL_CONDENSED, SETPOINT_CONDENSED = 161, 290
 PER_HA = 100  # kg/ha -> mg/m^2, and L/ha -> mm^3/m^2
 KG_HA_PER_RPM_KG = 600.0  # eq. 4: kg/ha = rpm x kg/rev x 600 / (km/h x m)
 FUNCTIONS = {130: "task controller", 29: "virtual terminal", 25: "tractor ECU"}
+# why a section the TC commands is off, beside section control's "covered" and "outside"
+OPERATOR, RATE_ZERO = "operator", "rate_zero"
 
 
 class Sender(Protocol):
@@ -147,6 +149,8 @@ class TcLink:
         self._functions_view: tuple[ControlFunctionView, ...] = ()
         self._sc: SectionControl | None = None  # the implement's section control, once placed
         self.section_on: tuple[bool, ...] | None = None  # what it decided last (None: all)
+        self.section_why: tuple[str, ...] = ()  # why each one off is off ("covered", "outside")
+        self._logged_sections: tuple[bool, ...] | None = None  # the last logged
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -377,10 +381,27 @@ class TcLink:
         for element in self._carrying(SETPOINT_WORK_STATE):
             self._set(c, now, element, SETPOINT_WORK_STATE, int(working))
         chosen = self.section_on
+        n = min(self.sections, SECTIONS_PER_DDI)  # sections 17 and up are not switched
+        on: list[bool | None] = [working and (chosen is None or chosen[i]) for i in range(n)]
         for element in self._carrying(SETPOINT_CONDENSED):
-            n = min(self.sections, SECTIONS_PER_DDI)  # sections 17 and up are not switched
-            on: list[bool | None] = [working and (chosen is None or chosen[i]) for i in range(n)]
             self._set(c, now, element, SETPOINT_CONDENSED, condensed_value(on))
+        if self._carrying(SETPOINT_CONDENSED):
+            self._log_sections(now, on, OPERATOR if not start else RATE_ZERO if not working else "")
+
+    def _log_sections(self, now: float, on: list[bool | None], all_off: str) -> None:
+        """The sections the TC commands, and why each one off is off, to the session log when
+        one switches (`isobus.sections`): the operator stopped, the rate is zero, or section
+        control put it off (covered, outside the field)."""
+        decided = self.section_why if self.section_on is not None else ()
+        reasons = tuple(
+            "" if o else all_off or (decided[i] if i < len(decided) else "")
+            for i, o in enumerate(on)
+        )
+        state = tuple(bool(o) for o in on)
+        if state == self._logged_sections:  # a reason alone changing is no new decision
+            return
+        self._logged_sections = state
+        self._journal.log_event(now, "isobus.sections", on=list(state), why=list(reasons))
 
     def on_position(
         self,
@@ -410,6 +431,7 @@ class TcLink:
             self._sc.cover(lat, lon, heading_deg, list(reported))
         lead_m = max(speed_kmh, 0.0) / 3.6 * self.latency_ms.get(SETPOINT_LATENCY, 0) / 1000
         self.section_on = tuple(self._sc.decide(lat, lon, heading_deg, lead_m))
+        self.section_why = self._sc.why
 
     def _set(self, c: Client, now: float, element: int, ddi: int, value: int) -> None:
         """Set a value on a change (acknowledged) or after SETPOINT_REFRESH_S (not)."""
