@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -144,6 +145,81 @@ def test_the_coverage_outlives_the_implement_lost_and_back() -> None:
     # the two sections over the first pass stay off (the coverage before the loss is kept),
     # the outermost, on fresh ground, works
     assert all(not (n & 0b11) and n & 0b100000 for n in back)
+
+
+def _first_pass(rig: IsobusRig, until_s: float) -> list[tuple[float, int]]:
+    """(north of the start in m, the sim's sections) at each tick of the first pass north."""
+    out = []
+    while rig.world.t_s < until_s:
+        rig.run(rig.world.t_s + 0.1)
+        tr = rig.world.tractor
+        if tr.v > 1.0:
+            out.append((tr.y, rig.sim.node.sections_on))
+    return out
+
+
+@pytest.mark.parametrize("hours", [24.0, 0.0])
+def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
+    tmp_path: Path, hours: float
+) -> None:
+    """The terminal killed 20 s into the first pass (about 26 m north), then started again
+    and driven over the same line from the start: over the ground the killed session covered
+    the sections stay off (its as-applied swaths, read from its log); past it they work.
+    With `coverage_hours = 0` earlier sessions do not count: the sections work all the way."""
+    field = _boundary(tmp_path)
+    boundary_line = 'path = ""' + " " * 18 + "# .gpkg, .shp, .geojson polygons or ISOXML "
+    boundary_line += "TASKDATA.XML\n"
+    assert DEFAULT_TOML.count(boundary_line) == 1
+    toml = DEFAULT_TOML.replace(boundary_line, f'path = "{field}"\n').replace(
+        "coverage_hours = 24.0", f"coverage_hours = {hours}"
+    )
+    cfg = loads_config(toml)
+    logs = tmp_path / "logs"
+    killed = SessionLog.create(logs, toml)
+    rig = IsobusRig(cfg, _drive(), killed)
+    try:
+        first = _first_pass(rig, 20.0)
+        assert all(n == 0b111111 for y, n in first if 2.0 < y < 20.0)  # fresh ground: all work
+        killed.sync()  # what a killed terminal leaves: the rows committed up to its last 0.5 s
+    finally:
+        rig.pc_bus.shutdown()  # no close: the terminal is gone, its log never closed
+        rig.ecu_bus.shutdown()
+    session = SessionLog.create(logs, toml)
+    again = IsobusRig(cfg, _drive(), session)
+    try:
+        tc = again.term.can.tc
+        assert tc is not None
+        deadline = time.monotonic() + 30.0  # the earlier log is read in a thread of its own
+        while not tc.coverage_read and time.monotonic() < deadline:
+            again.run(again.world.t_s + 0.1)
+            time.sleep(0.01)
+        second = _first_pass(again, 30.0)
+    finally:
+        again.close()
+        killed.close()
+    with SessionReader(session.path) as reader:
+        coverage = [e.detail for e in reader.events() if e.kind == "isobus.coverage"]
+    over = [n for y, n in second if 4.0 < y < 22.0]  # inside what the killed one covered
+    beyond = [n for y, n in second if 30.0 < y < 38.0]
+    assert len(over) > 50 and len(beyond) > 20
+    assert all(n & 0b011110 == 0b011110 for n in beyond)  # fresh ground again: they work
+    if hours:
+        (taken,) = coverage
+        assert taken["sessions"] == [killed.path.name] and taken["swaths"] > 10
+        assert all(n == 0 for n in over)
+    else:  # not read at all
+        assert coverage == []
+        assert all(n & 0b011110 == 0b011110 for n in over)
+
+
+def test_a_bad_coverage_window_is_refused_naming_the_key() -> None:
+    for bad in ("-1.0", "9000.0", '"day"'):
+        lines = [
+            f"coverage_hours = {bad}" if x.startswith("coverage_hours = ") else x
+            for x in DEFAULT_TOML.splitlines()
+        ]
+        with pytest.raises(ConfigError, match=r"isobus\.coverage_hours"):
+            loads_config("\n".join(lines))
 
 
 def test_section_control_off_switches_all_sections_with_the_rate(tmp_path: Path) -> None:

@@ -11,22 +11,30 @@ It goes off when more than `off_pct` % of that strip is outside the field or alr
 
 Coverage is built from the sections the implement reports working (DDI 161): the ground between
 a section's last footprint and its present one, kept in the as-applied map's tiles (`Cover`);
-as-applied swaths of an earlier session can be added. Work is done in the field's UTM zone.
+as-applied swaths of earlier sessions of the same field are added (`earlier_coverage` reads
+them from the session logs, so a terminal restarted mid-field keeps what it had covered). Work
+is done in the field's UTM zone.
 """
 
 from __future__ import annotations
 
+import sqlite3
 from dataclasses import dataclass
+from datetime import datetime, timedelta
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import shapely
 from pyproj import Transformer
 
+from topdress.errors import LogError, MapError
 from topdress.geo.asapplied import WGS84, Cover, utm_crs
+from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.outlet import offset_position
 from topdress.isobus.devicemap import Device
+from topdress.log.session import SUFFIX, SessionReader, session_config
 
 FLUSH_EVERY = 10  # positions whose covered quads go into the coverage together
 MAX_STEP_M = 5.0  # a longer jump between two positions is a gap: nothing is counted covered
@@ -173,3 +181,55 @@ class SectionControl:
             lambda xy: np.column_stack(fwd.transform(xy[:, 0], xy[:, 1])),
         )
         self.coverage.add(utm)
+
+
+@dataclass(frozen=True)
+class EarlierCoverage:
+    """The ground earlier sessions of the field covered: their as-applied swaths (WGS 84),
+    the session files they came from, and those that could not be read (name: why)."""
+
+    swaths: tuple[Any, ...]
+    sessions: tuple[str, ...]
+    skipped: tuple[str, ...]
+
+
+def _created(reader: SessionReader) -> datetime | None:
+    try:
+        return datetime.fromisoformat(reader.meta["created_utc"])
+    except (KeyError, ValueError):
+        return None
+
+
+def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
+    """The as-applied swaths of the sessions beside `session` (the one being written) that
+    count for its coverage: created within `hours` before it, with the same `[boundary] path`
+    and `layer` (the same field; two sessions without a boundary count alike, their swaths
+    only matter where the machine drives again). A session that cannot be read is skipped and
+    named. Reads files: run it off the control loop."""
+    with SessionReader(session) as reader:
+        now = _created(reader)
+        mine = session_config(reader.config_toml).boundary
+    if now is None:
+        raise LogError(f"{session}: no creation time")
+    since = now - timedelta(hours=hours)
+    swaths: list[Any] = []
+    used: list[str] = []
+    skipped: list[str] = []
+    for path in sorted(session.parent.glob(f"*{SUFFIX}")):
+        if path.resolve() == session.resolve():
+            continue
+        try:
+            with SessionReader(path) as reader:
+                created = _created(reader)
+                if created is None or not since <= created <= now:
+                    continue
+                b = session_config(reader.config_toml).boundary
+                if (b.path, b.layer) != (mine.path, mine.layer):
+                    continue
+                got = build_as_applied(reader).swath_geom
+        except (LogError, MapError, sqlite3.Error, ValueError) as exc:
+            skipped.append(f"{path.name}: {exc}")
+            continue
+        used.append(path.name)
+        swaths.extend(got)
+    return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped))

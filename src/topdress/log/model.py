@@ -104,6 +104,7 @@ EVENT_KINDS: Final = (
     "isobus.problem",
     "isobus.totals",
     "isobus.sections",
+    "isobus.coverage",
     "isobus.claimed",
     "isobus.ddop",
     "isobus.set",

@@ -25,15 +25,23 @@ session log and the operator's words; `problem` and `state` feed the alarms.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import can
+import numpy as np
 
 from topdress.errors import DeviceError, ProtocolError
 from topdress.geo.boundary import FieldBoundary
-from topdress.geo.sectionctl import SectionControl, sections_from_device
+from topdress.geo.sectionctl import (
+    EarlierCoverage,
+    SectionControl,
+    earlier_coverage,
+    sections_from_device,
+)
 from topdress.i18n import text
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
@@ -151,6 +159,61 @@ class TcLink:
         self.section_on: tuple[bool, ...] | None = None  # what it decided last (None: all)
         self.section_why: tuple[str, ...] = ()  # why each one off is off ("covered", "outside")
         self._logged_sections: tuple[bool, ...] | None = None  # the last logged
+        self._earlier = self._read_earlier()  # the field's earlier sessions, read off the loop
+        self._covered_before: tuple[Any, ...] = ()  # their swaths, for each SectionControl
+
+    def _read_earlier(self) -> Future[EarlierCoverage] | None:
+        """The ground earlier sessions of this field covered (`[isobus] coverage_hours`), read
+        from the session logs in a thread of its own (whole sessions: seconds for a long day);
+        the loop takes it once it is there (`_take_earlier`)."""
+        cfg = self._settings.cfg.isobus
+        session = self._journal.session
+        if not cfg.section_control or cfg.coverage_hours <= 0.0 or session is None:
+            return None
+        fut: Future[EarlierCoverage] = Future()
+
+        def read() -> None:
+            try:
+                fut.set_result(earlier_coverage(session.path, cfg.coverage_hours))
+            except Exception as exc:  # said by the loop; never a traceback in a thread
+                fut.set_exception(exc)
+
+        threading.Thread(target=read, name="tc-coverage", daemon=True).start()
+        return fut
+
+    @property
+    def coverage_read(self) -> bool:
+        """The earlier sessions' coverage was taken (or there is none to read)."""
+        return self._earlier is None
+
+    def _take_earlier(self) -> None:
+        fut = self._earlier
+        if fut is None or not fut.done():
+            return
+        self._earlier = None
+        now = self._journal.clock()
+        try:
+            got = fut.result()
+        except Exception as exc:  # the logs unreadable as a whole: coverage starts empty
+            self._tell(f"earlier sessions' coverage not read: {exc}")
+            return
+        self._covered_before = got.swaths
+        if self._sc is not None and got.swaths:
+            self._sc.add_covered_wgs84(np.array(got.swaths, dtype=object))
+        self._journal.log_event(
+            now,
+            "isobus.coverage",
+            sessions=list(got.sessions),
+            swaths=len(got.swaths),
+            skipped=list(got.skipped),
+        )
+        if got.sessions:
+            self._say(
+                f"section control: ground covered in {len(got.sessions)} earlier sessions of "
+                f"this field taken ({len(got.swaths)} swaths)"
+            )
+        for why in got.skipped:
+            self._tell(f"earlier session not read for the coverage: {why}")
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -426,6 +489,9 @@ class TcLink:
             self._sc = SectionControl(
                 sections, boundary, off_pct=cfg.overlap_pct, look_m=cfg.section_look_m
             )
+            if self._covered_before:
+                self._sc.add_covered_wgs84(np.array(self._covered_before, dtype=object))
+        self._take_earlier()
         reported = self._sections()
         if reported:
             self._sc.cover(lat, lon, heading_deg, list(reported))
