@@ -12,12 +12,14 @@ from pathlib import Path
 
 import can
 import pytest
+from pyproj import Geod
 
 from term_rig import TerminalParts
 from topdress.cli.isobus_demo import DEMO_PASS_M, DEMO_PASSES, DEMO_SPEED_KMH
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.errors import ConfigError
+from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
 from topdress.isobus.ddop import Machine, build
@@ -343,7 +345,9 @@ def _text(s: str) -> bytes:
     return bytes([len(s)]) + s.encode()
 
 
-def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
+def _spreader_pool(
+    setpoint_ddi: int, latency_ms: int | None, actual_ms: int | None = None
+) -> bytes:
     """A one-bin implement's pool written by hand (not by topdress's builder): a device with a
     setpoint latency (DDI 142) when given, a bin set in mass (DDI 6) or volume (DDI 1) per area."""
     actual = {6: 7, 1: 2}[setpoint_ddi]
@@ -372,6 +376,7 @@ def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
         return b"DPD" + struct.pack("<HHBB", oid, ddi, props, trig) + _text("pd") + b"\xff\xff"
 
     device_kids = [11] + ([10] if latency_ms is not None else [])
+    device_kids += [15] if actual_ms is not None else []
     objs = [
         dvc,
         det(1, 1, "Spreader", 0, 0, device_kids),
@@ -383,6 +388,8 @@ def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
     ]
     if latency_ms is not None:
         objs.append(b"DPT" + struct.pack("<HHi", 10, 142, latency_ms) + _text("lat") + b"\xff\xff")
+    if actual_ms is not None:
+        objs.append(b"DPT" + struct.pack("<HHi", 15, 143, actual_ms) + _text("act") + b"\xff\xff")
     return b"".join(objs)
 
 
@@ -396,6 +403,58 @@ def test_a_foreign_one_bin_pool_in_mass_takes_the_whole_rate_and_gives_its_delay
     assert link.setpoint_latency_s() == 0.8
     view = link.view(0.9)
     assert (view.implement, view.setpoint_latency_ms, view.sections) == ("Spreader 3000", 800, ())
+
+
+def test_a_pools_actual_value_delay_is_read() -> None:
+    link, _, _ = _client_session(_spreader_pool(6, 800, 1000))
+    assert link.state == "ok"
+    assert link.latency_ms == {142: 800, 143: 1000}
+    assert link.actual_latency_s() == 1.0
+    assert link.view(0.9).actual_latency_ms == 1000
+
+
+def _mapped_points(tmp_path: Path, actual_ms: int | None) -> dict[float, tuple[float, float]]:
+    """The as-applied map's points (by log time) of a pass north at 8 km/h, the implement's
+    DDI 143 `actual_ms` (as its pool's DPT 143 gives it, read at connection)."""
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path / f"logs-{actual_ms}", DEFAULT_TOML)
+    rig = IsobusRig(cfg, _drive(8.0, 80.0), session)
+    try:
+        rig.run(5.0)
+        tc = rig.term.can.tc
+        assert tc is not None and tc.state == "ok"
+        if actual_ms is not None:
+            tc.latency_ms[143] = actual_ms
+        rig.run(30.0)
+    finally:
+        rig.close()
+    with SessionReader(session.path) as reader:
+        data = build_as_applied(reader)
+    times = data.points["LogTime"]
+    return {round(float(t), 2): (g.y, g.x) for t, g in zip(times, data.point_geom, strict=True)}
+
+
+def test_the_actual_value_delay_puts_the_reports_where_the_machine_was(tmp_path: Path) -> None:
+    """A client reporting a 1 s actual-value delay (DDI 143), driven north at 8 km/h: the
+    as-applied map's point of each report is 2.22 m (8 km/h x 1 s) behind, where the machine
+    was when what it reports was metered; the same drive without the delay is the reference."""
+    now = _mapped_points(tmp_path, None)
+    delayed = _mapped_points(tmp_path, 1000)
+    geod = Geod(ellps="WGS84")
+    shifts, misses = [], []
+    for t, (lat, lon) in delayed.items():
+        before = round(t - 1.0, 2)
+        if 12.0 < t < 28.0 and t in now and before in now:  # at 8 km/h, the delay applied
+            az, _, dist = geod.inv(now[t][1], now[t][0], lon, lat)
+            shifts.append((abs(az), dist))
+            misses.append(geod.inv(now[before][1], now[before][0], lon, lat)[2])
+    assert len(shifts) > 100
+    # the point mapped is where the machine was mapped a second before, to a centimetre
+    assert max(misses) < 0.01
+    # back along the track (south), by 8 km/h x 1 s on average: 2.13 m measured, the fixes'
+    # own error (0.8 m, drifting over a minute) moving them by a few cm a second
+    assert all(az > 165.0 for az, _ in shifts)
+    assert sum(d for _, d in shifts) / len(shifts) == pytest.approx(8.0 / 3.6, rel=0.06)
 
 
 def test_a_volume_per_area_product_is_set_in_litres_by_the_density() -> None:

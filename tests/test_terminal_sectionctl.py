@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import shapely
 
 from test_terminal_isobus import IsobusRig
 from topdress.config import DEFAULT_TOML, ConfigError, TerminalConfig, loads_config
@@ -107,6 +108,32 @@ def test_the_decisions_are_in_the_session_log_on_change_only(tmp_path: Path) -> 
     assert back and all(w[:2] == ["covered"] * 2 and w[5] == "outside" for w in back)
     # the terminal closes: the operator's stop puts every section off
     assert events[-1].detail == {"on": [False] * 6, "why": ["operator"] * 6}
+
+
+def _covered_north_m(actual_ms: int | None) -> float:
+    """The northern end of the ground covered (UTM metres) 20 s into the first pass, still
+    driving at 6 km/h, the implement's actual-value delay (DDI 143) `actual_ms`."""
+    rig = IsobusRig(_cfg(None), _drive())
+    try:
+        rig.run(5.0)
+        tc = rig.term.can.tc
+        assert tc is not None and tc.state == "ok"
+        if actual_ms is not None:
+            tc.latency_ms[143] = actual_ms  # as its pool's DPT 143 gives it
+        rig.run(20.0)
+        sc = tc.section_control
+        assert sc is not None and rig.world.tractor.v > 1.5
+        covered = shapely.union_all(list(sc.coverage.tiles.values()))
+    finally:
+        rig.close()
+    return float(shapely.bounds(covered)[3])
+
+
+def test_the_actual_value_delay_puts_the_coverage_where_the_machine_was() -> None:
+    """What the implement reports working now it worked its DDI 143 ago: with 1 s at 6 km/h
+    the covered ground ends 1.67 m further back than without."""
+    back = _covered_north_m(None) - _covered_north_m(1000)
+    assert back == pytest.approx(6.0 / 3.6, abs=0.15)  # 1.69 m measured
 
 
 def test_without_a_boundary_only_the_overlap_goes_off() -> None:

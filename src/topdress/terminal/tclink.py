@@ -26,6 +26,7 @@ session log and the operator's words; `problem` and `state` feed the alarms.
 from __future__ import annotations
 
 import threading
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -55,6 +56,7 @@ MEASURE_MS = 200  # actual rates, work state and sections: 5 Hz, every other tic
 TOTAL_MS = 1000
 SETPOINT_REFRESH_S = 1.0
 CLAIM_S = 1.0  # an address claim takes 250 ms; none after this long is a loss
+TRACK_S = 10.0  # the outlet positions kept: the longest actual-value delay (DDI 143) applied
 ADDRESS_CLAIM_PGN = 0xEE00
 # DDIs (ISO 11783-11)
 SETPOINT_VOLUME_HA, ACTUAL_VOLUME_HA = 1, 2
@@ -161,6 +163,7 @@ class TcLink:
         self._logged_sections: tuple[bool, ...] | None = None  # the last logged
         self._earlier = self._read_earlier()  # the field's earlier sessions, read off the loop
         self._covered_before: tuple[Any, ...] = ()  # their swaths, for each SectionControl
+        self._track: deque[tuple[float, float, float, float]] = deque()  # t, lat, lon, heading
 
     def _read_earlier(self) -> Future[EarlierCoverage] | None:
         """The ground earlier sessions of this field covered (`[isobus] coverage_hours`), read
@@ -180,6 +183,11 @@ class TcLink:
 
         threading.Thread(target=read, name="tc-coverage", daemon=True).start()
         return fut
+
+    @property
+    def section_control(self) -> SectionControl | None:
+        """The served implement's section control, once placed (its coverage, its decisions)."""
+        return self._sc
 
     @property
     def coverage_read(self) -> bool:
@@ -473,10 +481,17 @@ class TcLink:
         heading_deg: float,
         speed_kmh: float,
         boundary: FieldBoundary | None,
+        now: float,
     ) -> None:
-        """A new outlet position (the device reference point): the ground the sections the
-        implement reports working passed since the last one is covered, then each section's
-        setpoint is decided for the ground just ahead of it, past its delay (DDI 142)."""
+        """A new outlet position (the device reference point) at `now`: the ground the
+        sections the implement reports working passed since the last one is covered (where
+        the machine was its DDI 143 ago: what it reports now is what was then), then each
+        section's setpoint is decided for the ground just ahead of it, past its delay (DDI
+        142)."""
+        track = self._track
+        track.append((now, lat, lon, heading_deg))
+        while track and track[0][0] < now - TRACK_S:
+            track.popleft()
         c = self._client()
         if not self._settings.cfg.isobus.section_control or c is None or c.device is None:
             self.section_on = None
@@ -494,10 +509,38 @@ class TcLink:
         self._take_earlier()
         reported = self._sections()
         if reported:
-            self._sc.cover(lat, lon, heading_deg, list(reported))
+            was = self._where(now - self.actual_latency_s())
+            self._sc.cover(*(was or (lat, lon, heading_deg)), list(reported))
         lead_m = max(speed_kmh, 0.0) / 3.6 * self.latency_ms.get(SETPOINT_LATENCY, 0) / 1000
         self.section_on = tuple(self._sc.decide(lat, lon, heading_deg, lead_m))
         self.section_why = self._sc.why
+
+    def actual_latency_s(self) -> float:
+        """The implement's actual-value delay (DDI 143: from the physical value to its report),
+        0 when its pool gives none; at most TRACK_S."""
+        ms = self.latency_ms.get(ACTUAL_LATENCY) if self.state == "ok" else None
+        return 0.0 if ms is None else min(max(ms, 0) / 1000.0, TRACK_S)
+
+    def _where(self, t: float) -> tuple[float, float, float] | None:
+        """Where the outlet was at `t` (lat, lon, heading), between the two positions around it;
+        the oldest kept when `t` is before them; None before any."""
+        later: tuple[float, float, float, float] | None = None
+        for t0, lat, lon, heading in reversed(self._track):  # the newest first: t is near
+            if t0 <= t:
+                if later is None or later[0] <= t0:
+                    return lat, lon, heading
+                f = (t - t0) / (later[0] - t0)
+                return (lat + f * (later[1] - lat), lon + f * (later[2] - lon),
+                        heading if f < 0.5 else later[3])  # fmt: skip
+            later = (t0, lat, lon, heading)
+        return None if later is None else later[1:]
+
+    def reported_where(self, now: float, lat: float, lon: float) -> tuple[float, float]:
+        """Where the implement's reports at `now` belong (the as-applied map's point): the outlet
+        its DDI 143 ago; the outlet now (`lat`, `lon`) without a delay."""
+        delay = self.actual_latency_s()
+        was = self._where(now - delay) if delay > 0.0 else None
+        return (lat, lon) if was is None else (was[0], was[1])
 
     def _set(self, c: Client, now: float, element: int, ddi: int, value: int) -> None:
         """Set a value on a change (acknowledged) or after SETPOINT_REFRESH_S (not)."""
