@@ -31,7 +31,7 @@ from topdress.isobus.devicemap import (
 )
 from topdress.isobus.node import Frame, split_id
 from topdress.isobus.poolstore import PoolStore
-from topdress.isobus.tcserver import TcServer, pd_frame, pdack_errors, tc_name
+from topdress.isobus.tcserver import Client, TcServer, pd_frame, pdack_errors, tc_name
 
 
 def test_pool_kept_and_offered_back_by_its_labels(tmp_path: Path) -> None:
@@ -223,6 +223,26 @@ def test_missing_acknowledges_said_once_per_silence_and_the_answer_again_said() 
         bus.now += STEP_US
         tc.step(bus.now, [])
     assert tc.errors[-1] == "client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"
+
+
+def test_the_server_offers_tc_geo_with_position_based_control() -> None:
+    """The version the TC answers, read as a client reads it: ISO 11783-10 version 4, TC-BAS,
+    TC-GEO with position-based control and TC-SC, 1 boom, 16 sections, 2 position-based
+    control channels; the ECU's C client takes the options."""
+    bus = connected(TcServer(tc_name(7)))
+    (answer,) = {
+        f.data
+        for f in bus.from_tc
+        if split_id(f.can_id)[1] == 0xCB00 and f.data[0] == 0x10 and split_id(f.can_id)[3] != 0xFF
+    }
+    server = Client(0, 0, version=answer)  # its options read with the client's own words
+    assert server.option_names == [
+        "documentation",
+        "TC-GEO with position-based control",
+        "implement section control",
+    ]
+    assert answer[1] == 4 and tuple(answer[5:8]) == (1, 16, 2)
+    assert bus.node.tc_state == "connected"
 
 
 def test_pdack_error_bits_in_words() -> None:

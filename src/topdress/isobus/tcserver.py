@@ -1,12 +1,13 @@
-"""The cab terminal as an ISOBUS Task Controller (ISO 11783-10 version 4, TC-BAS and TC-SC):
-claims its address with a TC NAME (the C layer's claim), sends the TC status every 2 s, answers
-the client's version and label requests (with the labels of a pool kept from an earlier
-connection, see `poolstore`), takes the device description (DDOP) over TP/ETP (the C layer's
-transport), parses and maps it (`devicemap`), activates it or refuses it with the error named,
-then sets values (acknowledges awaited) and asks for measurements by time, distance, threshold
-or change as the pool offers them. Faults (a second client, a second TC, a flood, nonsense
-process data, a client gone or re-addressed) are counted and said once in `errors`, never
-raised. Domain code: frames in, frames out, time passed in; no UI."""
+"""The cab terminal as an ISOBUS Task Controller (ISO 11783-10 version 4, TC-BAS, TC-GEO with
+position-based control, TC-SC): claims its address with a TC NAME (the C layer's claim), sends
+the TC status every 2 s, answers the client's version and label requests (with the labels of a
+pool kept from an earlier connection, see `poolstore`), takes the device description (DDOP)
+over TP/ETP (the C layer's transport), parses and maps it (`devicemap`), activates it or
+refuses it with the error named, then sets values (acknowledges awaited) and asks for
+measurements by time, distance, threshold or change as the pool offers them. Faults (a second
+client, a second TC, a flood, nonsense process data, a client gone or re-addressed) are counted
+and said once in `errors`, never raised. Domain code: frames in, frames out, time passed in;
+no UI."""
 
 from __future__ import annotations
 
@@ -71,10 +72,13 @@ KEEP_SAID = 1024  # faults said once; past this many kinds, further new ones are
 # process-data commands (low nibble of byte 0)
 TECH, DEVICE, REQUEST, VALUE, MEAS_TIME, MEAS_DISTANCE = 0, 1, 2, 3, 4, 5
 MEAS_MIN, MEAS_MAX, MEAS_CHANGE, SET_ACK, PDACK, STATUS, TASK = 6, 7, 8, 10, 13, 14, 15
-# the server's version message: version 4, options TC-BAS (bit 0) + TC-SC (bit 4), 1 boom,
-# 16 sections, 2 channels
+# the server's version message: version 4, options TC-BAS (bit 0), TC-GEO with position-based
+# control (bit 2: the terminal sends each position's rate, from its maps and crop sensors) and
+# TC-SC (bit 4); 1 boom, 16 sections, 2 position-based control channels (the two products, the
+# upper and lower layers' rates)
 VERSION = 4
-SERVER_OPTIONS = 0x11
+SERVER_OPTIONS = 0x15
+BOOMS, SECTIONS, GEO_CHANNELS = 1, 16, 2
 # the client's options byte (its version message, byte 4)
 OPTION_NAMES = (
     "documentation", "TC-GEO without position-based control", "TC-GEO with position-based "
@@ -510,7 +514,8 @@ class TcServer:
 
     def _technical(self, c: Client, d: bytes) -> None:
         if d[0] == 0x00:  # version request
-            self._send(c.address, bytes([0x10, VERSION, 0xFF, SERVER_OPTIONS, 0, 1, 16, 2]))
+            self._send(c.address, bytes([0x10, VERSION, 0xFF, SERVER_OPTIONS, 0, BOOMS, SECTIONS,
+                                         GEO_CHANNELS]))  # fmt: skip
             if c.version is None:  # ours came too early for it (AgIsoStack++): ask again
                 self._send(c.address, bytes([0x00]) + b"\xff" * 7)
         elif d[0] == 0x10:  # the client's own version, answering ours
