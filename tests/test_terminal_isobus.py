@@ -22,9 +22,11 @@ from topdress.errors import ConfigError
 from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
+from topdress.i18n import Text, render, text
+from topdress.i18n.catalogue import CATALOGUE
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
-from topdress.isobus.tcserver import map_device, tc_name
+from topdress.isobus.tcserver import map_device, pdack_texts, tc_name
 from topdress.isobus.workstate import condensed_states, condensed_value
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import format_text, summarise
@@ -553,6 +555,60 @@ def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -
     assert "ISOBUS: another Task Controller at 0xf7, TC number 1" in said  # the server's word
     whats = {f.address: f.what for f in link.view(0.0).functions}
     assert whats[0xF7] == "task controller" and "this terminal" in whats[link.server.address]
+
+
+def test_the_tcs_words_are_in_the_operators_language() -> None:
+    """What the TC link and server say are catalogue messages: Chinese on a Chinese screen,
+    English in the session log and the program log."""
+    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
+    said: list[Text] = []
+    logged: list[str] = []
+    journal = Journal(None, lambda: 0.0, said.append)
+    journal.log_event = lambda t, kind, **d: logged.append(d.get("what", ""))  # type: ignore[method-assign]
+    link = TcLink(_Port(), settings, journal)
+    t = 0.0
+    for _ in range(40):
+        t += 0.01
+        link.poll(t, (False, 0.0, 0.0, 0.0))
+    other = tc_name(99) & ~0x1FFFFF & ~(0x7FF << 21)  # a TC NAME of lower value: it wins
+    claim = can.Message(arbitration_id=6 << 26 | 0xEE00 << 8 | 0xFF << 8 | 0xF7)
+    claim.data = bytearray(other.to_bytes(8, "little"))
+    claim.dlc = 8
+    link.on_frame(claim, t)
+    for _ in range(40):
+        t += 0.01
+        link.poll(t, (False, 0.0, 0.0, 0.0))
+    new = link.server.address
+    assert new is not None
+    zh = [render(m, "zh") for m in said]
+    assert zh[0] == "ISOBUS：任务控制器地址 0xF7"
+    assert "ISOBUS：总线上另有任务控制器，地址 0xf7，任务控制器编号 1" in zh
+    assert f"ISOBUS：任务控制器从 0xF7 移至 0x{new:02X}：原地址被其他设备占用" in zh
+    assert render(link.view(0.0).problem, "zh") in [z.removeprefix("ISOBUS：") for z in zh]
+    # the session log keeps the English
+    assert "another Task Controller at 0xf7, TC number 1" in logged
+    assert f"Task Controller moved from 0xF7 to 0x{new:02X}: another took it" in logged
+
+
+def test_the_servers_faults_render_in_both_languages() -> None:
+    assert all(f"tc.pdack.{bit}" in CATALOGUE for bit in range(8))  # built at run time
+    refused = text(
+        "tc.pdack_refused", client=0x84, ddi=6, element=3,
+        why=text("tc.and", a=pdack_texts(0x90)[0], b=pdack_texts(0x90)[1]),
+    )  # fmt: skip
+    assert str(refused) == (
+        "client 0x84 refused DDI 6 of element 3: process data not settable, value outside the "
+        "operational range"
+    )
+    assert (
+        render(refused, "zh")
+        == "客户端 0x84 拒绝了元素 3 的 DDI 6：过程数据不可设置，数值超出工作范围"
+    )
+    assert render(text("tc.silent", client=0x84, ms=6000), "zh") == "客户端 0x84 已 6000 ms 无响应"
+    assert (
+        render(text("tc.ack_again", client=0x84, n=6), "zh")
+        == "客户端 0x84 恢复确认（此前缺少 6 次确认）"
+    )
 
 
 def test_an_ecu_setting_changed_with_an_isobus_implement_is_taken_without_a_push() -> None:

@@ -43,7 +43,7 @@ from topdress.geo.sectionctl import (
     earlier_coverage,
     sections_from_device,
 )
-from topdress.i18n import text
+from topdress.i18n import Text, text
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
 from topdress.isobus.tcserver import Client, Device, TcServer, tc_name
@@ -146,7 +146,7 @@ class TcLink:
         self.latency_ms: dict[int, int] = {}
         self._sent: dict[tuple[int, int], tuple[int, float]] = {}  # value and time, by var
         self.setpoints: tuple[float, ...] = ()  # per product, in its unit
-        self.problem = ""
+        self.problem: Text | str = ""  # the last thing wrong (a message, or a library's words)
         self.refused = False  # the last pool offered could not be activated
         self.refusal = ""  # why
         self._was: str = "wait"
@@ -203,7 +203,7 @@ class TcLink:
         try:
             got = fut.result()
         except Exception as exc:  # the logs unreadable as a whole: coverage starts empty
-            self._tell(f"earlier sessions' coverage not read: {exc}")
+            self._tell(text("tc.link.coverage_error", why=str(exc)))
             return
         self._covered_before = got.swaths
         if self._sc is not None and got.swaths:
@@ -216,12 +216,9 @@ class TcLink:
             skipped=list(got.skipped),
         )
         if got.sessions:
-            self._say(
-                f"section control: ground covered in {len(got.sessions)} earlier sessions of "
-                f"this field taken ({len(got.swaths)} swaths)"
-            )
+            self._say(text("tc.link.coverage", n=len(got.sessions), swaths=len(got.swaths)))
         for why in got.skipped:
-            self._tell(f"earlier session not read for the coverage: {why}")
+            self._tell(text("tc.link.coverage_skipped", why=why))
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -255,15 +252,16 @@ class TcLink:
             out = self.server.step(self._us(now), frames)
         except ProtocolError as exc:  # a frame the C layer refuses: counted, never raised
             self.counters.rx_malformed += 1
-            self._tell(f"ISOBUS frame refused: {exc}")
+            self._tell(text("tc.link.frame_refused", why=str(exc)))
             return
         for f in out:
             self._send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
         self._watch_address(now)
-        errors = self.server.errors
-        while self._errors < len(errors):
-            self._tell(errors[self._errors])
-            self._errors += 1
+        server = self.server
+        new = min(server.told - self._errors, len(server.messages))
+        self._errors = server.told
+        for what in server.messages[len(server.messages) - new :]:
+            self._tell(what)
 
     def _send(self, msg: can.Message) -> None:
         try:
@@ -275,17 +273,18 @@ class TcLink:
             self.counters.tx_errors += 1
             if not self._failing:
                 self._failing = True
-                self._tell(f"ISOBUS send failed: {exc}")
+                self._tell(text("tc.link.send_failed", why=str(exc)))
             return
         self._failing = False
         if self._on_tx is not None:
             self._on_tx(msg)
 
-    def _tell(self, what: str) -> None:
-        """Something wrong: to the operator, the session log, and `problem`."""
+    def _tell(self, what: Text | str) -> None:
+        """Something wrong: to the operator (in the language in force), the session log (in
+        English), and `problem`."""
         self.problem = what
         self._journal.event(text("event.isobus", what=what))
-        self._journal.log_event(self._journal.clock(), "isobus.problem", what=what)
+        self._journal.log_event(self._journal.clock(), "isobus.problem", what=str(what))
 
     def _watch_address(self, now: float) -> None:
         """The TC's address: claimed, taken by a control function with a higher-priority NAME
@@ -297,7 +296,7 @@ class TcLink:
                 self._no_address_since = now
             elif now - self._no_address_since > CLAIM_S and not self._said_no_address:
                 self._said_no_address = True
-                self._tell("the Task Controller has no address: every one it tried was taken")
+                self._tell(text("tc.link.no_address"))
             return
         self._no_address_since = None
         self._said_no_address = False
@@ -305,13 +304,11 @@ class TcLink:
             return
         self._claimed = address
         if was is None:
-            self._say(f"Task Controller at address 0x{address:02X}")
+            self._say(text("tc.link.at", address=address))
         else:
-            self._tell(
-                f"Task Controller moved from 0x{was:02X} to 0x{address:02X}: another took it"
-            )
+            self._tell(text("tc.link.moved", old=was, new=address))
 
-    def _say(self, what: str) -> None:
+    def _say(self, what: Text) -> None:
         self._journal.event(text("event.isobus", what=what))
 
     # ---- the tick ---------------------------------------------------------------------------
@@ -395,13 +392,16 @@ class TcLink:
         for ddi in (ACTUAL_WORK_STATE, ACTUAL_CONDENSED):
             for element in self._carrying(ddi):
                 self._measure(element, ddi, MEASURE_MS)
-        units = ", ".join(f"{p.unit} (element {p.element})" for p in products)
+        units: Text = text("tc.link.none")
+        for i, p in enumerate(products):
+            one = text("tc.link.product", unit=p.unit, element=p.element)
+            units = one if i == 0 else text("tc.and", a=units, b=one)
         self._say(
-            f"implement {c.device.designator} at 0x{c.address:02X}: DDOP active, "
-            f"{len(products)} products in {units or 'none'}, {self.sections} sections"
-        )
+            text("tc.link.implement", device=c.device.designator, address=c.address,
+                 n=len(products), units=units, sections=self.sections)
+        )  # fmt: skip
         if not products:
-            self._tell(f"{c.device.designator}: its DDOP has no settable rate (DDI 6 or 1)")
+            self._tell(text("tc.link.no_rate", device=c.device.designator))
         self._journal.log_event(
             now,
             "isobus.implement",
