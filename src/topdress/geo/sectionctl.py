@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 import shapely
-from pyproj import Transformer
+from pyproj import CRS, Transformer
 
 from topdress.errors import LogError, MapError
 from topdress.geo.asapplied import WGS84, Cover, utm_crs
@@ -78,17 +78,23 @@ class SectionControl:
         self.off_pct = off_pct
         self.look_m = look_m
         self.coverage = Cover()
+        self.crs: CRS | None = None  # the UTM zone worked in: the boundary's, or the first fix's
         self._fwd: Transformer | None = None
         self._last: list[tuple[Any, Any]] | None = None  # each section's footprint ends, UTM
         self._quads: list[tuple[Any, Any, Any, Any]] = []  # covered, not yet in `coverage`
         self._since = 0
         self.why: tuple[str, ...] = ()  # per section, why the last `decide` put it off ("": on)
         if boundary is not None:
-            self._fwd = Transformer.from_crs(WGS84, boundary.crs, always_xy=True)
+            self._use(boundary.crs)
+
+    def _use(self, crs: CRS) -> None:
+        self.crs = crs
+        self._fwd = Transformer.from_crs(WGS84, crs, always_xy=True)
 
     def _utm(self, lat: float, lon: float) -> np.ndarray:
         if self._fwd is None:
-            self._fwd = Transformer.from_crs(WGS84, utm_crs(lat, lon), always_xy=True)
+            self._use(utm_crs(lat, lon))
+        assert self._fwd is not None
         x, y = self._fwd.transform(lon, lat)
         return np.array([x, y])
 
@@ -167,6 +173,21 @@ class SectionControl:
         self._quads = []
         self.coverage.add(np.asarray(quads, dtype=object))
 
+    def add_cover(self, cover: Cover, crs: CRS) -> bool:
+        """Ground covered before, as tiles made elsewhere (off the loop: `earlier_coverage`) in
+        `crs`: taken tile by tile (a union only where this coverage has ground in the same
+        tile). False, nothing taken, when this section control works in another zone."""
+        if self.crs is None:
+            self._use(crs)
+        if self.crs != crs:
+            return False
+        self._flush()
+        tiles = self.coverage.tiles
+        for key, g in cover.tiles.items():
+            old = tiles.get(key)
+            tiles[key] = g if old is None else shapely.union(old, g)
+        return True
+
     def add_covered_wgs84(self, geoms: Any) -> None:
         """Ground covered before (as-applied swaths in WGS 84, e.g. of an earlier session)."""
         parts = [g for g in shapely.get_parts(np.atleast_1d(geoms)) if not g.is_empty]
@@ -186,11 +207,32 @@ class SectionControl:
 @dataclass(frozen=True)
 class EarlierCoverage:
     """The ground earlier sessions of the field covered: their as-applied swaths (WGS 84),
-    the session files they came from, and those that could not be read (name: why)."""
+    the same as covered tiles (`cover`, in `crs`, their UTM zone; None without swaths), the
+    session files they came from, and those that could not be read
+    (name: why)."""
 
     swaths: tuple[Any, ...]
     sessions: tuple[str, ...]
     skipped: tuple[str, ...]
+    cover: Cover | None = None
+    crs: CRS | None = None
+
+
+def _tiles(swaths: list[Any]) -> tuple[Cover | None, CRS | None]:
+    """The swaths (WGS 84) as covered tiles in their UTM zone (a field's boundary is in the
+    same one, but for a field across a zone's edge)."""
+    if not swaths:
+        return None, None
+    x0, y0, x1, y1 = shapely.total_bounds(np.array(swaths, dtype=object))
+    crs = utm_crs((y0 + y1) / 2, (x0 + x1) / 2)
+    fwd = Transformer.from_crs(WGS84, crs, always_xy=True)
+    utm = shapely.transform(
+        np.array(swaths, dtype=object),
+        lambda xy: np.column_stack(fwd.transform(xy[:, 0], xy[:, 1])),
+    )
+    cover = Cover()
+    cover.add(shapely.make_valid(utm))
+    return cover, crs
 
 
 def _created(reader: SessionReader) -> datetime | None:
@@ -204,8 +246,9 @@ def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
     """The as-applied swaths of the sessions beside `session` (the one being written) that
     count for its coverage: created within `hours` before it, with the same `[boundary] path`
     and `layer` (the same field; two sessions without a boundary count alike, their swaths
-    only matter where the machine drives again). A session that cannot be read is skipped and
-    named. Reads files: run it off the control loop."""
+    only matter where the machine drives again), also made into covered tiles. A session that
+    cannot be read is skipped and named. Reads files and unites the swaths (seconds for an
+    hour of log): run it off the control loop."""
     with SessionReader(session) as reader:
         now = _created(reader)
         mine = session_config(reader.config_toml).boundary
@@ -232,4 +275,5 @@ def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
             continue
         used.append(path.name)
         swaths.extend(got)
-    return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped))
+    cover, crs = _tiles(swaths)
+    return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped), cover, crs)
