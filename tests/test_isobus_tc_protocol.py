@@ -6,6 +6,7 @@ and their errors read, the client's options (TC-GEO) read from its version messa
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ from tc_rig import (
     DDOP,
     ECU_NAME,
     STEP_US,
+    TC,
     client_frames,
     connected,
     replay_agiso,
@@ -243,6 +245,26 @@ def test_the_server_offers_tc_geo_with_position_based_control() -> None:
     ]
     assert answer[1] == 4 and tuple(answer[5:8]) == (1, 16, 2)
     assert bus.node.tc_state == "connected"
+
+
+@pytest.mark.interop
+def test_agiso_client_live_against_the_tc_offering_tc_geo() -> None:
+    """Recorded live (docs/isobus.md): AgIsoStack++'s client against this server announcing
+    TC-GEO with position-based control (0x15, 2 channels). It activated its pool, took the
+    rates (150, then 180 kg/ha) and sections and reported; its side replayed here too."""
+    trace = DATA / "topdress_tc_geo_session.log"
+    server = [f.data for _, f in client_frames(trace, sources=(TC,))]
+    assert bytes([0x10, 4, 0xFF, 0x15, 0, 1, 16, 2]) in server
+    assert bytes([0x91, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0, 0xFF]) in server  # activated
+    reported = [
+        struct.unpack_from("<i", f.data, 4)[0]
+        for _, f in client_frames(trace)
+        if split_id(f.can_id)[1] == 0xCB00 and f.data[0] == 0x33 and f.data[2:4] == b"\x07\x00"
+    ]
+    assert reported and reported[-1] == pytest.approx(18000, rel=0.01)  # bin 1 at 180 kg/ha
+    tc, _ = replay_agiso(trace)
+    c = tc.client
+    assert c is not None and c.active and c.geo and tc.errors == []
 
 
 def test_pdack_error_bits_in_words() -> None:
