@@ -13,14 +13,18 @@ blocks (the port sends from its own thread). Once a client's pool (DDOP) is acti
   operator's start and the site's rate; with `[isobus] section_control` each section is also
   off over ground already covered (what the implement reported working, DDI 161) and outside
   the field boundary (geo.sectionctl, decided at each new outlet position: `on_position`);
-  with no boundary and nothing covered yet, all sections go with the rate;
+  with no boundary and nothing covered yet, all sections go with the rate; the ground earlier
+  sessions of the field covered (`[isobus] coverage_hours`) is read in a thread at start and
+  counts as covered; each switch of the sections commanded is an `isobus.sections` event;
 - asks for the actual rates (DDI 7/2), the work state (141), the sections (161) every
   MEASURE_MS and the totals (DDI 81/80) every TOTAL_MS;
-- reads the implement's delays from its pool (DDI 142, 143): 142 sets the look-ahead;
+- reads the implement's delays from its pool (DDI 142, 143): 142 sets the look-ahead, 143
+  puts its reports (the as-applied position, the ground covered) where the outlet was then;
 - keeps who is on the bus: every address claim heard, its NAME decoded.
 
 What goes wrong (a pool refused, the client silent, a value refused) becomes an event in the
-session log and the operator's words; `problem` and `state` feed the alarms.
+session log (English) and the operator's words (catalogue messages, topdress.i18n); `problem`
+and `state` feed the alarms.
 """
 
 from __future__ import annotations
