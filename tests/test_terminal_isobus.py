@@ -612,7 +612,10 @@ def test_the_servers_faults_render_in_both_languages() -> None:
 
 
 def test_an_ecu_setting_changed_with_an_isobus_implement_is_taken_without_a_push() -> None:
-    rig = IsobusRig(loads_config(DEFAULT_TOML), _drive(0.0, 0.0))
+    # an implement that is not a topdress ECU (another manufacturer code in its NAME): it has no
+    # topdress parameters (a topdress ECU's are pushed: tests/test_terminal_isobus_prop.py)
+    cfg = loads_config(DEFAULT_TOML)
+    rig = IsobusRig(replace(cfg, isobus=replace(cfg.isobus, ecu_manufacturer=5)), _drive(0.0, 0.0))
     try:
         rig.run(3.0)
         fut = rig.term.post(ApplySettings("speed", {"switch_speed_kmh": 7.0}))

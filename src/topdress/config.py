@@ -317,6 +317,10 @@ class IsobusConfig:
     # earlier sessions of the same field (same [boundary] path) started within this many
     # hours before this one: their as-applied swaths count as covered; 0 = none
     coverage_hours: float = _num(24.0, 0.0, 8760.0)
+    # The topdress ECU's NAME manufacturer code (its firmware's FW_ISOBUS_MANUFACTURER): an
+    # implement with it, the ECU's NAME function and a DDOP named "topdress" is spoken to in
+    # the ECU's private frames on Proprietary A/B (parameters, calibrations, its broadcasts).
+    ecu_manufacturer: int = _num(0, 0, 2047)
 
 
 @dataclass(frozen=True)
@@ -924,5 +928,6 @@ section_control = true     # sections off over ground covered and outside the bo
 overlap_pct = 50.0         # a section goes off when more of its ground ahead is done/outside
 section_look_m = 1.0       # the strip of ground each section looks at, m (past its delay)
 coverage_hours = 24.0      # sessions of the same field this recent count as covered; 0 = none
+ecu_manufacturer = 0       # the topdress ECU's NAME manufacturer code (FW_ISOBUS_MANUFACTURER)
 """
 )

@@ -195,6 +195,16 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "the ECU is {state}: calibration needs it",
         "控制器{state}：标定需要控制器",
     ),
+    # calibrations on an ISOBUS (terminal/proplink.py): only with a topdress ECU served
+    "op.error.cal_isobus_not_topdress": (
+        "calibration needs the topdress ECU; the ISOBUS implement is not one ({why})",
+        "标定需要topdress控制器；该ISOBUS机具不是（{why}）",
+    ),
+    "op.error.cal_isobus_fans": (
+        "the fan check and the look-ahead calibration need the fans started by the terminal's "
+        "command, which an ISOBUS does not carry: run them on the ECU's own bus",
+        "风机检查和前视标定需要终端命令启动风机，ISOBUS不传送该命令：请在控制器自己的总线上进行",
+    ),
     "op.error.no_device": (
         "no device {device!r} (gnss, crop, can)",
         "没有设备 {device!r}（gnss、crop、can）",
@@ -271,6 +281,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",
     ),
     "event.ecu_back": ("ECU back", "控制器已恢复"),
+    "event.ecu_reconnected": (
+        "ECU connected to the Task Controller again: its parameters are sent again",
+        "控制器重新连接任务控制器：重新发送参数",
+    ),
     "event.ecu_restarted": (
         "ECU restarted on its defaults: its parameters are sent again",
         "控制器已重启并使用默认参数：重新发送参数",
@@ -311,6 +325,12 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "status but does not answer (check [can.ids]); still trying",
         "等待控制器：参数 {name} 在 CAN {where} 上发送 {tries} 次未确认；控制器发送状态帧但不应答"
         "（请检查 [can.ids]）；继续重试",
+    ),
+    "event.ecu_wait_deaf_isobus": (
+        "ECU wait: {name} unacknowledged after {tries} tries on the ISOBUS ({where}); the ECU "
+        "sends status but does not answer the Task Controller; still trying",
+        "等待控制器：参数 {name} 在ISOBUS（{where}）上发送 {tries} 次未确认；"
+        "控制器发送状态帧但不应答任务控制器；继续重试",
     ),
     "event.udp_multicast": (
         "warning: CAN over udp_multicast: any host on this network can read and inject frames "
