@@ -318,7 +318,7 @@ class IsobusCard:
                 actual=fmt.num(v.actual_latency_ms, "d"),
             )
         )
-        self.problem.set_text(v.problem)
+        self.problem.set_text(render(v.problem))
         self._rows(
             self.functions,
             "_functions",

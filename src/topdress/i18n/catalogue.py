@@ -431,6 +431,115 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "机具描述（DDOP）被拒绝：{why}",
     ),
     "event.isobus": ("ISOBUS: {what}", "ISOBUS：{what}"),
+    # what the terminal's Task Controller says (isobus/tcserver.py, terminal/tclink.py)
+    "tc.frame_refused": ("frame {id:08X} refused: {why}", "帧 {id:08X} 被拒绝：{why}"),
+    "tc.silent": ("client {client:#x} silent for {ms} ms", "客户端 {client:#x} 已 {ms} ms 无响应"),
+    "tc.no_ack": (
+        "client {client:#x} did not acknowledge DDI {ddi} of element {element} within {ms} ms",
+        "客户端 {client:#x} 未在 {ms} ms 内确认元素 {element} 的 DDI {ddi}",
+    ),
+    "tc.ack_again": (
+        "client {client:#x} acknowledges again ({n} acknowledges were missing)",
+        "客户端 {client:#x} 恢复确认（此前缺少 {n} 次确认）",
+    ),
+    "tc.displaced": (
+        "client {client:#x}'s address taken by NAME {name:016X}: client dropped",
+        "客户端 {client:#x} 的地址被 NAME {name:016X} 占用：已断开该客户端",
+    ),
+    "tc.moved": (
+        "client NAME {name:016X} moved from {old:#x} to {new:#x}: it must connect again",
+        "客户端 NAME {name:016X} 从 {old:#x} 移至 {new:#x}：须重新连接",
+    ),
+    "tc.other_tc": (
+        "another Task Controller at {address:#x}",
+        "总线上另有任务控制器，地址 {address:#x}",
+    ),
+    "tc.other_tc_number": (
+        "another Task Controller at {address:#x}, TC number {number}",
+        "总线上另有任务控制器，地址 {address:#x}，任务控制器编号 {number}",
+    ),
+    "tc.elsewhere": (
+        "client {client:#x} works with the Task Controller at {tc:#x}",
+        "客户端 {client:#x} 已与地址 {tc:#x} 的任务控制器连接",
+    ),
+    "tc.flood": (
+        "address {address:#x} floods the TC (over {n} process-data messages a second): the "
+        "excess dropped",
+        "地址 {address:#x} 向任务控制器发送过多（每秒超过 {n} 条过程数据）：超出部分已丢弃",
+    ),
+    "tc.second_client": (
+        "client {client:#x} refused: the TC serves {served:#x}, one at a time",
+        "客户端 {client:#x} 被拒绝：任务控制器正在服务 {served:#x}，每次只服务一个",
+    ),
+    "tc.pool_too_large": (
+        "client {client:#x} offers a {size}-byte DDOP, too large",
+        "客户端 {client:#x} 提供的 DDOP 为 {size} 字节，过大",
+    ),
+    "tc.stored_corrupt": (
+        "client {client:#x}: {why}; its pool is asked for again",
+        "客户端 {client:#x}：{why}；已重新请求其对象池",
+    ),
+    "tc.pool_bad": ("client {client:#x}: {why}", "客户端 {client:#x}：{why}"),
+    "tc.activation_refused": (
+        "client {client:#x}: activation refused, no valid DDOP",
+        "客户端 {client:#x}：激活被拒绝，没有有效的 DDOP",
+    ),
+    "tc.not_kept": (
+        "DDOP of client {client:#x} not kept: {why}",
+        "客户端 {client:#x} 的 DDOP 未能保存：{why}",
+    ),
+    "tc.unknown_value": (
+        "client {client:#x} reports DDI {ddi} of element {element}, which its DDOP does not have",
+        "客户端 {client:#x} 报告了元素 {element} 的 DDI {ddi}，其 DDOP 中没有该项",
+    ),
+    "tc.pdack_refused": (
+        "client {client:#x} refused DDI {ddi} of element {element}: {why}",
+        "客户端 {client:#x} 拒绝了元素 {element} 的 DDI {ddi}：{why}",
+    ),
+    "tc.and": ("{a}, {b}", "{a}，{b}"),
+    "tc.pdack.0": ("process data command not supported", "不支持该过程数据命令"),
+    "tc.pdack.1": ("invalid element number", "元素编号无效"),
+    "tc.pdack.2": ("DDI not supported by the element", "该元素不支持此 DDI"),
+    "tc.pdack.3": ("trigger method not supported", "不支持该触发方式"),
+    "tc.pdack.4": ("process data not settable", "过程数据不可设置"),
+    "tc.pdack.5": ("invalid or unsupported interval or threshold", "间隔或阈值无效或不受支持"),
+    "tc.pdack.6": ("value does not conform to the DDI definition", "数值不符合 DDI 定义"),
+    "tc.pdack.7": ("value outside the operational range", "数值超出工作范围"),
+    "tc.link.frame_refused": ("ISOBUS frame refused: {why}", "ISOBUS 帧被拒绝：{why}"),
+    "tc.link.send_failed": ("ISOBUS send failed: {why}", "ISOBUS 发送失败：{why}"),
+    "tc.link.no_address": (
+        "the Task Controller has no address: every one it tried was taken",
+        "任务控制器没有地址：尝试过的地址均已被占用",
+    ),
+    "tc.link.at": ("Task Controller at address 0x{address:02X}", "任务控制器地址 0x{address:02X}"),
+    "tc.link.moved": (
+        "Task Controller moved from 0x{old:02X} to 0x{new:02X}: another took it",
+        "任务控制器从 0x{old:02X} 移至 0x{new:02X}：原地址被其他设备占用",
+    ),
+    "tc.link.implement": (
+        "implement {device} at 0x{address:02X}: DDOP active, {n} products in {units}, "
+        "{sections} sections",
+        "机具 {device}（0x{address:02X}）：DDOP 已激活，{n} 种物料（{units}），{sections} 个作业段",
+    ),
+    "tc.link.product": ("{unit} (element {element})", "{unit}（元素 {element}）"),
+    "tc.link.none": ("none", "无"),
+    "tc.link.no_rate": (
+        "{device}: its DDOP has no settable rate (DDI 6 or 1)",
+        "{device}：其 DDOP 没有可设置的施肥量（DDI 6 或 1）",
+    ),
+    "tc.link.coverage": (
+        "section control: ground covered in {n} earlier sessions of this field taken "
+        "({swaths} swaths)",
+        "分段控制：已计入本地块之前 {n} 次作业的覆盖区域（{swaths} 条幅带）",
+    ),
+    "tc.link.coverage_error": (
+        "earlier sessions' coverage not read: {why}",
+        "未能读取之前作业的覆盖区域：{why}",
+    ),
+    "tc.link.coverage_skipped": (
+        "earlier session not read for the coverage: {why}",
+        "读取覆盖区域时跳过了一次之前的作业：{why}",
+    ),
     "alarm.wrong_field_prescription": (
         "far outside the prescription map: wrong field?",
         "远离处方图：地块错误？",
