@@ -69,9 +69,10 @@ lint: $(STAMP) lint-c
 	$(BIN)/mypy
 
 # The whole suite with Python line coverage (printed; at least 85 %) and the slowest 15 tests.
+# Four workers on two cores: the slowest tests mostly wait on a browser, a demo or QEMU.
 pytest: $(STAMP) browser qemu office
 	$(BIN)/python -m pytest -q --durations=15 --cov=topdress --cov-report=term:skip-covered \
-	    --cov-fail-under=85 -n 2
+	    --cov-fail-under=85 -n 4
 
 # The fast tier's tests: no browser, no QEMU, no wall-clock demo (markers in pyproject.toml).
 pytest-fast: $(STAMP) office

@@ -296,7 +296,9 @@ class IsobusImplement:
 
         self.bus = udp_bus(group)
         self.spy_bus = udp_bus(group)
-        self.node = IsobusNode(topdress_name(0, b"bench"), tc_timeout_ms=3000)
+        # Not the terminal's [isobus] ecu_manufacturer (0): the node alone has no core to
+        # answer the topdress ECU's private frames, so it is served as any ISOBUS implement.
+        self.node = IsobusNode(topdress_name(1, b"bench"), tc_timeout_ms=3000)
         self.stop = threading.Event()
         self.lock = threading.Lock()
         self.writes: list[float] = []  # RMC write times not yet matched

@@ -1080,8 +1080,9 @@ def test_only_values_shown_with_their_unit_word_change_units() -> None:
 
 
 def isobus_view(**kw: object) -> IsobusView:
-    """A spreader served as Task Controller: two products, six sections (two off), three
-    control functions (the terminal, the implement, a virtual terminal)."""
+    """A spreader served as Task Controller: two products, six sections (two off), four
+    control functions (a virtual terminal, the implement, a tractor ECU of a maker not in the
+    manufacturer table, the terminal), their NAMEs encoded from the fields given."""
     base: dict[str, object] = dict(
         tc_address=247,
         state="ok",
@@ -1097,10 +1098,13 @@ def isobus_view(**kw: object) -> IsobusView:
         actual_latency_ms=None,
         lookahead_s=1.25,
         functions=(
-            ControlFunctionView(38, 0xA00A8C00_4BE00017, 29, 0, 2, 607, 23, "virtual terminal"),
-            ControlFunctionView(134, 0xA0048000_000001A2, 128, 4, 2, 0, 418, "implement (served)"),
+            ControlFunctionView(38, 0xA0001D00_0C400017, 29, 0, 2, 98, 23, "virtual terminal"),
             ControlFunctionView(
-                247, 0xA0008200_000000C8, 130, 0, 2, 0, 200, "task controller (this terminal)"
+                134, 0xA00A8400_256001A2, 132, 5, 2, 299, 418, "implement (served)"
+            ),
+            ControlFunctionView(240, 0x20008600_4BE01B59, 134, 0, 2, 607, 7001, "function 134"),
+            ControlFunctionView(
+                247, 0xA0008200_AFE000C8, 130, 0, 2, 1407, 200, "task controller (this terminal)"
             ),
         ),
     )
@@ -1134,11 +1138,18 @@ async def test_communication_screen_shows_the_isobus_implement(user: User) -> No
     (functions,) = user.find(marker="isobus_functions").elements
     rows = functions.rows  # type: ignore[attr-defined]
     assert [(r["address"], r["name"], r["what"]) for r in rows] == [
-        ("38", "A00A8C004BE00017", "virtual terminal"),
-        ("134", "A0048000000001A2", "implement (served)"),
-        ("247", "A0008200000000C8", "task controller (this terminal)"),
+        ("38", "A0001D000C400017", "Virtual Terminal (in cab)"),
+        ("134", "A00A8400256001A2", "implement served: Fertilizers Machine Control"),
+        ("240", "200086004BE01B59", "Tractor ECU"),
+        ("247", "A0008200AFE000C8", "task controller (this terminal)"),
     ]
-    assert rows[1]["decoded"] == ("function 128, class 4, group 2, manufacturer 0, identity 418")
+    assert [r["decoded"] for r in rows] == [
+        "function 29, class 0, group 2, manufacturer Mueller-Elektronik GmbH & Co (98), "
+        "identity 23",
+        "function 132, class 5, group 2, manufacturer Rauch (299), identity 418",
+        "function 134, class 0, group 2, manufacturer 607, identity 7001",  # not in the table
+        "function 130, class 0, group 2, manufacturer Open-Agriculture (1407), identity 200",
+    ]
     # the implement lost, with the terminal's words for it
     hub.publish(working(isobus=isobus_view(state="lost", problem="implement 134 silent 3.0 s")))
     await shows(user, "isobus_tc", "task controller at address 247: lost")
@@ -1168,6 +1179,39 @@ async def test_communication_screen_shows_the_isobus_implement(user: User) -> No
     assert text_of(user, "isobus_sections") == "作业段 ■■□■□■（6 段中 4 段开）"
     assert text_of(user, "isobus_implement") == "机具 Spreader 2400，地址 134 · 作业中"
     i18n.set_language("en")
+
+
+async def test_the_chinese_screen_names_the_control_functions_in_chinese(user: User) -> None:
+    hub = DisplayHub(default_config)
+    hub.publish(working(isobus=isobus_view()))
+    register_pages(hub)
+    i18n.set_language("zh")
+    try:
+        await user.open("/communication")
+        await shows(user, "isobus_tc", "任务控制器地址 247：正常")
+        (functions,) = user.find(marker="isobus_functions").elements
+        rows = functions.rows  # type: ignore[attr-defined]
+        assert [(r["address"], r["what"]) for r in rows] == [
+            ("38", "虚拟终端（驾驶室）"),
+            ("134", "所服务的机具：施肥机机器控制"),
+            ("240", "拖拉机控制单元"),
+            ("247", "任务控制器（本终端）"),
+        ]
+        # the makers' names as they are written, the rest of the fields in Chinese
+        assert rows[1]["decoded"] == "功能 132，设备类 5，行业组 2，制造商 Rauch (299)，标识号 418"
+        assert rows[2]["decoded"] == "功能 134，设备类 0，行业组 2，制造商 607，标识号 7001"
+        # and back to English when the operator switches
+        i18n.set_language("en")
+        await shows(user, "isobus_tc", "task controller at address 247: ok")
+        for _ in range(40):
+            with contextlib.suppress(AssertionError):  # the screen is built anew, then drawn
+                (functions,) = user.find(marker="isobus_functions").elements
+                if functions.rows and functions.rows[0]["what"].isascii():  # type: ignore[attr-defined]
+                    break
+            await asyncio.sleep(0.05)
+        assert functions.rows[2]["what"] == "Tractor ECU"  # type: ignore[attr-defined]
+    finally:
+        i18n.set_language("en")
 
 
 async def test_no_isobus_card_with_the_topdress_ecu(user: User) -> None:

@@ -102,14 +102,17 @@ def test_emulated_isobus_ecu_claims_its_address() -> None:
 @pytest.mark.qemu
 @pytest.mark.skipif(qemu_missing() is not None, reason=str(qemu_missing()))
 def test_emulated_isobus_ecu_activates_its_pool_with_a_tc() -> None:
-    """A whole TC session with the firmware on its own tick: claim, pool by TP, activated."""
-    from topdress.isobus.node import Frame
+    """A whole TC session with the firmware on its own tick: claim, pool by TP, activated; then
+    the ECU says who it is (EcuIdent on Proprietary B from its claimed address)."""
+    from topdress.isobus.node import Frame, from_bus
     from topdress.isobus.tcserver import TcServer, tc_name
+    from topdress.protocol import EcuIdent, decode
 
     out = REPO / "build" / "fw-qemu-isobus"
     done = _make(out, "FW_ISOBUS=1", "VARIANT=qemu")
     assert done.returncode == 0, done.stderr
     tc = TcServer(tc_name(7))
+    idents: list[EcuIdent] = []
     with QemuEcu(QemuOptions(image=out / ELF)) as ecu:
         HilLink(ecu.bus).send_clock(0, 0, free_run=True)
         t0 = time.monotonic()
@@ -123,11 +126,16 @@ def test_emulated_isobus_ecu_activates_its_pool_with_a_tc() -> None:
             now_us = int((time.monotonic() - t0) * 1e6)
             for f in tc.step(now_us, heard):
                 ecu.bus.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
-            if tc.client is not None and tc.client.active:
+            for f in heard:
+                core = from_bus(f, by_ecu=True, peer=0x84, my_address=0xF7)
+                if core is not None and isinstance(d := decode((core.can_id, core.data)), EcuIdent):
+                    idents.append(d)
+            if tc.client is not None and tc.client.active and idents:
                 break
     assert tc.client is not None, tc.errors
     assert tc.client.address == 0x84
     assert tc.client.active, tc.errors
+    assert idents and idents[0].target == "stm32f4" and idents[0].on_defaults, idents
 
 
 @pytest.mark.qemu

@@ -6,18 +6,23 @@ swaths of an earlier session; the condensed work state the TC sends."""
 
 from __future__ import annotations
 
+import sqlite3
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
 import shapely
 
 from tc_rig import DDOP, connected
+from topdress.geo.asapplied import utm_crs
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.outlet import offset_position
-from topdress.geo.sectionctl import Section, SectionControl, sections_from_device
+from topdress.geo.sectionctl import Section, SectionControl, earlier_coverage, sections_from_device
 from topdress.isobus.devicemap import map_device
 from topdress.isobus.tcserver import TcServer, tc_name
 from topdress.isobus.workstate import condensed_states, condensed_value
+from topdress.log.model import StateRow
+from topdress.log.session import SessionLog
 
 SW = (48.10, 11.50)  # the field's south-west corner
 NORTH, SOUTH = 0.0, 180.0
@@ -180,3 +185,59 @@ def test_closed_loop_with_the_ecu_client_through_the_tc() -> None:
     mid = drive(5.0, SOUTH, _steps(102.0, 50.0, 0.28))
     assert mid == 0b011111  # heading south section 6 is at east 3.2..3.8 m: the first pass's
     assert tc.errors == [] and tc.counters["pdacks_ok"] >= len(sent)
+
+
+def _session(logs: Path, toml: str, east_m: float, created: str | None = None) -> Path:
+    """A session of one 40 m pass north at 8 km/h, `east_m` east of the field's corner, its
+    meters turning; `created` overrides its creation time (ISO 8601)."""
+    with SessionLog.create(logs, toml) as log:
+        for i in range(200):
+            t = i * 0.1
+            lat, lon = at(east_m, 5.0 + t * 8.0 / 3.6)
+            log.state(
+                StateRow(
+                    t, lat, lon, 8.0, 8.0, 8.0, "gnss", 1.0, 0.6, 120.0, 120.0,
+                    20.0, 20.0, 20.0, 20.0, 3000.0, 3000.0, 0, utc=1.78e9 + t,
+                    utc_source="gnss", heading_deg=0.0, outlet_lat=lat, outlet_lon=lon,
+                )
+            )  # fmt: skip
+    if created is not None:
+        with sqlite3.connect(log.path) as db:
+            db.execute("UPDATE meta SET value = ? WHERE key = 'created_utc'", (created,))
+    return log.path
+
+
+def test_earlier_sessions_of_the_same_field_and_window_count_and_make_tiles(
+    tmp_path: Path,
+) -> None:
+    logs = tmp_path / "logs"
+    field = '[boundary]\npath = "field.geojson"\n'
+    now = datetime.now(UTC)
+    recent = (now - timedelta(hours=3)).isoformat(timespec="seconds")
+    old = (now - timedelta(hours=30)).isoformat(timespec="seconds")
+    same = _session(logs, field, 10.0, recent)
+    _session(logs, field, 20.0, old)  # the field's last dressing, a day before: not covered
+    _session(logs, '[boundary]\npath = "other.geojson"\n', 30.0, recent)  # another field
+    (logs / "broken.sqlite").write_bytes(b"not a session")
+    current = SessionLog.create(logs, field)
+    try:
+        got = earlier_coverage(current.path, 24.0)
+        wider = earlier_coverage(current.path, 48.0)
+    finally:
+        current.close()
+    assert got.sessions == (same.name,)
+    assert len(got.skipped) == 1 and got.skipped[0].startswith("broken.sqlite: ")
+    assert len(wider.sessions) == 2
+    # the swaths as tiles, in their UTM zone (the field's, 32N): 44.4 m of a pass of the
+    # machine's width (3.6 m, the session's [machine] width_m)
+    assert got.cover is not None and got.crs == utm_crs(*SW)
+    area = sum(shapely.area(g) for g in got.cover.tiles.values())
+    assert area == pytest.approx(3.6 * 44.4, rel=0.02)
+    # taken by a section control working in that zone; refused by one in another
+    sc = SectionControl([Section(0.0, 0.0, 3.0)], _field())
+    assert sc.add_cover(got.cover, got.crs)
+    assert sc.decide(*at(10.0, 20.0), NORTH) == [False]  # over the earlier pass: off
+    assert sc.decide(*at(40.0, 20.0), NORTH) == [True]
+    elsewhere = SectionControl([Section(0.0, 0.0, 3.0)], None)
+    elsewhere.decide(48.10, 5.90, NORTH)  # its first fix in UTM 31N
+    assert not elsewhere.add_cover(got.cover, got.crs)

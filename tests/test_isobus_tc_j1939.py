@@ -122,6 +122,14 @@ def test_j1939_client_uploads_its_pool_over_tp_and_is_activated(peer: tuple[Bus,
     got: list[bytes] = []
     ca.subscribe(lambda prio, pgn, sa, ts, data: got.append(bytes(data)) if pgn == 0xCB00 else None)
     _wait(lambda: ca.device_address == 0x80)
+
+    def task_message(cookie: Any) -> bool:
+        """The client's task message every 2 s (ISO 11783-10): a client that keeps it is not
+        dropped however slowly this run goes."""
+        ca.send_pgn(0, 0xCB, TC, 6, [0xFF, 0xFF, 0xFF, 0xFF, 0, 0, 0, 0])
+        return True
+
+    ca.add_timer(2.0, task_message)
     w.pump(0.4)
 
     def send(pf: int, ps: int, data: bytes, answer: int | None, seconds: float = 2.0) -> None:

@@ -6,6 +6,7 @@ and their errors read, the client's options (TC-GEO) read from its version messa
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ from tc_rig import (
     DDOP,
     ECU_NAME,
     STEP_US,
+    TC,
     client_frames,
     connected,
     replay_agiso,
@@ -31,7 +33,7 @@ from topdress.isobus.devicemap import (
 )
 from topdress.isobus.node import Frame, split_id
 from topdress.isobus.poolstore import PoolStore
-from topdress.isobus.tcserver import TcServer, pd_frame, pdack_errors, tc_name
+from topdress.isobus.tcserver import Client, TcServer, pd_frame, pdack_errors, tc_name
 
 
 def test_pool_kept_and_offered_back_by_its_labels(tmp_path: Path) -> None:
@@ -188,6 +190,81 @@ def test_pdack_errors_read_and_a_missing_acknowledge_reported() -> None:
         tc.step(bus.now, [])
     assert tc.counters["pdacks_missing"] == 1
     assert "did not acknowledge DDI 6 of element 3 within 1000 ms" in tc.errors[-1]
+
+
+def test_missing_acknowledges_said_once_per_silence_and_the_answer_again_said() -> None:
+    """A client that stops hearing the TC misses the acknowledges of the values set (two rates
+    every 0.5 s for 4 s): counted each, said once; when it acknowledges again, that is said."""
+    bus = connected(TcServer(tc_name(7)))
+    tc = bus.tc
+    c = tc.client
+    assert c is not None
+    said = len(tc.errors)
+    for k in range(8):  # its frames no longer reach it (the bus is not run)
+        tc.set_value(3, 6, 12000 + k)
+        tc.set_value(4, 6, 12000 + k)
+        for _ in range(50):
+            bus.now += STEP_US
+            tc.step(bus.now, [])
+    missing = tc.counters["pdacks_missing"]
+    # an awaited acknowledge is due 1 s after the first set of its DDI: at 1 s and 2.5 s each
+    assert missing == 4
+    new = tc.errors[said:]
+    assert new == ["client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"]
+    bus.run(0.2)  # it hears the TC again within its 6 s (the two set at 3 s are missed too)
+    missing = tc.counters["pdacks_missing"]
+    assert missing == 6 and tc.errors[said + 1 :] == []
+    tc.set_value(3, 6, 15000)
+    bus.run(0.3)
+    assert tc.errors[said + 1 :] == [
+        f"client 0x84 acknowledges again ({missing} acknowledges were missing)"
+    ]
+    assert c.unanswered == 0 and not c.lost
+    tc.set_value(3, 6, 15500)  # a later miss is a new silence: said again
+    for _ in range(120):
+        bus.now += STEP_US
+        tc.step(bus.now, [])
+    assert tc.errors[-1] == "client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"
+
+
+def test_the_server_offers_tc_geo_with_position_based_control() -> None:
+    """The version the TC answers, read as a client reads it: ISO 11783-10 version 4, TC-BAS,
+    TC-GEO with position-based control and TC-SC, 1 boom, 16 sections, 2 position-based
+    control channels; the ECU's C client takes the options."""
+    bus = connected(TcServer(tc_name(7)))
+    (answer,) = {
+        f.data
+        for f in bus.from_tc
+        if split_id(f.can_id)[1] == 0xCB00 and f.data[0] == 0x10 and split_id(f.can_id)[3] != 0xFF
+    }
+    server = Client(0, 0, version=answer)  # its options read with the client's own words
+    assert server.option_names == [
+        "documentation",
+        "TC-GEO with position-based control",
+        "implement section control",
+    ]
+    assert answer[1] == 4 and tuple(answer[5:8]) == (1, 16, 2)
+    assert bus.node.tc_state == "connected"
+
+
+@pytest.mark.interop
+def test_agiso_client_live_against_the_tc_offering_tc_geo() -> None:
+    """Recorded live (docs/isobus.md): AgIsoStack++'s client against this server announcing
+    TC-GEO with position-based control (0x15, 2 channels). It activated its pool, took the
+    rates (150, then 180 kg/ha) and sections and reported; its side replayed here too."""
+    trace = DATA / "topdress_tc_geo_session.log"
+    server = [f.data for _, f in client_frames(trace, sources=(TC,))]
+    assert bytes([0x10, 4, 0xFF, 0x15, 0, 1, 16, 2]) in server
+    assert bytes([0x91, 0, 0xFF, 0xFF, 0xFF, 0xFF, 0, 0xFF]) in server  # activated
+    reported = [
+        struct.unpack_from("<i", f.data, 4)[0]
+        for _, f in client_frames(trace)
+        if split_id(f.can_id)[1] == 0xCB00 and f.data[0] == 0x33 and f.data[2:4] == b"\x07\x00"
+    ]
+    assert reported and reported[-1] == pytest.approx(18000, rel=0.01)  # bin 1 at 180 kg/ha
+    tc, _ = replay_agiso(trace)
+    c = tc.client
+    assert c is not None and c.active and c.geo and tc.errors == []
 
 
 def test_pdack_error_bits_in_words() -> None:

@@ -29,7 +29,9 @@ def test_agiso_client_pool_accepted_activated_and_measured() -> None:
     assert sorted(c.device.bins) == [3, 4] and c.device.sections == [5, 6, 7, 8, 9, 10]
     assert c.device.condensed == {290: 2, 161: 2}
     mine = [f.data for f in sent if split_id(f.can_id)[3] == CLIENT]
-    assert bytes([0x10, 4, 0xFF, 0x11, 0, 1, 16, 2]) in mine  # version: TC-BAS + TC-SC
+    # version 4: TC-BAS, TC-GEO with position-based control, TC-SC; 1 boom, 16 sections, 2
+    # position-based control channels
+    assert bytes([0x10, 4, 0xFF, 0x15, 0, 1, 16, 2]) in mine
     assert bytes([0x00]) + b"\xff" * 7 in mine  # its working-set master heard: version asked
     assert c.version is not None and c.version[:2] == b"\x10\x04"  # it answered: version 4
     assert bytes([0x11]) + b"\xff" * 7 in mine  # no structure label stored

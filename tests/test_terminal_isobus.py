@@ -12,17 +12,21 @@ from pathlib import Path
 
 import can
 import pytest
+from pyproj import Geod
 
 from term_rig import TerminalParts
 from topdress.cli.isobus_demo import DEMO_PASS_M, DEMO_PASSES, DEMO_SPEED_KMH
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.errors import ConfigError
+from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.export import export_maps
 from topdress.gnss import sentences as nmea
+from topdress.i18n import Text, render, text
+from topdress.i18n.catalogue import CATALOGUE
 from topdress.isobus.ddop import Machine, build
 from topdress.isobus.node import Frame, IsobusNode, TpEndpoint, topdress_name
-from topdress.isobus.tcserver import map_device, tc_name
+from topdress.isobus.tcserver import map_device, pdack_texts, tc_name
 from topdress.isobus.workstate import condensed_states, condensed_value
 from topdress.log.session import SessionLog, SessionReader
 from topdress.log.summary import format_text, summarise
@@ -236,9 +240,12 @@ def test_implement_lost_is_an_alarm_and_the_loop_goes_on(tmp_path: Path) -> None
     # the implement's link is the machine's link ("ecu"); why, in the TC's words
     assert [e.detail["link"] for e in events if e.kind == "link.lost"] == ["ecu"]
     problems = [e.detail["what"] for e in events if e.kind == "isobus.problem"]
-    # the setpoints it no longer acknowledged, then its silence
-    assert problems[-1] == "client 0x84 silent for 6000 ms"
-    assert all(" did not acknowledge DDI 6 of element " in p for p in problems[:-1])
+    # the setpoints it no longer acknowledged (said once, however many), then its silence
+    assert len(problems) == 2, problems
+    assert problems[0].startswith("client 0x84 did not acknowledge DDI 6 of element ")
+    assert problems[1] == "client 0x84 silent for 6000 ms"
+    tc = rig.term.can.tc
+    assert tc is not None and tc.server.counters["pdacks_missing"] > 1
 
 
 def test_the_demos_40_s_apply_at_the_terminals_rate(tmp_path: Path) -> None:
@@ -340,7 +347,9 @@ def _text(s: str) -> bytes:
     return bytes([len(s)]) + s.encode()
 
 
-def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
+def _spreader_pool(
+    setpoint_ddi: int, latency_ms: int | None, actual_ms: int | None = None
+) -> bytes:
     """A one-bin implement's pool written by hand (not by topdress's builder): a device with a
     setpoint latency (DDI 142) when given, a bin set in mass (DDI 6) or volume (DDI 1) per area."""
     actual = {6: 7, 1: 2}[setpoint_ddi]
@@ -369,6 +378,7 @@ def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
         return b"DPD" + struct.pack("<HHBB", oid, ddi, props, trig) + _text("pd") + b"\xff\xff"
 
     device_kids = [11] + ([10] if latency_ms is not None else [])
+    device_kids += [15] if actual_ms is not None else []
     objs = [
         dvc,
         det(1, 1, "Spreader", 0, 0, device_kids),
@@ -380,6 +390,8 @@ def _spreader_pool(setpoint_ddi: int, latency_ms: int | None) -> bytes:
     ]
     if latency_ms is not None:
         objs.append(b"DPT" + struct.pack("<HHi", 10, 142, latency_ms) + _text("lat") + b"\xff\xff")
+    if actual_ms is not None:
+        objs.append(b"DPT" + struct.pack("<HHi", 15, 143, actual_ms) + _text("act") + b"\xff\xff")
     return b"".join(objs)
 
 
@@ -393,6 +405,58 @@ def test_a_foreign_one_bin_pool_in_mass_takes_the_whole_rate_and_gives_its_delay
     assert link.setpoint_latency_s() == 0.8
     view = link.view(0.9)
     assert (view.implement, view.setpoint_latency_ms, view.sections) == ("Spreader 3000", 800, ())
+
+
+def test_a_pools_actual_value_delay_is_read() -> None:
+    link, _, _ = _client_session(_spreader_pool(6, 800, 1000))
+    assert link.state == "ok"
+    assert link.latency_ms == {142: 800, 143: 1000}
+    assert link.actual_latency_s() == 1.0
+    assert link.view(0.9).actual_latency_ms == 1000
+
+
+def _mapped_points(tmp_path: Path, actual_ms: int | None) -> dict[float, tuple[float, float]]:
+    """The as-applied map's points (by log time) of a pass north at 8 km/h, the implement's
+    DDI 143 `actual_ms` (as its pool's DPT 143 gives it, read at connection)."""
+    cfg = loads_config(DEFAULT_TOML)
+    session = SessionLog.create(tmp_path / f"logs-{actual_ms}", DEFAULT_TOML)
+    rig = IsobusRig(cfg, _drive(8.0, 80.0), session)
+    try:
+        rig.run(5.0)
+        tc = rig.term.can.tc
+        assert tc is not None and tc.state == "ok"
+        if actual_ms is not None:
+            tc.latency_ms[143] = actual_ms
+        rig.run(30.0)
+    finally:
+        rig.close()
+    with SessionReader(session.path) as reader:
+        data = build_as_applied(reader)
+    times = data.points["LogTime"]
+    return {round(float(t), 2): (g.y, g.x) for t, g in zip(times, data.point_geom, strict=True)}
+
+
+def test_the_actual_value_delay_puts_the_reports_where_the_machine_was(tmp_path: Path) -> None:
+    """A client reporting a 1 s actual-value delay (DDI 143), driven north at 8 km/h: the
+    as-applied map's point of each report is 2.22 m (8 km/h x 1 s) behind, where the machine
+    was when what it reports was metered; the same drive without the delay is the reference."""
+    now = _mapped_points(tmp_path, None)
+    delayed = _mapped_points(tmp_path, 1000)
+    geod = Geod(ellps="WGS84")
+    shifts, misses = [], []
+    for t, (lat, lon) in delayed.items():
+        before = round(t - 1.0, 2)
+        if 12.0 < t < 28.0 and t in now and before in now:  # at 8 km/h, the delay applied
+            az, _, dist = geod.inv(now[t][1], now[t][0], lon, lat)
+            shifts.append((abs(az), dist))
+            misses.append(geod.inv(now[before][1], now[before][0], lon, lat)[2])
+    assert len(shifts) > 100
+    # the point mapped is where the machine was mapped a second before, to a centimetre
+    assert max(misses) < 0.01
+    # back along the track (south), by 8 km/h x 1 s on average: 2.13 m measured, the fixes'
+    # own error (0.8 m, drifting over a minute) moving them by a few cm a second
+    assert all(az > 165.0 for az, _ in shifts)
+    assert sum(d for _, d in shifts) / len(shifts) == pytest.approx(8.0 / 3.6, rel=0.06)
 
 
 def test_a_volume_per_area_product_is_set_in_litres_by_the_density() -> None:
@@ -493,8 +557,65 @@ def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -
     assert whats[0xF7] == "task controller" and "this terminal" in whats[link.server.address]
 
 
+def test_the_tcs_words_are_in_the_operators_language() -> None:
+    """What the TC link and server say are catalogue messages: Chinese on a Chinese screen,
+    English in the session log and the program log."""
+    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
+    said: list[Text] = []
+    logged: list[str] = []
+    journal = Journal(None, lambda: 0.0, said.append)
+    journal.log_event = lambda t, kind, **d: logged.append(d.get("what", ""))  # type: ignore[method-assign]
+    link = TcLink(_Port(), settings, journal)
+    t = 0.0
+    for _ in range(40):
+        t += 0.01
+        link.poll(t, (False, 0.0, 0.0, 0.0))
+    other = tc_name(99) & ~0x1FFFFF & ~(0x7FF << 21)  # a TC NAME of lower value: it wins
+    claim = can.Message(arbitration_id=6 << 26 | 0xEE00 << 8 | 0xFF << 8 | 0xF7)
+    claim.data = bytearray(other.to_bytes(8, "little"))
+    claim.dlc = 8
+    link.on_frame(claim, t)
+    for _ in range(40):
+        t += 0.01
+        link.poll(t, (False, 0.0, 0.0, 0.0))
+    new = link.server.address
+    assert new is not None
+    zh = [render(m, "zh") for m in said]
+    assert zh[0] == "ISOBUS：任务控制器地址 0xF7"
+    assert "ISOBUS：总线上另有任务控制器，地址 0xf7，任务控制器编号 1" in zh
+    assert f"ISOBUS：任务控制器从 0xF7 移至 0x{new:02X}：原地址被其他设备占用" in zh
+    assert render(link.view(0.0).problem, "zh") in [z.removeprefix("ISOBUS：") for z in zh]
+    # the session log keeps the English
+    assert "another Task Controller at 0xf7, TC number 1" in logged
+    assert f"Task Controller moved from 0xF7 to 0x{new:02X}: another took it" in logged
+
+
+def test_the_servers_faults_render_in_both_languages() -> None:
+    assert all(f"tc.pdack.{bit}" in CATALOGUE for bit in range(8))  # built at run time
+    refused = text(
+        "tc.pdack_refused", client=0x84, ddi=6, element=3,
+        why=text("tc.and", a=pdack_texts(0x90)[0], b=pdack_texts(0x90)[1]),
+    )  # fmt: skip
+    assert str(refused) == (
+        "client 0x84 refused DDI 6 of element 3: process data not settable, value outside the "
+        "operational range"
+    )
+    assert (
+        render(refused, "zh")
+        == "客户端 0x84 拒绝了元素 3 的 DDI 6：过程数据不可设置，数值超出工作范围"
+    )
+    assert render(text("tc.silent", client=0x84, ms=6000), "zh") == "客户端 0x84 已 6000 ms 无响应"
+    assert (
+        render(text("tc.ack_again", client=0x84, n=6), "zh")
+        == "客户端 0x84 恢复确认（此前缺少 6 次确认）"
+    )
+
+
 def test_an_ecu_setting_changed_with_an_isobus_implement_is_taken_without_a_push() -> None:
-    rig = IsobusRig(loads_config(DEFAULT_TOML), _drive(0.0, 0.0))
+    # an implement that is not a topdress ECU (another manufacturer code in its NAME): it has no
+    # topdress parameters (a topdress ECU's are pushed: tests/test_terminal_isobus_prop.py)
+    cfg = loads_config(DEFAULT_TOML)
+    rig = IsobusRig(replace(cfg, isobus=replace(cfg.isobus, ecu_manufacturer=5)), _drive(0.0, 0.0))
     try:
         rig.run(3.0)
         fut = rig.term.post(ApplySettings("speed", {"switch_speed_kmh": 7.0}))

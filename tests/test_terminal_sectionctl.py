@@ -4,15 +4,19 @@ the first by two of its six 0.6 m sections, in a field whose west edge cuts two 
 
 from __future__ import annotations
 
+import itertools
 import json
+import time
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import shapely
 
 from test_terminal_isobus import IsobusRig
 from topdress.config import DEFAULT_TOML, ConfigError, TerminalConfig, loads_config
 from topdress.geo.outlet import offset_position
+from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.gnss import GnssParams
 from topdress.sim.tractor import Drive, Segment
 
@@ -45,10 +49,12 @@ def _boundary(tmp_path: Path) -> str:
     return str(path)
 
 
-def _run(cfg: TerminalConfig) -> list[tuple[float, tuple[bool, ...], tuple[bool, ...]]]:
+def _run(
+    cfg: TerminalConfig, session: SessionLog | None = None
+) -> list[tuple[float, tuple[bool, ...], tuple[bool, ...]]]:
     """(time, the sections the terminal reports from DDI 161, the sim's sections) at each tick
     of the way back, once well clear of the turn."""
-    rig = IsobusRig(cfg, _drive())
+    rig = IsobusRig(cfg, _drive(), session)
     out = []
     try:
         while rig.world.t_s < 58.0:
@@ -81,6 +87,56 @@ def test_way_back_sections_off_over_the_first_pass_and_outside_the_field(tmp_pat
     for _, _, sim in back:
         assert not (sim[0] or sim[1])  # over the first pass: off
         assert not sim[5]  # outside the field: off
+
+
+def test_the_decisions_are_in_the_session_log_on_change_only(tmp_path: Path) -> None:
+    """Each switch of the sections commanded is an `isobus.sections` event with why each one
+    off is off; nothing between two switches."""
+    session = SessionLog.create(tmp_path / "logs", DEFAULT_TOML)
+    _run(_cfg(tmp_path), session)
+    with SessionReader(session.path) as reader:
+        events = [e for e in reader.events() if e.kind == "isobus.sections"]
+    assert 5 <= len(events) < 60  # one per switch, not one per position (about 530)
+    ons = [e.detail["on"] for e in events]
+    assert all(a != b for a, b in itertools.pairwise(ons))  # only on a change
+    for e in events:  # a reason for each section off, none for one on
+        on, why = e.detail["on"], e.detail["why"]
+        assert [w == "" for w in why] == on
+    # at connection off until the meters start (the operator's desk), then all on
+    first_on = ons.index([True] * 6)
+    assert events[first_on].t < 3.0
+    assert all(set(e.detail["why"]) <= {"operator", "rate_zero"} for e in events[:first_on])
+    # the way back: over the first pass covered, past the west edge outside
+    back = [e.detail["why"] for e in events if 40.0 < e.t < 56.0]
+    assert back and all(w[:2] == ["covered"] * 2 and w[5] == "outside" for w in back)
+    # the terminal closes: the operator's stop puts every section off
+    assert events[-1].detail == {"on": [False] * 6, "why": ["operator"] * 6}
+
+
+def _covered_north_m(actual_ms: int | None) -> float:
+    """The northern end of the ground covered (UTM metres) 20 s into the first pass, still
+    driving at 6 km/h, the implement's actual-value delay (DDI 143) `actual_ms`."""
+    rig = IsobusRig(_cfg(None), _drive())
+    try:
+        rig.run(5.0)
+        tc = rig.term.can.tc
+        assert tc is not None and tc.state == "ok"
+        if actual_ms is not None:
+            tc.latency_ms[143] = actual_ms  # as its pool's DPT 143 gives it
+        rig.run(20.0)
+        sc = tc.section_control
+        assert sc is not None and rig.world.tractor.v > 1.5
+        covered = shapely.union_all(list(sc.coverage.tiles.values()))
+    finally:
+        rig.close()
+    return float(shapely.bounds(covered)[3])
+
+
+def test_the_actual_value_delay_puts_the_coverage_where_the_machine_was() -> None:
+    """What the implement reports working now it worked its DDI 143 ago: with 1 s at 6 km/h
+    the covered ground ends 1.67 m further back than without."""
+    back = _covered_north_m(None) - _covered_north_m(1000)
+    assert back == pytest.approx(6.0 / 3.6, abs=0.15)  # 1.69 m measured
 
 
 def test_without_a_boundary_only_the_overlap_goes_off() -> None:
@@ -119,6 +175,81 @@ def test_the_coverage_outlives_the_implement_lost_and_back() -> None:
     # the two sections over the first pass stay off (the coverage before the loss is kept),
     # the outermost, on fresh ground, works
     assert all(not (n & 0b11) and n & 0b100000 for n in back)
+
+
+def _first_pass(rig: IsobusRig, until_s: float) -> list[tuple[float, int]]:
+    """(north of the start in m, the sim's sections) at each tick of the first pass north."""
+    out = []
+    while rig.world.t_s < until_s:
+        rig.run(rig.world.t_s + 0.1)
+        tr = rig.world.tractor
+        if tr.v > 1.0:
+            out.append((tr.y, rig.sim.node.sections_on))
+    return out
+
+
+@pytest.mark.parametrize("hours", [24.0, 0.0])
+def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
+    tmp_path: Path, hours: float
+) -> None:
+    """The terminal killed 20 s into the first pass (about 26 m north), then started again
+    and driven over the same line from the start: over the ground the killed session covered
+    the sections stay off (its as-applied swaths, read from its log); past it they work.
+    With `coverage_hours = 0` earlier sessions do not count: the sections work all the way."""
+    field = _boundary(tmp_path)
+    boundary_line = 'path = ""' + " " * 18 + "# .gpkg, .shp, .geojson polygons or ISOXML "
+    boundary_line += "TASKDATA.XML\n"
+    assert DEFAULT_TOML.count(boundary_line) == 1
+    toml = DEFAULT_TOML.replace(boundary_line, f'path = "{field}"\n').replace(
+        "coverage_hours = 24.0", f"coverage_hours = {hours}"
+    )
+    cfg = loads_config(toml)
+    logs = tmp_path / "logs"
+    killed = SessionLog.create(logs, toml)
+    rig = IsobusRig(cfg, _drive(), killed)
+    try:
+        first = _first_pass(rig, 20.0)
+        assert all(n == 0b111111 for y, n in first if 2.0 < y < 20.0)  # fresh ground: all work
+        killed.sync()  # what a killed terminal leaves: the rows committed up to its last 0.5 s
+    finally:
+        rig.pc_bus.shutdown()  # no close: the terminal is gone, its log never closed
+        rig.ecu_bus.shutdown()
+    session = SessionLog.create(logs, toml)
+    again = IsobusRig(cfg, _drive(), session)
+    try:
+        tc = again.term.can.tc
+        assert tc is not None
+        deadline = time.monotonic() + 30.0  # the earlier log is read in a thread of its own
+        while not tc.coverage_read and time.monotonic() < deadline:
+            again.run(again.world.t_s + 0.1)
+            time.sleep(0.01)
+        second = _first_pass(again, 30.0)
+    finally:
+        again.close()
+        killed.close()
+    with SessionReader(session.path) as reader:
+        coverage = [e.detail for e in reader.events() if e.kind == "isobus.coverage"]
+    over = [n for y, n in second if 4.0 < y < 22.0]  # inside what the killed one covered
+    beyond = [n for y, n in second if 30.0 < y < 38.0]
+    assert len(over) > 50 and len(beyond) > 20
+    assert all(n & 0b011110 == 0b011110 for n in beyond)  # fresh ground again: they work
+    if hours:
+        (taken,) = coverage
+        assert taken["sessions"] == [killed.path.name] and taken["swaths"] > 10
+        assert all(n == 0 for n in over)
+    else:  # not read at all
+        assert coverage == []
+        assert all(n & 0b011110 == 0b011110 for n in over)
+
+
+def test_a_bad_coverage_window_is_refused_naming_the_key() -> None:
+    for bad in ("-1.0", "9000.0", '"day"'):
+        lines = [
+            f"coverage_hours = {bad}" if x.startswith("coverage_hours = ") else x
+            for x in DEFAULT_TOML.splitlines()
+        ]
+        with pytest.raises(ConfigError, match=r"isobus\.coverage_hours"):
+            loads_config("\n".join(lines))
 
 
 def test_section_control_off_switches_all_sections_with_the_rate(tmp_path: Path) -> None:

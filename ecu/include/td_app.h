@@ -168,6 +168,13 @@ int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
  */
 int td_app_set_ident(td_app_t *app, const td_ident_t *ident);
 
+/**
+ * EcuIdent again at the next step, with the identity set before: for a port whose link to the
+ * cab PC has just come up in a way the core cannot see (on an ISOBUS, the node connected to its
+ * Task Controller; EcuIdent sent before the address claim went nowhere). TD_E_ARG for NULL.
+ */
+int td_app_announce(td_app_t *app);
+
 /** Read-only view of the state. */
 const td_state_t *td_app_state(const td_app_t *app);
 

@@ -190,6 +190,14 @@ int td_app_set_ident(td_app_t *app, const td_ident_t *ident) {
     return TD_OK;
 }
 
+int td_app_announce(td_app_t *app) {
+    if (app == NULL) {
+        return TD_E_ARG;
+    }
+    app->ident_due = true;
+    return TD_OK;
+}
+
 static void txq_push(td_app_t *app, const td_can_frame_t *f) {
     if (app->tx_count >= TD_TXQ_LEN) {
         app->cnt.tx_dropped++;

@@ -137,12 +137,31 @@ static void test_bad_identities_are_refused(void **state) {
     assert_int_equal(r.app.ident.target, TD_TARGET_HOST);
 }
 
+static void test_announce_says_it_again_with_the_identity_set(void **state) {
+    (void)state;
+    rig_t r;
+    rig_init(&r, NULL, 0u);
+    const td_ident_t id = { TD_TARGET_STM32F4, TD_TRANSPORT_CAN, TD_RESET_PIN, false };
+    assert_int_equal(td_app_set_ident(&r.app, &id), TD_OK);
+    td_can_frame_t f;
+    assert_int_equal(idents_in(&r, 100, &f), 1);
+    assert_int_equal(idents_in(&r, 300, &f), 0); /* commanded all along: said once */
+    /* the port's link came up (an ISOBUS node connected to its TC): once more, same identity */
+    assert_int_equal(td_app_announce(&r.app), TD_OK);
+    assert_int_equal(idents_in(&r, 1, &f), 1);
+    assert_int_equal(f.data[0], TD_TARGET_STM32F4);
+    assert_int_equal(f.data[6], TD_TRANSPORT_CAN | (TD_RESET_PIN << 4));
+    assert_int_equal(idents_in(&r, 300, &f), 0);
+    assert_int_equal(td_app_announce(NULL), TD_E_ARG);
+}
+
 int main(void) {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_host_identity_at_the_first_step),
         cmocka_unit_test(test_port_identity_and_the_pc_coming_back),
         cmocka_unit_test(test_a_power_up_is_told_from_a_command_timeout),
         cmocka_unit_test(test_bad_identities_are_refused),
+        cmocka_unit_test(test_announce_says_it_again_with_the_identity_set),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

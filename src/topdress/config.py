@@ -314,6 +314,13 @@ class IsobusConfig:
     section_control: bool = True
     overlap_pct: float = _num(50.0, 0.0, 99.0)  # a section goes off above this % done/outside
     section_look_m: float = _num(1.0, 0.1, 20.0)  # length of ground each section looks at
+    # earlier sessions of the same field (same [boundary] path) started within this many
+    # hours before this one: their as-applied swaths count as covered; 0 = none
+    coverage_hours: float = _num(24.0, 0.0, 8760.0)
+    # The topdress ECU's NAME manufacturer code (its firmware's FW_ISOBUS_MANUFACTURER): an
+    # implement with it, the ECU's NAME function and a DDOP named "topdress" is spoken to in
+    # the ECU's private frames on Proprietary A/B (parameters, calibrations, its broadcasts).
+    ecu_manufacturer: int = _num(0, 0, 2047)
 
 
 @dataclass(frozen=True)
@@ -920,5 +927,7 @@ density_kg_l = 1.0         # volume-per-area products (DDI 1): kg/ha -> L/ha by 
 section_control = true     # sections off over ground covered and outside the boundary
 overlap_pct = 50.0         # a section goes off when more of its ground ahead is done/outside
 section_look_m = 1.0       # the strip of ground each section looks at, m (past its delay)
+coverage_hours = 24.0      # sessions of the same field this recent count as covered; 0 = none
+ecu_manufacturer = 0       # the topdress ECU's NAME manufacturer code (FW_ISOBUS_MANUFACTURER)
 """
 )

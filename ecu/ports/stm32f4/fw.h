@@ -110,6 +110,8 @@ void fw_isobus_step(const td_app_t *app, uint32_t now_us);
 bool fw_isobus_tx(td_can_frame_t *f);
 /** The claimed address (0xFE: none). */
 uint8_t fw_isobus_address(void);
+/** True while the node is connected to its TC (its pool active). */
+bool fw_isobus_connected(void);
 #endif
 
 /* ---- fw_sys.c: watchdog, reset cause ------------------------------------------------------ */

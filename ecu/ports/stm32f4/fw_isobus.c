@@ -155,6 +155,10 @@ bool fw_isobus_tx(td_can_frame_t *f) {
 uint8_t fw_isobus_address(void) {
     return td_claim_address(&node.claim);
 }
+
+bool fw_isobus_connected(void) {
+    return started && node.tc.state == TD_TC_CONNECTED;
+}
 #else
 /* ISO C wants a translation unit to declare something */
 typedef int fw_isobus_unused_t;

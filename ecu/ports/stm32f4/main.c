@@ -155,7 +155,13 @@ static void isobus_before_step(uint32_t now_us) {
  * step's frames must fit the link's transmit buffer, 512 serial bytes on SLCAN). */
 static void isobus_after_step(uint32_t now_us, void (*send)(const td_can_frame_t *f), unsigned max) {
 #if defined(FW_ISOBUS)
+    static bool tc_connected;
     fw_isobus_step(&app, now_us);
+    const bool connected = fw_isobus_connected();
+    if (connected && !tc_connected) {
+        (void)td_app_announce(&app); /* EcuIdent from the claimed address, now the TC hears it */
+    }
+    tc_connected = connected;
     td_can_frame_t f;
     for (unsigned i = 0u; i < max && fw_isobus_tx(&f); i++) {
         send(&f);

@@ -16,7 +16,7 @@ from topdress.config import ECU_KEYS, SPEED_MODE_IDS, SWITCH_COMPARE_IDS, Termin
 from topdress.config_edit import section_values, section_version, validate_section
 from topdress.crop.rate import rate_curve
 from topdress.devices.ports import list_serial_ports
-from topdress.display import fmt
+from topdress.display import fmt, isobus_names
 from topdress.display.actions import Actions
 from topdress.display.forms import SectionForm
 from topdress.display.hub import DisplayHub
@@ -272,7 +272,11 @@ class IsobusCard:
             self.functions = (
                 ui.table(
                     columns=[
-                        _column("address", "isobus.address", "right"),
+                        # "地址" kept on one line: the narrow column would break it in two
+                        {
+                            **_column("address", "isobus.address", "right"),
+                            "headerClasses": "text-no-wrap",
+                        },
                         _column("name", "isobus.name"),
                         _column("decoded", "comm.decoded"),
                         _column("what", "isobus.what"),
@@ -314,7 +318,7 @@ class IsobusCard:
                 actual=fmt.num(v.actual_latency_ms, "d"),
             )
         )
-        self.problem.set_text(v.problem)
+        self.problem.set_text(render(v.problem))
         self._rows(
             self.functions,
             "_functions",
@@ -327,10 +331,10 @@ class IsobusCard:
                         function=f.function,
                         device_class=f.device_class,
                         group=f.industry_group,
-                        manufacturer=f.manufacturer_code,
+                        manufacturer=isobus_names.maker(f.manufacturer_code),
                         identity=f.identity_number,
                     ),
-                    "what": f.what,
+                    "what": isobus_names.what(f, v),
                 }
                 for f in v.functions
             ],

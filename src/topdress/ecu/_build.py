@@ -286,6 +286,7 @@ int td_app_init(td_app_t *app, const td_params_t *params, uint32_t now_us);
 int td_app_rx(td_app_t *app, const td_can_frame_t *frame, uint32_t now_us);
 int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_t *out);
 int td_app_tx_pop(td_app_t *app, td_can_frame_t *frame);
+int td_app_announce(td_app_t *app);
 const td_state_t *td_app_state(const td_app_t *app);
 
 /* fast paths of the binding (below): one C call per step, per frame in, per drain of the

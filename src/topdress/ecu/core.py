@@ -188,6 +188,10 @@ class Ecu:
         buf = ffi.unpack(self._tx_buf, 8 * n)
         return [(int(ids[i]), buf[8 * i : 8 * i + lens[i]]) for i in range(n)]
 
+    def announce(self) -> None:
+        """EcuIdent again at the next step (td_app_announce): the port's link has just come up."""
+        check(lib.td_app_announce(self._app), "announce")
+
     def tx_discard(self) -> int:
         """Empty the transmit queue without reading it (a replay needs none of the frames);
         returns how many frames were dropped."""

@@ -11,25 +11,34 @@ It goes off when more than `off_pct` % of that strip is outside the field or alr
 
 Coverage is built from the sections the implement reports working (DDI 161): the ground between
 a section's last footprint and its present one, kept in the as-applied map's tiles (`Cover`);
-as-applied swaths of an earlier session can be added. Work is done in the field's UTM zone.
+as-applied swaths of earlier sessions of the same field are added (`earlier_coverage` reads
+them from the session logs, so a terminal restarted mid-field keeps what it had covered). Work
+is done in the field's UTM zone.
 """
 
 from __future__ import annotations
 
+import sqlite3
 from dataclasses import dataclass
+from datetime import datetime, timedelta
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import shapely
-from pyproj import Transformer
+from pyproj import CRS, Transformer
 
+from topdress.errors import LogError, MapError
 from topdress.geo.asapplied import WGS84, Cover, utm_crs
+from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.outlet import offset_position
 from topdress.isobus.devicemap import Device
+from topdress.log.session import SUFFIX, SessionReader, session_config
 
 FLUSH_EVERY = 10  # positions whose covered quads go into the coverage together
 MAX_STEP_M = 5.0  # a longer jump between two positions is a gap: nothing is counted covered
+OUTSIDE, COVERED = "outside", "covered"  # why `decide` put a section off (`SectionControl.why`)
 
 
 @dataclass(frozen=True)
@@ -69,16 +78,23 @@ class SectionControl:
         self.off_pct = off_pct
         self.look_m = look_m
         self.coverage = Cover()
+        self.crs: CRS | None = None  # the UTM zone worked in: the boundary's, or the first fix's
         self._fwd: Transformer | None = None
         self._last: list[tuple[Any, Any]] | None = None  # each section's footprint ends, UTM
         self._quads: list[tuple[Any, Any, Any, Any]] = []  # covered, not yet in `coverage`
         self._since = 0
+        self.why: tuple[str, ...] = ()  # per section, why the last `decide` put it off ("": on)
         if boundary is not None:
-            self._fwd = Transformer.from_crs(WGS84, boundary.crs, always_xy=True)
+            self._use(boundary.crs)
+
+    def _use(self, crs: CRS) -> None:
+        self.crs = crs
+        self._fwd = Transformer.from_crs(WGS84, crs, always_xy=True)
 
     def _utm(self, lat: float, lon: float) -> np.ndarray:
         if self._fwd is None:
-            self._fwd = Transformer.from_crs(WGS84, utm_crs(lat, lon), always_xy=True)
+            self._use(utm_crs(lat, lon))
+        assert self._fwd is not None
         x, y = self._fwd.transform(lon, lat)
         return np.array([x, y])
 
@@ -115,9 +131,16 @@ class SectionControl:
         inside = (
             looks if self.boundary is None else shapely.intersection(looks, self.boundary.outer)
         )
-        todo = np.maximum(shapely.area(inside) - self.coverage.covered_m2(inside), 0.0)
+        field = shapely.area(inside)
+        todo = np.maximum(field - self.coverage.covered_m2(inside), 0.0)
         need = whole * (1.0 - self.off_pct / 100.0)
-        return [bool(w > 0.0 and t >= n) for t, w, n in zip(todo, whole, need, strict=True)]
+        on = [bool(w > 0.0 and t >= n) for t, w, n in zip(todo, whole, need, strict=True)]
+        # why each is off: too little of its ground in the field, else too much of it covered
+        self.why = tuple(
+            "" if o else OUTSIDE if f < n else COVERED
+            for o, f, n in zip(on, field, need, strict=True)
+        )
+        return on
 
     def cover(self, lat: float, lon: float, heading_deg: float, working: list[bool | None]) -> None:
         """The implement reports `working` (DDI 161, section 1 first) at this position: the ground
@@ -150,6 +173,21 @@ class SectionControl:
         self._quads = []
         self.coverage.add(np.asarray(quads, dtype=object))
 
+    def add_cover(self, cover: Cover, crs: CRS) -> bool:
+        """Ground covered before, as tiles made elsewhere (off the loop: `earlier_coverage`) in
+        `crs`: taken tile by tile (a union only where this coverage has ground in the same
+        tile). False, nothing taken, when this section control works in another zone."""
+        if self.crs is None:
+            self._use(crs)
+        if self.crs != crs:
+            return False
+        self._flush()
+        tiles = self.coverage.tiles
+        for key, g in cover.tiles.items():
+            old = tiles.get(key)
+            tiles[key] = g if old is None else shapely.union(old, g)
+        return True
+
     def add_covered_wgs84(self, geoms: Any) -> None:
         """Ground covered before (as-applied swaths in WGS 84, e.g. of an earlier session)."""
         parts = [g for g in shapely.get_parts(np.atleast_1d(geoms)) if not g.is_empty]
@@ -164,3 +202,78 @@ class SectionControl:
             lambda xy: np.column_stack(fwd.transform(xy[:, 0], xy[:, 1])),
         )
         self.coverage.add(utm)
+
+
+@dataclass(frozen=True)
+class EarlierCoverage:
+    """The ground earlier sessions of the field covered: their as-applied swaths (WGS 84),
+    the same as covered tiles (`cover`, in `crs`, their UTM zone; None without swaths), the
+    session files they came from, and those that could not be read
+    (name: why)."""
+
+    swaths: tuple[Any, ...]
+    sessions: tuple[str, ...]
+    skipped: tuple[str, ...]
+    cover: Cover | None = None
+    crs: CRS | None = None
+
+
+def _tiles(swaths: list[Any]) -> tuple[Cover | None, CRS | None]:
+    """The swaths (WGS 84) as covered tiles in their UTM zone (a field's boundary is in the
+    same one, but for a field across a zone's edge)."""
+    if not swaths:
+        return None, None
+    x0, y0, x1, y1 = shapely.total_bounds(np.array(swaths, dtype=object))
+    crs = utm_crs((y0 + y1) / 2, (x0 + x1) / 2)
+    fwd = Transformer.from_crs(WGS84, crs, always_xy=True)
+    utm = shapely.transform(
+        np.array(swaths, dtype=object),
+        lambda xy: np.column_stack(fwd.transform(xy[:, 0], xy[:, 1])),
+    )
+    cover = Cover()
+    cover.add(shapely.make_valid(utm))
+    return cover, crs
+
+
+def _created(reader: SessionReader) -> datetime | None:
+    try:
+        return datetime.fromisoformat(reader.meta["created_utc"])
+    except (KeyError, ValueError):
+        return None
+
+
+def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
+    """The as-applied swaths of the sessions beside `session` (the one being written) that
+    count for its coverage: created within `hours` before it, with the same `[boundary] path`
+    and `layer` (the same field; two sessions without a boundary count alike, their swaths
+    only matter where the machine drives again), also made into covered tiles. A session that
+    cannot be read is skipped and named. Reads files and unites the swaths (seconds for an
+    hour of log): run it off the control loop."""
+    with SessionReader(session) as reader:
+        now = _created(reader)
+        mine = session_config(reader.config_toml).boundary
+    if now is None:
+        raise LogError(f"{session}: no creation time")
+    since = now - timedelta(hours=hours)
+    swaths: list[Any] = []
+    used: list[str] = []
+    skipped: list[str] = []
+    for path in sorted(session.parent.glob(f"*{SUFFIX}")):
+        if path.resolve() == session.resolve():
+            continue
+        try:
+            with SessionReader(path) as reader:
+                created = _created(reader)
+                if created is None or not since <= created <= now:
+                    continue
+                b = session_config(reader.config_toml).boundary
+                if (b.path, b.layer) != (mine.path, mine.layer):
+                    continue
+                got = build_as_applied(reader).swath_geom
+        except (LogError, MapError, sqlite3.Error, ValueError) as exc:
+            skipped.append(f"{path.name}: {exc}")
+            continue
+        used.append(path.name)
+        swaths.extend(got)
+    cover, crs = _tiles(swaths)
+    return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped), cover, crs)

@@ -195,6 +195,16 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "the ECU is {state}: calibration needs it",
         "控制器{state}：标定需要控制器",
     ),
+    # calibrations on an ISOBUS (terminal/proplink.py): only with a topdress ECU served
+    "op.error.cal_isobus_not_topdress": (
+        "calibration needs the topdress ECU; the ISOBUS implement is not one ({why})",
+        "标定需要topdress控制器；该ISOBUS机具不是（{why}）",
+    ),
+    "op.error.cal_isobus_fans": (
+        "the fan check and the look-ahead calibration need the fans started by the terminal's "
+        "command, which an ISOBUS does not carry: run them on the ECU's own bus",
+        "风机检查和前视标定需要终端命令启动风机，ISOBUS不传送该命令：请在控制器自己的总线上进行",
+    ),
     "op.error.no_device": (
         "no device {device!r} (gnss, crop, can)",
         "没有设备 {device!r}（gnss、crop、can）",
@@ -271,6 +281,10 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "控制器就绪：所有参数已确认，启动后 {s:.1f} 秒",
     ),
     "event.ecu_back": ("ECU back", "控制器已恢复"),
+    "event.ecu_reconnected": (
+        "ECU connected to the Task Controller again: its parameters are sent again",
+        "控制器重新连接任务控制器：重新发送参数",
+    ),
     "event.ecu_restarted": (
         "ECU restarted on its defaults: its parameters are sent again",
         "控制器已重启并使用默认参数：重新发送参数",
@@ -311,6 +325,12 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "status but does not answer (check [can.ids]); still trying",
         "等待控制器：参数 {name} 在 CAN {where} 上发送 {tries} 次未确认；控制器发送状态帧但不应答"
         "（请检查 [can.ids]）；继续重试",
+    ),
+    "event.ecu_wait_deaf_isobus": (
+        "ECU wait: {name} unacknowledged after {tries} tries on the ISOBUS ({where}); the ECU "
+        "sends status but does not answer the Task Controller; still trying",
+        "等待控制器：参数 {name} 在ISOBUS（{where}）上发送 {tries} 次未确认；"
+        "控制器发送状态帧但不应答任务控制器；继续重试",
     ),
     "event.udp_multicast": (
         "warning: CAN over udp_multicast: any host on this network can read and inject frames "
@@ -411,6 +431,115 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "机具描述（DDOP）被拒绝：{why}",
     ),
     "event.isobus": ("ISOBUS: {what}", "ISOBUS：{what}"),
+    # what the terminal's Task Controller says (isobus/tcserver.py, terminal/tclink.py)
+    "tc.frame_refused": ("frame {id:08X} refused: {why}", "帧 {id:08X} 被拒绝：{why}"),
+    "tc.silent": ("client {client:#x} silent for {ms} ms", "客户端 {client:#x} 已 {ms} ms 无响应"),
+    "tc.no_ack": (
+        "client {client:#x} did not acknowledge DDI {ddi} of element {element} within {ms} ms",
+        "客户端 {client:#x} 未在 {ms} ms 内确认元素 {element} 的 DDI {ddi}",
+    ),
+    "tc.ack_again": (
+        "client {client:#x} acknowledges again ({n} acknowledges were missing)",
+        "客户端 {client:#x} 恢复确认（此前缺少 {n} 次确认）",
+    ),
+    "tc.displaced": (
+        "client {client:#x}'s address taken by NAME {name:016X}: client dropped",
+        "客户端 {client:#x} 的地址被 NAME {name:016X} 占用：已断开该客户端",
+    ),
+    "tc.moved": (
+        "client NAME {name:016X} moved from {old:#x} to {new:#x}: it must connect again",
+        "客户端 NAME {name:016X} 从 {old:#x} 移至 {new:#x}：须重新连接",
+    ),
+    "tc.other_tc": (
+        "another Task Controller at {address:#x}",
+        "总线上另有任务控制器，地址 {address:#x}",
+    ),
+    "tc.other_tc_number": (
+        "another Task Controller at {address:#x}, TC number {number}",
+        "总线上另有任务控制器，地址 {address:#x}，任务控制器编号 {number}",
+    ),
+    "tc.elsewhere": (
+        "client {client:#x} works with the Task Controller at {tc:#x}",
+        "客户端 {client:#x} 已与地址 {tc:#x} 的任务控制器连接",
+    ),
+    "tc.flood": (
+        "address {address:#x} floods the TC (over {n} process-data messages a second): the "
+        "excess dropped",
+        "地址 {address:#x} 向任务控制器发送过多（每秒超过 {n} 条过程数据）：超出部分已丢弃",
+    ),
+    "tc.second_client": (
+        "client {client:#x} refused: the TC serves {served:#x}, one at a time",
+        "客户端 {client:#x} 被拒绝：任务控制器正在服务 {served:#x}，每次只服务一个",
+    ),
+    "tc.pool_too_large": (
+        "client {client:#x} offers a {size}-byte DDOP, too large",
+        "客户端 {client:#x} 提供的 DDOP 为 {size} 字节，过大",
+    ),
+    "tc.stored_corrupt": (
+        "client {client:#x}: {why}; its pool is asked for again",
+        "客户端 {client:#x}：{why}；已重新请求其对象池",
+    ),
+    "tc.pool_bad": ("client {client:#x}: {why}", "客户端 {client:#x}：{why}"),
+    "tc.activation_refused": (
+        "client {client:#x}: activation refused, no valid DDOP",
+        "客户端 {client:#x}：激活被拒绝，没有有效的 DDOP",
+    ),
+    "tc.not_kept": (
+        "DDOP of client {client:#x} not kept: {why}",
+        "客户端 {client:#x} 的 DDOP 未能保存：{why}",
+    ),
+    "tc.unknown_value": (
+        "client {client:#x} reports DDI {ddi} of element {element}, which its DDOP does not have",
+        "客户端 {client:#x} 报告了元素 {element} 的 DDI {ddi}，其 DDOP 中没有该项",
+    ),
+    "tc.pdack_refused": (
+        "client {client:#x} refused DDI {ddi} of element {element}: {why}",
+        "客户端 {client:#x} 拒绝了元素 {element} 的 DDI {ddi}：{why}",
+    ),
+    "tc.and": ("{a}, {b}", "{a}，{b}"),
+    "tc.pdack.0": ("process data command not supported", "不支持该过程数据命令"),
+    "tc.pdack.1": ("invalid element number", "元素编号无效"),
+    "tc.pdack.2": ("DDI not supported by the element", "该元素不支持此 DDI"),
+    "tc.pdack.3": ("trigger method not supported", "不支持该触发方式"),
+    "tc.pdack.4": ("process data not settable", "过程数据不可设置"),
+    "tc.pdack.5": ("invalid or unsupported interval or threshold", "间隔或阈值无效或不受支持"),
+    "tc.pdack.6": ("value does not conform to the DDI definition", "数值不符合 DDI 定义"),
+    "tc.pdack.7": ("value outside the operational range", "数值超出工作范围"),
+    "tc.link.frame_refused": ("ISOBUS frame refused: {why}", "ISOBUS 帧被拒绝：{why}"),
+    "tc.link.send_failed": ("ISOBUS send failed: {why}", "ISOBUS 发送失败：{why}"),
+    "tc.link.no_address": (
+        "the Task Controller has no address: every one it tried was taken",
+        "任务控制器没有地址：尝试过的地址均已被占用",
+    ),
+    "tc.link.at": ("Task Controller at address 0x{address:02X}", "任务控制器地址 0x{address:02X}"),
+    "tc.link.moved": (
+        "Task Controller moved from 0x{old:02X} to 0x{new:02X}: another took it",
+        "任务控制器从 0x{old:02X} 移至 0x{new:02X}：原地址被其他设备占用",
+    ),
+    "tc.link.implement": (
+        "implement {device} at 0x{address:02X}: DDOP active, {n} products in {units}, "
+        "{sections} sections",
+        "机具 {device}（0x{address:02X}）：DDOP 已激活，{n} 种物料（{units}），{sections} 个作业段",
+    ),
+    "tc.link.product": ("{unit} (element {element})", "{unit}（元素 {element}）"),
+    "tc.link.none": ("none", "无"),
+    "tc.link.no_rate": (
+        "{device}: its DDOP has no settable rate (DDI 6 or 1)",
+        "{device}：其 DDOP 没有可设置的施肥量（DDI 6 或 1）",
+    ),
+    "tc.link.coverage": (
+        "section control: ground covered in {n} earlier sessions of this field taken "
+        "({swaths} swaths)",
+        "分段控制：已计入本地块之前 {n} 次作业的覆盖区域（{swaths} 条幅带）",
+    ),
+    "tc.link.coverage_error": (
+        "earlier sessions' coverage not read: {why}",
+        "未能读取之前作业的覆盖区域：{why}",
+    ),
+    "tc.link.coverage_skipped": (
+        "earlier session not read for the coverage: {why}",
+        "读取覆盖区域时跳过了一次之前的作业：{why}",
+    ),
     "alarm.wrong_field_prescription": (
         "far outside the prescription map: wrong field?",
         "远离处方图：地块错误？",
@@ -567,6 +696,78 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "功能 {function}，设备类 {device_class}，行业组 {group}，"
         "制造商 {manufacturer}，标识号 {identity}",
     ),
+    # who a control function is (its NAME's function, display/isobus_names.py); the English is
+    # after the ISOBUS public listing's function names (ISO 11783-1, SAE J1939)
+    "isobus.what_self": ("task controller (this terminal)", "任务控制器（本终端）"),
+    "isobus.what_served": ("implement served: {function}", "所服务的机具：{function}"),
+    "isobus.what_unknown": ("function {function}", "功能 {function}"),
+    "isobus.fn.engine": ("Engine", "发动机"),
+    "isobus.fn.transmission": ("Transmission", "变速箱"),
+    "isobus.fn.pto_rear": ("Power TakeOff (Main or Rear)", "动力输出轴（主/后）"),
+    "isobus.fn.steering": ("Steering Controller", "转向控制器"),
+    "isobus.fn.instruments": ("Instrument Cluster", "组合仪表"),
+    "isobus.fn.navigation": ("Vehicle Navigation", "车辆导航"),
+    "isobus.fn.niu": ("Network Interconnect ECU", "网络互联控制单元"),
+    "isobus.fn.pto_front": ("Power TakeOff (Secondary or Front)", "动力输出轴（副/前）"),
+    "isobus.fn.gateway": ("Off Vehicle Gateway", "车外网关"),
+    "isobus.fn.vt": ("Virtual Terminal (in cab)", "虚拟终端（驾驶室）"),
+    "isobus.fn.management": ("Management Computer", "管理计算机"),
+    "isobus.fn.monitor": ("System Monitor", "系统监视器"),
+    "isobus.fn.hydraulic_pump": ("Hydraulic Pump Controller", "液压泵控制器"),
+    "isobus.fn.cab": ("Cab Controller", "驾驶室控制器"),
+    "isobus.fn.tire_pressure": ("Tire Pressure Control", "轮胎气压控制"),
+    "isobus.fn.cellular": ("Communications Unit, Cellular", "通信单元（蜂窝网络）"),
+    "isobus.fn.cab_display": ("Cab Display", "驾驶室显示器"),
+    "isobus.fn.file_server_printer": ("File Server / Printer", "文件服务器/打印机"),
+    "isobus.fn.diagnostic": ("On-Board Diagnostic Unit", "车载诊断单元"),
+    "isobus.fn.io": ("I/O Controller", "输入/输出控制器"),
+    "isobus.fn.file_server": ("File Server", "文件服务器"),
+    "isobus.fn.service_tool": ("Off-board diagnostic-service tool", "车外诊断服务工具"),
+    "isobus.fn.onboard_logger": ("On-board data logger", "车载数据记录仪"),
+    "isobus.fn.ground_speed": ("Ground based speed sensor", "对地速度传感器"),
+    "isobus.fn.inertial": ("Inertial Sensor", "惯性传感器"),
+    "isobus.fn.display": ("Non Virtual Terminal Display", "非虚拟终端显示器"),
+    "isobus.fn.operator_controls": ("Operator Controls - Machine Specific", "操作控制（机器专用）"),
+    "isobus.fn.tc": ("Task Controller (Mapping Computer)", "任务控制器（作业图计算机）"),
+    "isobus.fn.position": ("Position Control", "位置控制"),
+    "isobus.fn.machine": ("Machine Control", "机器控制"),
+    "isobus.fn.foreign_object": ("Foreign Object Detection", "异物检测"),
+    "isobus.fn.tecu": ("Tractor ECU", "拖拉机控制单元"),
+    "isobus.fn.scm": ("Sequence Control Master", "顺序控制主控"),
+    "isobus.fn.dosing": ("Product Dosing", "物料定量"),
+    "isobus.fn.treatment": ("Product Treatment", "物料处理"),
+    "isobus.fn.logger": ("Data Logger", "数据记录仪"),
+    "isobus.fn.decision": ("Decision Support", "决策支持"),
+    "isobus.fn.lighting": ("Lighting Controller", "照明控制器"),
+    "isobus.fn.tim": ("TIM Server", "TIM 服务器"),
+    "isobus.fn.aux_valves": ("Auxiliary Valve Control", "辅助阀控制"),
+    "isobus.fn.rear_hitch": ("Rear Hitch Control", "后悬挂控制"),
+    "isobus.fn.front_hitch": ("Front Hitch Control", "前悬挂控制"),
+    "isobus.fn.tractor_machine": ("Tractor Machine Control", "拖拉机机器控制"),
+    "isobus.fn.center_hitch": ("Center Hitch Control", "中间悬挂控制"),
+    "isobus.fn.seed_rate": ("Seed Rate Control", "播种量控制"),
+    "isobus.fn.sections": ("Section On/Off Control", "作业段开关控制"),
+    "isobus.fn.seeder_machine": ("Planters/Seeders Machine Control", "播种机机器控制"),
+    "isobus.fn.flow": ("Product Flow", "物料流量"),
+    "isobus.fn.level": ("Product Level", "物料料位"),
+    "isobus.fn.depth": ("Depth Control", "深度控制"),
+    "isobus.fn.frame": ("Frame Control", "机架控制"),
+    "isobus.fn.down_pressure": ("Down Pressure", "下压力"),
+    "isobus.fn.fert_rate": ("Fertilize Rate Control", "施肥量控制"),
+    "isobus.fn.pressure": ("Product Pressure", "物料压力"),
+    "isobus.fn.fert_machine": ("Fertilizers Machine Control", "施肥机机器控制"),
+    "isobus.fn.height_depth": ("Height/Depth Control", "高度/深度控制"),
+    "isobus.fn.spray_rate": ("Spray Rate Control", "喷施量控制"),
+    "isobus.fn.sprayer_machine": ("Sprayers Machine Control", "喷雾机机器控制"),
+    "isobus.fn.boom_height": ("Boom Height Control", "喷杆高度控制"),
+    "isobus.fn.feeler": ("Guidance Feeler", "导向触杆"),
+    "isobus.fn.camera": ("Camera System", "摄像系统"),
+    "isobus.fn.crop_scouting": ("Crop Scouting", "作物监测"),
+    "isobus.fn.material_sensing": ("Material Properties Sensing", "物料特性检测"),
+    "isobus.fn.imu": ("Inertial Measurement Unit (IMU)", "惯性测量单元（IMU）"),
+    "isobus.fn.mass": ("Product Mass", "物料质量"),
+    "isobus.fn.weather": ("Weather Instruments", "气象仪器"),
+    "isobus.fn.soil_scouting": ("Soil Scouting", "土壤监测"),
     "main.implement": ("{name}: {state}", "{name}：{state}"),
     "control.rate": ("Fertilization model", "施肥模型"),
     "control.curve": ("Rate against NDVI", "施肥量-NDVI 曲线"),

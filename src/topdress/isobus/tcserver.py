@@ -1,12 +1,13 @@
-"""The cab terminal as an ISOBUS Task Controller (ISO 11783-10 version 4, TC-BAS and TC-SC):
-claims its address with a TC NAME (the C layer's claim), sends the TC status every 2 s, answers
-the client's version and label requests (with the labels of a pool kept from an earlier
-connection, see `poolstore`), takes the device description (DDOP) over TP/ETP (the C layer's
-transport), parses and maps it (`devicemap`), activates it or refuses it with the error named,
-then sets values (acknowledges awaited) and asks for measurements by time, distance, threshold
-or change as the pool offers them. Faults (a second client, a second TC, a flood, nonsense
-process data, a client gone or re-addressed) are counted and said once in `errors`, never
-raised. Domain code: frames in, frames out, time passed in; no UI."""
+"""The cab terminal as an ISOBUS Task Controller (ISO 11783-10 version 4, TC-BAS, TC-GEO with
+position-based control, TC-SC): claims its address with a TC NAME (the C layer's claim), sends
+the TC status every 2 s, answers the client's version and label requests (with the labels of a
+pool kept from an earlier connection, see `poolstore`), takes the device description (DDOP)
+over TP/ETP (the C layer's transport), parses and maps it (`devicemap`), activates it or
+refuses it with the error named, then sets values (acknowledges awaited) and asks for
+measurements by time, distance, threshold or change as the pool offers them. Faults (a second
+client, a second TC, a flood, nonsense process data, a client gone or re-addressed) are counted
+and said once in `errors`, never raised. Domain code: frames in, frames out, time passed in;
+no UI."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 
 from topdress.errors import ProtocolError
+from topdress.i18n import Text, text
 from topdress.isobus.devicemap import (
     ACTUAL_CONDENSED,
     ACTUAL_MASS_HA,
@@ -50,6 +52,7 @@ __all__ = [
     "map_device",
     "pd_frame",
     "pdack_errors",
+    "pdack_texts",
     "tc_name",
 ]  # fmt: skip
 
@@ -71,20 +74,17 @@ KEEP_SAID = 1024  # faults said once; past this many kinds, further new ones are
 # process-data commands (low nibble of byte 0)
 TECH, DEVICE, REQUEST, VALUE, MEAS_TIME, MEAS_DISTANCE = 0, 1, 2, 3, 4, 5
 MEAS_MIN, MEAS_MAX, MEAS_CHANGE, SET_ACK, PDACK, STATUS, TASK = 6, 7, 8, 10, 13, 14, 15
-# the server's version message: version 4, options TC-BAS (bit 0) + TC-SC (bit 4), 1 boom,
-# 16 sections, 2 channels
+# the server's version message: version 4, options TC-BAS (bit 0), TC-GEO with position-based
+# control (bit 2: the terminal sends each position's rate, from its maps and crop sensors) and
+# TC-SC (bit 4); 1 boom, 16 sections, 2 position-based control channels (the two products, the
+# upper and lower layers' rates)
 VERSION = 4
-SERVER_OPTIONS = 0x11
+SERVER_OPTIONS = 0x15
+BOOMS, SECTIONS, GEO_CHANNELS = 1, 16, 2
 # the client's options byte (its version message, byte 4)
 OPTION_NAMES = (
     "documentation", "TC-GEO without position-based control", "TC-GEO with position-based "
     "control", "peer control", "implement section control",
-)  # fmt: skip
-PDACK_BITS = (
-    "process data command not supported", "invalid element number",
-    "DDI not supported by the element", "trigger method not supported",
-    "process data not settable", "invalid or unsupported interval or threshold",
-    "value does not conform to the DDI definition", "value outside the operational range",
 )  # fmt: skip
 
 
@@ -120,12 +120,18 @@ def pd_frame(cmd: int, element: int, ddi: int, value: int) -> bytes:
     return head + struct.pack("<i", value)
 
 
-def pdack_errors(code: int) -> list[str]:
-    """A PDACK's error byte in words; 0 and 0xFF (AgIsoStack++ fills the byte with 0xFF: no
-    code given) are no error."""
+def pdack_texts(code: int) -> list[Text]:
+    """A PDACK's error byte as messages, one per bit set (ISO 11783-10's eight: `tc.pdack.0`
+    "process data command not supported" to `tc.pdack.7` "value outside the operational
+    range"); 0 and 0xFF (AgIsoStack++ fills the byte with 0xFF: no code given) are no error."""
     if code in (0, 0xFF):
         return []
-    return [w for bit, w in enumerate(PDACK_BITS) if code >> bit & 1]
+    return [text(f"tc.pdack.{bit}") for bit in range(8) if code >> bit & 1]
+
+
+def pdack_errors(code: int) -> list[str]:
+    """A PDACK's error byte in (English) words."""
+    return [str(t) for t in pdack_texts(code)]
 
 
 @dataclass
@@ -146,6 +152,7 @@ class Client:
     from_store: bool = False  # the pool is the one kept from an earlier connection
     awaiting: dict[tuple[int, int], int] = field(default_factory=dict)  # acks due, by sent time
     pool_error: str = ""  # why its last pool could not be mapped ("" when it could)
+    unanswered: int = 0  # acknowledges missed since it last acknowledged (said at the first)
 
     @property
     def options(self) -> int:
@@ -181,6 +188,8 @@ class TcServer:
         self.store = store
         self.client: Client | None = None
         self.errors: list[str] = []  # what went wrong, in words, oldest first (the last 200)
+        self.messages: list[Text] = []  # the same as catalogue messages (topdress.i18n)
+        self.told = 0  # faults said since the start (`messages` keeps the last 200)
         self.ignored = 0  # frames not understood or from a client not served, counted
         self.counters: Counter[str] = Counter()
         self.names: dict[int, int] = {}  # address -> NAME, from the address claims heard
@@ -219,8 +228,9 @@ class TcServer:
         if sa is not None:
             self._out.append(Frame(prio << 26 | PD_PGN << 8 | da << 8 | sa, data))
 
-    def _error(self, what: str, key: str | None = None) -> None:
-        """Records a fault in words (once per `key`, when given) and logs it."""
+    def _error(self, what: Text, key: str | None = None) -> None:
+        """Records a fault (once per `key`, when given): its English in `errors` and the
+        program log, the message itself (for the operator's language) in `messages`."""
         if key is not None:
             if key in self._said:
                 return
@@ -228,8 +238,11 @@ class TcServer:
                 self.counters["errors_suppressed"] += 1
                 return
             self._said.add(key)
-        self.errors.append(what)
+        self.errors.append(str(what))
         del self.errors[:-KEEP_ERRORS]
+        self.messages.append(what)
+        del self.messages[:-KEEP_ERRORS]
+        self.told += 1
         _log.warning("TC: %s", what)
 
     def set_value(self, element: int, ddi: int, value: int, ack: bool = True) -> None:
@@ -328,7 +341,7 @@ class TcServer:
                 self._rx(f, now_us)
             except ProtocolError as exc:  # a frame the C layer refused: said, counted, dropped
                 self.counters["bad_frames"] += 1
-                self._error(f"frame {f.can_id:08X} refused: {exc}", key="bad_frame")
+                self._error(text("tc.frame_refused", id=f.can_id, why=str(exc)), key="bad_frame")
         self._claim.step(now_us)
         self._out[:0] = self._claim.tx()
         sa = self.address
@@ -339,7 +352,7 @@ class TcServer:
             if now_us - c.last_heard_us > CLIENT_TIMEOUT_US:
                 c.lost = True
                 self.counters["clients_lost"] += 1
-                self._error(f"client {c.address:#x} silent for {CLIENT_TIMEOUT_US // 1000} ms")
+                self._error(text("tc.silent", client=c.address, ms=CLIENT_TIMEOUT_US // 1000))
             self._acks_due(c, now_us)
         if sa is not None and now_us >= self._next_status:
             self._next_status = now_us + STATUS_PERIOD_US
@@ -358,10 +371,10 @@ class TcServer:
             elif now_us - sent > PDACK_TIMEOUT_US:
                 del c.awaiting[key]
                 self.counters["pdacks_missing"] += 1
-                self._error(
-                    f"client {c.address:#x} did not acknowledge DDI {key[1]} of element {key[0]}"
-                    f" within {PDACK_TIMEOUT_US // 1000} ms"
-                )
+                c.unanswered += 1
+                if c.unanswered == 1:  # once per silence: the rest are counted
+                    self._error(text("tc.no_ack", client=c.address, ddi=key[1], element=key[0],
+                                     ms=PDACK_TIMEOUT_US // 1000))  # fmt: skip
 
     def _rx(self, f: Frame, now_us: int) -> None:
         self._claim.rx(f.can_id, f.data, now_us)
@@ -421,12 +434,11 @@ class TcServer:
         if sa == c.address and c.name is not None and name != c.name:
             c.lost = True
             self.counters["clients_displaced"] += 1
-            self._error(f"client {sa:#x}'s address taken by NAME {name:016X}: client dropped")
+            self._error(text("tc.displaced", client=sa, name=name))
         elif sa != c.address and c.name == name:
             c.lost = True
             self.counters["clients_displaced"] += 1
-            self._error(f"client NAME {name:016X} moved from {c.address:#x} to {sa:#x}: "
-                        "it must connect again")  # fmt: skip
+            self._error(text("tc.moved", name=name, old=c.address, new=sa))
 
     def _other_tc(self, sa: int, name: int | None) -> None:
         if sa in self.other_tcs and self.other_tcs[sa] == name:
@@ -438,16 +450,20 @@ class TcServer:
         if key in self._said:
             return
         self.counters["other_tcs"] += 1
-        inst = "" if name is None else f", TC number {name_fields(name)['function_instance'] + 1}"
-        self._error(f"another Task Controller at {sa:#x}{inst}", key=key)
+        if name is None:
+            self._error(text("tc.other_tc", address=sa), key=key)
+        else:
+            number = name_fields(name)["function_instance"] + 1
+            self._error(text("tc.other_tc_number", address=sa, number=number), key=key)
 
     def _elsewhere(self, c: Client, tc: int) -> None:
         """The client talks to another TC (two on the bus, and it chose that one): let it go
         rather than wait for it and call it lost."""
         self.client = None
         self.counters["clients_to_other_tc"] += 1
-        self._error(f"client {c.address:#x} works with the Task Controller at {tc:#x}",
-                    key=f"elsewhere:{c.address}:{tc}")  # fmt: skip
+        self._error(
+            text("tc.elsewhere", client=c.address, tc=tc), key=f"elsewhere:{c.address}:{tc}"
+        )
 
     def _flooding(self, sa: int, now_us: int) -> bool:
         second = now_us // 1_000_000
@@ -457,8 +473,7 @@ class TcServer:
         if n <= FLOOD_PER_S:
             return False
         self.counters["flood_dropped"] += 1
-        self._error(f"address {sa:#x} floods the TC (over {FLOOD_PER_S} process-data messages "
-                    "a second): the excess dropped", key=f"flood:{sa}")  # fmt: skip
+        self._error(text("tc.flood", address=sa, n=FLOOD_PER_S), key=f"flood:{sa}")
         return True
 
     def _client(self, sa: int, now_us: int) -> Client | None:
@@ -467,7 +482,7 @@ class TcServer:
         if c is not None and c.address != sa and not c.lost:
             if sa not in self._refused:
                 self._refused.add(sa)
-                self._error(f"client {sa:#x} refused: the TC serves {c.address:#x}, one at a time")
+                self._error(text("tc.second_client", client=sa, served=c.address))
             self.counters["refused_frames"] += 1
             self._nack(sa, now_us)
             return None
@@ -507,7 +522,8 @@ class TcServer:
 
     def _technical(self, c: Client, d: bytes) -> None:
         if d[0] == 0x00:  # version request
-            self._send(c.address, bytes([0x10, VERSION, 0xFF, SERVER_OPTIONS, 0, 1, 16, 2]))
+            self._send(c.address, bytes([0x10, VERSION, 0xFF, SERVER_OPTIONS, 0, BOOMS, SECTIONS,
+                                         GEO_CHANNELS]))  # fmt: skip
             if c.version is None:  # ours came too early for it (AgIsoStack++): ask again
                 self._send(c.address, bytes([0x00]) + b"\xff" * 7)
         elif d[0] == 0x10:  # the client's own version, answering ours
@@ -532,7 +548,7 @@ class TcServer:
             room = size <= MAX_POOL_BYTES
             if not room:
                 self.counters["pools_refused"] += 1
-                self._error(f"client {c.address:#x} offers a {size}-byte DDOP, too large")
+                self._error(text("tc.pool_too_large", client=c.address, size=size))
             self._send(c.address, bytes([0x51, 0 if room else 1]) + b"\xff" * 6)
         elif op == 6:
             self._pool(c, d[1:])
@@ -559,7 +575,7 @@ class TcServer:
         except ProtocolError as exc:
             self.store.discard(c.name)
             self.counters["stored_pools_corrupt"] += 1
-            self._error(f"client {c.address:#x}: {exc}; its pool is asked for again")
+            self._error(text("tc.stored_corrupt", client=c.address, why=str(exc)))
             return None
         c.pool, c.device, c.active, c.from_store = pool, device, False, True
         self.counters["stored_pools_offered"] += 1
@@ -574,14 +590,14 @@ class TcServer:
         except ProtocolError as exc:
             c.pool_error = str(exc)
             self.counters["pools_refused"] += 1
-            self._error(f"client {c.address:#x}: {exc}")
+            self._error(text("tc.pool_bad", client=c.address, why=str(exc)))
             err = 1 if len(pool) > MAX_POOL_BYTES else 0  # a bad pool is refused at activation
         self._send(c.address, bytes([0x71, err]) + struct.pack("<I", len(pool)) + b"\xff\xff")
 
     def _activate(self, c: Client) -> None:
         if c.device is None or c.pool is None:  # errors in the pool (bit 0), "other error" (bit 2)
             self._send(c.address, bytes([0x91, 1, 0xFF, 0xFF, 0xFF, 0xFF, 4, 0xFF]))
-            self._error(f"client {c.address:#x}: activation refused, no valid DDOP")
+            self._error(text("tc.activation_refused", client=c.address))
             return
         c.active = True
         self.counters["activations"] += 1
@@ -594,7 +610,7 @@ class TcServer:
                                 c.device.localization_label)  # fmt: skip
             except OSError as exc:
                 self.counters["store_errors"] += 1
-                self._error(f"DDOP of client {c.address:#x} not kept: {exc}", key="store")
+                self._error(text("tc.not_kept", client=c.address, why=str(exc)), key="store")
 
     @staticmethod
     def _unpack(d: bytes) -> tuple[int, int, int]:
@@ -611,8 +627,8 @@ class TcServer:
         ):
             # not process data of its pool: counted and said once, not taken for a measurement
             self.counters["unknown_values"] += 1
-            self._error(f"client {c.address:#x} reports DDI {ddi} of element {element}, "
-                        "which its DDOP does not have", key=f"unknown:{element}:{ddi}")  # fmt: skip
+            self._error(text("tc.unknown_value", client=c.address, ddi=ddi, element=element),
+                        key=f"unknown:{element}:{ddi}")  # fmt: skip
             return
         c.values[(element, ddi)] = value
         c.heard[(element, ddi)] = c.heard.get((element, ddi), 0) + 1
@@ -623,10 +639,16 @@ class TcServer:
         c.pdacks.append((element, ddi, d[4]))
         del c.pdacks[:-KEEP_PDACKS]
         c.awaiting.pop((element, ddi), None)
-        words = pdack_errors(d[4])
+        if c.unanswered:
+            self._error(text("tc.ack_again", client=c.address, n=c.unanswered))
+            c.unanswered = 0
+        words = pdack_texts(d[4])
         if words:
             self.counters["pdack_errors"] += 1
-            self._error(f"client {c.address:#x} refused DDI {ddi} of element {element}: "
-                        + ", ".join(words))  # fmt: skip
+            why = words[0]
+            for w in words[1:]:
+                why = text("tc.and", a=why, b=w)
+            self._error(text("tc.pdack_refused", client=c.address, ddi=ddi, element=element,
+                             why=why))  # fmt: skip
         else:
             self.counters["pdacks_ok"] += 1

@@ -103,6 +103,8 @@ EVENT_KINDS: Final = (
     "isobus.refused",
     "isobus.problem",
     "isobus.totals",
+    "isobus.sections",
+    "isobus.coverage",
     "isobus.claimed",
     "isobus.ddop",
     "isobus.set",

@@ -55,7 +55,7 @@ class AlarmInputs:
     position_lost: bool = False  # the outlet dead reckoned past its limit (site.UNKNOWN)
     # An ISOBUS implement (None: the topdress ECU): its link's state (terminal.tclink: ok,
     # lost, refused, wait), its DDOP's designator and the last problem in words
-    isobus: tuple[str, str, str] | None = None
+    isobus: tuple[str, str, Text | str] | None = None
 
 
 @dataclass

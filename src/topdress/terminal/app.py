@@ -312,7 +312,7 @@ class Terminal:
             here = (outlet.lat, outlet.lon)
             if here != self._sc_at:  # a new position: section control (terminal.tclink)
                 self._sc_at = here
-                tc.on_position(*here, outlet.heading_deg, v_sel, self.site.boundary)
+                tc.on_position(*here, outlet.heading_deg, v_sel, self.site.boundary, now)
         site = self.site.decide(
             ndvi,
             (outlet.lat, outlet.lon) if outlet is not None else None,
@@ -321,6 +321,11 @@ class Terminal:
         )
         if ndvi is None and site.used_ndvi:
             self.counters["no_ndvi_ticks"] += 1
+        # The state row's outlet is where what the machine reports was metered: an ISOBUS
+        # implement's reports are its DDI 143 old (terminal.tclink).
+        mapped = None if outlet is None else (outlet.lat, outlet.lon)
+        if tc is not None and mapped is not None:
+            mapped = tc.reported_where(now, *mapped)
         cfg = self.cfg
         rates = split_layers(site.total_kg_ha, cfg.rate.split_upper, cfg.machine.layers)
         # No command goes out before the parameters are in force anyway; while they are pushed
@@ -339,8 +344,8 @@ class Terminal:
             lag,
             utc=self.gnss_in.utc.now(now),
             heading_deg=outlet.heading_deg if outlet is not None else None,
-            outlet_lat=outlet.lat if outlet is not None else None,
-            outlet_lon=outlet.lon if outlet is not None else None,
+            outlet_lat=mapped[0] if mapped is not None else None,
+            outlet_lon=mapped[1] if mapped is not None else None,
             zone=site.zone,
             prescription_kg_ha=site.prescription_kg_ha,
         )

@@ -9,8 +9,11 @@ moves to it when it has them (at once when nothing works on the old one). No dev
 on the loop's thread.
 
 With `[can] implement = "isobus"` the bus is an ISOBUS: every frame goes to the Task Controller
-(`TcLink`, terminal.tclink) and the topdress ECU's link sends nothing (it keeps the command the
-desk decided, which the TC turns into the implement's setpoints).
+(`TcLink`, terminal.tclink), which turns the command the desk decided into the implement's
+setpoints. The topdress ECU's link speaks only when the implement served is a topdress ECU
+(terminal.proplink): its private frames on Proprietary A/B, the parameters pushed once it is
+recognised; while they are not all in force the TC is given the stop command, as no PcCommand
+goes out on the private bus before them.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from topdress.terminal.ecuview import terminal_protocol
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.lines import in_background
+from topdress.terminal.proplink import PropLink
 from topdress.terminal.tclink import TcLink
 
 log = logging.getLogger(__name__)
@@ -76,8 +80,9 @@ class BusSwitch:
         self._opening: _Opening | None = None
         self._port_down_since: float | None = None
         self._failing = False  # a receive error was told; the next frame ends the spell
-        self.link = self._new_link(self.port, cfg.can, cfg.machine.fan_rpm)
         self.tc = self._new_tc(self.port, cfg)
+        self.prop = self._new_prop(self.port, cfg)
+        self.link = self._new_link(self.port, cfg.can, cfg.machine.fan_rpm)
 
     def _new_tc(self, port: CanPort, cfg: TerminalConfig) -> TcLink | None:
         """The Task Controller on an ISOBUS (None: the bus is the topdress ECU's)."""
@@ -85,14 +90,29 @@ class BusSwitch:
             return None
         return TcLink(port, self._settings, self._journal, on_tx=self._log_tx)
 
+    def _new_prop(self, port: CanPort, cfg: TerminalConfig) -> PropLink | None:
+        """The topdress ECU's private frames beside the Task Controller (None: no ISOBUS)."""
+        if self.tc is None:
+            return None
+
+        def say(what: str) -> None:
+            self._journal.event(text("event.isobus", what=what))
+
+        server = self.tc.server
+        return PropLink(port, server, cfg.isobus.ecu_manufacturer, self._log_tx, say)
+
     @property
     def ecu_state(self) -> str:
         """The ECU link's state: the CAN link's, or the ISOBUS implement's (ok, lost, wait: none
-        served yet, or its pool refused), and `lost` while no adapter is open."""
+        served yet, or its pool refused; a topdress ECU served is ok once its own link is, its
+        parameters in force and its status heard, as on its own bus), and `lost` while no
+        adapter is open."""
         if not self.port.connected:
             return "lost"
         if self.tc is not None:
             state = self.tc.state
+            if state == "ok" and self.prop is not None and self.prop.serving:
+                return self.link.state
             return state if state in ("ok", "lost") else "wait"
         return self.link.state
 
@@ -102,23 +122,32 @@ class BusSwitch:
         implement activated its pool."""
         return self.tc.connected_once if self.tc is not None else self.link.ready
 
+    @property
+    def pushes_params(self) -> bool:
+        """The topdress ECU's parameters are pushed: on its own bus, or on an ISOBUS once it is
+        recognised as the implement served (another implement has none)."""
+        return self.prop is None or self.prop.serving
+
     def params(self, cfg: TerminalConfig) -> dict[int, float]:
         """The ECU parameters pushed at start, the GNSS lag's start value included."""
         return cfg.ecu_params(self._start_ms())
 
     def _new_link(self, port: CanPort, cfg: CanConfig, fan_rpm: float) -> CanLink:
+        """The topdress ECU's link: on `port`, or on an ISOBUS through the PropLink (which
+        logs the frames as they go on the bus)."""
         return CanLink(
-            port,
+            port if self.prop is None else self.prop,
             cfg,
             fan_rpm=fan_rpm,
-            on_tx=self._log_tx,
+            on_tx=self._log_tx if self.prop is None else None,
             on_event=self._journal.event,
             on_ident=self._log_ident,
             on_again=self._on_again,
+            isobus=self.prop is not None,
         )
 
     def begin(self, now: float) -> None:
-        """The parameter push at open (the topdress ECU's; an ISOBUS implement has none)."""
+        """The parameter push at open (the topdress ECU's; on an ISOBUS once one is served)."""
         if self.tc is None:
             self.link.begin(self.params(self._settings.cfg), now)
 
@@ -179,10 +208,14 @@ class BusSwitch:
         if kind == "can":
             self._failing = False
             self._journal.raw("can_rx", t, (payload.arbitration_id, bytes(payload.data)))
-            if self.tc is not None:
-                self.tc.on_frame(payload, t)
-            else:
+            if self.tc is None:
                 self.link.on_frame(payload, t)
+                return
+            self.tc.on_frame(payload, t)
+            assert self.prop is not None
+            private = self.prop.take(payload)
+            if private is not None:
+                self.link.on_frame(private, t)
         elif kind == "can_error":
             self._journal.counters["can_rx_errors"] += 1
             if not self._failing:  # once per failure spell (the reader retries)
@@ -199,10 +232,24 @@ class BusSwitch:
         now)."""
         self.link.set_command(*command)
         self._poll_new_bus(now)
-        if self.tc is not None:
-            self.tc.poll(now, command)
-        else:
+        if self.tc is None:
             self.link.poll(now)
+            return
+        assert self.prop is not None
+        served = self.prop.watch()
+        if served == "first":  # a topdress ECU served: its parameters, then it may meter
+            self.link.begin(self.params(self._settings.cfg), now)
+        elif served == "again":  # connected again (a reboot is not heard otherwise)
+            self.link.reconnected(now)
+        self.tc.poll(now, self.held(command))
+        self.link.poll(now)
+
+    def held(self, command: tuple[bool, float, float, float]) -> tuple[bool, float, float, float]:
+        """The command for the Task Controller: the stop while a topdress ECU served has not all
+        its parameters in force (on its own bus no PcCommand goes out before them)."""
+        if self.prop is not None and self.prop.serving and not self.link.params_done:
+            return (False, command[1], 0.0, 0.0)
+        return command
 
     def _on_port(self, t: float, port: CanPort, what: str, detail: Any) -> None:
         if port is self.port:
@@ -250,11 +297,14 @@ class BusSwitch:
         assert opening is not None
         self._opening = None
         old, self.port = self.port, opening.port
-        # An ISOBUS TC starts over on the new bus (it claims its address there); no ECU
-        # parameters go to an ISOBUS.
+        # An ISOBUS TC starts over on the new bus (it claims its address there); the ECU's
+        # parameters go to an ISOBUS once a topdress ECU is served there.
         self.tc = self._new_tc(self.port, opening.cfg)
-        if self.tc is not None:
+        self.prop = self._new_prop(self.port, opening.cfg)
+        if self.tc is not None or self.link.isobus:  # the link's kind of bus changes
             self.link = self._new_link(self.port, opening.cfg.can, self.link.command.fan_rpm)
+            if self.tc is None:
+                self.link.begin(self.params(opening.cfg), t)
         elif opening.next is not None:
             opening.next.command = self.link.command  # what the ECU is doing carries on
             self.link = opening.next

@@ -356,3 +356,18 @@ class FanCheck:
 
 
 Wizard = CatchTest | WheelCal | FanCheck
+
+
+def isobus_refusal(needs_fans: bool, why_not_topdress: str | None) -> Text | None:
+    """Why a calibration cannot run with the ECU on an ISOBUS (None: it can).
+
+    The catch test (PcCalCommand) and the wheel calibration (EcuDiag's pulses) go through the
+    ECU's private frames when the implement served is a topdress ECU (`why_not_topdress` None;
+    else why it is not one). The fan check and the look-ahead calibration (`needs_fans`) run
+    the fans with a start command at zero rate, a PcCommand, which has no ISOBUS form: there the
+    Task Controller's rates start the machine, and the firmware sets the fans itself."""
+    if why_not_topdress is not None:
+        return text("op.error.cal_isobus_not_topdress", why=why_not_topdress)
+    if needs_fans:
+        return text("op.error.cal_isobus_fans")
+    return None

@@ -27,6 +27,12 @@ seconds on any monotonic clock (virtual in tests). It
   learning starts, and it has learned.
   An ECU never heard is waited for ("wait"), not lost.
 
+On an ISOBUS (`isobus=True`) the same link speaks to a topdress ECU the Task Controller serves,
+its frames carried on Proprietary A/B by terminal.proplink's `PropLink` (the `bus` it sends on):
+everything above but the PcCommand, which has no ISOBUS form (the Task Controller sets the
+rates and sections); the paper's identifiers are used whatever `[can.ids]` says, since the
+mapping to the proprietary PGNs is by them (protocol/topdress.dbc, IsobusPgn).
+
 The parameter push is terminal.parampush's `ParamPusher`; what the link knows of the ECU
 (its frames as last heard, the counters, who it is) terminal.ecuview's. It sends on anything
 with python-can's `send`: the terminal's `devices.can.CanPort`, which
@@ -93,9 +99,11 @@ class CanLink:
         on_event: Callable[[Text], None] | None = None,
         on_ident: Callable[[protocol.EcuIdent, float], None] | None = None,
         on_again: Callable[[Mapping[int, float], float], None] | None = None,
+        isobus: bool = False,
     ) -> None:
         """`on_again(params, now)`: the parameters pushed again to an ECU back from a loss are
-        all in force."""
+        all in force. `isobus`: the ECU is on an ISOBUS behind `bus` (no PcCommand)."""
+        self.isobus = isobus
         self._ack_timeout_s = param_ack_timeout_s
         self._on_ident = on_ident
         self._on_again = on_again
@@ -109,13 +117,14 @@ class CanLink:
         """The state of a link fresh on `bus`."""
         self._bus = bus
         self.cfg = cfg
-        self.ids = frame_ids(cfg)
+        self.ids = protocol.DEFAULT_IDS if self.isobus else frame_ids(cfg)
         self.counters = LinkCounters()
         self.command = command
         self.ecu = EcuView()
         self._fault_record = FaultRecord()  # a firmware's EcuFaultRecord round
         self._params = ParamPusher(
             self._send,
+            self._send_stop,
             self.ids,
             self.where,
             self.counters,
@@ -125,6 +134,7 @@ class CanLink:
             self._ack_timeout_s,
             self._retries,
             self._backoff_s,
+            self.isobus,
         )
         self._next_cmd_t: float | None = None
         self._alive = False
@@ -212,7 +222,7 @@ class CanLink:
             self.command, start=start, fan_rpm=fan, rate_upper_kg_ha=upper, rate_lower_kg_ha=lower
         )
         changed = self._sent is not None and self._sent != (start, fan, upper, lower)
-        if self.cfg.send_on_rate and changed and self.params_done:
+        if self.cfg.send_on_rate and changed and self.params_done and not self.isobus:
             return self._send_command()
         return False
 
@@ -238,7 +248,7 @@ class CanLink:
 
     def send_now(self) -> None:
         """Send the command at once (once the parameters are in force), off the period."""
-        if self.params_done:
+        if self.params_done and not self.isobus:
             self._send_command()
 
     def poll(self, now: float) -> None:
@@ -246,11 +256,13 @@ class CanLink:
 
         Raises EcuParamError when a parameter is refused."""
         self._params.poll(now)
-        if self.params_done and (self._next_cmd_t is None or now >= self._next_cmd_t - _EPS_S):
+        # No PcCommand on an ISOBUS: the Task Controller sets the rates.
+        next_t = self._next_cmd_t
+        if not self.isobus and self.params_done and (next_t is None or now >= next_t - _EPS_S):
             # On a fixed grid, so send-on-GNSS frames in between do not shift the period;
             # after a stall the grid restarts from now.
             period = self.cfg.command_period_s
-            due = now if self._next_cmd_t is None else self._next_cmd_t
+            due = now if next_t is None else next_t
             self._next_cmd_t = due + period if now - due < period else now + period
             self._send_command()
         self._poll_liveness(now)
@@ -266,6 +278,14 @@ class CanLink:
             return True
         # A failed send is not retried early: the next period carries fresher values.
         return False
+
+    def _send_stop(self) -> bool:
+        """The stop command now, to an ECU running when it should take a parameter; False when
+        not sent (on an ISOBUS the Task Controller's work state stops it: terminal.busswitch
+        holds it off while a push is under way)."""
+        if self.isobus:
+            return False
+        return self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
 
     def _send(self, msg: can.Message) -> bool:
         try:
@@ -349,6 +369,14 @@ class CanLink:
             self._params.restarted(now, had, self._lost)
         if self._on_ident is not None:
             self._on_ident(ident, now)
+
+    def reconnected(self, now: float) -> None:
+        """On an ISOBUS: the ECU connected to the Task Controller again. Its EcuIdent is not
+        heard there (sent before its address is claimed), so a reboot within `ecu_timeout_s`
+        shows only so: what it took may be gone, and the parameters in force are pushed again
+        (not while a push is under way: that one gives them)."""
+        if self._params.done:
+            self._params.restarted(now, True, self._lost, "event.ecu_reconnected")
 
     def _on_heard(self, now: float, back: bool) -> None:
         """The first status frame, or the first after a loss."""

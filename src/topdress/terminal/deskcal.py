@@ -19,6 +19,7 @@ from topdress.terminal.calibration import (
     FanCheck,
     WheelCal,
     Wizard,
+    isobus_refusal,
 )
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.leadcal import LeadCal
@@ -96,6 +97,11 @@ class CalDesk:
                 text("op.error.stop_first", state=text(f"op.state.{self._op.state}"))
             )
         link, cfg = self._can.link, self._settings.cfg
+        if (prop := self._can.prop) is not None:  # an ISOBUS: only with a topdress ECU served
+            fans = isinstance(c, op.StartFanCheck | op.StartLeadCal)
+            why = None if prop.serving else prop.why or "none served"
+            if (refused := isobus_refusal(fans, why)) is not None:
+                raise op.OperatorError(refused)
         if not (link.ready and link.ecu_alive):
             raise op.OperatorError(text("op.error.ecu_for_cal", state=link_state(link.state)))
         m = cfg.machine

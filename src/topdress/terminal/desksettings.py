@@ -81,8 +81,8 @@ class SettingsDesk:
         new = validate_section(self._settings.cfg, c.section, c.values)
         if c.section in ECU_SECTIONS:
             changed = changed_ecu_params(self._settings.cfg, new)
-            # An ISOBUS implement has no topdress ECU parameters: the change is taken as it is.
-            if changed and self._can.tc is None:
+            # An ISOBUS implement that is not a topdress ECU has none: taken as it is.
+            if changed and self._can.pushes_params:
                 return self._push(now, c, new, changed, fut)
         elif c.section in DEVICE_KEYS:
             keys = changed_device_keys(self._settings.cfg, new, c.section)

@@ -64,13 +64,15 @@ def _impossible_ack(
 
 
 class ParamPusher:
-    """The parameter push of one link on one bus. `send(msg)` sends (False: not sent); `ecu()`
+    """The parameter push of one link on one bus. `send(msg)` sends (False: not sent); `stop()`
+    stops a running ECU (False: not sent, it is stopped another way); `ecu()`
     is the link's view of the ECU's frames; `counters` the link's (tx_params, param_retries,
     rx_implausible, ecu_restarts)."""
 
     def __init__(
         self,
         send: Callable[[can.Message], bool],
+        stop: Callable[[], bool],
         ids: FrameIds,
         where: str,
         counters: LinkCounters,
@@ -80,8 +82,11 @@ class ParamPusher:
         ack_timeout_s: float,
         retries: int,
         backoff_s: tuple[float, ...],
+        isobus: bool = False,
     ) -> None:
+        self._isobus = isobus  # on an ISOBUS: no [can.ids] to blame for a deaf ECU
         self._send = send
+        self._stop = stop
         self.ids = ids
         self._where = where
         self.counters = counters
@@ -162,10 +167,15 @@ class ParamPusher:
         if ack.result is AckResult.BUSY and busy_other and not self._lag_learned(param_id, push):
             # Running with another value (the terminal restarted mid-field with a new file):
             # stop it, then write again. Busy with the value already in force is as good as Ok.
-            self._send(protocol.encode_command(False, 0.0, 0.0, 0.0, None, ids=self.ids))
+            # Where the stop goes another way (an ISOBUS: the Task Controller's work state), the
+            # parameter is asked again after the acknowledge's timeout, not Busy on Busy at once.
             push.tries = 0
-            self._send_param(now)
+            if self._stop():
+                self._send_param(now)
+            else:
+                push.sent_t = now
             return
+
         if ack.result is AckResult.INCONSISTENT and self._defer(push, now):
             return
         if ack.result not in (AckResult.OK, AckResult.BUSY):
@@ -288,24 +298,26 @@ class ParamPusher:
         if self._ecu().status_t is None:
             return text("event.ecu_wait_silent", **head)
         # It talks but does not answer: other frame identifiers, or a firmware without them.
-        return text("event.ecu_wait_deaf", **head)
+        return text("event.ecu_wait_deaf_isobus" if self._isobus else "event.ecu_wait_deaf", **head)
 
-    def restarted(self, now: float, had: bool, lost: bool) -> None:
+    def restarted(
+        self, now: float, had: bool, lost: bool, said: str = "event.ecu_restarted"
+    ) -> None:
         """The ECU says it runs on its firmware defaults (EcuIdent.OnDefaults) after it said it
         had parameters (`had`), or amid a push it took some of: it restarted, and whatever it
         took is gone, though it was never unheard long enough to be lost (it rebooted within
         ecu_timeout_s). The parameters in force are pushed again from the first; a settings
-        change under way is refused."""
+        change under way is refused. `said`: the event's key (why it is thought restarted)."""
         push = self._push
         if push is None or lost:
             return  # nothing to push yet, or lost: the status that ends the loss pushes them
         if not (had or (not push.done and push.index > 0)):
             return
         self.counters.ecu_restarts += 1
-        self._event(text("event.ecu_restarted"))
+        self._event(text(said))
         if push.on_done is not None and not push.done:
             self._push = None
-            push.on_done(str(text("event.ecu_restarted")), [])
+            push.on_done(str(text(said)), [])
         again = self.ready or push.again
         self._push = _ParamPush(list(self._params), again=again)
         self._send_param(now)

@@ -16,6 +16,7 @@ from topdress.terminal.gnsslag import LagKeeper
 from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal
 from topdress.terminal.linkwatch import LinkWatch
+from topdress.terminal.proplink import with_ecu
 from topdress.view.snapshot import LagView, Snapshot, ecu_values
 
 
@@ -58,8 +59,9 @@ class SnapshotBuilder:
         pos = self._gnss.tracker.position
         ident = link.ecu.ident  # who the ECU is stays known while it is not heard
         tc = self._bus.tc
-        if tc is not None:  # an ISOBUS implement: its reports in the ECU's fields
-            machine = tc.machine_values(link.command.gnss_kmh)
+        if tc is not None:  # an ISOBUS implement: its reports in the ECU's fields, and a
+            # topdress ECU's own broadcasts where they say more (terminal.proplink)
+            machine = with_ecu(tc.machine_values(link.command.gnss_kmh), ecu)
             live = tc.state == "ok"
         else:
             machine = ecu_values(ecu.status, ecu.diag, ecu.speeds, ecu.targets)
@@ -113,6 +115,8 @@ class SnapshotBuilder:
         session = self._journal.session
         if session is not None:
             out["log_err"] = session.errors
+        if self._bus.prop is not None:  # the topdress ECU's private frames on the ISOBUS
+            out.update(self._bus.prop.counter_view(self._bus.link.counters))
         if nmea["bad_field"]:
             out["nmea_bad_field"] = nmea["bad_field"]
         # The loop's own anomalies (no NDVI, CAN receive errors) only when they happen.

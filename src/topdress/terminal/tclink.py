@@ -13,28 +13,41 @@ blocks (the port sends from its own thread). Once a client's pool (DDOP) is acti
   operator's start and the site's rate; with `[isobus] section_control` each section is also
   off over ground already covered (what the implement reported working, DDI 161) and outside
   the field boundary (geo.sectionctl, decided at each new outlet position: `on_position`);
-  with no boundary and nothing covered yet, all sections go with the rate;
+  with no boundary and nothing covered yet, all sections go with the rate; the ground earlier
+  sessions of the field covered (`[isobus] coverage_hours`) is read in a thread at start and
+  counts as covered; each switch of the sections commanded is an `isobus.sections` event;
 - asks for the actual rates (DDI 7/2), the work state (141), the sections (161) every
   MEASURE_MS and the totals (DDI 81/80) every TOTAL_MS;
-- reads the implement's delays from its pool (DDI 142, 143): 142 sets the look-ahead;
+- reads the implement's delays from its pool (DDI 142, 143): 142 sets the look-ahead, 143
+  puts its reports (the as-applied position, the ground covered) where the outlet was then;
 - keeps who is on the bus: every address claim heard, its NAME decoded.
 
 What goes wrong (a pool refused, the client silent, a value refused) becomes an event in the
-session log and the operator's words; `problem` and `state` feed the alarms.
+session log (English) and the operator's words (catalogue messages, topdress.i18n); `problem`
+and `state` feed the alarms.
 """
 
 from __future__ import annotations
 
+import threading
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import can
+import numpy as np
 
 from topdress.errors import DeviceError, ProtocolError
 from topdress.geo.boundary import FieldBoundary
-from topdress.geo.sectionctl import SectionControl, sections_from_device
-from topdress.i18n import text
+from topdress.geo.sectionctl import (
+    EarlierCoverage,
+    SectionControl,
+    earlier_coverage,
+    sections_from_device,
+)
+from topdress.i18n import Text, text
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
 from topdress.isobus.tcserver import Client, Device, TcServer, tc_name
@@ -47,6 +60,7 @@ MEASURE_MS = 200  # actual rates, work state and sections: 5 Hz, every other tic
 TOTAL_MS = 1000
 SETPOINT_REFRESH_S = 1.0
 CLAIM_S = 1.0  # an address claim takes 250 ms; none after this long is a loss
+TRACK_S = 10.0  # the outlet positions kept: the longest actual-value delay (DDI 143) applied
 ADDRESS_CLAIM_PGN = 0xEE00
 # DDIs (ISO 11783-11)
 SETPOINT_VOLUME_HA, ACTUAL_VOLUME_HA = 1, 2
@@ -59,6 +73,8 @@ ACTUAL_CONDENSED, SETPOINT_CONDENSED = 161, 290
 PER_HA = 100  # kg/ha -> mg/m^2, and L/ha -> mm^3/m^2
 KG_HA_PER_RPM_KG = 600.0  # eq. 4: kg/ha = rpm x kg/rev x 600 / (km/h x m)
 FUNCTIONS = {130: "task controller", 29: "virtual terminal", 25: "tractor ECU"}
+# why a section the TC commands is off, beside section control's "covered" and "outside"
+OPERATOR, RATE_ZERO = "operator", "rate_zero"
 
 
 class Sender(Protocol):
@@ -134,7 +150,7 @@ class TcLink:
         self.latency_ms: dict[int, int] = {}
         self._sent: dict[tuple[int, int], tuple[int, float]] = {}  # value and time, by var
         self.setpoints: tuple[float, ...] = ()  # per product, in its unit
-        self.problem = ""
+        self.problem: Text | str = ""  # the last thing wrong (a message, or a library's words)
         self.refused = False  # the last pool offered could not be activated
         self.refusal = ""  # why
         self._was: str = "wait"
@@ -147,6 +163,76 @@ class TcLink:
         self._functions_view: tuple[ControlFunctionView, ...] = ()
         self._sc: SectionControl | None = None  # the implement's section control, once placed
         self.section_on: tuple[bool, ...] | None = None  # what it decided last (None: all)
+        self.section_why: tuple[str, ...] = ()  # why each one off is off ("covered", "outside")
+        self._logged_sections: tuple[bool, ...] | None = None  # the last logged
+        self._earlier = self._read_earlier()  # the field's earlier sessions, read off the loop
+        self._covered_before: EarlierCoverage | None = None  # for each SectionControl
+        self._track: deque[tuple[float, float, float, float]] = deque()  # t, lat, lon, heading
+
+    def _read_earlier(self) -> Future[EarlierCoverage] | None:
+        """The ground earlier sessions of this field covered (`[isobus] coverage_hours`), read
+        from the session logs in a thread of its own (whole sessions: seconds for a long day);
+        the loop takes it once it is there (`_take_earlier`)."""
+        cfg = self._settings.cfg.isobus
+        session = self._journal.session
+        if not cfg.section_control or cfg.coverage_hours <= 0.0 or session is None:
+            return None
+        fut: Future[EarlierCoverage] = Future()
+
+        def read() -> None:
+            try:
+                fut.set_result(earlier_coverage(session.path, cfg.coverage_hours))
+            except Exception as exc:  # said by the loop; never a traceback in a thread
+                fut.set_exception(exc)
+
+        threading.Thread(target=read, name="tc-coverage", daemon=True).start()
+        return fut
+
+    def _seed(self, sc: SectionControl) -> None:
+        """The earlier sessions' ground into a section control: their tiles, made in the
+        reading thread (a few ms here), or, for a boundary in another UTM zone than theirs,
+        their swaths projected and united here (0.7 s an hour of log, once)."""
+        got = self._covered_before
+        if got is None or got.cover is None or got.crs is None:
+            return
+        if not sc.add_cover(got.cover, got.crs):
+            sc.add_covered_wgs84(np.array(got.swaths, dtype=object))
+
+    @property
+    def section_control(self) -> SectionControl | None:
+        """The served implement's section control, once placed (its coverage, its decisions)."""
+        return self._sc
+
+    @property
+    def coverage_read(self) -> bool:
+        """The earlier sessions' coverage was taken (or there is none to read)."""
+        return self._earlier is None
+
+    def _take_earlier(self) -> None:
+        fut = self._earlier
+        if fut is None or not fut.done():
+            return
+        self._earlier = None
+        now = self._journal.clock()
+        try:
+            got = fut.result()
+        except Exception as exc:  # the logs unreadable as a whole: coverage starts empty
+            self._tell(text("tc.link.coverage_error", why=str(exc)))
+            return
+        self._covered_before = got
+        if self._sc is not None:
+            self._seed(self._sc)
+        self._journal.log_event(
+            now,
+            "isobus.coverage",
+            sessions=list(got.sessions),
+            swaths=len(got.swaths),
+            skipped=list(got.skipped),
+        )
+        if got.sessions:
+            self._say(text("tc.link.coverage", n=len(got.sessions), swaths=len(got.swaths)))
+        for why in got.skipped:
+            self._tell(text("tc.link.coverage_skipped", why=why))
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
@@ -180,15 +266,16 @@ class TcLink:
             out = self.server.step(self._us(now), frames)
         except ProtocolError as exc:  # a frame the C layer refuses: counted, never raised
             self.counters.rx_malformed += 1
-            self._tell(f"ISOBUS frame refused: {exc}")
+            self._tell(text("tc.link.frame_refused", why=str(exc)))
             return
         for f in out:
             self._send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
         self._watch_address(now)
-        errors = self.server.errors
-        while self._errors < len(errors):
-            self._tell(errors[self._errors])
-            self._errors += 1
+        server = self.server
+        new = min(server.told - self._errors, len(server.messages))
+        self._errors = server.told
+        for what in server.messages[len(server.messages) - new :]:
+            self._tell(what)
 
     def _send(self, msg: can.Message) -> None:
         try:
@@ -200,17 +287,18 @@ class TcLink:
             self.counters.tx_errors += 1
             if not self._failing:
                 self._failing = True
-                self._tell(f"ISOBUS send failed: {exc}")
+                self._tell(text("tc.link.send_failed", why=str(exc)))
             return
         self._failing = False
         if self._on_tx is not None:
             self._on_tx(msg)
 
-    def _tell(self, what: str) -> None:
-        """Something wrong: to the operator, the session log, and `problem`."""
+    def _tell(self, what: Text | str) -> None:
+        """Something wrong: to the operator (in the language in force), the session log (in
+        English), and `problem`."""
         self.problem = what
         self._journal.event(text("event.isobus", what=what))
-        self._journal.log_event(self._journal.clock(), "isobus.problem", what=what)
+        self._journal.log_event(self._journal.clock(), "isobus.problem", what=str(what))
 
     def _watch_address(self, now: float) -> None:
         """The TC's address: claimed, taken by a control function with a higher-priority NAME
@@ -222,7 +310,7 @@ class TcLink:
                 self._no_address_since = now
             elif now - self._no_address_since > CLAIM_S and not self._said_no_address:
                 self._said_no_address = True
-                self._tell("the Task Controller has no address: every one it tried was taken")
+                self._tell(text("tc.link.no_address"))
             return
         self._no_address_since = None
         self._said_no_address = False
@@ -230,13 +318,11 @@ class TcLink:
             return
         self._claimed = address
         if was is None:
-            self._say(f"Task Controller at address 0x{address:02X}")
+            self._say(text("tc.link.at", address=address))
         else:
-            self._tell(
-                f"Task Controller moved from 0x{was:02X} to 0x{address:02X}: another took it"
-            )
+            self._tell(text("tc.link.moved", old=was, new=address))
 
-    def _say(self, what: str) -> None:
+    def _say(self, what: Text) -> None:
         self._journal.event(text("event.isobus", what=what))
 
     # ---- the tick ---------------------------------------------------------------------------
@@ -291,6 +377,7 @@ class TcLink:
         """A pool newly active: its products, sections, delays; the measurements asked for."""
         assert c.device is not None
         self._served = (c.address, c.device)
+        self._logged_sections = None  # each connection's first sections are logged
         self.connected_once = True
         self._sent.clear()
         if self._sc is not None and self._sc.sections != sections_from_device(c.device):
@@ -320,13 +407,16 @@ class TcLink:
         for ddi in (ACTUAL_WORK_STATE, ACTUAL_CONDENSED):
             for element in self._carrying(ddi):
                 self._measure(element, ddi, MEASURE_MS)
-        units = ", ".join(f"{p.unit} (element {p.element})" for p in products)
+        units: Text = text("tc.link.none")
+        for i, p in enumerate(products):
+            one = text("tc.link.product", unit=p.unit, element=p.element)
+            units = one if i == 0 else text("tc.and", a=units, b=one)
         self._say(
-            f"implement {c.device.designator} at 0x{c.address:02X}: DDOP active, "
-            f"{len(products)} products in {units or 'none'}, {self.sections} sections"
-        )
+            text("tc.link.implement", device=c.device.designator, address=c.address,
+                 n=len(products), units=units, sections=self.sections)
+        )  # fmt: skip
         if not products:
-            self._tell(f"{c.device.designator}: its DDOP has no settable rate (DDI 6 or 1)")
+            self._tell(text("tc.link.no_rate", device=c.device.designator))
         self._journal.log_event(
             now,
             "isobus.implement",
@@ -377,10 +467,27 @@ class TcLink:
         for element in self._carrying(SETPOINT_WORK_STATE):
             self._set(c, now, element, SETPOINT_WORK_STATE, int(working))
         chosen = self.section_on
+        n = min(self.sections, SECTIONS_PER_DDI)  # sections 17 and up are not switched
+        on: list[bool | None] = [working and (chosen is None or chosen[i]) for i in range(n)]
         for element in self._carrying(SETPOINT_CONDENSED):
-            n = min(self.sections, SECTIONS_PER_DDI)  # sections 17 and up are not switched
-            on: list[bool | None] = [working and (chosen is None or chosen[i]) for i in range(n)]
             self._set(c, now, element, SETPOINT_CONDENSED, condensed_value(on))
+        if self._carrying(SETPOINT_CONDENSED):
+            self._log_sections(now, on, OPERATOR if not start else RATE_ZERO if not working else "")
+
+    def _log_sections(self, now: float, on: list[bool | None], all_off: str) -> None:
+        """The sections the TC commands, and why each one off is off, to the session log when
+        one switches (`isobus.sections`): the operator stopped, the rate is zero, or section
+        control put it off (covered, outside the field)."""
+        decided = self.section_why if self.section_on is not None else ()
+        reasons = tuple(
+            "" if o else all_off or (decided[i] if i < len(decided) else "")
+            for i, o in enumerate(on)
+        )
+        state = tuple(bool(o) for o in on)
+        if state == self._logged_sections:  # a reason alone changing is no new decision
+            return
+        self._logged_sections = state
+        self._journal.log_event(now, "isobus.sections", on=list(state), why=list(reasons))
 
     def on_position(
         self,
@@ -389,10 +496,17 @@ class TcLink:
         heading_deg: float,
         speed_kmh: float,
         boundary: FieldBoundary | None,
+        now: float,
     ) -> None:
-        """A new outlet position (the device reference point): the ground the sections the
-        implement reports working passed since the last one is covered, then each section's
-        setpoint is decided for the ground just ahead of it, past its delay (DDI 142)."""
+        """A new outlet position (the device reference point) at `now`: the ground the
+        sections the implement reports working passed since the last one is covered (where
+        the machine was its DDI 143 ago: what it reports now is what was then), then each
+        section's setpoint is decided for the ground just ahead of it, past its delay (DDI
+        142)."""
+        track = self._track
+        track.append((now, lat, lon, heading_deg))
+        while track and track[0][0] < now - TRACK_S:
+            track.popleft()
         c = self._client()
         if not self._settings.cfg.isobus.section_control or c is None or c.device is None:
             self.section_on = None
@@ -405,11 +519,43 @@ class TcLink:
             self._sc = SectionControl(
                 sections, boundary, off_pct=cfg.overlap_pct, look_m=cfg.section_look_m
             )
+            if self._covered_before is not None:
+                self._seed(self._sc)
+        self._take_earlier()
         reported = self._sections()
         if reported:
-            self._sc.cover(lat, lon, heading_deg, list(reported))
+            was = self._where(now - self.actual_latency_s())
+            self._sc.cover(*(was or (lat, lon, heading_deg)), list(reported))
         lead_m = max(speed_kmh, 0.0) / 3.6 * self.latency_ms.get(SETPOINT_LATENCY, 0) / 1000
         self.section_on = tuple(self._sc.decide(lat, lon, heading_deg, lead_m))
+        self.section_why = self._sc.why
+
+    def actual_latency_s(self) -> float:
+        """The implement's actual-value delay (DDI 143: from the physical value to its report),
+        0 when its pool gives none; at most TRACK_S."""
+        ms = self.latency_ms.get(ACTUAL_LATENCY) if self.state == "ok" else None
+        return 0.0 if ms is None else min(max(ms, 0) / 1000.0, TRACK_S)
+
+    def _where(self, t: float) -> tuple[float, float, float] | None:
+        """Where the outlet was at `t` (lat, lon, heading), between the two positions around it;
+        the oldest kept when `t` is before them; None before any."""
+        later: tuple[float, float, float, float] | None = None
+        for t0, lat, lon, heading in reversed(self._track):  # the newest first: t is near
+            if t0 <= t:
+                if later is None or later[0] <= t0:
+                    return lat, lon, heading
+                f = (t - t0) / (later[0] - t0)
+                return (lat + f * (later[1] - lat), lon + f * (later[2] - lon),
+                        heading if f < 0.5 else later[3])  # fmt: skip
+            later = (t0, lat, lon, heading)
+        return None if later is None else later[1:]
+
+    def reported_where(self, now: float, lat: float, lon: float) -> tuple[float, float]:
+        """Where the implement's reports at `now` belong (the as-applied map's point): the outlet
+        its DDI 143 ago; the outlet now (`lat`, `lon`) without a delay."""
+        delay = self.actual_latency_s()
+        was = self._where(now - delay) if delay > 0.0 else None
+        return (lat, lon) if was is None else (was[0], was[1])
 
     def _set(self, c: Client, now: float, element: int, ddi: int, value: int) -> None:
         """Set a value on a change (acknowledged) or after SETPOINT_REFRESH_S (not)."""

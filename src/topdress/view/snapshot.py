@@ -145,7 +145,7 @@ class IsobusView:
     actual_latency_ms: int | None = None  # DDI 143
     lookahead_s: float = 0.0  # the look-ahead in force
     functions: tuple[ControlFunctionView, ...] = ()  # every control function heard, by address
-    problem: str = ""  # the last thing that went wrong, in words
+    problem: Text | str = ""  # the last thing wrong: a message (i18n.render), a library's words
 
 
 @dataclass(frozen=True)
