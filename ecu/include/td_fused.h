@@ -22,14 +22,21 @@
  * Cruise (the last fix was settled and flat, below) above 6 km/h, while the wheel's innovation
  *   (its mean over ~0.3 s) stays within 5 %: a decays with a time constant of 0.5 s, so a fix's
  *   noise left in a does not ramp v until the next fix (a Gauss-Markov acceleration). Below
- *   6 km/h the wheel measures well and a brake from a slow pass shows in it first.
+ *   6 km/h the wheel measures well and a brake from a slow pass shows in it first. Out of
+ *   cruise too, in flat motion with the wheel within 5 %, once the scale has learned (its
+ *   variance below (3 %)^2), with a fix in the last 0.5 s and no speed change awaiting GNSS's
+ *   check (4. below): after a ramp, GNSS through v - a d kept the ramp's a for seconds while
+ *   the receiver's filter settled, and v ran on (+9 % on the field drives at 5 Hz).
  * A ramp of the wheel above 6 km/h (td_fused_record, every 100 ms bucket, before the step
  *   check): three 0.3 s means each moving the same way by 3 % of the estimate's wheel speed (or
  *   1.5 sigmas of a mean's bounce), evenly (|d1 - d2| < 0.2 (d1 + d2): a slip step moves one, or
- *   two by 1/3 and 2/3), the newest beyond 6 % and within 40 %: a brake or a launch. a takes
- *   the three's slope with its whole variance, v's variance opens to its distance from the
- *   wheel's newest mean, and for 1 s after the last bucket that shows it there is no cruise and
- *   the whole jerk.
+ *   two by 1/3 and 2/3), the newest beyond 6 % and within 40 %: a brake or a launch. a gets
+ *   its whole variance back (not the three's slope: a wandering bounce passes for a ramp now
+ *   and then, and its slope held the caller's steady motion off for 1.5 s), v's variance opens
+ *   to its distance from the wheel's newest mean, and for 1 s after the last bucket that shows
+ *   it there is no cruise and the whole jerk, unless the wheel's newest 0.3 s mean goes back
+ *   against the ramp by 1.5 % of the estimate's wheel speed: a brake goes on, the bounce's
+ *   ramp ends there.
  * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket): the
  *   estimate flat (|a| < 0.1 m/s^2), the newest bucket beyond 5 % of the estimate's wheel speed,
  *   moved by 7 % (or 3 sigmas of the wheel's own bucket-to-bucket bounce) against the buckets
@@ -49,7 +56,9 @@
  *      scale error (it did when the scale was learned through v - a d);
  *   2. the speed through the model: z_g = v(t - d) = v - a*d,  H = [1, -d, 0],
  *      R_g = gnss_std^2 + q*d^3/3 (the jerk over the delay; 1 % of it in steady motion), with
- *      the scale's row of the gain zeroed. Beyond the history (a delay over ~3.5 s, or no wheel)
+ *      the scale's row of the gain zeroed; ten times that while GNSS still moves (quiet for less
+ *      than the delay) and the wheel says the speed holds (jerk share < 0.3): what GNSS still
+ *      shows of a change is its filter settling. Beyond the history (a delay over ~3.5 s, or no wheel)
  *      the scale is learned through this update instead.
  *   3. settled (below) and flat (jerk share < 0.3), not re-opened (cruise): the speed then was
  *      the speed now, so the fix is compared with v itself, H = [1, 0, 0], R = gnss_std^2 +
@@ -81,7 +90,7 @@
  * Innovations beyond 5 sigma (and beyond 0.3 m/s) are rejected: a frozen receiver, a cut
  * encoder cable, a bounce. A wheel rejected for 25 steps in a row while no accepted GNSS backs
  * the estimate restarts the speed from the wheel.
- * Costs per step: ~120 float operations (a bucket's step check ~60 more); 220 bytes (136 of
+ * Costs per step: ~120 float operations (a bucket's step check ~60 more); 228 bytes (144 of
  * state, 84 of wheel history; it was 180). No heap, no globals.
  */
 #ifndef TD_FUSED_H

@@ -55,8 +55,8 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
 #define CRUISE_SHARE 0.3f
 #define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
-#define GNSS_UNSETTLED_K 10.0f
-#define FLAT_GNSS_S 0.5f
+#define FLAT_GNSS_S 0.5f    /* out of cruise a decays so only with a fix this recent (GNSS holds v) */
+#define GNSS_UNSETTLED_K 10.0f /* a fix's variance while GNSS still moves and the wheel holds */
 #define CRUISE_MIN_MS 1.67f /* and above the paper's 6 km/h: slower, the wheel measures well and a brake
                               * from a slow pass shows in it first (Table 2's stop at 3.5 km/h) */
 #define WHEEL_DEV_K 0.03f   /* that mean: over ~0.3 s of 10 ms steps */
@@ -90,7 +90,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define TREND_EVEN 0.2f    /* and evenly: |d1 - d2| below this share of d1 + d2 (a step straddling the middle
                             * mean moves the two by 1/3 and 2/3 of it: 1/3) */
 #define TREND_MAX_REL 0.4f /* a wheel further off is a cut cable (the gate's), no brake */
-#define TREND_BACK_REL 0.015f
+#define TREND_BACK_REL 0.015f /* a ramp's newest mean going back this share: the bounce's, it ends */
 #define TREND_KEEP 10u      /* then the whole jerk and no cruise for this many buckets (1 s) after it */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
@@ -171,9 +171,12 @@ void td_fused_predict(td_fused_t *f, float dt_s) {
     if (f->v_ms < 0.0f) {
         f->v_ms = 0.0f;
     }
-    if ((f->cruise || (f->p[SS] < P_S_REOPEN && !(f->ramp_s > 0.0f) && f->since_gnss_s < FLAT_GNSS_S)) && f->q_share < CRUISE_SHARE &&
-        fabsf(f->wheel_dev) < WHEEL_FLAT_REL && f->v_ms > CRUISE_MIN_MS) {
-        /* in cruise the acceleration is a short-lived correction (a Gauss-Markov one of time
+    /* out of cruise too once the scale has learned, with a recent fix and no change awaiting
+     * GNSS's check (td_fused_gnss): after a ramp, GNSS through v - a d kept its a while the
+     * receiver's filter settled, and v ran on */
+    const bool flat = f->cruise || (f->p[SS] < P_S_REOPEN && !(f->ramp_s > 0.0f) && f->since_gnss_s < FLAT_GNSS_S);
+    if (flat && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < WHEEL_FLAT_REL && f->v_ms > CRUISE_MIN_MS) {
+        /* in flat motion the acceleration is a short-lived correction (a Gauss-Markov one of time
          * constant CRUISE_TAU_S): a GNSS fix's noise left in a would ramp v until the next */
         const float k = dt_s < CRUISE_TAU_S ? 1.0f - dt_s / CRUISE_TAU_S : 0.0f;
         f->a_ms2 *= k;
@@ -425,15 +428,16 @@ static void step_check(td_fused_t *f) {
         return;
     }
     if (f->v_ms > CRUISE_MIN_MS && wheel_trend(f, pred)) {
-        /* a brake or a launch: the wheel leads, the estimate follows it with the whole jerk */
+        /* a brake or a launch: the wheel leads, the estimate follows it with the whole jerk (a
+         * keeps its value: the bounce's ramps come now and then, and a slope set as a held the
+         * caller's steady motion off for 1.5 s after them) */
+        const float m0 = hist_mean(f, 0u, STEP_N - 1u);
         if (f->trend_n == 0u) {
-            const float sg = f->scale * td_fused_shape(f, f->v_ms, NULL);
-            const float y = hist_mean(f, 0u, STEP_N - 1u) / sg - f->v_ms;
+            const float y = m0 / (f->scale * td_fused_shape(f, f->v_ms, NULL)) - f->v_ms;
             f->p[VV] = f->p[VV] > y * y ? f->p[VV] : y * y;
             f->p[VA] = 0.0f;
             f->p[AA] = P0_A;
         }
-        const float m0 = hist_mean(f, 0u, STEP_N - 1u);
         f->trend_w_ms = m0 > pred ? m0 : -m0;
         f->trend_n = TREND_KEEP;
         f->cruise = false;
@@ -442,8 +446,8 @@ static void step_check(td_fused_t *f) {
     }
     if (f->trend_n > 0u) {
         /* the wheel went back against the ramp: it was the bounce's (a brake goes on) */
-        const float back = (hist_mean(f, 0u, STEP_N - 1u) - fabsf(f->trend_w_ms)) * (f->trend_w_ms > 0.0f ? 1.0f : -1.0f);
-        if (back < -TREND_BACK_REL * pred) {
+        const float back = hist_mean(f, 0u, STEP_N - 1u) - fabsf(f->trend_w_ms);
+        if ((f->trend_w_ms > 0.0f ? back : -back) < -TREND_BACK_REL * pred) {
             f->trend_n = 0u;
             return;
         }
@@ -686,6 +690,7 @@ td_fused_result_t td_fused_gnss(td_fused_t *f, float z_ms, float delay_s, bool l
         r = f->r_gnss + CRUISE_A_MS2 * CRUISE_A_MS2 * d * d;
         f->innov_ms = z_ms - f->v_ms;
     } else if (f->q_share < CRUISE_SHARE && f->quiet_s < d) {
+        /* GNSS still moves while the wheel says the speed holds: its filter still settles */
         r *= GNSS_UNSETTLED_K;
     }
     if (!update(f, h, f->innov_ms, r, learning && !have_w && !cruise)) {
