@@ -47,7 +47,9 @@
  *   scale; still moving the same way, a speed change: v and a restart from the wheel. A scale
  *   step is undone (scale and history back, v from the wheel) by a second sharp step the same
  *   way, or by GNSS's 1 s mean moving half the step the same way (beyond 3 GNSS sigmas) within
- *   the delay + 0.5 s; confirmed after the delay + 1.5 s.
+ *   the delay + 0.5 s; confirmed after the delay + 1.5 s. A sharp step the way of a ramp that
+ *   showed in the last 2 s is not held but goes on with it (v and a from the wheel): with the
+ *   ramp's end, a slow brake whose ramp the bounce hid for a moment was taken for a slip step.
  * GNSS (delayed by d = age + lag) enters twice:
  *   1. the scale, against the wheel's own history at the fix's time of validity (100 ms means
  *      kept for 3.6 s in mm/s, td_fused_record): z = w(t - d) = s g(z_g) z_g, H = [0, 0, g z_g],
@@ -140,6 +142,7 @@ typedef struct {
     float bounce_var;          /**< the wheel's bucket-to-bucket change in cruise, its mean square, share of speed ^2 */
     uint8_t trend_n;           /**< buckets left of a wheel's ramp (no cruise, the whole jerk), 0..10 */
     float trend_w_ms;          /**< the wheel's newest 0.3 s mean when the ramp last showed, m/s (negative: a ramp down) */
+    uint8_t trend_ago;         /**< buckets left in which a sharp step the ramp's way goes on with it, 0..20 */
     uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */

@@ -91,6 +91,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
                             * mean moves the two by 1/3 and 2/3 of it: 1/3) */
 #define TREND_MAX_REL 0.4f /* a wheel further off is a cut cable (the gate's), no brake */
 #define TREND_BACK_REL 0.015f /* a ramp's newest mean going back this share: the bounce's, it ends */
+#define TREND_AGO_N 20u    /* a sharp step the way of a ramp this many buckets after it goes on with it */
 #define TREND_KEEP 10u      /* then the whole jerk and no cruise for this many buckets (1 s) after it */
 /* look-ahead acceleration: noise shrink and bound */
 #define LEAD_A_SHRINK_PER_MS 0.13f /* per m/s of speed */
@@ -134,6 +135,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->departed = 0u;
     f->trend_n = 0u;
     f->trend_w_ms = 0.0f;
+    f->trend_ago = 0u;
     f->hist_head = 0u;
     f->hist_n = 0u;
     f->hist_sum = 0.0f;
@@ -393,6 +395,9 @@ static void step_check(td_fused_t *f) {
         f->hold_s = 0.0f;
         return;
     }
+    if (f->trend_ago > 0u) {
+        f->trend_ago--;
+    }
     const float g = td_fused_shape(f, f->v_ms, NULL);
     const float pred = f->scale * g * f->v_ms;
     if (f->hold_s > 0.0f) {
@@ -440,6 +445,7 @@ static void step_check(td_fused_t *f) {
         }
         f->trend_w_ms = m0 > pred ? m0 : -m0;
         f->trend_n = TREND_KEEP;
+        f->trend_ago = TREND_AGO_N;
         f->cruise = false;
         f->q_share = 1.0f;
         return;
@@ -482,6 +488,11 @@ static void step_check(td_fused_t *f) {
     if (f->stepped_s > 0.0f && (b0 - w_old) * f->step_dv_ms > 0.0f) {
         /* the wheel went on the same way: the first step was a brake (or a launch) too */
         undo_step(f);
+        snap_to_wheel(f, b0, w_old, 3.0f * TD_FUSED_BUCKET_S);
+        return;
+    }
+    if (f->trend_ago > 0u && (b0 - w_old) * f->trend_w_ms > 0.0f) {
+        /* a ramp the same way ended lately: a slow brake whose ramp the bounce hid for a moment */
         snap_to_wheel(f, b0, w_old, 3.0f * TD_FUSED_BUCKET_S);
         return;
     }
