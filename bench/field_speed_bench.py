@@ -32,6 +32,7 @@ Its wet patch mean, after the first 3 s, is GNSS again (within 0.7 %).
 
     .venv/bin/python bench/field_speed_bench.py            # 2 drives per receiver
     .venv/bin/python bench/field_speed_bench.py --seeds 4
+    .venv/bin/python bench/field_speed_bench.py --rx 0     # the 5 Hz, 1.3 s receiver alone
 """
 
 from __future__ import annotations
@@ -269,7 +270,15 @@ def mean_score(scores: Sequence[Score]) -> Score:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seeds", type=int, default=2, help="drives per receiver")
+    ap.add_argument(
+        "--rx",
+        type=int,
+        nargs="+",
+        choices=range(len(RECEIVERS)),
+        help="only these receivers (their rows, from 0)",
+    )
     args = ap.parse_args()
+    receivers = [RECEIVERS[i] for i in args.rx] if args.rx else RECEIVERS
     drive = make_drive()
     print(
         f"Field drives: {PASSES} passes of {PASS_M:g} m at {PASS_KMH} km/h, turns at {TURN_KMH} "
@@ -282,7 +291,7 @@ def main() -> None:
         "| outage mean / worst % fused (<= 2 / 6) | paper |"
     )
     print("|---|---|---|---|---|---|---|")
-    for rx in RECEIVERS:
+    for rx in receivers:
         fused = mean_score([run(drive, rx, s, "fused") for s in range(args.seeds)])
         paper = mean_score([run(drive, rx, s, "paper") for s in range(args.seeds)])
         ratio = fused.whole_kmh / paper.whole_kmh
