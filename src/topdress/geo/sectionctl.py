@@ -273,7 +273,7 @@ def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
         except (LogError, MapError, sqlite3.Error, ValueError) as exc:
             skipped.append(f"{path.name}: {exc}")
             continue
-        if len(got):  # a log with nothing applied (or not a terminal's: an implement's) adds nothing
+        if len(got):  # a log that applied nothing (an implement's, too) adds nothing
             used.append(path.name)
             swaths.extend(got)
     cover, crs = _tiles(swaths)
