@@ -5,7 +5,7 @@ the machine's end of that bus beside it, every event it says kept with the world
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 
 import can
@@ -49,6 +49,18 @@ class TerminalParts:
             on_event=lambda e: self.events.append((clock(), str(e))),
         )
         self.term.open()
+
+    def deliver(
+        self, t: float, nmea: Iterable[str], crop: Iterable[str], frames: Iterable[can.Message]
+    ) -> None:
+        """One step of the machine at `t`: its NMEA and crop lines to the terminal's sources, its
+        frames to the terminal's inbox (as its CAN reader puts them)."""
+        for line in nmea:
+            self.gnss.emit(t, line.encode())
+        for line in crop:
+            self.crop.emit(t, line.encode())
+        for msg in frames:
+            self.term.inbox.put(("can", t, msg))
 
     def close(self) -> None:
         self.term.close()

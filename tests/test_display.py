@@ -1098,14 +1098,10 @@ def isobus_view(**kw: object) -> IsobusView:
         actual_latency_ms=None,
         lookahead_s=1.25,
         functions=(
-            ControlFunctionView(38, 0xA0001D00_0C400017, 29, 0, 2, 98, 23, "virtual terminal"),
-            ControlFunctionView(
-                134, 0xA00A8400_256001A2, 132, 5, 2, 299, 418, "implement (served)"
-            ),
-            ControlFunctionView(240, 0x20008600_4BE01B59, 134, 0, 2, 607, 7001, "function 134"),
-            ControlFunctionView(
-                247, 0xA0008200_AFE000C8, 130, 0, 2, 1407, 200, "task controller (this terminal)"
-            ),
+            ControlFunctionView(38, 0xA0001D00_0C400017, 29, 0, 2, 98, 23),
+            ControlFunctionView(134, 0xA00A8400_256001A2, 132, 5, 2, 299, 418),
+            ControlFunctionView(240, 0x20008600_4BE01B59, 134, 0, 2, 607, 7001),
+            ControlFunctionView(247, 0xA0008200_AFE000C8, 130, 0, 2, 1407, 200),
         ),
     )
     base.update(kw)

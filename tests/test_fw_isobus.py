@@ -93,7 +93,7 @@ def test_emulated_isobus_ecu_claims_its_address() -> None:
     assert can_id & 0xFF == 0x84  # the preferred address, alone on the link
     assert (can_id >> 8) & 0xFF == 0xFF  # to all
     name = int.from_bytes(data, "little")  # ISO 11783-5 4.4.2: the NAME's fields
-    assert (name >> 40) & 0xFF == 130  # function: rate control
+    assert (name >> 40) & 0xFF == 128  # function: Fertilize Rate Control (class 5)
     assert (name >> 49) & 0x7F == 5  # device class: fertilizers
     assert (name >> 60) & 0x7 == 2  # industry group: agriculture
     assert name & 0x1FFFFF != 0  # identity number from the unique ID

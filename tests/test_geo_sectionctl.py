@@ -219,6 +219,8 @@ def test_earlier_sessions_of_the_same_field_and_window_count_and_make_tiles(
     _session(logs, field, 20.0, old)  # the field's last dressing, a day before: not covered
     _session(logs, '[boundary]\npath = "other.geojson"\n', 30.0, recent)  # another field
     (logs / "broken.sqlite").write_bytes(b"not a session")
+    with SessionLog.create(logs, field):  # a session of the field that applied nothing
+        pass
     current = SessionLog.create(logs, field)
     try:
         got = earlier_coverage(current.path, 24.0)

@@ -613,12 +613,8 @@ class _HeldRig(VirtualRig):
                 w.deliver_can(msg)
             out = w.step()
             t = out.t_s
-            for line in out.nmea:
-                self.gnss.emit(t, line.encode())
-            for line in out.crop:
-                self.crop.emit(t, line.encode())
-            for frame_id, data in out.can:
-                term.inbox.put(("can", t, can.Message(arbitration_id=frame_id, data=data)))
+            msgs = (can.Message(arbitration_id=i, data=d) for i, d in out.can)
+            self.deliver(t, out.nmea, out.crop, msgs)
             while not term.inbox.empty():
                 item = term.inbox.get()
                 assert item is not None

@@ -22,7 +22,7 @@ UID = bytes(range(12))
 def test_name_of_the_implement() -> None:
     name = topdress_name(1407, UID)
     f = name_fields(name)
-    assert (f["industry_group"], f["device_class"], f["function"]) == (2, 5, 130)
+    assert (f["industry_group"], f["device_class"], f["function"]) == (2, 5, 128)
     assert (f["manufacturer_code"], f["self_configurable"]) == (1407, 1)
     assert f["identity_number"] == name & 0x1FFFFF
     assert topdress_name(1407, UID[:-1] + b"\x0c") != name

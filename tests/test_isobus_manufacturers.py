@@ -98,10 +98,10 @@ def test_every_function_named_has_its_words_in_both_languages() -> None:
 
 def test_what_a_function_is_in_chinese() -> None:
     v = IsobusView(tc_address=247, implement_address=134)
-    vt = ControlFunctionView(38, 0, 29, 0, 2, 98, 23, "virtual terminal")
-    tc = ControlFunctionView(247, 0, 130, 0, 2, 1407, 200, "task controller (this terminal)")
-    spreader = ControlFunctionView(134, 0, 132, 5, 2, 299, 418, "implement (served)")
-    odd = ControlFunctionView(90, 0, 200, 5, 2, 0, 1, "function 200")
+    vt = ControlFunctionView(38, 0, 29, 0, 2, 98, 23)
+    tc = ControlFunctionView(247, 0, 130, 0, 2, 1407, 200)
+    spreader = ControlFunctionView(134, 0, 132, 5, 2, 299, 418)
+    odd = ControlFunctionView(90, 0, 200, 5, 2, 0, 1)
     assert [isobus_names.what(f, v) for f in (vt, tc, spreader, odd)] == [
         "Virtual Terminal (in cab)",
         "task controller (this terminal)",

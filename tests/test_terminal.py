@@ -46,13 +46,9 @@ class VirtualRig(TerminalParts):
                     w.deliver_can(msg)
             out = w.step()
             t = out.t_s
-            for line in out.nmea:
-                self.gnss.emit(t, line.encode())
-            for line in out.crop:
-                self.crop.emit(t, line.encode())
-            if not (self.ecu_silent or self.ecu_off):
-                for frame_id, data in out.can:
-                    term.inbox.put(("can", t, can.Message(arbitration_id=frame_id, data=data)))
+            silent = self.ecu_silent or self.ecu_off
+            msgs = (can.Message(arbitration_id=i, data=d) for i, d in ([] if silent else out.can))
+            self.deliver(t, out.nmea, out.crop, msgs)
             while not term.inbox.empty():
                 term.handle(*term.inbox.get())
             if round(t * 100) % 10 == 0:

@@ -18,6 +18,7 @@ from term_rig import TerminalParts
 from topdress.cli.isobus_demo import DEMO_PASS_M, DEMO_PASSES, DEMO_SPEED_KMH
 from topdress.cli.main import main
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
+from topdress.display import isobus_names
 from topdress.errors import ConfigError
 from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.export import export_maps
@@ -78,14 +79,9 @@ class IsobusRig(TerminalParts):
             out = self.sim.out
             assert out is not None
             t = out.t_s
-            for line in out.nmea:
-                self.gnss.emit(t, line.encode())
-            for line in out.crop:
-                self.crop.emit(t, line.encode())
-            if not self.implement_off:
-                for f in frames:
-                    msg = can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
-                    term.inbox.put(("can", t, msg))
+            msgs = (can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
+                    for f in ([] if self.implement_off else frames))  # fmt: skip
+            self.deliver(t, out.nmea, out.crop, msgs)
             while not term.inbox.empty():
                 term.handle(*term.inbox.get())
             if round(t * 100) % 10 == 0:
@@ -152,9 +148,9 @@ def test_crop_sensor_rate_reaches_the_implement_and_its_reports_come_back(
         (4, 6, "kg/ha"),
     ]
     # who is on the bus, NAMEs decoded: the TC (function 130) and the implement
-    whats = {f.address: (f.function, f.what) for f in iso.functions}
+    whats = {f.address: (f.function, isobus_names.what(f, iso)) for f in iso.functions}
     assert whats[0xF7] == (130, "task controller (this terminal)")
-    assert whats[0x84][1] == "implement (served)"
+    assert whats[0x84] == (128, "implement served: Fertilize Rate Control")
     # the rates set on the implement are the terminal's crop-sensor rates, tick by tick (the
     # node holds what the last tick sent: compared with the tick before), to 0.01 kg/ha
     working = [
@@ -531,16 +527,15 @@ def test_a_can_change_to_isobus_while_running_serves_the_implement() -> None:
     assert rig.sim.node.rate_kg_ha(0) > 50.0
 
 
-def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -> None:
-    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
-    said: list[str] = []
-    link = TcLink(_Port(), settings, Journal(None, lambda: 0.0, lambda e: said.append(str(e))))
+def _driven_off_its_address(link: TcLink) -> None:
+    """The TC claims 0xF7 (250 ms without a contest), then another TC with a NAME of lower
+    value claims it too and wins: the link's TC goes on elsewhere (0.4 s more)."""
     t = 0.0
-    for _ in range(40):  # the claim: 250 ms without a contest
+    for _ in range(40):
         t += 0.01
         link.poll(t, (False, 0.0, 0.0, 0.0))
     assert link.server.address == 0xF7
-    other = tc_name(99) & ~0x1FFFFF & ~(0x7FF << 21)  # a TC NAME of lower value: it wins
+    other = tc_name(99) & ~0x1FFFFF & ~(0x7FF << 21)
     claim = can.Message(arbitration_id=6 << 26 | 0xEE00 << 8 | 0xFF << 8 | 0xF7)
     claim.data = bytearray(other.to_bytes(8, "little"))
     claim.dlc = 8
@@ -548,13 +543,22 @@ def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -
     for _ in range(40):
         t += 0.01
         link.poll(t, (False, 0.0, 0.0, 0.0))
+
+
+def test_a_second_tc_taking_the_address_is_said_and_the_tc_goes_on_elsewhere() -> None:
+    settings = Settings(loads_config('[can]\nimplement = "isobus"\n'))
+    said: list[str] = []
+    link = TcLink(_Port(), settings, Journal(None, lambda: 0.0, lambda e: said.append(str(e))))
+    _driven_off_its_address(link)
     assert link.server.address not in (None, 0xF7)
     assert said[0] == "ISOBUS: Task Controller at address 0xF7"
     moved = f"ISOBUS: Task Controller moved from 0xF7 to 0x{link.server.address:02X}"
     assert any(moved in line for line in said), said
     assert "ISOBUS: another Task Controller at 0xf7, TC number 1" in said  # the server's word
-    whats = {f.address: f.what for f in link.view(0.0).functions}
-    assert whats[0xF7] == "task controller" and "this terminal" in whats[link.server.address]
+    view = link.view(0.0)
+    whats = {f.address: isobus_names.what(f, view) for f in view.functions}
+    assert whats[0xF7] == "Task Controller (Mapping Computer)"  # the other TC, now there
+    assert whats[link.server.address] == "task controller (this terminal)"
 
 
 def test_the_tcs_words_are_in_the_operators_language() -> None:
@@ -566,18 +570,7 @@ def test_the_tcs_words_are_in_the_operators_language() -> None:
     journal = Journal(None, lambda: 0.0, said.append)
     journal.log_event = lambda t, kind, **d: logged.append(d.get("what", ""))  # type: ignore[method-assign]
     link = TcLink(_Port(), settings, journal)
-    t = 0.0
-    for _ in range(40):
-        t += 0.01
-        link.poll(t, (False, 0.0, 0.0, 0.0))
-    other = tc_name(99) & ~0x1FFFFF & ~(0x7FF << 21)  # a TC NAME of lower value: it wins
-    claim = can.Message(arbitration_id=6 << 26 | 0xEE00 << 8 | 0xFF << 8 | 0xF7)
-    claim.data = bytearray(other.to_bytes(8, "little"))
-    claim.dlc = 8
-    link.on_frame(claim, t)
-    for _ in range(40):
-        t += 0.01
-        link.poll(t, (False, 0.0, 0.0, 0.0))
+    _driven_off_its_address(link)
     new = link.server.address
     assert new is not None
     zh = [render(m, "zh") for m in said]

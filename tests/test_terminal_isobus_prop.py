@@ -128,14 +128,9 @@ class PropRig(TerminalParts):
             out = self.sim.out
             assert out is not None
             t = out.t_s
-            for line in out.nmea:
-                self.gnss.emit(t, line.encode())
-            for line in out.crop:
-                self.crop.emit(t, line.encode())
-            if not self.off:
-                for f in frames:
-                    msg = can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
-                    term.inbox.put(("can", t, msg))
+            msgs = (can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
+                    for f in ([] if self.off else frames))  # fmt: skip
+            self.deliver(t, out.nmea, out.crop, msgs)
             self._handle(t)
             if round(t * 100) % 10 == 0:
                 term.tick(t)

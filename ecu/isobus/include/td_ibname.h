@@ -16,7 +16,7 @@
 
 #define TD_IBNAME_IG_AGRICULTURE 2u      /**< industry group 2: agricultural and forestry */
 #define TD_IBNAME_DC_FERTILIZERS 5u      /**< device class 5 of industry group 2: fertilizers */
-#define TD_IBNAME_FN_RATE_CONTROL 130u   /**< function 130: rate control (implement ECU) */
+#define TD_IBNAME_FN_RATE_CONTROL 128u   /**< function 128 of device class 5: Fertilize Rate Control */
 
 /** The fields of a NAME, each in its own range (checked by td_ibname_encode). */
 typedef struct {

@@ -14,11 +14,11 @@ static void test_name_fields_round_trip(void **s) {
     (void)s;
     assert_int_equal(td_ibname_topdress(1407u, UID, sizeof UID, &n), TD_IB_OK);
     assert_int_equal(td_ibname_encode(&n, &v), TD_IB_OK);
-    /* self-configurable, industry group 2, device class 5, function 130, manufacturer 1407 */
+    /* self-configurable, industry group 2, device class 5, function 128, manufacturer 1407 */
     assert_true((v >> 63) == 1u);
     assert_int_equal((v >> 60) & 7u, 2);
     assert_int_equal((v >> 49) & 127u, 5);
-    assert_int_equal((v >> 40) & 0xFFu, 130);
+    assert_int_equal((v >> 40) & 0xFFu, 128);
     assert_int_equal((v >> 21) & 0x7FFu, 1407);
     assert_int_equal(v & 0x1FFFFFu, n.identity_number);
     td_ibname_decode(v, &back);

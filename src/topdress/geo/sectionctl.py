@@ -273,7 +273,8 @@ def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
         except (LogError, MapError, sqlite3.Error, ValueError) as exc:
             skipped.append(f"{path.name}: {exc}")
             continue
-        used.append(path.name)
-        swaths.extend(got)
+        if len(got):  # a log that applied nothing (an implement's, too) adds nothing
+            used.append(path.name)
+            swaths.extend(got)
     cover, crs = _tiles(swaths)
     return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped), cover, crs)

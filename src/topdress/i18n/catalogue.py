@@ -528,7 +528,7 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "{device}：其 DDOP 没有可设置的施肥量（DDI 6 或 1）",
     ),
     "tc.link.coverage": (
-        "section control: ground covered in {n} earlier sessions of this field taken "
+        "section control: ground covered earlier taken from {n} session log(s) of this field "
         "({swaths} swaths)",
         "分段控制：已计入本地块之前 {n} 次作业的覆盖区域（{swaths} 条幅带）",
     ),

@@ -11,8 +11,8 @@ goes on the proprietary PGN protocol/topdress.dbc's IsobusPgn gives it (topdress
 the ECU's address, PcGnssTime on Proprietary B.
 
 A topdress ECU is recognised by what it says of itself, all of it: its NAME (the one
-`td_ibname_topdress` makes: industry group 2, device class 5 fertilizers, function 130 rate
-control, and the manufacturer code `[isobus] ecu_manufacturer`, the firmware's
+`td_ibname_topdress` makes: industry group 2, device class 5 fertilizers, function 128
+Fertilize Rate Control, and the manufacturer code `[isobus] ecu_manufacturer`, the firmware's
 FW_ISOBUS_MANUFACTURER) and its DDOP's device designator "topdress". Proprietary PGNs mean what
 their sender's manufacturer says they mean, so the manufacturer code is the one thing that
 makes the frames ours; the function and the DDOP keep another product of the same maker (or a
@@ -39,7 +39,7 @@ from topdress.view.snapshot import ecu_values
 
 DESIGNATOR = "topdress"  # the DDOP's device designator (isobus.ddop.build)
 # The NAME fields td_ibname_topdress sets (docs/isobus.md, "The NAME")
-INDUSTRY_GROUP, DEVICE_CLASS, FUNCTION = 2, 5, 130
+INDUSTRY_GROUP, DEVICE_CLASS, FUNCTION = 2, 5, 128
 
 
 class Sender(Protocol):

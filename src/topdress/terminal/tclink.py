@@ -72,7 +72,6 @@ SECTION_CONTROL_STATE = 160
 ACTUAL_CONDENSED, SETPOINT_CONDENSED = 161, 290
 PER_HA = 100  # kg/ha -> mg/m^2, and L/ha -> mm^3/m^2
 KG_HA_PER_RPM_KG = 600.0  # eq. 4: kg/ha = rpm x kg/rev x 600 / (km/h x m)
-FUNCTIONS = {130: "task controller", 29: "virtual terminal", 25: "tractor ECU"}
 # why a section the TC commands is off, beside section control's "covered" and "outside"
 OPERATOR, RATE_ZERO = "operator", "rate_zero"
 
@@ -640,7 +639,7 @@ class TcLink:
             setpoint_latency_ms=self.latency_ms.get(SETPOINT_LATENCY),
             actual_latency_ms=self.latency_ms.get(ACTUAL_LATENCY),
             lookahead_s=lookahead_s,
-            functions=self._functions(c),
+            functions=self._functions(),
             problem=self.refusal if self.state == "refused" else self.problem,
         )
 
@@ -658,39 +657,16 @@ class TcLink:
                 return v == 1
         return None
 
-    def _functions(self, c: Client | None) -> tuple[ControlFunctionView, ...]:
+    def _functions(self) -> tuple[ControlFunctionView, ...]:
         """Every control function heard, NAMEs decoded (again only when one changed)."""
         names = dict(self.names)
         if self.server.address is not None:  # its own claim is not heard back
             names[self.server.address] = self.name
-        key = (tuple(sorted(names.items())), None if c is None else c.address)
+        key = tuple(sorted(names.items()))
         if key != self._functions_key:
             self._functions_key = key
-            self._functions_view = self._decode(names, c)
+            self._functions_view = tuple(_decode(a, n) for a, n in key)
         return self._functions_view
-
-    def _decode(self, names: dict[int, int], c: Client | None) -> tuple[ControlFunctionView, ...]:
-        out = []
-        for address, name in sorted(names.items()):
-            f = name_fields(name)
-            what = FUNCTIONS.get(f["function"], f"function {f['function']}")
-            if address == self.server.address:
-                what = "task controller (this terminal)"
-            elif c is not None and address == c.address:
-                what = "implement (served)"
-            out.append(
-                ControlFunctionView(
-                    address,
-                    name,
-                    f["function"],
-                    f["device_class"],
-                    f["industry_group"],
-                    f["manufacturer_code"],
-                    f["identity_number"],
-                    what,
-                )
-            )
-        return tuple(out)
 
     def setpoint_latency_s(self) -> float | None:
         """The implement's own delay from setpoint to product applied (DDI 142), if it gives one."""
@@ -729,3 +705,17 @@ class TcLink:
             fan_rpm=(0.0, 0.0),
             faults=0,
         )
+
+
+def _decode(address: int, name: int) -> ControlFunctionView:
+    """A NAME's fields; what its function means is the display's to say (display/isobus_names)."""
+    f = name_fields(name)
+    return ControlFunctionView(
+        address,
+        name,
+        f["function"],
+        f["device_class"],
+        f["industry_group"],
+        f["manufacturer_code"],
+        f["identity_number"],
+    )

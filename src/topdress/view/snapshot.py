@@ -114,7 +114,6 @@ class ControlFunctionView:
     industry_group: int
     manufacturer_code: int
     identity_number: int
-    what: str  # "task controller (this terminal)", "implement (served)", "function 130", ...
 
 
 @dataclass(frozen=True)
