@@ -395,6 +395,33 @@ static void test_a_ramp_the_wheel_turns_back_from_ends(void **state) {
     assert_float_equal(r.f.v_ms, v_pass(0.0), 0.02 * v_pass(0.0));
 }
 
+/* A sharp step of the wheel in cruise is held and judged, unless a ramp the same way showed in
+ * the last 2 s (here set as if one had ended on the bounce): then it is that ramp going on, a
+ * slow brake, and the estimate restarts from the wheel at once (GNSS, which here says the speed
+ * held, then takes it back); the scale stays. */
+static void sharp_step_after(run_t *r, float trend_w_ms, uint8_t ago) {
+    run_init(r);
+    td_fused_tune(&r->f, 0.3f, 0.2f, 15.0f);
+    r->f.slip_shape = true;
+    run(r, 40.0, v_pass, 0.98, true, 1.3, 1.3, true);
+    r->f.trend_w_ms = trend_w_ms;
+    r->f.trend_ago = ago;
+    run(r, 0.3, v_pass, 0.98 * 0.9, true, 1.3, 1.3, true);
+}
+
+static void test_a_sharp_step_after_a_ramp_goes_on_with_it(void **state) {
+    (void)state;
+    run_t r;
+    sharp_step_after(&r, 0.0f, 0u); /* no ramp: held */
+    assert_true(r.f.hold_s > 0.0f);
+    const float s0 = r.f.scale;
+    sharp_step_after(&r, -2.0f, 15u); /* a ramp down lately: goes on */
+    assert_false(r.f.hold_s > 0.0f);
+    assert_float_equal(r.f.scale, s0, 1e-6);
+    sharp_step_after(&r, 2.0f, 15u); /* a ramp up: a step down is no part of it */
+    assert_true(r.f.hold_s > 0.0f);
+}
+
 /* The wheel's history: 100 ms means, read back at a delay between bucket centres, nothing beyond
  * what is held, and cleared by a missing wheel. */
 static void test_wheel_history(void **state) {
@@ -727,6 +754,7 @@ int main(void) {
         cmocka_unit_test(test_a_brake_is_no_slip_step),
         cmocka_unit_test(test_the_ramps_acceleration_decays_after_it),
         cmocka_unit_test(test_a_ramp_the_wheel_turns_back_from_ends),
+        cmocka_unit_test(test_a_sharp_step_after_a_ramp_goes_on_with_it),
         cmocka_unit_test(test_lead_acceleration_shrink),
         cmocka_unit_test(test_wheel_history),
         cmocka_unit_test(test_slip_step_with_the_receivers_lag),
