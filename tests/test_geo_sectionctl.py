@@ -6,6 +6,7 @@ swaths of an earlier session; the condensed work state the TC sends."""
 
 from __future__ import annotations
 
+import os
 import sqlite3
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -243,3 +244,31 @@ def test_earlier_sessions_of_the_same_field_and_window_count_and_make_tiles(
     elsewhere = SectionControl([Section(0.0, 0.0, 3.0)], None)
     elsewhere.decide(48.10, 5.90, NORTH)  # its first fix in UTM 31N
     assert not elsewhere.add_cover(got.cover, got.crs)
+
+
+def test_old_files_are_not_opened_and_sessions_of_an_unknown_field_are_skipped(
+    tmp_path: Path,
+) -> None:
+    """A damaged file last written three days ago is not opened at all (it is no session of
+    the window); a session whose configuration cannot be read is of no known field, so it is
+    skipped and named even though the current session has no boundary either; a creation
+    time written without a zone is UTC."""
+    logs = tmp_path / "logs"
+    now = datetime.now(UTC)
+    naive = (now - timedelta(hours=2)).replace(tzinfo=None).isoformat(timespec="seconds")
+    counted = _session(logs, "", 10.0, naive)
+    unknown = _session(logs, "[boundery]\npath = 'field.geojson'\n", 20.0)
+    old = logs / "old.sqlite"
+    old.write_bytes(b"a damaged file of an old day")
+    three_days = (now - timedelta(days=3)).timestamp()
+    os.utime(old, (three_days, three_days))
+    current = SessionLog.create(logs, "")
+    try:
+        got = earlier_coverage(current.path, 24.0)
+    finally:
+        current.close()
+    assert got.sessions == (counted.name,)
+    (skipped,) = got.skipped
+    assert skipped.startswith(f"{unknown.name}: boundery")
+    area = sum(shapely.area(g) for g in got.cover.tiles.values()) if got.cover else 0.0
+    assert area == pytest.approx(3.6 * 44.4, rel=0.02)  # the one pass of the session counted

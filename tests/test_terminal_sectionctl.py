@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -214,6 +215,12 @@ def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
     finally:
         rig.pc_bus.shutdown()  # no close: the terminal is gone, its log never closed
         rig.ecu_bus.shutdown()
+    # a damaged file of today and one of three days ago in the log directory: the first is
+    # named in the session log only, never told at every start; the second is not even opened
+    (logs / "broken.sqlite").write_bytes(b"not a session")
+    (logs / "old.sqlite").write_bytes(b"a damaged file of an old day")
+    three_days = time.time() - 3 * 86400.0
+    os.utime(logs / "old.sqlite", (three_days, three_days))
     session = SessionLog.create(logs, toml)
     again = IsobusRig(cfg, _drive(), session)
     try:
@@ -229,6 +236,8 @@ def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
         killed.close()
     with SessionReader(session.path) as reader:
         coverage = [e.detail for e in reader.events() if e.kind == "isobus.coverage"]
+        problems = [e.detail for e in reader.events() if e.kind == "isobus.problem"]
+    assert not any("sqlite" in p["what"] for p in problems), problems
     over = [n for y, n in second if 4.0 < y < 22.0]  # inside what the killed one covered
     beyond = [n for y, n in second if 30.0 < y < 38.0]
     assert len(over) > 50 and len(beyond) > 20
@@ -236,6 +245,8 @@ def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
     if hours:
         (taken,) = coverage
         assert taken["sessions"] == [killed.path.name] and taken["swaths"] > 10
+        (skipped,) = taken["skipped"]
+        assert skipped.startswith("broken.sqlite: ")
         assert all(n == 0 for n in over)
     else:  # not read at all
         assert coverage == []

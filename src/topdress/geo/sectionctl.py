@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import sqlite3
 from dataclasses import dataclass
-from datetime import datetime, timedelta
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -28,16 +28,18 @@ import numpy as np
 import shapely
 from pyproj import CRS, Transformer
 
-from topdress.errors import LogError, MapError
+from topdress.config import loads_config
+from topdress.errors import ConfigError, LogError, MapError
 from topdress.geo.asapplied import WGS84, Cover, utm_crs
 from topdress.geo.asapplied import build as build_as_applied
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.outlet import offset_position
 from topdress.isobus.devicemap import Device
-from topdress.log.session import SUFFIX, SessionReader, session_config
+from topdress.log.session import SUFFIX, SessionReader
 
 FLUSH_EVERY = 10  # positions whose covered quads go into the coverage together
 MAX_STEP_M = 5.0  # a longer jump between two positions is a gap: nothing is counted covered
+MTIME_SLACK_S = 600.0  # a file last written this long before the window may still be in it
 OUTSIDE, COVERED = "outside", "covered"  # why `decide` put a section off (`SectionControl.why`)
 
 
@@ -236,25 +238,37 @@ def _tiles(swaths: list[Any]) -> tuple[Cover | None, CRS | None]:
 
 
 def _created(reader: SessionReader) -> datetime | None:
+    """When the session was created, in UTC (a time without a zone is taken as UTC, as the
+    log writes it); None when missing or not a time."""
     try:
-        return datetime.fromisoformat(reader.meta["created_utc"])
+        t = datetime.fromisoformat(reader.meta["created_utc"])
     except (KeyError, ValueError):
         return None
+    return t.replace(tzinfo=UTC) if t.tzinfo is None else t
+
+
+def _boundary_key(reader: SessionReader) -> tuple[str, str]:
+    """The session's field: its `[boundary] path` and `layer` (ConfigError: its configuration
+    cannot be read, so its field is unknown)."""
+    b = loads_config(reader.config_toml).boundary
+    return (b.path, b.layer)
 
 
 def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
     """The as-applied swaths of the sessions beside `session` (the one being written) that
     count for its coverage: created within `hours` before it, with the same `[boundary] path`
     and `layer` (the same field; two sessions without a boundary count alike, their swaths
-    only matter where the machine drives again), also made into covered tiles. A session that
-    cannot be read is skipped and named. Reads files and unites the swaths (seconds for an
-    hour of log): run it off the control loop."""
+    only matter where the machine drives again), also made into covered tiles. Files last
+    written before the window are not opened; a session of the window that cannot be read,
+    or whose configuration cannot (its field unknown), is skipped and named. Reads files and
+    unites the swaths (seconds for an hour of log): run it off the control loop."""
     with SessionReader(session) as reader:
         now = _created(reader)
-        mine = session_config(reader.config_toml).boundary
+        mine = _boundary_key(reader)
     if now is None:
         raise LogError(f"{session}: no creation time")
     since = now - timedelta(hours=hours)
+    oldest = since.timestamp() - MTIME_SLACK_S
     swaths: list[Any] = []
     used: list[str] = []
     skipped: list[str] = []
@@ -262,15 +276,16 @@ def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
         if path.resolve() == session.resolve():
             continue
         try:
+            if path.stat().st_mtime < oldest:
+                continue  # written before the window: an old day's log, or not a session
             with SessionReader(path) as reader:
                 created = _created(reader)
                 if created is None or not since <= created <= now:
                     continue
-                b = session_config(reader.config_toml).boundary
-                if (b.path, b.layer) != (mine.path, mine.layer):
+                if _boundary_key(reader) != mine:
                     continue
                 got = build_as_applied(reader).swath_geom
-        except (LogError, MapError, sqlite3.Error, ValueError) as exc:
+        except (ConfigError, LogError, MapError, OSError, sqlite3.Error, ValueError) as exc:
             skipped.append(f"{path.name}: {exc}")
             continue
         if len(got):  # a log that applied nothing (an implement's, too) adds nothing

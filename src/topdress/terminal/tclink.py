@@ -228,10 +228,10 @@ class TcLink:
             swaths=len(got.swaths),
             skipped=list(got.skipped),
         )
+        # files that could not be read are in that event only: told at every start they would
+        # keep a damaged or foreign file of the log directory on the operator's screen
         if got.sessions:
             self._say(text("tc.link.coverage", n=len(got.sessions), swaths=len(got.swaths)))
-        for why in got.skipped:
-            self._tell(text("tc.link.coverage_skipped", why=why))
 
     # ---- time and frames --------------------------------------------------------------------
     def _us(self, now: float) -> int:
