@@ -33,7 +33,15 @@ from topdress.isobus.devicemap import (
 )
 from topdress.isobus.node import Frame, split_id
 from topdress.isobus.poolstore import PoolStore
-from topdress.isobus.tcserver import Client, TcServer, pd_frame, pdack_errors, tc_name
+from topdress.isobus.tcserver import (
+    PD_PGN,
+    PDACK,
+    Client,
+    TcServer,
+    pd_frame,
+    pdack_errors,
+    tc_name,
+)
 
 
 def test_pool_kept_and_offered_back_by_its_labels(tmp_path: Path) -> None:
@@ -225,6 +233,33 @@ def test_missing_acknowledges_said_once_per_silence_and_the_answer_again_said() 
         bus.now += STEP_US
         tc.step(bus.now, [])
     assert tc.errors[-1] == "client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"
+
+
+def test_a_client_that_never_acknowledges_one_value_is_said_once() -> None:
+    """A client that acknowledges element 4's rate but never element 3's (both set every
+    1.5 s for 12 s): each of element 3's misses is counted, said once; element 4's
+    acknowledges are no end of that silence, so nothing more is said."""
+    bus = connected(TcServer(tc_name(7)))
+    tc, node = bus.tc, bus.node
+    said = len(tc.errors)
+
+    def kept(f: Frame) -> bool:  # the client's acknowledges of element 3's DDI 6 are lost
+        d = f.data
+        pdack = split_id(f.can_id)[1] == PD_PGN and d[0] & 0x0F == PDACK
+        return not (pdack and (d[0] >> 4 | d[1] << 4, d[2] | d[3] << 8) == (3, 6))
+
+    pending: list[Frame] = []
+    for k in range(8):
+        tc.set_value(3, 6, 12000 + 100 * k)
+        tc.set_value(4, 6, 12000 + 100 * k)
+        for _ in range(150):
+            bus.now += STEP_US
+            for f in pending:
+                node.rx(f.can_id, f.data, bus.now)
+            node.step(bus.now, 0)
+            pending = tc.step(bus.now, [f for f in node.tx() if kept(f)])
+    assert tc.counters["pdacks_missing"] == 8 and tc.counters["pdacks_ok"] >= 8
+    assert tc.errors[said:] == ["client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"]
 
 
 def test_the_server_offers_tc_geo_with_position_based_control() -> None:

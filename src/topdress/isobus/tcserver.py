@@ -152,7 +152,8 @@ class Client:
     from_store: bool = False  # the pool is the one kept from an earlier connection
     awaiting: dict[tuple[int, int], int] = field(default_factory=dict)  # acks due, by sent time
     pool_error: str = ""  # why its last pool could not be mapped ("" when it could)
-    unanswered: int = 0  # acknowledges missed since it last acknowledged (said at the first)
+    unanswered: int = 0  # acknowledges missed in this silence (said at the first)
+    missed: set[tuple[int, int]] = field(default_factory=set)  # the values they were of
 
     @property
     def options(self) -> int:
@@ -372,6 +373,7 @@ class TcServer:
                 del c.awaiting[key]
                 self.counters["pdacks_missing"] += 1
                 c.unanswered += 1
+                c.missed.add(key)
                 if c.unanswered == 1:  # once per silence: the rest are counted
                     self._error(text("tc.no_ack", client=c.address, ddi=key[1], element=key[0],
                                      ms=PDACK_TIMEOUT_US // 1000))  # fmt: skip
@@ -639,9 +641,12 @@ class TcServer:
         c.pdacks.append((element, ddi, d[4]))
         del c.pdacks[:-KEEP_PDACKS]
         c.awaiting.pop((element, ddi), None)
-        if c.unanswered:
+        # the silence ends when a value it missed is acknowledged: a client that acknowledges
+        # others but never this one would otherwise say "missed" and "again" at each change
+        if (element, ddi) in c.missed:
             self._error(text("tc.ack_again", client=c.address, n=c.unanswered))
             c.unanswered = 0
+            c.missed.clear()
         words = pdack_texts(d[4])
         if words:
             self.counters["pdack_errors"] += 1
