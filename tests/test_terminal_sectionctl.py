@@ -20,6 +20,7 @@ from topdress.geo.outlet import offset_position
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.gnss import GnssParams
 from topdress.sim.tractor import Drive, Segment
+from topdress.view.commands import ApplySettings
 
 # The turn's 1.2 m radius puts the way back about 2.2 m west (the tractor drifts back a little):
 # its sections 1 and 2 (0.6 m each, left going south) are over the first pass; the field's west
@@ -282,3 +283,23 @@ def test_a_bad_section_control_key_is_refused_naming_it(line: str, key: str) -> 
     lines = [line if x.startswith(f"{name} = ") else x for x in DEFAULT_TOML.splitlines()]
     with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
         loads_config("\n".join(lines))
+
+
+def test_an_isobus_change_while_running_is_saved_for_the_next_start(tmp_path: Path) -> None:
+    """[isobus] turned off section control mid-pass: the operator is told it is in force at
+    the next start, the configuration has it, and the TC link serving goes on as it was made
+    (sections still decided), not half-changed."""
+    rig = IsobusRig(_cfg(tmp_path), _drive())
+    try:
+        rig.run(8.0)  # moving on the first pass: sections decided
+        tc = rig.term.can.tc
+        assert tc is not None and tc.section_on is not None
+        fut = rig.term.post(ApplySettings("isobus", {"section_control": False}))
+        rig.run(8.5)
+        assert fut.done() and fut.result().ok, fut.result()
+        assert str(fut.result().message).endswith("(in force at the next start)")
+        assert rig.term.cfg.isobus.section_control is False
+        rig.run(10.0)
+        assert tc.section_on is not None and rig.term.can.tc is tc
+    finally:
+        rig.close()

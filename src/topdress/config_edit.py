@@ -39,7 +39,8 @@ WHOLE_TABLES = ("ids", "options")
 # pushed to the ECU (meters stopped); [lookahead]'s meter and air-line times are ECU parameters
 ECU_SECTIONS = ("machine", "speed", "ecu", "lookahead")
 LIVE_SECTIONS = ("rate", "operator")  # taken at once by the loop
-RESTART_SECTIONS = ("log", "display")  # saved; in force at the next start
+# saved; in force at the next start ([isobus] also with a new CAN bus: the TC link is made anew)
+RESTART_SECTIONS = ("log", "display", "isobus")
 
 
 def _plain(value: Any) -> Any:

@@ -135,7 +135,9 @@ class TcLink:
         self._journal = journal
         self._on_tx = on_tx
         self._settings = settings
-        cfg = settings.cfg.isobus
+        # [isobus] as it was when the link was made: a change is saved and in force at the
+        # next start (or the next [can] change), never half-taken by a link already serving
+        self._cfg = cfg = settings.cfg.isobus
         self.name = tc_name(cfg.tc_identity)
         self.server = TcServer(self.name, cfg.tc_address)
         self.counters = LinkCounters()
@@ -172,7 +174,7 @@ class TcLink:
         """The ground earlier sessions of this field covered (`[isobus] coverage_hours`), read
         from the session logs in a thread of its own (whole sessions: seconds for a long day);
         the loop takes it once it is there (`_take_earlier`)."""
-        cfg = self._settings.cfg.isobus
+        cfg = self._cfg
         session = self._journal.session
         if not cfg.section_control or cfg.coverage_hours <= 0.0 or session is None:
             return None
@@ -452,7 +454,7 @@ class TcLink:
             rates[0] = upper + lower
         elif start:
             rates[: min(n, 2)] = layers[: min(n, 2)]
-        density = self._settings.cfg.isobus.density_kg_l
+        density = self._cfg.density_kg_l
         self.setpoints = tuple(
             r if p.setpoint_ddi == SETPOINT_MASS_HA else r / density
             for p, r in zip(self.products, rates, strict=True)
@@ -507,14 +509,14 @@ class TcLink:
         while track and track[0][0] < now - TRACK_S:
             track.popleft()
         c = self._client()
-        if not self._settings.cfg.isobus.section_control or c is None or c.device is None:
+        if not self._cfg.section_control or c is None or c.device is None:
             self.section_on = None
             return
         if self._sc is None:
             sections = sections_from_device(c.device)
             if not sections or any(s.width_m <= 0.0 for s in sections):
                 return  # a pool without section widths: all sections with the rate
-            cfg = self._settings.cfg.isobus
+            cfg = self._cfg
             self._sc = SectionControl(
                 sections, boundary, off_pct=cfg.overlap_pct, look_m=cfg.section_look_m
             )
@@ -682,7 +684,7 @@ class TcLink:
         v = gnss_kmh if gnss_kmh is not None and live else 0.0
         actual = [0.0, 0.0]
         target = [0.0, 0.0]
-        density = self._settings.cfg.isobus.density_kg_l
+        density = self._cfg.density_kg_l
         for i, (p, sp) in enumerate(zip(self.products[:2], self.setpoints, strict=False)):
             k = 1.0 if p.setpoint_ddi == SETPOINT_MASS_HA else density
             a = self._value(p.element, p.actual_ddi)
