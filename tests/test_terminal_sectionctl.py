@@ -10,16 +10,20 @@ import os
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 import shapely
 
 from test_terminal_isobus import IsobusRig
+from test_terminal_isobus_prop import PropRig
+from test_terminal_isobus_prop import _drive as prop_drive
 from topdress.config import DEFAULT_TOML, ConfigError, TerminalConfig, loads_config
 from topdress.geo.outlet import offset_position
 from topdress.log.session import SessionLog, SessionReader
 from topdress.sim.gnss import GnssParams
 from topdress.sim.tractor import Drive, Segment
+from topdress.view import commands as op
 from topdress.view.commands import ApplySettings
 
 # The turn's 1.2 m radius puts the way back about 2.2 m west (the tractor drifts back a little):
@@ -104,10 +108,11 @@ def test_the_decisions_are_in_the_session_log_on_change_only(tmp_path: Path) -> 
     for e in events:  # a reason for each section off, none for one on
         on, why = e.detail["on"], e.detail["why"]
         assert [w == "" for w in why] == on
-    # at connection off until the meters start (the operator's desk), then all on
+    # at connection off while the topdress ECU takes its parameters (the TC holds it stopped
+    # though the operator runs), then all on
     first_on = ons.index([True] * 6)
     assert events[first_on].t < 3.0
-    assert all(set(e.detail["why"]) <= {"operator", "rate_zero"} for e in events[:first_on])
+    assert [e.detail["why"] for e in events[:first_on]] == [["params"] * 6]
     # the way back: over the first pass covered, past the west edge outside
     back = [e.detail["why"] for e in events if 40.0 < e.t < 56.0]
     assert back and all(w[:2] == ["covered"] * 2 and w[5] == "outside" for w in back)
@@ -301,5 +306,33 @@ def test_an_isobus_change_while_running_is_saved_for_the_next_start(tmp_path: Pa
         assert rig.term.cfg.isobus.section_control is False
         rig.run(10.0)
         assert tc.section_on is not None and rig.term.can.tc is tc
+    finally:
+        rig.close()
+
+
+def test_sections_held_off_for_the_ecus_parameters_say_so_in_the_session_log() -> None:
+    """A topdress ECU that takes no parameter (its core deaf): the TC holds its sections off
+    while the operator runs, and the session log says why (`params`, not `operator`); once
+    the parameters are in, they work."""
+    rig = PropRig(loads_config(DEFAULT_TOML), prop_drive())
+    rig.deaf = True
+    logged: list[dict[str, Any]] = []
+    journal = rig.term.journal
+    log_event = journal.log_event
+
+    def keep(t: float, kind: str, **detail: Any) -> None:
+        if kind == "isobus.sections":
+            logged.append(detail)
+        log_event(t, kind, **detail)
+
+    journal.log_event = keep  # type: ignore[method-assign]
+    try:
+        rig.run(5.0)
+        assert not rig.term.link.params_done and rig.term.desk.op.state == op.RUNNING
+        assert logged == [{"on": [False] * 6, "why": ["params"] * 6}]
+        rig.deaf = False
+        rig.run(9.0)
+        assert rig.term.link.params_done
+        assert logged[1:] == [{"on": [True] * 6, "why": [""] * 6}]
     finally:
         rig.close()

@@ -36,7 +36,7 @@ from topdress.terminal.inbox import Inbox
 from topdress.terminal.journal import Journal, Settings
 from topdress.terminal.lines import in_background
 from topdress.terminal.proplink import PropLink
-from topdress.terminal.tclink import TcLink
+from topdress.terminal.tclink import PARAMS, TcLink
 
 log = logging.getLogger(__name__)
 
@@ -241,7 +241,8 @@ class BusSwitch:
             self.link.begin(self.params(self._settings.cfg), now)
         elif served == "again":  # connected again (a reboot is not heard otherwise)
             self.link.reconnected(now)
-        self.tc.poll(now, self.held(command))
+        held = self.held(command)  # the command itself, or the stop while parameters are due
+        self.tc.poll(now, held, PARAMS if held is not command else "")
         self.link.poll(now)
 
     def held(self, command: tuple[bool, float, float, float]) -> tuple[bool, float, float, float]:

@@ -72,8 +72,9 @@ SECTION_CONTROL_STATE = 160
 ACTUAL_CONDENSED, SETPOINT_CONDENSED = 161, 290
 PER_HA = 100  # kg/ha -> mg/m^2, and L/ha -> mm^3/m^2
 KG_HA_PER_RPM_KG = 600.0  # eq. 4: kg/ha = rpm x kg/rev x 600 / (km/h x m)
-# why a section the TC commands is off, beside section control's "covered" and "outside"
-OPERATOR, RATE_ZERO = "operator", "rate_zero"
+# why a section the TC commands is off, beside section control's "covered" and "outside":
+# the operator stopped, the rate is zero, or the ECU's parameters are not all in force yet
+OPERATOR, RATE_ZERO, PARAMS = "operator", "rate_zero", "params"
 
 
 class Sender(Protocol):
@@ -327,9 +328,10 @@ class TcLink:
         self._journal.event(text("event.isobus", what=what))
 
     # ---- the tick ---------------------------------------------------------------------------
-    def poll(self, now: float, command: tuple[bool, float, float, float]) -> None:
+    def poll(self, now: float, command: tuple[bool, float, float, float], held: str = "") -> None:
         """The tick's turn: the TC's own work, then the command (start, fan, upper and lower
-        kg/ha) as setpoints to the implement served."""
+        kg/ha) as setpoints to the implement served; `held`: why the command is a stop the
+        operator did not give (PARAMS), for the session log ("": it is the operator's)."""
         self._step(now, [])
         c = self._client()
         self._watch_state(now, c)
@@ -337,7 +339,7 @@ class TcLink:
             return
         if self._served is None or self._served[0] != c.address or self._served[1] is not c.device:
             self._connect(c, now)
-        self._command(c, now, command)
+        self._command(c, now, command, held)
         self._step(now, [])  # what was set goes out this tick
 
     def _client(self) -> Client | None:
@@ -445,7 +447,9 @@ class TcLink:
         elif device.measured(element, ddi, TRIG_CHANGE):
             self.server.measure_on_change(element, ddi)
 
-    def _command(self, c: Client, now: float, command: tuple[bool, float, float, float]) -> None:
+    def _command(
+        self, c: Client, now: float, command: tuple[bool, float, float, float], held: str = ""
+    ) -> None:
         start, _, upper, lower = command
         layers = (upper, lower)
         n = len(self.products)
@@ -473,12 +477,14 @@ class TcLink:
         for element in self._carrying(SETPOINT_CONDENSED):
             self._set(c, now, element, SETPOINT_CONDENSED, condensed_value(on))
         if self._carrying(SETPOINT_CONDENSED):
-            self._log_sections(now, on, OPERATOR if not start else RATE_ZERO if not working else "")
+            why = held or (OPERATOR if not start else RATE_ZERO if not working else "")
+            self._log_sections(now, on, why)
 
     def _log_sections(self, now: float, on: list[bool | None], all_off: str) -> None:
         """The sections the TC commands, and why each one off is off, to the session log when
         one switches (`isobus.sections`): the operator stopped, the rate is zero, or section
-        control put it off (covered, outside the field)."""
+        control put it off (covered, outside the field), or the topdress ECU's parameters are
+        not all in force yet (the stop held)."""
         decided = self.section_why if self.section_on is not None else ()
         reasons = tuple(
             "" if o else all_off or (decided[i] if i < len(decided) else "")
