@@ -39,7 +39,7 @@ from topdress.isobus.tcserver import (
     Client,
     TcServer,
     pd_frame,
-    pdack_errors,
+    pdack_texts,
     tc_name,
 )
 
@@ -303,9 +303,9 @@ def test_agiso_client_live_against_the_tc_offering_tc_geo() -> None:
 
 
 def test_pdack_error_bits_in_words() -> None:
-    assert pdack_errors(0) == [] and pdack_errors(0xFF) == []  # AgIsoStack++: no code given
-    assert pdack_errors(0x04) == ["DDI not supported by the element"]
-    assert pdack_errors(0x90) == [
+    assert pdack_texts(0) == [] and pdack_texts(0xFF) == []  # AgIsoStack++: no code given
+    assert [str(t) for t in pdack_texts(0x04)] == ["DDI not supported by the element"]
+    assert [str(t) for t in pdack_texts(0x90)] == [
         "process data not settable",
         "value outside the operational range",
     ]

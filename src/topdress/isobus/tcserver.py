@@ -51,7 +51,6 @@ __all__ = [
     "is_tc",
     "map_device",
     "pd_frame",
-    "pdack_errors",
     "pdack_texts",
     "tc_name",
 ]  # fmt: skip
@@ -127,11 +126,6 @@ def pdack_texts(code: int) -> list[Text]:
     if code in (0, 0xFF):
         return []
     return [text(f"tc.pdack.{bit}") for bit in range(8) if code >> bit & 1]
-
-
-def pdack_errors(code: int) -> list[str]:
-    """A PDACK's error byte in (English) words."""
-    return [str(t) for t in pdack_texts(code)]
 
 
 @dataclass

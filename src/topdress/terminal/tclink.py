@@ -144,7 +144,7 @@ class TcLink:
         self.counters = LinkCounters()
         self._t0: float | None = None
         self.names: dict[int, int] = {}  # address -> NAME of every claim heard
-        self._errors = 0  # of server.errors, those told
+        self._told = 0  # the server's `told` count up to which its messages were told here
         self._served: tuple[int, Device] | None = None  # the client and pool set up
         self.products: tuple[Product, ...] = ()
         self.sections = 0
@@ -274,8 +274,8 @@ class TcLink:
             self._send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True))
         self._watch_address(now)
         server = self.server
-        new = min(server.told - self._errors, len(server.messages))
-        self._errors = server.told
+        new = min(server.told - self._told, len(server.messages))
+        self._told = server.told
         for what in server.messages[len(server.messages) - new :]:
             self._tell(what)
 
