@@ -18,7 +18,13 @@ from tc_rig import DDOP, connected
 from topdress.geo.asapplied import utm_crs
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.outlet import offset_position
-from topdress.geo.sectionctl import Section, SectionControl, earlier_coverage, sections_from_device
+from topdress.geo.sectionctl import (
+    Section,
+    SectionControl,
+    covered_tiles,
+    earlier_coverage,
+    sections_from_device,
+)
 from topdress.isobus.devicemap import map_device
 from topdress.isobus.tcserver import TcServer, tc_name
 from topdress.isobus.workstate import condensed_states, condensed_value
@@ -111,7 +117,8 @@ def test_boom_hanging_over_the_side_of_the_field() -> None:
 def test_earlier_session_swaths_count_as_covered() -> None:
     sc = _spreader(_field())
     swath = [at(20, 0), at(40, 0), at(40, 100), at(20, 100)]
-    sc.add_covered_wgs84(shapely.Polygon([(lon, lat) for lat, lon in swath]))
+    cover, crs = covered_tiles([shapely.Polygon([(lon, lat) for lat, lon in swath])])
+    assert cover is not None and crs is not None and sc.add_cover(cover, crs)
     lat, lon = at(30.0, 50.0)
     assert sc.decide(lat, lon, NORTH) == [False] * 6
     lat, lon = at(44.0, 50.0)  # sections at east 38..50 m: only the first over the swath
@@ -244,6 +251,16 @@ def test_earlier_sessions_of_the_same_field_and_window_count_and_make_tiles(
     elsewhere = SectionControl([Section(0.0, 0.0, 3.0)], None)
     elsewhere.decide(48.10, 5.90, NORTH)  # its first fix in UTM 31N
     assert not elsewhere.add_cover(got.cover, got.crs)
+    # made in the zone a section control works in (a field across a zone's edge): the same
+    # ground, taken there
+    east = utm_crs(48.10, 12.10)
+    with SessionLog.create(logs, field) as again:
+        there = earlier_coverage(again.path, 24.0, east)
+    assert there.crs == east and there.cover is not None and there.sessions == got.sessions
+    across = SectionControl([Section(0.0, 0.0, 3.0)], None, crs=east)
+    assert across.add_cover(there.cover, east)
+    assert across.decide(*at(10.0, 20.0), NORTH) == [False]
+    assert across.decide(*at(40.0, 20.0), NORTH) == [True]
 
 
 def test_old_files_are_not_opened_and_sessions_of_an_unknown_field_are_skipped(

@@ -44,9 +44,9 @@ def _drive() -> Drive:
     )
 
 
-def _boundary(tmp_path: Path) -> str:
+def _boundary(tmp_path: Path, east_m: float = 30.0) -> str:
     p = GnssParams()
-    corners = [(WEST_EDGE_M, -30.0), (30.0, -30.0), (30.0, 100.0), (WEST_EDGE_M, 100.0)]
+    corners = [(WEST_EDGE_M, -30.0), (east_m, -30.0), (east_m, 100.0), (WEST_EDGE_M, 100.0)]
     ring = [offset_position(p.lat0_deg, p.lon0_deg, 0.0, n, e)[::-1] for e, n in corners]
     path = tmp_path / "field.geojson"
     feature = {"type": "Feature", "properties": {},
@@ -195,15 +195,20 @@ def _first_pass(rig: IsobusRig, until_s: float) -> list[tuple[float, int]]:
     return out
 
 
-@pytest.mark.parametrize("hours", [24.0, 0.0])
+@pytest.mark.parametrize(
+    ("hours", "east_m", "zone"),
+    [(24.0, 30.0, "EPSG:32651"), (0.0, 30.0, ""), (24.0, 150_000.0, "EPSG:32652")],
+)
 def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
-    tmp_path: Path, hours: float
+    tmp_path: Path, hours: float, east_m: float, zone: str
 ) -> None:
     """The terminal killed 20 s into the first pass (about 26 m north), then started again
     and driven over the same line from the start: over the ground the killed session covered
     the sections stay off (its as-applied swaths, read from its log); past it they work.
-    With `coverage_hours = 0` earlier sessions do not count: the sections work all the way."""
-    field = _boundary(tmp_path)
+    With `coverage_hours = 0` earlier sessions do not count: the sections work all the way.
+    A field reaching 150 km east (its boundary's centre past 126 E, in UTM zone 52; the swaths
+    in 51): the swaths' tiles are made in the boundary's zone, off the loop."""
+    field = _boundary(tmp_path, east_m)
     boundary_line = 'path = ""' + " " * 18 + "# .gpkg, .shp, .geojson polygons or ISOXML "
     boundary_line += "TASKDATA.XML\n"
     assert DEFAULT_TOML.count(boundary_line) == 1
@@ -251,6 +256,7 @@ def test_the_coverage_survives_a_terminal_killed_mid_field_and_restarted(
     if hours:
         (taken,) = coverage
         assert taken["sessions"] == [killed.path.name] and taken["swaths"] > 10
+        assert taken["zone"] == zone
         (skipped,) = taken["skipped"]
         assert skipped.startswith("broken.sqlite: ")
         assert all(n == 0 for n in over)

@@ -59,7 +59,8 @@ def sections_from_device(device: Device) -> list[Section]:
 
 class SectionControl:
     """Section setpoints for one implement; what `decide` answers depends only on the position
-    and the ground covered so far, `cover` adds what the implement reports it worked."""
+    and the ground covered so far, `cover` adds what the implement reports it worked. It works
+    in the boundary's UTM zone; without a boundary in `crs`, else the first position's."""
 
     def __init__(
         self,
@@ -69,6 +70,7 @@ class SectionControl:
         drp_across_m: float = 0.0,
         off_pct: float = 50.0,
         look_m: float = 1.0,
+        crs: CRS | None = None,
     ) -> None:
         if not sections:
             raise ValueError("section control needs at least one section")
@@ -88,6 +90,8 @@ class SectionControl:
         self.why: tuple[str, ...] = ()  # per section, why the last `decide` put it off ("": on)
         if boundary is not None:
             self._use(boundary.crs)
+        elif crs is not None:
+            self._use(crs)
 
     def _use(self, crs: CRS) -> None:
         self.crs = crs
@@ -190,27 +194,12 @@ class SectionControl:
             tiles[key] = g if old is None else shapely.union(old, g)
         return True
 
-    def add_covered_wgs84(self, geoms: Any) -> None:
-        """Ground covered before (as-applied swaths in WGS 84, e.g. of an earlier session)."""
-        parts = [g for g in shapely.get_parts(np.atleast_1d(geoms)) if not g.is_empty]
-        if not parts:
-            return
-        c = parts[0].centroid
-        self._utm(c.y, c.x)  # the frame is the boundary's, or the first position's zone
-        fwd = self._fwd
-        assert fwd is not None
-        utm = shapely.transform(
-            np.array(parts, dtype=object),
-            lambda xy: np.column_stack(fwd.transform(xy[:, 0], xy[:, 1])),
-        )
-        self.coverage.add(utm)
-
 
 @dataclass(frozen=True)
 class EarlierCoverage:
     """The ground earlier sessions of the field covered: their as-applied swaths (WGS 84),
-    the same as covered tiles (`cover`, in `crs`, their UTM zone; None without swaths), the
-    session files they came from, and those that could not be read
+    the same as covered tiles (`cover`, in `crs`: the zone asked for, else theirs; None
+    without swaths), the session files they came from, and those that could not be read
     (name: why)."""
 
     swaths: tuple[Any, ...]
@@ -220,13 +209,14 @@ class EarlierCoverage:
     crs: CRS | None = None
 
 
-def _tiles(swaths: list[Any]) -> tuple[Cover | None, CRS | None]:
-    """The swaths (WGS 84) as covered tiles in their UTM zone (a field's boundary is in the
-    same one, but for a field across a zone's edge)."""
+def covered_tiles(swaths: list[Any], crs: CRS | None = None) -> tuple[Cover | None, CRS | None]:
+    """The swaths (WGS 84) as covered tiles in `crs` (the zone the section control works in),
+    else in their own UTM zone; (None, None) without swaths."""
     if not swaths:
         return None, None
-    x0, y0, x1, y1 = shapely.total_bounds(np.array(swaths, dtype=object))
-    crs = utm_crs((y0 + y1) / 2, (x0 + x1) / 2)
+    if crs is None:
+        x0, y0, x1, y1 = shapely.total_bounds(np.array(swaths, dtype=object))
+        crs = utm_crs((y0 + y1) / 2, (x0 + x1) / 2)
     fwd = Transformer.from_crs(WGS84, crs, always_xy=True)
     utm = shapely.transform(
         np.array(swaths, dtype=object),
@@ -254,11 +244,12 @@ def _boundary_key(reader: SessionReader) -> tuple[str, str]:
     return (b.path, b.layer)
 
 
-def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
+def earlier_coverage(session: Path, hours: float, crs: CRS | None = None) -> EarlierCoverage:
     """The as-applied swaths of the sessions beside `session` (the one being written) that
     count for its coverage: created within `hours` before it, with the same `[boundary] path`
     and `layer` (the same field; two sessions without a boundary count alike, their swaths
-    only matter where the machine drives again), also made into covered tiles. Files last
+    only matter where the machine drives again), also made into covered tiles (in `crs`, the
+    section control's zone, so that it takes them as they are; else the swaths'). Files last
     written before the window are not opened; a session of the window that cannot be read,
     or whose configuration cannot (its field unknown), is skipped and named. Reads files and
     unites the swaths (seconds for an hour of log): run it off the control loop."""
@@ -291,5 +282,5 @@ def earlier_coverage(session: Path, hours: float) -> EarlierCoverage:
         if len(got):  # a log that applied nothing (an implement's, too) adds nothing
             used.append(path.name)
             swaths.extend(got)
-    cover, crs = _tiles(swaths)
-    return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped), cover, crs)
+    cover, zone = covered_tiles(swaths, crs)
+    return EarlierCoverage(tuple(swaths), tuple(used), tuple(skipped), cover, zone)

@@ -37,9 +37,10 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import can
-import numpy as np
+from pyproj import CRS
 
 from topdress.errors import DeviceError, ProtocolError
+from topdress.geo.asapplied import utm_crs
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.sectionctl import (
     EarlierCoverage,
@@ -167,38 +168,48 @@ class TcLink:
         self.section_on: tuple[bool, ...] | None = None  # what it decided last (None: all)
         self.section_why: tuple[str, ...] = ()  # why each one off is off ("covered", "outside")
         self._logged_sections: tuple[bool, ...] | None = None  # the last logged
-        self._earlier = self._read_earlier()  # the field's earlier sessions, read off the loop
+        # the UTM zone section control works in: the boundary's, else the first position's
+        self._zone: CRS | None = None
+        # the field's earlier sessions, read off the loop once the zone is known
+        self._earlier: Future[EarlierCoverage] | None = None
+        self._earlier_due = (
+            self._cfg.section_control
+            and self._cfg.coverage_hours > 0.0
+            and self._journal.session is not None
+        )
         self._covered_before: EarlierCoverage | None = None  # for each SectionControl
         self._track: deque[tuple[float, float, float, float]] = deque()  # t, lat, lon, heading
 
-    def _read_earlier(self) -> Future[EarlierCoverage] | None:
+    def _read_earlier(self, zone: CRS) -> None:
         """The ground earlier sessions of this field covered (`[isobus] coverage_hours`), read
-        from the session logs in a thread of its own (whole sessions: seconds for a long day);
-        the loop takes it once it is there (`_take_earlier`)."""
-        cfg = self._cfg
+        from the session logs and made into tiles in `zone` in a thread of its own (whole
+        sessions: seconds for a long day); the loop takes it once it is there
+        (`_take_earlier`)."""
         session = self._journal.session
-        if not cfg.section_control or cfg.coverage_hours <= 0.0 or session is None:
-            return None
+        self._earlier_due = False
+        if session is None:
+            return
+        hours = self._cfg.coverage_hours
         fut: Future[EarlierCoverage] = Future()
+        self._earlier = fut
 
         def read() -> None:
             try:
-                fut.set_result(earlier_coverage(session.path, cfg.coverage_hours))
+                fut.set_result(earlier_coverage(session.path, hours, zone))
             except Exception as exc:  # said by the loop; never a traceback in a thread
                 fut.set_exception(exc)
 
         threading.Thread(target=read, name="tc-coverage", daemon=True).start()
-        return fut
 
     def _seed(self, sc: SectionControl) -> None:
         """The earlier sessions' ground into a section control: their tiles, made in the
-        reading thread (a few ms here), or, for a boundary in another UTM zone than theirs,
-        their swaths projected and united here (0.7 s an hour of log, once)."""
+        reading thread in its zone (taking them: a few ms here, never a projection)."""
         got = self._covered_before
         if got is None or got.cover is None or got.crs is None:
             return
-        if not sc.add_cover(got.cover, got.crs):
-            sc.add_covered_wgs84(np.array(got.swaths, dtype=object))
+        if not sc.add_cover(got.cover, got.crs):  # both in self._zone: not met
+            why = f"tiles in {got.crs.to_string()}, section control in {sc.crs}"
+            self._tell(text("tc.link.coverage_error", why=why))
 
     @property
     def section_control(self) -> SectionControl | None:
@@ -208,7 +219,7 @@ class TcLink:
     @property
     def coverage_read(self) -> bool:
         """The earlier sessions' coverage was taken (or there is none to read)."""
-        return self._earlier is None
+        return not self._earlier_due and self._earlier is None
 
     def _take_earlier(self) -> None:
         fut = self._earlier
@@ -230,6 +241,7 @@ class TcLink:
             sessions=list(got.sessions),
             swaths=len(got.swaths),
             skipped=list(got.skipped),
+            zone=got.crs.to_string() if got.crs is not None else None,
         )
         # files that could not be read are in that event only: told at every start they would
         # keep a damaged or foreign file of the log directory on the operator's screen
@@ -514,6 +526,10 @@ class TcLink:
         track.append((now, lat, lon, heading_deg))
         while track and track[0][0] < now - TRACK_S:
             track.popleft()
+        if self._zone is None:  # the earlier sessions' tiles are made in the zone worked in
+            self._zone = boundary.crs if boundary is not None else utm_crs(lat, lon)
+            if self._earlier_due:
+                self._read_earlier(self._zone)
         c = self._client()
         if not self._cfg.section_control or c is None or c.device is None:
             self.section_on = None
@@ -524,7 +540,11 @@ class TcLink:
                 return  # a pool without section widths: all sections with the rate
             cfg = self._cfg
             self._sc = SectionControl(
-                sections, boundary, off_pct=cfg.overlap_pct, look_m=cfg.section_look_m
+                sections,
+                boundary,
+                off_pct=cfg.overlap_pct,
+                look_m=cfg.section_look_m,
+                crs=self._zone,
             )
             if self._covered_before is not None:
                 self._seed(self._sc)
