@@ -342,3 +342,43 @@ def test_sections_held_off_for_the_ecus_parameters_say_so_in_the_session_log() -
         assert logged[1:] == [{"on": [True] * 6, "why": [""] * 6}]
     finally:
         rig.close()
+
+
+def test_the_coverage_goes_on_over_a_can_change_mid_field(tmp_path: Path) -> None:
+    """[can] changed 12 s into the first pass (about 12 m north), the implement unplugged
+    meanwhile (moved to the new adapter: it connects to the TC there after its TC timeout):
+    the TC link is made anew on the new bus and takes the ground covered so far with it, so
+    on the way back sections 1 and 2 stay off over the first pass's first 11 m; over the
+    ground driven unplugged (nothing applied) they work."""
+    rig = IsobusRig(_cfg(tmp_path), _drive())
+    back: list[tuple[float, int]] = []
+    try:
+        rig.run(12.0)
+        old = rig.term.can.tc
+        assert old is not None and old.section_control is not None
+        rig.implement_off = True
+        fut = rig.term.post(ApplySettings("can", {"ecu_timeout_s": 0.6}))
+        deadline = time.monotonic() + 10.0  # the new bus opens in a thread of its own
+        while not fut.done() and time.monotonic() < deadline:
+            rig.run(rig.world.t_s + 0.1)
+            time.sleep(0.005)
+        assert fut.done() and fut.result().ok, fut.result()
+        assert rig.world.t_s < 14.0
+        rig.run(16.0)
+        rig.implement_off = False
+        new = rig.term.can.tc
+        assert new is not None and new is not old
+        while rig.world.t_s < 62.0:
+            rig.run(rig.world.t_s + 0.1)
+            tr = rig.world.tractor
+            if abs(tr.heading) > 3.0 and tr.v > 1.0:
+                back.append((tr.y, rig.sim.node.sections_on))
+        assert new.state == "ok"
+    finally:
+        rig.close()
+    before = [n for y, n in back if y < 10.5]  # covered before the change (the pass ends at 8 m)
+    unplugged = [n for y, n in back if 14.0 < y < 17.0]  # nothing applied there
+    after = [n for y, n in back if 22.0 < y < 30.0]  # covered after the change
+    assert len(before) > 10 and len(unplugged) > 10 and len(after) > 20
+    assert all(n & 0b11 == 0 for n in before + after)
+    assert all(n & 0b11 == 0b11 for n in unplugged)

@@ -179,6 +179,12 @@ class SectionControl:
         self._quads = []
         self.coverage.add(np.asarray(quads, dtype=object))
 
+    def ground(self) -> tuple[Cover, CRS | None]:
+        """The ground covered so far (the positions gathered since the last flush too), in
+        the zone worked in (None before any position)."""
+        self._flush()
+        return self.coverage, self.crs
+
     def add_cover(self, cover: Cover, crs: CRS) -> bool:
         """Ground covered before, as tiles made elsewhere (off the loop: `earlier_coverage`) in
         `crs`: taken tile by tile (a union only where this coverage has ground in the same

@@ -300,7 +300,9 @@ class BusSwitch:
         old, self.port = self.port, opening.port
         # An ISOBUS TC starts over on the new bus (it claims its address there); the ECU's
         # parameters go to an ISOBUS once a topdress ECU is served there.
-        self.tc = self._new_tc(self.port, opening.cfg)
+        was, self.tc = self.tc, self._new_tc(self.port, opening.cfg)
+        if self.tc is not None and was is not None:
+            self.tc.carry(was)  # the ground covered so far goes on with it
         self.prop = self._new_prop(self.port, opening.cfg)
         if self.tc is not None or self.link.isobus:  # the link's kind of bus changes
             self.link = self._new_link(self.port, opening.cfg.can, self.link.command.fan_rpm)

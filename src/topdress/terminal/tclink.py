@@ -40,7 +40,7 @@ import can
 from pyproj import CRS
 
 from topdress.errors import DeviceError, ProtocolError
-from topdress.geo.asapplied import utm_crs
+from topdress.geo.asapplied import Cover, utm_crs
 from topdress.geo.boundary import FieldBoundary
 from topdress.geo.sectionctl import (
     EarlierCoverage,
@@ -178,6 +178,7 @@ class TcLink:
             and self._journal.session is not None
         )
         self._covered_before: EarlierCoverage | None = None  # for each SectionControl
+        self._carried: tuple[Cover, CRS] | None = None  # covered on the bus before ([can])
         self._track: deque[tuple[float, float, float, float]] = deque()  # t, lat, lon, heading
 
     def _read_earlier(self, zone: CRS) -> None:
@@ -201,14 +202,29 @@ class TcLink:
 
         threading.Thread(target=read, name="tc-coverage", daemon=True).start()
 
+    def carry(self, old: TcLink) -> None:
+        """This session's ground from the TC link of the bus before (a [can] change makes the
+        link anew): its section control's coverage, the zone, the earlier sessions' ground
+        or their reading under way; taken by this link's section control once placed."""
+        self._zone = old._zone
+        self._earlier, self._earlier_due = old._earlier, old._earlier_due
+        self._covered_before = old._covered_before
+        if old._sc is not None:
+            cover, crs = old._sc.ground()
+            self._carried = None if crs is None else (cover, crs)
+        else:
+            self._carried = old._carried
+
     def _seed(self, sc: SectionControl) -> None:
         """The earlier sessions' ground into a section control: their tiles, made in the
         reading thread in its zone (taking them: a few ms here, never a projection)."""
         got = self._covered_before
-        if got is None or got.cover is None or got.crs is None:
-            return
-        if not sc.add_cover(got.cover, got.crs):  # both in self._zone: not met
-            why = f"tiles in {got.crs.to_string()}, section control in {sc.crs}"
+        if got is not None and got.cover is not None and got.crs is not None:
+            self._give(sc, got.cover, got.crs)
+
+    def _give(self, sc: SectionControl, cover: Cover, crs: CRS) -> None:
+        if not sc.add_cover(cover, crs):  # both in self._zone: not met
+            why = f"tiles in {crs.to_string()}, section control in {sc.crs}"
             self._tell(text("tc.link.coverage_error", why=why))
 
     @property
@@ -548,6 +564,8 @@ class TcLink:
             )
             if self._covered_before is not None:
                 self._seed(self._sc)
+            if self._carried is not None:  # this session's, from the bus before
+                self._give(self._sc, *self._carried)
         self._take_earlier()
         reported = self._sections()
         if reported:
