@@ -207,8 +207,9 @@ class TcLink:
         link anew): its section control's coverage, the zone, the earlier sessions' ground
         or their reading under way; taken by this link's section control once placed."""
         self._zone = old._zone
-        self._earlier, self._earlier_due = old._earlier, old._earlier_due
-        self._covered_before = old._covered_before
+        if self._earlier_due:  # this link's [isobus] counts earlier sessions too
+            self._earlier, self._earlier_due = old._earlier, old._earlier_due
+            self._covered_before = old._covered_before
         if old._sc is not None:
             cover, crs = old._sc.ground()
             self._carried = None if crs is None else (cover, crs)
