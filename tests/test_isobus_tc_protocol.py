@@ -31,7 +31,7 @@ from topdress.isobus.devicemap import (
     TRIG_TIME,
     map_device,
 )
-from topdress.isobus.node import Frame, split_id
+from topdress.isobus.node import Frame, IsobusNode, split_id
 from topdress.isobus.poolstore import PoolStore
 from topdress.isobus.tcserver import (
     PD_PGN,
@@ -260,6 +260,31 @@ def test_a_client_that_never_acknowledges_one_value_is_said_once() -> None:
             pending = tc.step(bus.now, [f for f in node.tx() if kept(f)])
     assert tc.counters["pdacks_missing"] == 8 and tc.counters["pdacks_ok"] >= 8
     assert tc.errors[said:] == ["client 0x84 did not acknowledge DDI 6 of element 3 within 1000 ms"]
+
+
+def test_a_tc_started_after_the_implement_asks_for_its_claim() -> None:
+    """The implement claimed 0x84 before the TC was on the bus: the TC's first frame is a
+    request for address claim from the null address, the implement claims again, and the TC
+    knows its NAME (PropLink judges a topdress ECU by it)."""
+    node = IsobusNode(ECU_NAME, tc_timeout_ms=6000)
+    node.start(0)
+    now = 0
+    for _ in range(50):  # 0.5 s alone: claimed, its frames heard by nobody
+        now += STEP_US
+        node.step(now, 0)
+        node.tx()
+    assert node.address == 0x84
+    tc = TcServer(tc_name(7))
+    tc.start(now)
+    out = tc.step(now, [])
+    assert (out[0].can_id, bytes(out[0].data)) == (0x18EAFFFE, b"\x00\xee\x00")
+    for _ in range(10):
+        now += STEP_US
+        for f in out:
+            node.rx(f.can_id, f.data, now)
+        node.step(now, 0)
+        out = tc.step(now, node.tx())
+    assert tc.names[0x84] == ECU_NAME
 
 
 def test_the_server_offers_tc_geo_with_position_based_control() -> None:

@@ -345,40 +345,49 @@ def test_sections_held_off_for_the_ecus_parameters_say_so_in_the_session_log() -
 
 
 def test_the_coverage_goes_on_over_a_can_change_mid_field(tmp_path: Path) -> None:
-    """[can] changed 12 s into the first pass (about 12 m north), the implement unplugged
-    meanwhile (moved to the new adapter: it connects to the TC there after its TC timeout):
-    the TC link is made anew on the new bus and takes the ground covered so far with it, so
-    on the way back sections 1 and 2 stay off over the first pass's first 11 m; over the
-    ground driven unplugged (nothing applied) they work."""
+    """[can] changed 12 s into the first pass (about 12 m north), the implement on the same
+    bus: the TC is made anew there and keeps its status back 8 s, so the implement takes it
+    for lost (its fail-safe stop) and connects again, as to a TC that booted. The new TC link
+    takes the ground covered so far with it: on the way back sections 1 and 2 stay off over
+    the first pass's first 10 m as over what was covered after the change; over the ground
+    driven while the implement was not served (nothing applied) they work."""
     rig = IsobusRig(_cfg(tmp_path), _drive())
     back: list[tuple[float, int]] = []
     try:
         rig.run(12.0)
         old = rig.term.can.tc
         assert old is not None and old.section_control is not None
-        rig.implement_off = True
         fut = rig.term.post(ApplySettings("can", {"ecu_timeout_s": 0.6}))
         deadline = time.monotonic() + 10.0  # the new bus opens in a thread of its own
         while not fut.done() and time.monotonic() < deadline:
             rig.run(rig.world.t_s + 0.1)
             time.sleep(0.005)
         assert fut.done() and fut.result().ok, fut.result()
-        assert rig.world.t_s < 14.0
-        rig.run(16.0)
-        rig.implement_off = False
+        changed = rig.world.t_s
+        assert changed < 14.0
         new = rig.term.can.tc
         assert new is not None and new is not old
+        rig.run(changed + 7.5)
+        assert new.state == "wait"  # still silent: the implement has not connected again
+        rig.run(changed + 9.0)
+        assert new.state == "ok"
         while rig.world.t_s < 62.0:
             rig.run(rig.world.t_s + 0.1)
             tr = rig.world.tractor
             if abs(tr.heading) > 3.0 and tr.v > 1.0:
                 back.append((tr.y, rig.sim.node.sections_on))
-        assert new.state == "ok"
     finally:
         rig.close()
+    told = [e for _, e in rig.events if "started anew" in e]
+    assert told == [
+        "ISOBUS: Task Controller started anew on the new bus: silent 8 s, so that the "
+        "implement at 0x84 takes it for a new one and connects again"
+    ]
+    # the NAMEs heard again (the TC asked for the claims): the topdress ECU is known as such
+    assert not [e for _, e in rig.events if "not a topdress ECU" in e]
     before = [n for y, n in back if y < 10.5]  # covered before the change (the pass ends at 8 m)
-    unplugged = [n for y, n in back if 14.0 < y < 17.0]  # nothing applied there
-    after = [n for y, n in back if 22.0 < y < 30.0]  # covered after the change
-    assert len(before) > 10 and len(unplugged) > 10 and len(after) > 20
+    unserved = [n for y, n in back if 15.0 < y < 23.0]  # nothing applied there
+    after = [n for y, n in back if 27.0 < y < 34.0]  # covered after the change
+    assert len(before) > 10 and len(unserved) > 30 and len(after) > 30
     assert all(n & 0b11 == 0 for n in before + after)
-    assert all(n & 0b11 == 0b11 for n in unplugged)
+    assert all(n & 0b11 == 0b11 for n in unserved)

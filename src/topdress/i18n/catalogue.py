@@ -532,6 +532,12 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "({swaths} swaths)",
         "分段控制：已计入本地块之前 {n} 次作业的覆盖区域（{swaths} 条幅带）",
     ),
+    "tc.link.restarted": (
+        "Task Controller started anew on the new bus: silent {s} s, so that the implement "
+        "at {client:#x} takes it for a new one and connects again",
+        "任务控制器已在新总线上重新启动：静默 {s} 秒，"
+        "使地址 {client:#x} 的机具将其视为新的任务控制器并重新连接",
+    ),
     "tc.link.coverage_error": (
         "earlier sessions' coverage not read: {why}",
         "未能读取之前作业的覆盖区域：{why}",

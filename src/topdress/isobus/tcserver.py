@@ -42,6 +42,7 @@ __all__ = [
     "ACTUAL_CONDENSED",
     "ACTUAL_MASS_HA",
     "ACTUAL_WORK_STATE",
+    "RESTART_QUIET_US",
     "SETPOINT_CONDENSED",
     "SETPOINT_MASS_HA",
     "SETPOINT_WORK_STATE",
@@ -60,10 +61,14 @@ _log = logging.getLogger(__name__)
 PD_PGN = 0xCB00
 ACK_PGN = 0xE800
 CLAIM_PGN = 0xEE00
+REQUEST_PGN = 0xEA00
 TC_ADDRESS = 0xF7
 TC_FUNCTION = 130
 STATUS_PERIOD_US = 2_000_000
 CLIENT_TIMEOUT_US = 6_000_000  # three missed 2 s task messages (ISO 11783-10 client timeout)
+# silent this long, a TC started anew is lost to every client (6 s) and its next status is
+# a new TC to them
+RESTART_QUIET_US = CLIENT_TIMEOUT_US + STATUS_PERIOD_US
 PDACK_TIMEOUT_US = 1_000_000  # a Set Value and Acknowledge unanswered this long is reported
 FLOOD_PER_S = 200  # process-data messages a second from one address; more are dropped
 KEEP_PDACKS = 256  # the last acknowledges kept per client
@@ -180,6 +185,8 @@ class TcServer:
         self._tp: TpEndpoint | None = None
         self._out: list[Frame] = []
         self._next_status = 0
+        self._quiet_until = 0  # a TC started anew: no client taken before (`start`)
+        self._ask: list[Frame] = []  # the request for address claim, sent with the first step
         self.store = store
         self.client: Client | None = None
         self.errors: list[str] = []  # what went wrong, in words, oldest first (the last 200)
@@ -215,8 +222,15 @@ class TcServer:
             out.append(f"the implement at {c.address:#x} stopped answering")
         return out
 
-    def start(self, now_us: int) -> None:
+    def start(self, now_us: int, quiet_us: int = 0) -> None:
+        """Claims its address; its status goes out from `now_us + quiet_us` (a TC started anew
+        beside clients that took the one before for itself: silent past their timeout, they
+        take it for lost and connect again, as to a TC that booted). It asks every node to
+        claim its address again (from the null address, before its own claim), so that it
+        knows the NAMEs of those that claimed before it was on the bus."""
+        self._ask = [Frame(6 << 26 | REQUEST_PGN << 8 | 0xFF << 8 | 0xFE, b"\x00\xee\x00")]
         self._claim.start(now_us)
+        self._next_status = self._quiet_until = now_us + quiet_us
 
     def _send(self, da: int, data: bytes, prio: int = 5) -> None:
         sa = self.address
@@ -338,7 +352,8 @@ class TcServer:
                 self.counters["bad_frames"] += 1
                 self._error(text("tc.frame_refused", id=f.can_id, why=str(exc)), key="bad_frame")
         self._claim.step(now_us)
-        self._out[:0] = self._claim.tx()
+        self._out[:0] = self._ask + self._claim.tx()  # the request before its own claim
+        self._ask = []
         sa = self.address
         if sa is not None and (self._tp is None or self._tp.address != sa):
             self._tp = TpEndpoint(sa, MAX_POOL_BYTES + 1)  # claimed, or moved by a contest
@@ -387,7 +402,9 @@ class TcServer:
             if pgn == PD_PGN and da in self.other_tcs and c is not None and c.address == sa:
                 self._elsewhere(c, da)
             return
-        if pgn == 0xEA00 and f.data[:3] == b"\x0f\xfe\x00":  # request for the language command
+        if now_us < self._quiet_until:
+            return  # started anew: a client still talking to the TC before, until it lost it
+        if pgn == REQUEST_PGN and f.data[:3] == b"\x0f\xfe\x00":  # request for the language command
             self._out.append(Frame(6 << 26 | 0xFE0F << 8 | me, b"en\x50\x00\x00\x00\xff\xff"))
             return
         if pgn == 0xFE0D:  # working-set master: a client announces itself; ask its version

@@ -51,7 +51,7 @@ from topdress.geo.sectionctl import (
 from topdress.i18n import Text, text
 from topdress.isobus.devicemap import TRIG_CHANGE, TRIG_TIME
 from topdress.isobus.node import Frame, name_fields, split_id
-from topdress.isobus.tcserver import Client, Device, TcServer, tc_name
+from topdress.isobus.tcserver import RESTART_QUIET_US, Client, Device, TcServer, tc_name
 from topdress.isobus.workstate import SECTIONS_PER_DDI, condensed_states, condensed_value
 from topdress.terminal.ecuview import LinkCounters
 from topdress.terminal.journal import Journal, Settings
@@ -144,6 +144,7 @@ class TcLink:
         self.server = TcServer(self.name, cfg.tc_address)
         self.counters = LinkCounters()
         self._t0: float | None = None
+        self._quiet_us = 0  # the server's status held back at its start (`carry`)
         self.names: dict[int, int] = {}  # address -> NAME of every claim heard
         self._told = 0  # the server's `told` count up to which its messages were told here
         self._served: tuple[int, Device] | None = None  # the client and pool set up
@@ -203,9 +204,17 @@ class TcLink:
         threading.Thread(target=read, name="tc-coverage", daemon=True).start()
 
     def carry(self, old: TcLink) -> None:
-        """This session's ground from the TC link of the bus before (a [can] change makes the
-        link anew): its section control's coverage, the zone, the earlier sessions' ground
-        or their reading under way; taken by this link's section control once placed."""
+        """Takes over from the TC link of the bus before (a [can] change makes the link anew).
+        The implement it served, if the new bus is the same, knows nothing of the change:
+        this TC keeps its status back past the client timeout, so that the implement takes
+        it for lost and connects again (else it would go on at its last rate, never set
+        again). And this session's ground: the old section control's coverage, the zone,
+        the earlier sessions' ground or their reading under way; taken by this link's
+        section control once placed."""
+        c = old._client()
+        if c is not None:  # on the same bus it would go on taking this TC for the old one
+            self._quiet_us = RESTART_QUIET_US
+            self._say(text("tc.link.restarted", client=c.address, s=RESTART_QUIET_US // 10**6))
         self._zone = old._zone
         if self._earlier_due:  # this link's [isobus] counts earlier sessions too
             self._earlier, self._earlier_due = old._earlier, old._earlier_due
@@ -269,7 +278,7 @@ class TcLink:
     def _us(self, now: float) -> int:
         if self._t0 is None:
             self._t0 = now
-            self.server.start(1)
+            self.server.start(1, self._quiet_us)
         return round((now - self._t0) * 1e6) + 1
 
     def on_frame(self, msg: can.Message, now: float) -> None:
