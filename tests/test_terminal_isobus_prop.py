@@ -54,7 +54,8 @@ class PropRig(TerminalParts):
     steps, the tick every 100 ms). Knobs: `manufacturer` (the ECU NAME's code), `refuse` (the
     ECU answers these parameters with a refusal instead of taking them), `deaf` (the ECU's
     core gets none of the terminal's private frames), `off` (the implement unplugged),
-    `nmea_hold_s` (each NMEA line handled this long after it came)."""
+    `nmea_hold_s` (each NMEA line handled this long after it came), `extra` (frames of
+    other nodes, on the bus at the next step whether the ECU is plugged or not)."""
 
     def __init__(
         self,
@@ -80,7 +81,7 @@ class PropRig(TerminalParts):
         self.nmea_hold_s = 0.0
         self.bus_log: list[tuple[float, Frame]] = []  # every frame the terminal sent
         self.ecu_log: list[tuple[float, Frame]] = []  # every frame the implement sent
-        self.extra: list[Frame] = []  # frames of other nodes, put on the bus at the next step
+        self.extra: list[Frame] = []
         self.snapshots: list[tuple[float, Snapshot]] = []
         self.node_rates: list[tuple[float, float, float]] = []
         self.peak_kg_ha = 0.0  # the highest rate the ECU's core was told, any step
@@ -120,16 +121,16 @@ class PropRig(TerminalParts):
                 heard.append(f)
                 self.bus_log.append((w.t_s, f))
             passed, answers = self._to_ecu(heard)
-            frames = self.sim.step([] if self.off else passed) + answers + self.extra
-            self.extra = []
+            frames = self.sim.step([] if self.off else passed) + answers
             self.ecu_log += [(w.t_s, f) for f in frames]
             node = self.sim.node
             self.peak_kg_ha = max(self.peak_kg_ha, node.rate_kg_ha(0), node.rate_kg_ha(1))
             out = self.sim.out
             assert out is not None
             t = out.t_s
+            others, self.extra = self.extra, []  # other nodes are on the bus, plugged or not
             msgs = (can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
-                    for f in ([] if self.off else frames))  # fmt: skip
+                    for f in ([] if self.off else frames) + others)  # fmt: skip
             self.deliver(t, out.nmea, out.crop, msgs)
             self._handle(t)
             if round(t * 100) % 10 == 0:
@@ -563,3 +564,47 @@ def test_a_can_change_from_isobus_to_the_ecus_own_bus_pushes_there_with_the_pape
     # its own push, with the paper's identifiers (the ISOBUS ECU there does not answer them)
     sets = [f for t, f in rig.bus_log if t >= since and f.can_id == frame_ids()["PcParamSet"]]
     assert sets and not link.params_done and rig.term.snapshot.ecu_link == "wait"
+
+
+def _claim(sa: int, name: int) -> Frame:
+    """An address claim (PGN 0xEE00) of `name` at `sa`."""
+    return Frame(6 << 26 | 0xEEFF << 8 | sa, name.to_bytes(8, "little"))
+
+
+def test_another_implement_at_the_ecus_address_gets_and_gives_no_private_frame() -> None:
+    # the topdress ECU is unplugged; another maker's implement claims its address and sends on
+    # the Proprietary B group extension of the ECU's EcuStatus (0x18FF5C84)
+    rig = PropRig(_cfg(""), _drive(0.0, 0.0))
+    try:
+        rig.run(3.0)
+        link, prop = rig.term.link, rig.term.can.prop
+        assert prop is not None and prop.serving and link.params_done
+        pushed = link.counters.tx_params
+        rig.off = True
+        rig.run(4.0)
+        assert link.state == "lost"
+        foreign = name_of(industry_group=2, device_class=5, function=128, manufacturer_code=7)
+        status = to_bus(Frame(frame_ids()["EcuStatus"], bytes(8)), by_ecu=True, sa=ECU)
+        assert status is not None and split_id(status.can_id)[1:3] == (STATUS_PGN, ECU)
+        rig.extra = [_claim(ECU, foreign)]
+        rig.run(4.1)
+        since = rig.world.t_s
+        assert not prop.serving  # its client was displaced, its NAME is not ours
+        for _ in range(10):
+            rig.extra = [status]
+            rig.run(rig.world.t_s + 0.1)
+        assert link.state == "lost" and link.ecu.status_t is not None
+        assert link.ecu.status_t < since  # its frames are not the ECU's
+        assert not link.send(protocol.encode_param_set(protocol.param("SwitchSpeed").id, 6.0))
+        assert not [f for t, f in rig.bus_log if t >= since and split_id(f.can_id)[1] == PROP_A]
+        assert prop.counters.tx_refused > 0 and prop.counters.wrong_source == 0
+        assert not any("ECU back" in e for _, e in rig.events)
+        # the topdress ECU plugged in again (it starts over): served again, given its parameters
+        rig.off = False
+        rig.reboot()
+        rig.run(rig.world.t_s + 4.0)
+        assert prop.serving and link.state == "ok" and link.params_done
+        assert link.counters.tx_params >= 2 * pushed
+        assert any("ECU back" in e for _, e in rig.events)
+    finally:
+        rig.close()
