@@ -55,7 +55,8 @@ class PropRig(TerminalParts):
     ECU answers these parameters with a refusal instead of taking them), `deaf` (the ECU's
     core gets none of the terminal's private frames), `off` (the implement unplugged),
     `nmea_hold_s` (each NMEA line handled this long after it came), `extra` (frames of
-    other nodes, on the bus at the next step whether the ECU is plugged or not)."""
+    other nodes, on the bus at the next step whether the ECU is plugged or not), `tick_ms`
+    (where in each 100 ms the terminal's tick falls: 0, 10, ... 90)."""
 
     def __init__(
         self,
@@ -79,6 +80,7 @@ class PropRig(TerminalParts):
         self.deaf = False
         self.off = False
         self.nmea_hold_s = 0.0
+        self.tick_ms = 0
         self.bus_log: list[tuple[float, Frame]] = []  # every frame the terminal sent
         self.ecu_log: list[tuple[float, Frame]] = []  # every frame the implement sent
         self.extra: list[Frame] = []
@@ -133,7 +135,7 @@ class PropRig(TerminalParts):
                     for f in ([] if self.off else frames) + others)  # fmt: skip
             self.deliver(t, out.nmea, out.crop, msgs)
             self._handle(t)
-            if round(t * 100) % 10 == 0:
+            if round(t * 1000) % 100 == self.tick_ms:
                 term.tick(t)
                 self.snapshots.append((t, term.snapshot))
                 node = self.sim.node
@@ -409,10 +411,13 @@ def test_an_ecu_lost_and_back_is_given_its_parameters_again() -> None:
         rig.close()
 
 
-def test_the_ecu_says_who_it_is_once_connected_to_the_tc() -> None:
+@pytest.mark.parametrize("tick_ms", range(0, 100, 10))
+def test_the_ecu_says_who_it_is_once_connected_to_the_tc(tick_ms: int) -> None:
     # its core's first EcuIdent goes out before the node has an address, to no one: the port
-    # announces it again once the node is connected to its TC (td_app_announce)
+    # announces it again once the node is connected to its TC (td_app_announce), about 10 ms
+    # after its pool is activated: heard wherever the terminal's tick falls
     rig = PropRig(_cfg(""), _drive())
+    rig.tick_ms = tick_ms
     try:
         rig.run(3.0)
         ident = rig.term.link.ecu.ident

@@ -212,6 +212,7 @@ class BusSwitch:
                 self.link.on_frame(payload, t)
                 return
             self.tc.on_frame(payload, t)
+            self._follow(t)  # the frame may have connected it: its EcuIdent follows at once
             assert self.prop is not None
             private = self.prop.take(payload)
             if private is not None:
@@ -235,14 +236,20 @@ class BusSwitch:
         if self.tc is None:
             self.link.poll(now)
             return
+        self._follow(now)
+        self.tc.poll(now, self.held(command))
+        self.link.poll(now)
+
+    def _follow(self, now: float) -> None:
+        """The client the TC serves, followed on each frame and tick (the ECU announces itself
+        within milliseconds of its pool's activation, its frames taken only once it is known
+        to be served)."""
         assert self.prop is not None
         served = self.prop.watch()
         if served == "first":  # a topdress ECU served: its parameters, then it may meter
             self.link.begin(self.params(self._settings.cfg), now)
         elif served == "again":  # connected again (a reboot is not heard otherwise)
             self.link.reconnected(now)
-        self.tc.poll(now, self.held(command))
-        self.link.poll(now)
 
     def held(self, command: tuple[bool, float, float, float]) -> tuple[bool, float, float, float]:
         """The command for the Task Controller: the stop while a topdress ECU served has not all

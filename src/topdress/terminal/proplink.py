@@ -97,9 +97,9 @@ class PropCounters:
 class PropLink:
     """The `bus` of the topdress ECU's CanLink on an ISOBUS, and the filter of what it hears.
 
-    `watch()` each tick follows the client the TC serves; `peer` is the ECU's address while a
-    topdress ECU is served (None otherwise: none served, or the one served displaced);
-    `on_tx` is told each frame as it goes on the bus."""
+    `watch()` on each frame and tick follows the client the TC serves; `peer` is the ECU's
+    address while a topdress ECU is served (None otherwise: none served, or the one served
+    displaced); `on_tx` is told each frame as it goes on the bus."""
 
     def __init__(
         self,
