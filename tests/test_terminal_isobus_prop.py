@@ -613,3 +613,33 @@ def test_another_implement_at_the_ecus_address_gets_and_gives_no_private_frame()
         assert any("ECU back" in e for _, e in rig.events)
     finally:
         rig.close()
+
+
+def test_a_setting_changed_while_another_implement_is_served_reaches_the_ecu_back() -> None:
+    cfg = _cfg("")
+    rig = PropRig(replace(cfg, machine=replace(cfg.machine, kg_per_rev_lower=0.28)), _drive())
+    try:
+        rig.run(3.0)
+        assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.28)
+        rig.off = True  # unplugged; another maker's implement takes its address
+        foreign = name_of(industry_group=2, device_class=5, function=128, manufacturer_code=7)
+        rig.extra = [_claim(ECU, foreign)]
+        rig.run(4.0)
+        prop = rig.term.can.prop
+        assert prop is not None and not prop.serving and not rig.term.can.pushes_params
+        # that implement has no topdress parameters: the change is taken as it is
+        result = rig.post(op.ApplySettings("machine", {"kg_per_rev_lower": 0.25}))
+        assert result.ok, result
+        assert rig.term.cfg.machine.kg_per_rev_lower == 0.25
+        sets_before = len(rig.sent(PROP_A))
+        rig.off = False  # the topdress ECU plugged in again, on its defaults
+        rig.reboot()
+        rig.run(rig.world.t_s + 4.0)
+        link = rig.term.link
+        assert prop.serving and link.params_done
+    finally:
+        rig.close()
+    assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.25)  # the new value, not 0.28
+    lower = protocol.param("LowerKgPerRev").id
+    again = [d for _, d in _decoded(rig, PROP_A)[sets_before:] if d.param_id == lower]
+    assert [d.value for d in again] == [pytest.approx(0.25)]

@@ -81,9 +81,11 @@ class SettingsDesk:
         new = validate_section(self._settings.cfg, c.section, c.values)
         if c.section in ECU_SECTIONS:
             changed = changed_ecu_params(self._settings.cfg, new)
-            # An ISOBUS implement that is not a topdress ECU has none: taken as it is.
             if changed and self._can.pushes_params:
                 return self._push(now, c, new, changed, fut)
+            # An ISOBUS implement that is not a topdress ECU has none: taken as it is, and
+            # pushed to a topdress ECU served again in place of the values it had.
+            self._can.link.renew(changed)
         elif c.section in DEVICE_KEYS:
             keys = changed_device_keys(self._settings.cfg, new, c.section)
             if c.section == "can":  # the CAN link starts over on any change of [can]
