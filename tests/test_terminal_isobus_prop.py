@@ -17,7 +17,8 @@ from term_rig import TerminalParts
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.ecu.params import EcuParams, check
-from topdress.errors import EcuParamError
+from topdress.i18n import render, set_language
+from topdress.i18n.catalogue import CATALOGUE
 from topdress.isobus.ddop import Machine
 from topdress.isobus.node import (
     Frame,
@@ -333,19 +334,53 @@ def test_an_ecu_busy_metering_is_stopped_by_the_tcs_work_state_then_takes_the_va
     assert not [f for _, f in rig.bus_log if f.can_id in PAPER_IDS]
 
 
-def test_a_refused_parameter_stops_the_terminal_naming_it() -> None:
+def test_a_refused_parameter_is_an_alarm_naming_it_and_the_tc_holds_the_implement() -> None:
+    # on its own bus a refusal at start ends the program; on an ISOBUS the ECU may be recognised
+    # mid-field: the TC goes on (its other implements' links too), this one held at rate 0
     lag_auto = protocol.param("GnssLagAuto").id
-    rig = PropRig(_cfg(""), _drive(), refuse={lag_auto: AckResult.OUT_OF_RANGE})
+    rig = PropRig(_cfg(""), _drive(8.0, 80.0), refuse={lag_auto: AckResult.OUT_OF_RANGE})
     try:
-        with pytest.raises(
-            EcuParamError, match=r"GnssLagAuto = 1: refused by the ECU: out of range"
-        ):
-            rig.run(3.0)
-        assert not rig.term.link.params_done
-        # the implement was never given a rate
-        assert all(u == 0.0 and lo == 0.0 for _, u, lo in rig.node_rates)
+        rig.run(6.0)  # on the pass
+        link, can_ = rig.term.link, rig.term.can
+        assert not link.params_done
+        sets = len(rig.sent(PROP_A))
+        assert rig.post(op.Stop()).ok and rig.post(op.Start()).ok  # sent off the tick: held too
+        rig.run(12.0)
+        snap = rig.term.snapshot
+        assert can_.tc is not None and can_.tc.state == "ok"
+        assert len(rig.sent(PROP_A)) == sets  # the refused one is not asked again and again
+        peak = rig.peak_kg_ha
+        # its firmware mended, it connects again: pushed from the top, then it meters
+        del rig.refuse[lag_auto]
+        rig.reboot()
+        rig.run(16.0)
+        back = rig.term.snapshot
+        assert link.params_done and rig.node_rates[-1][1] > 50.0
     finally:
         rig.close()
+    assert {a.name: a.state for a in back.alarms}["ecu_param_refused"] == "cleared"
+    alarms = {a.name: a for a in snap.alarms}
+    refused = alarms["ecu_param_refused"]
+    assert refused.state == "active"
+    assert str(refused.text) == (
+        "the ECU refused its parameter GnssLagAuto = 1 (out of range): "
+        "the implement is held at rate 0"
+    )
+    said = [e for _, e in rig.events]
+    assert any("GnssLagAuto = 1: refused by the ECU: out of range" in e for e in said), said
+    # the loop went on: the TC's status, the GNSS link, the implement commanded to rate 0
+    assert snap.t_s > 11.5 and snap.gnss_link == "ok" and snap.v_kmh == pytest.approx(8.0, abs=0.5)
+    assert peak == 0.0 and snap.ecu_link == "wait"
+    status = [t for t, f in rig.bus_log if split_id(f.can_id)[1] == 0xCB00 and 6.0 < t < 12.0]
+    assert status, "the TC status went on"
+    set_language("zh")
+    try:
+        zh = "控制器拒绝参数 GnssLagAuto = 1（超出范围）：机具施肥量保持为 0"
+        assert render(refused.text) == zh
+    finally:
+        set_language("en")
+    for r in AckResult:  # each refusal's reason, in both languages
+        assert r in (AckResult.OK, AckResult.BUSY) or f"ecu.ack.{r.name.lower()}" in CATALOGUE
 
 
 def test_a_refused_setting_is_told_and_the_old_value_stays() -> None:

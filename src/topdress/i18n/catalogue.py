@@ -430,6 +430,17 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "the implement's DDOP was refused: {why}",
         "机具描述（DDOP）被拒绝：{why}",
     ),
+    # a parameter the topdress ECU on an ISOBUS refused (terminal/busswitch.py), and why
+    "alarm.ecu_param_refused": ("ECU parameter refused", "控制器拒绝参数"),
+    "alarm.text.ecu_param_refused": (
+        "the ECU refused its parameter {param} = {value:g} ({why}): "
+        "the implement is held at rate 0",
+        "控制器拒绝参数 {param} = {value:g}（{why}）：机具施肥量保持为 0",
+    ),
+    "ecu.ack.unknown_param": ("not a parameter it knows", "控制器不认识此参数"),
+    "ecu.ack.out_of_range": ("out of range", "超出范围"),
+    "ecu.ack.inconsistent": ("inconsistent with its other parameters", "与其他参数不一致"),
+    "ecu.ack.bad_frame": ("bad frame", "帧格式错误"),
     "event.isobus": ("ISOBUS: {what}", "ISOBUS：{what}"),
     # what the terminal's Task Controller says (isobus/tcserver.py, terminal/tclink.py)
     "tc.frame_refused": ("frame {id:08X} refused: {why}", "帧 {id:08X} 被拒绝：{why}"),

@@ -171,6 +171,12 @@ class CanLink:
         return self._params.done
 
     @property
+    def refused(self) -> tuple[str, float, protocol.AckResult] | None:
+        """The parameter the ECU refused in the push at start (name, value, its answer); the
+        push stops there until a new one begins."""
+        return self._params.refused
+
+    @property
     def ready(self) -> bool:
         """Every parameter was acknowledged once: the ECU has worked for this terminal."""
         return self._params.ready
