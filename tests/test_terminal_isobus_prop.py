@@ -6,8 +6,9 @@ implement gets none of it, and private frames from other addresses are ignored a
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Any
+from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
+from typing import Any, cast
 
 import can
 import pytest
@@ -17,7 +18,7 @@ from term_rig import TerminalParts
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.ecu.params import EcuParams, check
-from topdress.i18n import render, set_language
+from topdress.i18n import Text, render, set_language
 from topdress.i18n.catalogue import CATALOGUE
 from topdress.isobus.ddop import Machine
 from topdress.isobus.node import (
@@ -29,13 +30,14 @@ from topdress.isobus.node import (
     to_bus,
     topdress_name,
 )
+from topdress.isobus.tcserver import Client
 from topdress.protocol import AckResult
 from topdress.protocol.dbc import frame_ids
 from topdress.sim.actuators import MeterParams
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.proplink import not_topdress
+from topdress.terminal.proplink import PropLink, not_topdress
 from topdress.view import commands as op
 from topdress.view.snapshot import Snapshot
 
@@ -199,10 +201,44 @@ def test_a_topdress_ecu_is_recognised_by_its_name_and_ddop() -> None:
     assert not_topdress(ours, "topdress", 0) is None
     assert "manufacturer is 0, not 7" in str(not_topdress(ours, "topdress", 7))
     assert "DDOP is 'Spreader'" in str(not_topdress(ours, "Spreader", 0))
-    assert not_topdress(None, "topdress", 0) == "no NAME heard from it"
+    assert str(not_topdress(None, "topdress", 0)) == "no NAME heard from it"
     # a spreader of another kind (function 131) with the same maker and designator
     other = name_of(industry_group=2, device_class=5, function=131, self_configurable=1)
     assert "function 131" in str(not_topdress(other, "topdress", 0))
+
+
+@dataclass
+class _Tc:
+    """The Task Controller as the PropLink sees it (proplink.Served)."""
+
+    client: Client | None
+    address: int | None = TC
+    names: dict[int, int] = field(default_factory=dict)
+    counters: dict[str, int] = field(default_factory=lambda: {"activations": 1})
+
+
+def test_why_an_implement_is_not_a_topdress_ecu_is_said_in_the_operators_language() -> None:
+    ours, spreader = topdress_name(0, b"x"), name_of(industry_group=2, device_class=5, function=131)
+    said: list[Text | str] = []
+    tc = _Tc(Client(STRANGER, 0, device=cast(Any, SimpleNamespace(designator="Spreader")),
+                    active=True, name=spreader))  # fmt: skip
+    link = PropLink(cast(Any, None), tc, 0, say=said.append)
+    link.watch()
+    tc.client = Client(ECU, 0, device=cast(Any, SimpleNamespace(designator="topdress")),
+                       active=True, name=ours)  # fmt: skip
+    tc.names[ECU] = ours  # its address claim
+    assert link.watch() == "first" and link.serving
+    set_language("zh")
+    try:
+        assert [render(s) for s in said] == [
+            "地址 0x90 的机具不是 topdress 控制器（其 NAME 为行业组 2、设备类 5、功能 131）",
+            "地址 0x84 的机具是 topdress 控制器：使用其专有帧",
+        ]
+        assert render(not_topdress(ours, "topdress", 7)) == "其 NAME 的制造商代码为 0，而非 7"
+        assert render(not_topdress(ours, "Spreader", 0)) == "其 DDOP 为“Spreader”，而非“topdress”"
+        assert render(not_topdress(None, "topdress", 0)) == "未收到其 NAME"
+    finally:
+        set_language("en")
 
 
 def test_parameters_pushed_on_proprietary_a_and_acknowledged_then_the_ecus_frames() -> None:
@@ -542,7 +578,7 @@ def test_an_implement_that_is_not_a_topdress_ecu_gets_no_private_frame() -> None
         rig.run(10.0)
         link, prop = rig.term.link, rig.term.can.prop
         assert prop is not None and not prop.serving
-        assert "manufacturer is 7, not 0" in prop.why
+        assert "manufacturer is 7, not 0" in str(prop.why)
         assert rig.post(op.Stop()).ok
         refused = rig.post(op.StartCatchTest("upper"))
     finally:
@@ -552,6 +588,11 @@ def test_an_implement_that_is_not_a_topdress_ecu_gets_no_private_frame() -> None
     assert not ours and not rig.sent(GNSS_TIME_PGN)
     assert max(u for _, u, _ in rig.node_rates) > 50.0  # the TC sets its rates, not held
     assert not refused.ok and "not one" in str(refused.message)
+    set_language("zh")
+    try:
+        assert "其 NAME 的制造商代码为 7，而非 0" in render(refused.message)
+    finally:
+        set_language("en")
     assert prop.counters.wrong_source == 0  # its broadcasts are not looked at
 
 

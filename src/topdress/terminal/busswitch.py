@@ -98,7 +98,7 @@ class BusSwitch:
         if self.tc is None:
             return None
 
-        def say(what: str) -> None:
+        def say(what: Text) -> None:
             self._journal.event(text("event.isobus", what=what))
 
         server = self.tc.server

@@ -34,6 +34,7 @@ from typing import Any, Protocol
 import can
 
 from topdress.errors import DeviceError, ProtocolError
+from topdress.i18n import Text, text
 from topdress.isobus.node import Frame, from_bus, name_fields, split_id, to_bus
 from topdress.isobus.tcserver import Client
 from topdress.terminal.ecuview import EcuView, LinkCounters
@@ -68,19 +69,20 @@ class Served(Protocol):
     def counters(self) -> Mapping[str, int]: ...
 
 
-def not_topdress(name: int | None, designator: str, manufacturer: int) -> str | None:
+def not_topdress(name: int | None, designator: str, manufacturer: int) -> Text | None:
     """Why an implement with this NAME and DDOP designator is not a topdress ECU (None: it is)."""
     if name is None:
-        return "no NAME heard from it"
+        return text("prop.why.no_name")
     f = name_fields(name)
     if f["manufacturer_code"] != manufacturer:
-        return f"its NAME's manufacturer is {f['manufacturer_code']}, not {manufacturer}"
+        return text("prop.why.manufacturer", theirs=f["manufacturer_code"], ours=manufacturer)
     ours = (INDUSTRY_GROUP, DEVICE_CLASS, FUNCTION)
     theirs = (f["industry_group"], f["device_class"], f["function"])
     if theirs != ours:
-        return "its NAME is of industry group {}, device class {}, function {}".format(*theirs)
+        group, device_class, function = theirs
+        return text("prop.why.name", group=group, device_class=device_class, function=function)
     if designator != DESIGNATOR:
-        return f"its DDOP is {designator!r}, not {DESIGNATOR!r}"
+        return text("prop.why.ddop", theirs=designator, ours=DESIGNATOR)
     return None
 
 
@@ -107,7 +109,7 @@ class PropLink:
         tc: Served,
         manufacturer: int,
         on_tx: Callable[[can.Message], None] | None = None,
-        say: Callable[[str], None] | None = None,
+        say: Callable[[Text], None] | None = None,
     ) -> None:
         self._port = port
         self._tc = tc
@@ -117,7 +119,7 @@ class PropLink:
         self.counters = PropCounters()
         self.peer: int | None = None
         self._name: int | None = None  # the NAME of the topdress ECU recognised last
-        self.why = ""  # why the implement served is not a topdress ECU ("" when none served)
+        self.why: Text | None = None  # why the implement served is not a topdress ECU
         self.recognised = False  # a topdress ECU was served once (its parameters pushed)
         self._judged: tuple[int, int | None, str] | None = None  # address, NAME, designator
         self._activations = 0  # the TC's, when the topdress ECU was last judged or heard of
@@ -139,7 +141,7 @@ class PropLink:
         activations = self._tc.counters.get("activations", 0)
         key = (c.address, c.name, c.device.designator)
         if key == self._judged:
-            back = self.peer is None and not self.why  # the topdress ECU, served again
+            back = self.peer is None and self.why is None  # the topdress ECU, served again
             again = back or (self.serving and activations > self._activations)
             self._activations = activations
             if back:
@@ -150,11 +152,11 @@ class PropLink:
         why = not_topdress(c.name, c.device.designator, self.manufacturer)
         if why is not None:
             self.peer, self.why = None, why
-            self._tell(f"implement at 0x{c.address:02X} is not a topdress ECU ({why})")
+            self._tell(text("prop.not_topdress", address=c.address, why=why))
             return None
         was, self.recognised = self.recognised, True
-        self.peer, self.why, self._name = c.address, "", c.name
-        self._tell(f"implement at 0x{c.address:02X} is a topdress ECU: its private frames")
+        self.peer, self.why, self._name = c.address, None, c.name
+        self._tell(text("prop.topdress", address=c.address))
         return "again" if was else "first"
 
     @property
@@ -162,7 +164,7 @@ class PropLink:
         """A topdress ECU is the implement served, and its NAME still holds its address."""
         return self.peer is not None and self._tc.names.get(self.peer) == self._name
 
-    def _tell(self, what: str) -> None:
+    def _tell(self, what: Text) -> None:
         if self._say is not None:
             self._say(what)
 
