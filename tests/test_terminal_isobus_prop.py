@@ -719,3 +719,23 @@ def test_a_setting_changed_while_another_implement_is_served_reaches_the_ecu_bac
     lower = protocol.param("LowerKgPerRev").id
     again = [d for _, d in _decoded(rig, PROP_A)[sets_before:] if d.param_id == lower]
     assert [d.value for d in again] == [pytest.approx(0.25)]
+
+
+def test_a_refused_parameter_mended_in_the_settings_is_pushed_again_from_the_top() -> None:
+    switch = protocol.param("SwitchSpeed").id
+    rig = PropRig(_cfg(""), _drive(0.0, 0.0), refuse={switch: AckResult.OUT_OF_RANGE})
+    try:
+        rig.run(3.0)
+        link = rig.term.link
+        assert rig.term.can.refused is not None and not link.params_done
+        del rig.refuse[switch]  # the ECU takes the value the operator puts in its place
+        result = rig.post(op.ApplySettings("speed", {"switch_speed_kmh": 7.0}))
+        assert result.ok, result
+        rig.run(rig.world.t_s + 2.0)
+        snap = rig.term.snapshot
+    finally:
+        rig.close()
+    assert link.params_done and rig.term.can.refused is None
+    assert rig.world.ecu.params.switch_speed_kmh == pytest.approx(7.0)
+    assert rig.term.cfg.speed.switch_speed_kmh == 7.0
+    assert {a.name: a.state for a in snap.alarms}["ecu_param_refused"] == "cleared"

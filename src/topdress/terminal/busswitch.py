@@ -16,7 +16,7 @@ recognised; while they are not all in force the TC is given the stop command, as
 goes out on the private bus before them. A parameter the ECU refuses there does not end the
 program as at start on its own bus (the ECU may be recognised mid-field, and every implement
 depends on the TC going on): it is an alarm naming it, the implement held at rate 0 until the
-ECU connects again.
+ECU connects again or the operator changes a setting of its parameters.
 """
 
 from __future__ import annotations
@@ -257,7 +257,7 @@ class BusSwitch:
         # A topdress ECU served: its parameters, then it may meter; one that refused one
         # gets another try from the top when it connects again.
         if served == "first" or (served == "again" and self.link.refused is not None):
-            self.link.begin(self.params(self._settings.cfg), now)
+            self.push_again(now)
         elif served == "again":  # connected again (a reboot is not heard otherwise)
             self.link.reconnected(now)
 
@@ -270,6 +270,10 @@ class BusSwitch:
         name, value, result = refused
         why = text(f"ecu.ack.{result.name.lower()}")
         return text("alarm.text.ecu_param_refused", param=name, value=value, why=why)
+
+    def push_again(self, now: float) -> None:
+        """The parameters pushed from the top, as the configuration has them now."""
+        self.link.begin(self.params(self._settings.cfg), now)
 
     def held(self, command: tuple[bool, float, float, float]) -> tuple[bool, float, float, float]:
         """The command for the Task Controller: the stop while a topdress ECU served has not all
