@@ -143,7 +143,7 @@ typedef struct {
     uint8_t trend_n;           /**< buckets left of a wheel's ramp (no cruise, the whole jerk), 0..10 */
     float trend_w_ms;          /**< the wheel's newest 0.3 s mean when the ramp last showed, m/s (negative: a ramp down) */
     uint8_t trend_ago;         /**< buckets left in which a sharp step the ramp's way goes on with it, 0..20 */
-    uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
+    int8_t departed;           /**< buckets of the wheel beyond 5 % of the estimate judged for a step, -2..2 (its sign: below or above) */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
     uint8_t hist_head;         /**< index of the newest complete bucket */
