@@ -37,11 +37,13 @@
  *   it there is no cruise and the whole jerk, unless the wheel's newest 0.3 s mean goes back
  *   against the ramp by 1.5 % of the estimate's wheel speed: a brake goes on, the bounce's
  *   ramp ends there.
- * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket): the
- *   estimate flat (|a| < 0.1 m/s^2), the newest bucket beyond 5 % of the estimate's wheel speed,
- *   moved by 7 % (or 3 sigmas of the wheel's own bucket-to-bucket bounce) against the buckets
- *   0.2-0.5 s before, on the first two buckets beyond 5 % (a ramp that went on is no step), and
- *   within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
+ * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket), or
+ *   out of cruise in flat motion (jerk share < 0.3) with the scale learned and GNSS not moving
+ *   (two noisy fixes end cruise for the delay + 1 s): the estimate flat (|a| < 0.1 m/s^2), the
+ *   newest bucket beyond 5 % of the estimate's wheel speed, moved by 7 % (or 3 sigmas of the
+ *   wheel's own bucket-to-bucket bounce) against the buckets 0.2-0.5 s before, on the first two
+ *   buckets beyond 5 % on one side (a ramp that went on is no step; a wheel that crosses to the
+ *   other side departs anew), and within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
  *   judged on two 3-bucket means: back near where it was, a bounce; level (within 3.5 %), a
  *   slip step: the scale takes it, v holds, the history before the step is rescaled to the new
  *   scale; still moving the same way, a speed change: v and a restart from the wheel. A scale

@@ -384,8 +384,8 @@ static void undo_step(td_fused_t *f) {
     f->stepped_s = 0.0f;
 }
 
-/* In cruise above 6 km/h a wheel that steps away from the estimate within a few tenths of a
- * second is held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet
+/* In cruise (or as flat out of it) above 6 km/h a wheel that steps away from the estimate within
+ * a few tenths of a second is held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet
  * patch changes the wheel's slip so. Level since: the scale takes the step and the speed holds
  * (GNSS would show the truth only a lag later, and td_fused_gnss checks it then). Still moving
  * the same way: a speed change after all, and the estimate restarts from the wheel. Back where
@@ -461,9 +461,10 @@ static void step_check(td_fused_t *f) {
         f->q_share = 1.0f;
         return;
     }
-    /* in cruise, or as flat as cruise with the scale learned: two noisy fixes end cruise for the
-     * delay + 1 s, and a slip step then went in as a speed change until GNSS's check */
-    const bool flat = f->q_share < CRUISE_SHARE && f->p[SS] < P_S_REOPEN;
+    /* in cruise, or as flat as cruise with the scale learned and GNSS not moving now: two noisy
+     * fixes end cruise for the delay + 1 s, and a slip step then went in as a speed change until
+     * GNSS's check (a slow brake's onset, which GNSS already shows, is no step to hold) */
+    const bool flat = f->q_share < CRUISE_SHARE && f->p[SS] < P_S_REOPEN && f->moves_n < 2u;
     if (!(f->cruise || flat) || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) ||
         !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
         return;
