@@ -30,8 +30,8 @@ defines it: below 6 km/h (the turns), while the wheel's CV is above 4.2 % (the r
 first ~1.5 s of the wet patch, where the wheel reads 23 % low), and without GNSS (the outage).
 Its wet patch mean, after the first 3 s, is GNSS again (within 0.7 %).
 
-    .venv/bin/python bench/field_speed_bench.py            # 2 drives per receiver
-    .venv/bin/python bench/field_speed_bench.py --seeds 4
+    .venv/bin/python bench/field_speed_bench.py            # 6 drives per receiver (~40 s)
+    .venv/bin/python bench/field_speed_bench.py --seeds 2  # 2 drives, a quick look
     .venv/bin/python bench/field_speed_bench.py --rx 0     # the 5 Hz, 1.3 s receiver alone
 """
 
@@ -269,7 +269,7 @@ def mean_score(scores: Sequence[Score]) -> Score:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--seeds", type=int, default=2, help="drives per receiver")
+    ap.add_argument("--seeds", type=int, default=6, help="drives per receiver")
     ap.add_argument(
         "--rx",
         type=int,

@@ -6,8 +6,9 @@ implement gets none of it, and private frames from other addresses are ignored a
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import Any
+from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
+from typing import Any, cast
 
 import can
 import pytest
@@ -17,7 +18,8 @@ from term_rig import TerminalParts
 from topdress import protocol
 from topdress.config import DEFAULT_TOML, TerminalConfig, loads_config
 from topdress.ecu.params import EcuParams, check
-from topdress.errors import EcuParamError
+from topdress.i18n import Text, render, set_language
+from topdress.i18n.catalogue import CATALOGUE
 from topdress.isobus.ddop import Machine
 from topdress.isobus.node import (
     Frame,
@@ -28,13 +30,14 @@ from topdress.isobus.node import (
     to_bus,
     topdress_name,
 )
+from topdress.isobus.tcserver import Client
 from topdress.protocol import AckResult
 from topdress.protocol.dbc import frame_ids
 from topdress.sim.actuators import MeterParams
 from topdress.sim.isobus import IsobusMachine, tc_timeout_ms
 from topdress.sim.tractor import Drive, Segment
 from topdress.sim.world import SimConfig, World
-from topdress.terminal.proplink import not_topdress
+from topdress.terminal.proplink import PropLink, not_topdress
 from topdress.view import commands as op
 from topdress.view.snapshot import Snapshot
 
@@ -54,7 +57,9 @@ class PropRig(TerminalParts):
     steps, the tick every 100 ms). Knobs: `manufacturer` (the ECU NAME's code), `refuse` (the
     ECU answers these parameters with a refusal instead of taking them), `deaf` (the ECU's
     core gets none of the terminal's private frames), `off` (the implement unplugged),
-    `nmea_hold_s` (each NMEA line handled this long after it came)."""
+    `nmea_hold_s` (each NMEA line handled this long after it came), `extra` (frames of
+    other nodes, on the bus at the next step whether the ECU is plugged or not), `tick_ms`
+    (where in each 100 ms the terminal's tick falls: 0, 10, ... 90)."""
 
     def __init__(
         self,
@@ -78,9 +83,10 @@ class PropRig(TerminalParts):
         self.deaf = False
         self.off = False
         self.nmea_hold_s = 0.0
+        self.tick_ms = 0
         self.bus_log: list[tuple[float, Frame]] = []  # every frame the terminal sent
         self.ecu_log: list[tuple[float, Frame]] = []  # every frame the implement sent
-        self.extra: list[Frame] = []  # frames of other nodes, put on the bus at the next step
+        self.extra: list[Frame] = []
         self.snapshots: list[tuple[float, Snapshot]] = []
         self.node_rates: list[tuple[float, float, float]] = []
         self.peak_kg_ha = 0.0  # the highest rate the ECU's core was told, any step
@@ -120,19 +126,19 @@ class PropRig(TerminalParts):
                 heard.append(f)
                 self.bus_log.append((w.t_s, f))
             passed, answers = self._to_ecu(heard)
-            frames = self.sim.step([] if self.off else passed) + answers + self.extra
-            self.extra = []
+            frames = self.sim.step([] if self.off else passed) + answers
             self.ecu_log += [(w.t_s, f) for f in frames]
             node = self.sim.node
             self.peak_kg_ha = max(self.peak_kg_ha, node.rate_kg_ha(0), node.rate_kg_ha(1))
             out = self.sim.out
             assert out is not None
             t = out.t_s
+            others, self.extra = self.extra, []  # other nodes are on the bus, plugged or not
             msgs = (can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=True)
-                    for f in ([] if self.off else frames))  # fmt: skip
+                    for f in ([] if self.off else frames) + others)  # fmt: skip
             self.deliver(t, out.nmea, out.crop, msgs)
             self._handle(t)
-            if round(t * 100) % 10 == 0:
+            if round(t * 1000) % 100 == self.tick_ms:
                 term.tick(t)
                 self.snapshots.append((t, term.snapshot))
                 node = self.sim.node
@@ -195,10 +201,44 @@ def test_a_topdress_ecu_is_recognised_by_its_name_and_ddop() -> None:
     assert not_topdress(ours, "topdress", 0) is None
     assert "manufacturer is 0, not 7" in str(not_topdress(ours, "topdress", 7))
     assert "DDOP is 'Spreader'" in str(not_topdress(ours, "Spreader", 0))
-    assert not_topdress(None, "topdress", 0) == "no NAME heard from it"
+    assert str(not_topdress(None, "topdress", 0)) == "no NAME heard from it"
     # a spreader of another kind (function 131) with the same maker and designator
     other = name_of(industry_group=2, device_class=5, function=131, self_configurable=1)
     assert "function 131" in str(not_topdress(other, "topdress", 0))
+
+
+@dataclass
+class _Tc:
+    """The Task Controller as the PropLink sees it (proplink.Served)."""
+
+    client: Client | None
+    address: int | None = TC
+    names: dict[int, int] = field(default_factory=dict)
+    counters: dict[str, int] = field(default_factory=lambda: {"activations": 1})
+
+
+def test_why_an_implement_is_not_a_topdress_ecu_is_said_in_the_operators_language() -> None:
+    ours, spreader = topdress_name(0, b"x"), name_of(industry_group=2, device_class=5, function=131)
+    said: list[Text | str] = []
+    tc = _Tc(Client(STRANGER, 0, device=cast(Any, SimpleNamespace(designator="Spreader")),
+                    active=True, name=spreader))  # fmt: skip
+    link = PropLink(cast(Any, None), tc, 0, say=said.append)
+    link.watch()
+    tc.client = Client(ECU, 0, device=cast(Any, SimpleNamespace(designator="topdress")),
+                       active=True, name=ours)  # fmt: skip
+    tc.names[ECU] = ours  # its address claim
+    assert link.watch() == "first" and link.serving
+    set_language("zh")
+    try:
+        assert [render(s) for s in said] == [
+            "地址 0x90 的机具不是 topdress 控制器（其 NAME 为行业组 2、设备类 5、功能 131）",
+            "地址 0x84 的机具是 topdress 控制器：使用其专有帧",
+        ]
+        assert render(not_topdress(ours, "topdress", 7)) == "其 NAME 的制造商代码为 0，而非 7"
+        assert render(not_topdress(ours, "Spreader", 0)) == "其 DDOP 为“Spreader”，而非“topdress”"
+        assert render(not_topdress(None, "topdress", 0)) == "未收到其 NAME"
+    finally:
+        set_language("en")
 
 
 def test_parameters_pushed_on_proprietary_a_and_acknowledged_then_the_ecus_frames() -> None:
@@ -330,19 +370,53 @@ def test_an_ecu_busy_metering_is_stopped_by_the_tcs_work_state_then_takes_the_va
     assert not [f for _, f in rig.bus_log if f.can_id in PAPER_IDS]
 
 
-def test_a_refused_parameter_stops_the_terminal_naming_it() -> None:
+def test_a_refused_parameter_is_an_alarm_naming_it_and_the_tc_holds_the_implement() -> None:
+    # on its own bus a refusal at start ends the program; on an ISOBUS the ECU may be recognised
+    # mid-field: the TC goes on (its other implements' links too), this one held at rate 0
     lag_auto = protocol.param("GnssLagAuto").id
-    rig = PropRig(_cfg(""), _drive(), refuse={lag_auto: AckResult.OUT_OF_RANGE})
+    rig = PropRig(_cfg(""), _drive(8.0, 80.0), refuse={lag_auto: AckResult.OUT_OF_RANGE})
     try:
-        with pytest.raises(
-            EcuParamError, match=r"GnssLagAuto = 1: refused by the ECU: out of range"
-        ):
-            rig.run(3.0)
-        assert not rig.term.link.params_done
-        # the implement was never given a rate
-        assert all(u == 0.0 and lo == 0.0 for _, u, lo in rig.node_rates)
+        rig.run(6.0)  # on the pass
+        link, can_ = rig.term.link, rig.term.can
+        assert not link.params_done
+        sets = len(rig.sent(PROP_A))
+        assert rig.post(op.Stop()).ok and rig.post(op.Start()).ok  # sent off the tick: held too
+        rig.run(12.0)
+        snap = rig.term.snapshot
+        assert can_.tc is not None and can_.tc.state == "ok"
+        assert len(rig.sent(PROP_A)) == sets  # the refused one is not asked again and again
+        peak = rig.peak_kg_ha
+        # its firmware mended, it connects again: pushed from the top, then it meters
+        del rig.refuse[lag_auto]
+        rig.reboot()
+        rig.run(16.0)
+        back = rig.term.snapshot
+        assert link.params_done and rig.node_rates[-1][1] > 50.0
     finally:
         rig.close()
+    assert {a.name: a.state for a in back.alarms}["ecu_param_refused"] == "cleared"
+    alarms = {a.name: a for a in snap.alarms}
+    refused = alarms["ecu_param_refused"]
+    assert refused.state == "active"
+    assert str(refused.text) == (
+        "the ECU refused its parameter GnssLagAuto = 1 (out of range): "
+        "the implement is held at rate 0"
+    )
+    said = [e for _, e in rig.events]
+    assert any("GnssLagAuto = 1: refused by the ECU: out of range" in e for e in said), said
+    # the loop went on: the TC's status, the GNSS link, the implement commanded to rate 0
+    assert snap.t_s > 11.5 and snap.gnss_link == "ok" and snap.v_kmh == pytest.approx(8.0, abs=0.5)
+    assert peak == 0.0 and snap.ecu_link == "wait"
+    status = [t for t, f in rig.bus_log if split_id(f.can_id)[1] == 0xCB00 and 6.0 < t < 12.0]
+    assert status, "the TC status went on"
+    set_language("zh")
+    try:
+        zh = "控制器拒绝参数 GnssLagAuto = 1（超出范围）：机具施肥量保持为 0"
+        assert render(refused.text) == zh
+    finally:
+        set_language("en")
+    for r in AckResult:  # each refusal's reason, in both languages
+        assert r in (AckResult.OK, AckResult.BUSY) or f"ecu.ack.{r.name.lower()}" in CATALOGUE
 
 
 def test_a_refused_setting_is_told_and_the_old_value_stays() -> None:
@@ -408,10 +482,13 @@ def test_an_ecu_lost_and_back_is_given_its_parameters_again() -> None:
         rig.close()
 
 
-def test_the_ecu_says_who_it_is_once_connected_to_the_tc() -> None:
+@pytest.mark.parametrize("tick_ms", range(0, 100, 10))
+def test_the_ecu_says_who_it_is_once_connected_to_the_tc(tick_ms: int) -> None:
     # its core's first EcuIdent goes out before the node has an address, to no one: the port
-    # announces it again once the node is connected to its TC (td_app_announce)
+    # announces it again once the node is connected to its TC (td_app_announce), about 10 ms
+    # after its pool is activated: heard wherever the terminal's tick falls
     rig = PropRig(_cfg(""), _drive())
+    rig.tick_ms = tick_ms
     try:
         rig.run(3.0)
         ident = rig.term.link.ecu.ident
@@ -501,7 +578,7 @@ def test_an_implement_that_is_not_a_topdress_ecu_gets_no_private_frame() -> None
         rig.run(10.0)
         link, prop = rig.term.link, rig.term.can.prop
         assert prop is not None and not prop.serving
-        assert "manufacturer is 7, not 0" in prop.why
+        assert "manufacturer is 7, not 0" in str(prop.why)
         assert rig.post(op.Stop()).ok
         refused = rig.post(op.StartCatchTest("upper"))
     finally:
@@ -511,6 +588,11 @@ def test_an_implement_that_is_not_a_topdress_ecu_gets_no_private_frame() -> None
     assert not ours and not rig.sent(GNSS_TIME_PGN)
     assert max(u for _, u, _ in rig.node_rates) > 50.0  # the TC sets its rates, not held
     assert not refused.ok and "not one" in str(refused.message)
+    set_language("zh")
+    try:
+        assert "其 NAME 的制造商代码为 7，而非 0" in render(refused.message)
+    finally:
+        set_language("en")
     assert prop.counters.wrong_source == 0  # its broadcasts are not looked at
 
 
@@ -563,3 +645,97 @@ def test_a_can_change_from_isobus_to_the_ecus_own_bus_pushes_there_with_the_pape
     # its own push, with the paper's identifiers (the ISOBUS ECU there does not answer them)
     sets = [f for t, f in rig.bus_log if t >= since and f.can_id == frame_ids()["PcParamSet"]]
     assert sets and not link.params_done and rig.term.snapshot.ecu_link == "wait"
+
+
+def _claim(sa: int, name: int) -> Frame:
+    """An address claim (PGN 0xEE00) of `name` at `sa`."""
+    return Frame(6 << 26 | 0xEEFF << 8 | sa, name.to_bytes(8, "little"))
+
+
+def test_another_implement_at_the_ecus_address_gets_and_gives_no_private_frame() -> None:
+    # the topdress ECU is unplugged; another maker's implement claims its address and sends on
+    # the Proprietary B group extension of the ECU's EcuStatus (0x18FF5C84)
+    rig = PropRig(_cfg(""), _drive(0.0, 0.0))
+    try:
+        rig.run(3.0)
+        link, prop = rig.term.link, rig.term.can.prop
+        assert prop is not None and prop.serving and link.params_done
+        pushed = link.counters.tx_params
+        rig.off = True
+        rig.run(4.0)
+        assert link.state == "lost"
+        foreign = name_of(industry_group=2, device_class=5, function=128, manufacturer_code=7)
+        status = to_bus(Frame(frame_ids()["EcuStatus"], bytes(8)), by_ecu=True, sa=ECU)
+        assert status is not None and split_id(status.can_id)[1:3] == (STATUS_PGN, ECU)
+        rig.extra = [_claim(ECU, foreign)]
+        rig.run(4.1)
+        since = rig.world.t_s
+        assert not prop.serving  # its client was displaced, its NAME is not ours
+        for _ in range(10):
+            rig.extra = [status]
+            rig.run(rig.world.t_s + 0.1)
+        assert link.state == "lost" and link.ecu.status_t is not None
+        assert link.ecu.status_t < since  # its frames are not the ECU's
+        assert not link.send(protocol.encode_param_set(protocol.param("SwitchSpeed").id, 6.0))
+        assert not [f for t, f in rig.bus_log if t >= since and split_id(f.can_id)[1] == PROP_A]
+        assert prop.counters.tx_refused > 0 and prop.counters.wrong_source == 0
+        assert not any("ECU back" in e for _, e in rig.events)
+        # the topdress ECU plugged in again (it starts over): served again, given its parameters
+        rig.off = False
+        rig.reboot()
+        rig.run(rig.world.t_s + 4.0)
+        assert prop.serving and link.state == "ok" and link.params_done
+        assert link.counters.tx_params >= 2 * pushed
+        assert any("ECU back" in e for _, e in rig.events)
+    finally:
+        rig.close()
+
+
+def test_a_setting_changed_while_another_implement_is_served_reaches_the_ecu_back() -> None:
+    cfg = _cfg("")
+    rig = PropRig(replace(cfg, machine=replace(cfg.machine, kg_per_rev_lower=0.28)), _drive())
+    try:
+        rig.run(3.0)
+        assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.28)
+        rig.off = True  # unplugged; another maker's implement takes its address
+        foreign = name_of(industry_group=2, device_class=5, function=128, manufacturer_code=7)
+        rig.extra = [_claim(ECU, foreign)]
+        rig.run(4.0)
+        prop = rig.term.can.prop
+        assert prop is not None and not prop.serving and not rig.term.can.pushes_params
+        # that implement has no topdress parameters: the change is taken as it is
+        result = rig.post(op.ApplySettings("machine", {"kg_per_rev_lower": 0.25}))
+        assert result.ok, result
+        assert rig.term.cfg.machine.kg_per_rev_lower == 0.25
+        sets_before = len(rig.sent(PROP_A))
+        rig.off = False  # the topdress ECU plugged in again, on its defaults
+        rig.reboot()
+        rig.run(rig.world.t_s + 4.0)
+        link = rig.term.link
+        assert prop.serving and link.params_done
+    finally:
+        rig.close()
+    assert rig.world.ecu.params.kg_per_rev[1] == pytest.approx(0.25)  # the new value, not 0.28
+    lower = protocol.param("LowerKgPerRev").id
+    again = [d for _, d in _decoded(rig, PROP_A)[sets_before:] if d.param_id == lower]
+    assert [d.value for d in again] == [pytest.approx(0.25)]
+
+
+def test_a_refused_parameter_mended_in_the_settings_is_pushed_again_from_the_top() -> None:
+    switch = protocol.param("SwitchSpeed").id
+    rig = PropRig(_cfg(""), _drive(0.0, 0.0), refuse={switch: AckResult.OUT_OF_RANGE})
+    try:
+        rig.run(3.0)
+        link = rig.term.link
+        assert rig.term.can.refused is not None and not link.params_done
+        del rig.refuse[switch]  # the ECU takes the value the operator puts in its place
+        result = rig.post(op.ApplySettings("speed", {"switch_speed_kmh": 7.0}))
+        assert result.ok, result
+        rig.run(rig.world.t_s + 2.0)
+        snap = rig.term.snapshot
+    finally:
+        rig.close()
+    assert link.params_done and rig.term.can.refused is None
+    assert rig.world.ecu.params.switch_speed_kmh == pytest.approx(7.0)
+    assert rig.term.cfg.speed.switch_speed_kmh == 7.0
+    assert {a.name: a.state for a in snap.alarms}["ecu_param_refused"] == "cleared"

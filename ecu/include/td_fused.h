@@ -37,11 +37,13 @@
  *   it there is no cruise and the whole jerk, unless the wheel's newest 0.3 s mean goes back
  *   against the ramp by 1.5 % of the estimate's wheel speed: a brake goes on, the bounce's
  *   ramp ends there.
- * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket): the
- *   estimate flat (|a| < 0.1 m/s^2), the newest bucket beyond 5 % of the estimate's wheel speed,
- *   moved by 7 % (or 3 sigmas of the wheel's own bucket-to-bucket bounce) against the buckets
- *   0.2-0.5 s before, on the first two buckets beyond 5 % (a ramp that went on is no step), and
- *   within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
+ * A sharp step of the wheel in cruise above 6 km/h (td_fused_record, every 100 ms bucket), or
+ *   out of cruise in flat motion (jerk share < 0.3) with the scale learned and GNSS not moving
+ *   (two noisy fixes end cruise for the delay + 1 s): the estimate flat (|a| < 0.1 m/s^2), the
+ *   newest bucket beyond 5 % of the estimate's wheel speed, moved by 7 % (or 3 sigmas of the
+ *   wheel's own bucket-to-bucket bounce) against the buckets 0.2-0.5 s before, on the first two
+ *   buckets beyond 5 % on one side (a ramp that went on is no step; a wheel that crosses to the
+ *   other side departs anew), and within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
  *   judged on two 3-bucket means: back near where it was, a bounce; level (within 3.5 %), a
  *   slip step: the scale takes it, v holds, the history before the step is rescaled to the new
  *   scale; still moving the same way, a speed change: v and a restart from the wheel. A scale
@@ -143,7 +145,7 @@ typedef struct {
     uint8_t trend_n;           /**< buckets left of a wheel's ramp (no cruise, the whole jerk), 0..10 */
     float trend_w_ms;          /**< the wheel's newest 0.3 s mean when the ramp last showed, m/s (negative: a ramp down) */
     uint8_t trend_ago;         /**< buckets left in which a sharp step the ramp's way goes on with it, 0..20 */
-    uint8_t departed;          /**< buckets of the wheel beyond 5 % of the estimate judged for a step, 0..2 */
+    int8_t departed;           /**< buckets of the wheel beyond 5 % of the estimate judged for a step, -2..2 (its sign: below or above) */
     uint8_t wheel_rejects;     /**< wheel updates rejected in a row */
     bool slip_shape;           /**< the wheel's slip follows eq. 5's shape in speed, scaled by s */
     uint8_t hist_head;         /**< index of the newest complete bucket */

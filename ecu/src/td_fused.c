@@ -132,7 +132,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->step_z0_ms = 0.0f;
     f->bounce_var = STEP_BOUNCE0;
     f->wheel_dev = 0.0f;
-    f->departed = 0u;
+    f->departed = 0;
     f->trend_n = 0u;
     f->trend_w_ms = 0.0f;
     f->trend_ago = 0u;
@@ -384,8 +384,8 @@ static void undo_step(td_fused_t *f) {
     f->stepped_s = 0.0f;
 }
 
-/* In cruise above 6 km/h a wheel that steps away from the estimate within a few tenths of a
- * second is held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet
+/* In cruise (or as flat out of it) above 6 km/h a wheel that steps away from the estimate within
+ * a few tenths of a second is held out for STEP_HOLD_S: a machine does not change its speed that sharply, a wet
  * patch changes the wheel's slip so. Level since: the scale takes the step and the speed holds
  * (GNSS would show the truth only a lag later, and td_fused_gnss checks it then). Still moving
  * the same way: a speed change after all, and the estimate restarts from the wheel. Back where
@@ -461,7 +461,11 @@ static void step_check(td_fused_t *f) {
         f->q_share = 1.0f;
         return;
     }
-    if (!f->cruise || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) ||
+    /* in cruise, or as flat as cruise with the scale learned and GNSS not moving now: two noisy
+     * fixes end cruise for the delay + 1 s, and a slip step then went in as a speed change until
+     * GNSS's check (a slow brake's onset, which GNSS already shows, is no step to hold) */
+    const bool flat = f->q_share < CRUISE_SHARE && f->p[SS] < P_S_REOPEN && f->moves_n < 2u;
+    if (!(f->cruise || flat) || !(f->since_gnss_s < STEP_GNSS_S) || !(f->v_ms > CRUISE_MIN_MS) ||
         !(fabsf(f->a_ms2) < RAMP_A_MS2)) {
         return;
     }
@@ -471,14 +475,19 @@ static void step_check(td_fused_t *f) {
     const float d01 = (b0 - hist_mean(f, 1u, 1u)) / pred;
     f->bounce_var += STEP_BOUNCE_K * (d01 * d01 - f->bounce_var);
     if (!(fabsf(b0 - pred) > STEP_REL * pred)) {
-        f->departed = 0u;
+        f->departed = 0;
         return;
     }
-    /* judged on the first two buckets beyond: a ramp that went on is no step */
-    if (f->departed >= 2u) {
+    /* judged on the first two buckets beyond: a ramp that went on is no step; a wheel that
+     * crossed to the other side beyond the band (a slip step out of a bounce) departs anew */
+    const int8_t side = b0 > pred ? 1 : -1;
+    if (f->departed * side < 0) {
+        f->departed = 0;
+    }
+    if (f->departed * side >= 2) {
         return;
     }
-    f->departed++;
+    f->departed = (int8_t)(f->departed + side);
     const float w_old = hist_mean(f, 2u, 4u);
     const float sharp = STEP_SHARP_K * sqrtf(f->bounce_var);
     if (!(fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred) ||

@@ -195,6 +195,26 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "the ECU is {state}: calibration needs it",
         "控制器{state}：标定需要控制器",
     ),
+    # whether the ISOBUS implement served is a topdress ECU, and why not (terminal/proplink.py)
+    "prop.topdress": (
+        "implement at 0x{address:02X} is a topdress ECU: its private frames",
+        "地址 0x{address:02X} 的机具是 topdress 控制器：使用其专有帧",
+    ),
+    "prop.not_topdress": (
+        "implement at 0x{address:02X} is not a topdress ECU ({why})",
+        "地址 0x{address:02X} 的机具不是 topdress 控制器（{why}）",
+    ),
+    "prop.why.no_name": ("no NAME heard from it", "未收到其 NAME"),
+    "prop.why.manufacturer": (
+        "its NAME's manufacturer is {theirs}, not {ours}",
+        "其 NAME 的制造商代码为 {theirs}，而非 {ours}",
+    ),
+    "prop.why.name": (
+        "its NAME is of industry group {group}, device class {device_class}, function {function}",
+        "其 NAME 为行业组 {group}、设备类 {device_class}、功能 {function}",
+    ),
+    "prop.why.ddop": ("its DDOP is '{theirs}', not '{ours}'", "其 DDOP 为“{theirs}”，而非“{ours}”"),
+    "prop.why.none_served": ("none served", "未服务任何机具"),
     # calibrations on an ISOBUS (terminal/proplink.py): only with a topdress ECU served
     "op.error.cal_isobus_not_topdress": (
         "calibration needs the topdress ECU; the ISOBUS implement is not one ({why})",
@@ -430,6 +450,17 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "the implement's DDOP was refused: {why}",
         "机具描述（DDOP）被拒绝：{why}",
     ),
+    # a parameter the topdress ECU on an ISOBUS refused (terminal/busswitch.py), and why
+    "alarm.ecu_param_refused": ("ECU parameter refused", "控制器拒绝参数"),
+    "alarm.text.ecu_param_refused": (
+        "the ECU refused its parameter {param} = {value:g} ({why}): "
+        "the implement is held at rate 0",
+        "控制器拒绝参数 {param} = {value:g}（{why}）：机具施肥量保持为 0",
+    ),
+    "ecu.ack.unknown_param": ("not a parameter it knows", "控制器不认识此参数"),
+    "ecu.ack.out_of_range": ("out of range", "超出范围"),
+    "ecu.ack.inconsistent": ("inconsistent with its other parameters", "与其他参数不一致"),
+    "ecu.ack.bad_frame": ("bad frame", "帧格式错误"),
     "event.isobus": ("ISOBUS: {what}", "ISOBUS：{what}"),
     # what the terminal's Task Controller says (isobus/tcserver.py, terminal/tclink.py)
     "tc.frame_refused": ("frame {id:08X} refused: {why}", "帧 {id:08X} 被拒绝：{why}"),

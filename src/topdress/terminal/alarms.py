@@ -56,6 +56,7 @@ class AlarmInputs:
     # An ISOBUS implement (None: the topdress ECU): its link's state (terminal.tclink: ok,
     # lost, refused, wait), its DDOP's designator and the last problem in words
     isobus: tuple[str, str, Text | str] | None = None
+    ecu_refused: Text | None = None  # a parameter the ECU on an ISOBUS refused (the text)
 
 
 @dataclass
@@ -130,6 +131,8 @@ class AlarmBook:
                 yield "ddop_refused", text("alarm.text.ddop_refused", why=problem)
         elif x.ecu_link == "lost":
             yield "ecu_lost", text("alarm.ecu_lost")
+        if x.ecu_refused is not None:
+            yield "ecu_param_refused", x.ecu_refused
         if x.metering:  # the wrong field matters only while product goes out
             for o in x.off_map:
                 yield (

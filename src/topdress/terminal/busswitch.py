@@ -13,7 +13,10 @@ With `[can] implement = "isobus"` the bus is an ISOBUS: every frame goes to the 
 setpoints. The topdress ECU's link speaks only when the implement served is a topdress ECU
 (terminal.proplink): its private frames on Proprietary A/B, the parameters pushed once it is
 recognised; while they are not all in force the TC is given the stop command, as no PcCommand
-goes out on the private bus before them.
+goes out on the private bus before them. A parameter the ECU refuses there does not end the
+program as at start on its own bus (the ECU may be recognised mid-field, and every implement
+depends on the TC going on): it is an alarm naming it, the implement held at rate 0 until the
+ECU connects again or the operator changes a setting of its parameters.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import can
 from topdress.config import CanConfig, TerminalConfig
 from topdress.devices.can import CanPort
 from topdress.errors import EcuParamError
-from topdress.i18n import text
+from topdress.i18n import Text, text
 from topdress.protocol import EcuIdent
 from topdress.terminal.canlink import CanLink
 from topdress.terminal.ecuview import terminal_protocol
@@ -95,7 +98,7 @@ class BusSwitch:
         if self.tc is None:
             return None
 
-        def say(what: str) -> None:
+        def say(what: Text) -> None:
             self._journal.event(text("event.isobus", what=what))
 
         server = self.tc.server
@@ -212,10 +215,16 @@ class BusSwitch:
                 self.link.on_frame(payload, t)
                 return
             self.tc.on_frame(payload, t)
+            self._follow(t)  # the frame may have connected it: its EcuIdent follows at once
             assert self.prop is not None
             private = self.prop.take(payload)
-            if private is not None:
+            if private is None:
+                return
+            try:
                 self.link.on_frame(private, t)
+            except EcuParamError as exc:  # held by `held()` while it stands: said, logged
+                self._journal.event(text("event.isobus", what=str(exc)))
+                self._journal.log_event(t, "isobus.problem", what=str(exc))
         elif kind == "can_error":
             self._journal.counters["can_rx_errors"] += 1
             if not self._failing:  # once per failure spell (the reader retries)
@@ -235,15 +244,37 @@ class BusSwitch:
         if self.tc is None:
             self.link.poll(now)
             return
-        assert self.prop is not None
-        served = self.prop.watch()
-        if served == "first":  # a topdress ECU served: its parameters, then it may meter
-            self.link.begin(self.params(self._settings.cfg), now)
-        elif served == "again":  # connected again (a reboot is not heard otherwise)
-            self.link.reconnected(now)
+        self._follow(now)
         held = self.held(command)  # the command itself, or the stop while parameters are due
         self.tc.poll(now, held, PARAMS if held is not command else "")
         self.link.poll(now)
+
+    def _follow(self, now: float) -> None:
+        """The client the TC serves, followed on each frame and tick (the ECU announces itself
+        within milliseconds of its pool's activation, its frames taken only once it is known
+        to be served)."""
+        assert self.prop is not None
+        served = self.prop.watch()
+        # A topdress ECU served: its parameters, then it may meter; one that refused one
+        # gets another try from the top when it connects again.
+        if served == "first" or (served == "again" and self.link.refused is not None):
+            self.push_again(now)
+        elif served == "again":  # connected again (a reboot is not heard otherwise)
+            self.link.reconnected(now)
+
+    @property
+    def refused(self) -> Text | None:
+        """The alarm of a parameter the topdress ECU served on an ISOBUS refused (None: none)."""
+        refused = self.link.refused if self.prop is not None and self.prop.serving else None
+        if refused is None:
+            return None
+        name, value, result = refused
+        why = text(f"ecu.ack.{result.name.lower()}")
+        return text("alarm.text.ecu_param_refused", param=name, value=value, why=why)
+
+    def push_again(self, now: float) -> None:
+        """The parameters pushed from the top, as the configuration has them now."""
+        self.link.begin(self.params(self._settings.cfg), now)
 
     def held(self, command: tuple[bool, float, float, float]) -> tuple[bool, float, float, float]:
         """The command for the Task Controller: the stop while a topdress ECU served has not all

@@ -358,7 +358,7 @@ class FanCheck:
 Wizard = CatchTest | WheelCal | FanCheck
 
 
-def isobus_refusal(needs_fans: bool, why_not_topdress: str | None) -> Text | None:
+def isobus_refusal(needs_fans: bool, why_not_topdress: Text | None) -> Text | None:
     """Why a calibration cannot run with the ECU on an ISOBUS (None: it can).
 
     The catch test (PcCalCommand) and the wheel calibration (EcuDiag's pulses) go through the

@@ -171,6 +171,12 @@ class CanLink:
         return self._params.done
 
     @property
+    def refused(self) -> tuple[str, float, protocol.AckResult] | None:
+        """The parameter the ECU refused in the push at start (name, value, its answer); the
+        push stops there until a new one begins."""
+        return self._params.refused
+
+    @property
     def ready(self) -> bool:
         """Every parameter was acknowledged once: the ECU has worked for this terminal."""
         return self._params.ready
@@ -371,10 +377,10 @@ class CanLink:
             self._on_ident(ident, now)
 
     def reconnected(self, now: float) -> None:
-        """On an ISOBUS: the ECU connected to the Task Controller again. Its EcuIdent is not
-        heard there (sent before its address is claimed), so a reboot within `ecu_timeout_s`
-        shows only so: what it took may be gone, and the parameters in force are pushed again
-        (not while a push is under way: that one gives them)."""
+        """On an ISOBUS: the ECU connected to the Task Controller again, the first sign of a
+        reboot within `ecu_timeout_s`: what it took may be gone, and the parameters in force
+        are pushed again. Not while a push is under way: that one sends those not yet taken,
+        and those taken before a reboot are sent again on its EcuIdent (OnDefaults)."""
         if self._params.done:
             self._params.restarted(now, True, self._lost, "event.ecu_reconnected")
 

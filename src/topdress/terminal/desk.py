@@ -300,6 +300,7 @@ class OperatorDesk:
                 if snap.isobus is None
                 else (snap.isobus.state, snap.isobus.implement, snap.isobus.problem)
             ),
+            ecu_refused=self._parts.can.refused,
             tank_low=(
                 text("alarm.text.tank_low", kg=max(0.0, tank.remaining_kg or 0.0)) if low else None
             ),

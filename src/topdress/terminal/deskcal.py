@@ -99,7 +99,7 @@ class CalDesk:
         link, cfg = self._can.link, self._settings.cfg
         if (prop := self._can.prop) is not None:  # an ISOBUS: only with a topdress ECU served
             fans = isinstance(c, op.StartFanCheck | op.StartLeadCal)
-            why = None if prop.serving else prop.why or "none served"
+            why = None if prop.serving else prop.why or text("prop.why.none_served")
             if (refused := isobus_refusal(fans, why)) is not None:
                 raise op.OperatorError(refused)
         if not (link.ready and link.ecu_alive):

@@ -2,9 +2,11 @@
 opened anew, saved to the configuration file, then taken by the loop's parts.
 
 A section of ECU parameters is pushed while the meters are stopped, and committed once the ECU
-took every value; a refusal puts back what it took of the change. A changed [gnss] or [crop]
-section opens its line source anew (only when a key it is opened with changed); a changed
-[can] section opens its bus in its own thread and is answered once the link is on it.
+took every value; a refusal puts back what it took of the change. A topdress ECU on an ISOBUS
+held after it refused a parameter of its first push takes the change saved at once and the
+whole push again (terminal.busswitch). A changed [gnss] or [crop] section opens its line
+source anew (only when a key it is opened with changed); a changed [can] section opens its bus
+in its own thread and is answered once the link is on it.
 """
 
 from __future__ import annotations
@@ -81,9 +83,17 @@ class SettingsDesk:
         new = validate_section(self._settings.cfg, c.section, c.values)
         if c.section in ECU_SECTIONS:
             changed = changed_ecu_params(self._settings.cfg, new)
-            # An ISOBUS implement that is not a topdress ECU has none: taken as it is.
+            if changed and self._can.refused is not None:
+                # The ECU on an ISOBUS refused one at start and is held: the change may mend
+                # it, and is pushed with all the others from the top (refused: the alarm again).
+                done = self._commit(now, c, new)
+                self._can.push_again(now)
+                return done
             if changed and self._can.pushes_params:
                 return self._push(now, c, new, changed, fut)
+            # An ISOBUS implement that is not a topdress ECU has none: taken as it is, and
+            # pushed to a topdress ECU served again in place of the values it had.
+            self._can.link.renew(changed)
         elif c.section in DEVICE_KEYS:
             keys = changed_device_keys(self._settings.cfg, new, c.section)
             if c.section == "can":  # the CAN link starts over on any change of [can]

@@ -40,6 +40,7 @@ class _ParamPush:
     # A settings push (push_params): told the outcome instead of raising on a refusal.
     on_done: Callable[[str | None, list[int]], None] | None = None
     again: bool = False  # the parameters in force, pushed again to an ECU back from a loss
+    refused: AckResult | None = None  # the ECU refused items[index]: not asked again
 
     @property
     def done(self) -> bool:
@@ -111,11 +112,21 @@ class ParamPusher:
     def done(self) -> bool:
         return self._push is not None and self._push.done
 
+    @property
+    def refused(self) -> tuple[str, float, AckResult] | None:
+        """The parameter the ECU refused in the push at start (name, value, its answer): the
+        push stops there until a new one begins."""
+        push = self._push
+        if push is None or push.refused is None or push.done:
+            return None
+        param_id, value = push.items[push.index]
+        return protocol.param_name(param_id), value, push.refused
+
     def heard(self, now: float, back: bool) -> None:
         """The ECU's first status frame, or the first after a loss."""
         push = self._push
-        if push is None:
-            return
+        if push is None or push.refused is not None:
+            return  # refused: asked again only in a new push
         if push.done:
             if back:  # an ECU that rebooted meanwhile runs on its defaults
                 self._push = _ParamPush(list(self._params), again=True)
@@ -152,7 +163,7 @@ class ParamPusher:
 
     def on_ack(self, ack: protocol.EcuParamAck, now: float) -> None:
         push = self._push
-        if push is None or push.done:
+        if push is None or push.done or push.refused is not None:
             return
         param_id, value = push.items[push.index]
         if ack.param_id != param_id:
@@ -186,6 +197,7 @@ class ParamPusher:
                 name = protocol.param_name(param_id)
                 push.on_done(f"{name} = {value:g}: refused by the ECU: {reason}", accepted)
                 return
+            push.refused = ack.result
             raise EcuParamError(
                 protocol.param_name(param_id), value, f"refused by the ECU: {reason}"
             )
@@ -275,7 +287,7 @@ class ParamPusher:
 
     def poll(self, now: float) -> None:
         push = self._push
-        if push is None or push.done or push.sent_t is None:
+        if push is None or push.done or push.sent_t is None or push.refused is not None:
             return
         waited = now - push.sent_t + _EPS_S
         if push.tries > self._retries and not push.waiting and waited >= self._ack_timeout_s:

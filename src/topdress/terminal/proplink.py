@@ -20,7 +20,9 @@ code left at 0 on both sides) out. Any other implement gets no proprietary frame
 
 Frames carrying a private PGN from any address but the ECU's (or Proprietary A to the TC from
 elsewhere) are ignored and counted (`wrong_source`); without a topdress ECU served they are
-other implements' traffic and not looked at.
+other implements' traffic and not looked at. The ECU is its address and its NAME: once
+another node claims that address (implements often prefer the same one), nothing goes to it
+and nothing from it is taken until the same ECU is served again.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from typing import Any, Protocol
 import can
 
 from topdress.errors import DeviceError, ProtocolError
+from topdress.i18n import Text, text
 from topdress.isobus.node import Frame, from_bus, name_fields, split_id, to_bus
 from topdress.isobus.tcserver import Client
 from topdress.terminal.ecuview import EcuView, LinkCounters
@@ -49,8 +52,9 @@ class Sender(Protocol):
 
 
 class Served(Protocol):
-    """What the link needs of the Task Controller: its address, the client it serves and its
-    counters (`activations`: each pool activated)."""
+    """What the link needs of the Task Controller: its address, the client it serves, the NAME
+    at each address (from the address claims heard) and its counters (`activations`: each pool
+    activated)."""
 
     @property
     def address(self) -> int | None: ...
@@ -59,22 +63,26 @@ class Served(Protocol):
     def client(self) -> Client | None: ...
 
     @property
+    def names(self) -> Mapping[int, int]: ...
+
+    @property
     def counters(self) -> Mapping[str, int]: ...
 
 
-def not_topdress(name: int | None, designator: str, manufacturer: int) -> str | None:
+def not_topdress(name: int | None, designator: str, manufacturer: int) -> Text | None:
     """Why an implement with this NAME and DDOP designator is not a topdress ECU (None: it is)."""
     if name is None:
-        return "no NAME heard from it"
+        return text("prop.why.no_name")
     f = name_fields(name)
     if f["manufacturer_code"] != manufacturer:
-        return f"its NAME's manufacturer is {f['manufacturer_code']}, not {manufacturer}"
+        return text("prop.why.manufacturer", theirs=f["manufacturer_code"], ours=manufacturer)
     ours = (INDUSTRY_GROUP, DEVICE_CLASS, FUNCTION)
     theirs = (f["industry_group"], f["device_class"], f["function"])
     if theirs != ours:
-        return "its NAME is of industry group {}, device class {}, function {}".format(*theirs)
+        group, device_class, function = theirs
+        return text("prop.why.name", group=group, device_class=device_class, function=function)
     if designator != DESIGNATOR:
-        return f"its DDOP is {designator!r}, not {DESIGNATOR!r}"
+        return text("prop.why.ddop", theirs=designator, ours=DESIGNATOR)
     return None
 
 
@@ -91,8 +99,9 @@ class PropCounters:
 class PropLink:
     """The `bus` of the topdress ECU's CanLink on an ISOBUS, and the filter of what it hears.
 
-    `watch()` each tick follows the client the TC serves; `peer` is the ECU's address while a
-    topdress ECU is served (None otherwise); `on_tx` is told each frame as it goes on the bus."""
+    `watch()` on each frame and tick follows the client the TC serves; `peer` is the ECU's
+    address while a topdress ECU is served (None otherwise: none served, or the one served
+    displaced); `on_tx` is told each frame as it goes on the bus."""
 
     def __init__(
         self,
@@ -100,7 +109,7 @@ class PropLink:
         tc: Served,
         manufacturer: int,
         on_tx: Callable[[can.Message], None] | None = None,
-        say: Callable[[str], None] | None = None,
+        say: Callable[[Text], None] | None = None,
     ) -> None:
         self._port = port
         self._tc = tc
@@ -109,7 +118,8 @@ class PropLink:
         self._say = say
         self.counters = PropCounters()
         self.peer: int | None = None
-        self.why = ""  # why the implement served is not a topdress ECU ("" when none served)
+        self._name: int | None = None  # the NAME of the topdress ECU recognised last
+        self.why: Text | None = None  # why the implement served is not a topdress ECU
         self.recognised = False  # a topdress ECU was served once (its parameters pushed)
         self._judged: tuple[int, int | None, str] | None = None  # address, NAME, designator
         self._activations = 0  # the TC's, when the topdress ECU was last judged or heard of
@@ -121,32 +131,40 @@ class PropLink:
         pushed), `again` when the topdress ECU served has activated its pool again (it
         connected again: it may have restarted), else None."""
         c = self._tc.client
+        if c is None or (self.peer is not None and not self.serving):
+            # Served by another TC, or another node claimed its address: served again once
+            # back. One only lost keeps its address while its NAME holds it: its frames are
+            # its own, and its first status after the loss ends the loss at once.
+            self.peer = None
         if c is None or not c.active or c.lost or c.device is None:
-            return None  # none served now: the last one's address is kept (it may be back)
+            return None
         activations = self._tc.counters.get("activations", 0)
         key = (c.address, c.name, c.device.designator)
         if key == self._judged:
-            again = self.serving and activations > self._activations
+            back = self.peer is None and self.why is None  # the topdress ECU, served again
+            again = back or (self.serving and activations > self._activations)
             self._activations = activations
+            if back:
+                self.peer = c.address
             return "again" if again else None
         self._judged = key
         self._activations = activations
         why = not_topdress(c.name, c.device.designator, self.manufacturer)
         if why is not None:
             self.peer, self.why = None, why
-            self._tell(f"implement at 0x{c.address:02X} is not a topdress ECU ({why})")
+            self._tell(text("prop.not_topdress", address=c.address, why=why))
             return None
         was, self.recognised = self.recognised, True
-        self.peer, self.why = c.address, ""
-        self._tell(f"implement at 0x{c.address:02X} is a topdress ECU: its private frames")
+        self.peer, self.why, self._name = c.address, None, c.name
+        self._tell(text("prop.topdress", address=c.address))
         return "again" if was else "first"
 
     @property
     def serving(self) -> bool:
-        """A topdress ECU is the implement served (or was, and no other has been since)."""
-        return self.peer is not None
+        """A topdress ECU is the implement served, and its NAME still holds its address."""
+        return self.peer is not None and self._tc.names.get(self.peer) == self._name
 
-    def _tell(self, what: str) -> None:
+    def _tell(self, what: Text) -> None:
         if self._say is not None:
             self._say(what)
 
@@ -157,7 +175,7 @@ class PropLink:
         form): the link counts it as a frame not sent."""
         me, peer = self._tc.address, self.peer
         bus = None
-        if me is not None and peer is not None:
+        if me is not None and peer is not None and self.serving:
             bus = to_bus(Frame(msg.arbitration_id, bytes(msg.data)), False, me, peer)
         if bus is None:
             self.counters.tx_refused += 1
@@ -175,6 +193,8 @@ class PropLink:
         address counted in `wrong_source`)."""
         me, peer = self._tc.address, self.peer
         if peer is None or me is None or not msg.is_extended_id or msg.is_error_frame:
+            return None
+        if not self.serving:  # another node claimed its address: not the ECU's frames
             return None
         if msg.is_remote_frame or split_id(msg.arbitration_id)[2] == me:
             return None  # our own echo (udp_multicast), or nothing with data
