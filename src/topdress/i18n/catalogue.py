@@ -573,10 +573,6 @@ CATALOGUE: Final[dict[str, tuple[str, str]]] = {
         "earlier sessions' coverage not read: {why}",
         "未能读取之前作业的覆盖区域：{why}",
     ),
-    "tc.link.coverage_skipped": (
-        "earlier session not read for the coverage: {why}",
-        "读取覆盖区域时跳过了一次之前的作业：{why}",
-    ),
     "alarm.wrong_field_prescription": (
         "far outside the prescription map: wrong field?",
         "远离处方图：地块错误？",
