@@ -234,6 +234,13 @@ static double v_pass(double t) { /* a pass at 8.5 km/h */
     return 8.5 / 3.6;
 }
 
+/* A run with the core's defaults (td_params.h) and the field's slip shape. */
+static void field_init(run_t *r) {
+    run_init(r);
+    td_fused_tune(&r->f, 0.3f, 0.2f, 15.0f);
+    r->f.slip_shape = true;
+}
+
 /* A wet patch at 8.5 km/h with GNSS 1.3 s late and the slip shape on: the wheel slips 10 % more
  * for 17 s and then grips again. The wheel's drop is a speed change of the estimate that GNSS
  * has not shown 1.3 s + 0.2 s after it began: the scale takes the step. Measured: the mean
@@ -243,9 +250,7 @@ static double v_pass(double t) { /* a pass at 8.5 km/h */
 static void test_a_wet_patch_is_followed_within_seconds(void **state) {
     (void)state;
     run_t r;
-    run_init(&r);
-    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f); /* the defaults of td_params.h */
-    r.f.slip_shape = true;
+    field_init(&r);
     const double firm = 0.98;
     run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
     const float s_firm = r.f.scale;
@@ -281,9 +286,7 @@ static void test_a_wet_patch_is_followed_within_seconds(void **state) {
 static void test_a_wet_patch_step_is_taken_by_the_scale(void **state) {
     (void)state;
     run_t r;
-    run_init(&r);
-    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
-    r.f.slip_shape = true;
+    field_init(&r);
     const double firm = 0.98;
     run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
     const float s_firm = r.f.scale;
@@ -311,9 +314,7 @@ static double v_brake(double t) { /* 2.36 m/s, braking at 0.5 m/s^2 from t = 41 
 static void test_a_brake_is_no_slip_step(void **state) {
     (void)state;
     run_t r;
-    run_init(&r);
-    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
-    r.f.slip_shape = true;
+    field_init(&r);
     run(&r, 41.0, v_brake, 0.98, true, 1.3, 1.3, true);
     const float s0 = r.f.scale;
     run(&r, 3.0, v_brake, 0.98, true, 1.3, 1.3, false);
@@ -348,9 +349,7 @@ static double v_turn(double t) {
 static void test_the_ramps_acceleration_decays_after_it(void **state) {
     (void)state;
     run_t r;
-    run_init(&r);
-    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
-    r.f.slip_shape = true;
+    field_init(&r);
     run(&r, 40.0, v_turn, 0.98, true, 1.3, 1.3, true);
     run(&r, 20.0, v_turn, 0.98, true, 1.3, 1.3, false);
     double worst = 0.0;
@@ -379,9 +378,7 @@ static double bump(double u) {
 static void test_a_ramp_the_wheel_turns_back_from_ends(void **state) {
     (void)state;
     run_t r;
-    run_init(&r);
-    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
-    r.f.slip_shape = true;
+    field_init(&r);
     run(&r, 40.0, v_pass, 0.98, true, 1.3, 1.3, true);
     bool ramp = false;
     for (int k = 0; k < 18; k++) {
@@ -432,9 +429,7 @@ static void test_a_sharp_step_after_a_ramp_goes_on_with_it(void **state) {
 static void test_a_step_back_just_after_cruise_ends_is_held(void **state) {
     (void)state;
     run_t r;
-    run_init(&r);
-    td_fused_tune(&r.f, 0.3f, 0.2f, 15.0f);
-    r.f.slip_shape = true;
+    field_init(&r);
     const double firm = 0.98;
     run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
     const float s_firm = r.f.scale;
