@@ -199,7 +199,7 @@ def test_emulated_isobus_ecu_meters_the_tcs_rate() -> None:
                  for i in range(19)]  # fmt: skip
         late = world.timing.late_inputs
         kg0, dist = (world.metered_kg(0), world.metered_kg(1)), [0.0]
-        run(6.0, dist, tuple(flood))
+        run(2.0, dist, tuple(flood))
         area_ha = dist[0] * 3.6 / 10_000
         loaded = [(world.metered_kg(i) - kg0[i]) / area_ha for i in (0, 1)]
         print(f"at 100 % load: {loaded[0]:.1f} / {loaded[1]:.1f} kg/ha")
