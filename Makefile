@@ -86,7 +86,13 @@ screenshots: $(STAMP) browser
 interop: $(STAMP)
 	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py tests/test_isobus_agiso_replay.py tests/test_isobus_tcserver.py tests/test_isobus_tc_j1939.py tests/test_isobus_tc_isoxml.py tests/test_isobus_tc_protocol.py tests/test_isobus_tc_faults.py tests/test_terminal_agiso.py
 
-test: ctest ctest-san lint pytest
+# The system packages first, one apt-get at a time; then the C tests, their sanitized run, the
+# linters and pytest side by side: pytest mostly waits on a browser, a demo or QEMU, and the C
+# builds need no virtual environment, so they take the CPU it leaves. Each part's output is
+# printed whole when it ends.
+test:
+	for w in python ctest browser qemu office; do PYTHON=$(PYTHON) bash scripts/sysdeps.sh $$w || exit 1; done
+	$(MAKE) --no-print-directory -j4 --output-sync=target ctest ctest-san lint pytest
 
 check: ctest lint pytest-fast
 
