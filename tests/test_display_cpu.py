@@ -54,7 +54,8 @@ def test_the_display_drops_a_real_time_policy_it_inherited_and_its_priority() ->
     out = subprocess.run([sys.executable, "-c", YIELD], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     before, after, niced, cpus = (int(x) for x in out.stdout.split())
-    assert after == os.SCHED_OTHER and niced == 10
+    # 10 lower, within the kernel's ceiling of 19 (a test run under `nice` starts at 10)
+    assert after == os.SCHED_OTHER and niced == min(os.nice(0) + 10, 19) - os.nice(0)
     assert cpus == max(1, len(os.sched_getaffinity(0)) - 1)
     if before != os.SCHED_RR:
         pytest.skip("not allowed to set a real-time policy here: only the nice part checked")

@@ -126,7 +126,6 @@ typedef struct {
     td_lag_t lag;              /**< the GNSS lag learned against the wheel's history */
     float gnss_pend_ms;        /**< GNSS speed waiting for the next step, m/s */
     uint32_t gnss_pend_us;     /**< its time of validity as the PC gave it (reception - age) */
-    uint32_t gnss_time_us;     /**< last PcGnssTime received */
     uint32_t gnss_fused_us;    /**< last GNSS speed the estimate accepted */
     uint32_t steady_since_us;  /**< start of the current steady motion */
     uint8_t gnss_seq;          /**< GnssSeq of the last PcGnssTime applied */

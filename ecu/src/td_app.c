@@ -269,8 +269,10 @@ static int apply_command(td_app_t *app, const td_can_frame_t *frame, uint32_t no
         st->v_gnss_kmh = c.gnss_kmh;
         app->have_gnss = true;
         app->last_gnss_us = now_us;
-        /* a PC without PcGnssTime: the command's speed goes to the estimate as if fresh */
-        if (!(app->have_gnss_time && td_age_us(now_us, app->gnss_time_us) <= (uint32_t)app->p.gnss_timeout_ms * 1000u)) {
+        /* a PC without PcGnssTime: the command's speed goes to the estimate as if fresh. One
+         * that speaks it gives its fixes there only: when its fixes stop (an outage) it still
+         * repeats the last speed in its commands until that is stale, and those are no fixes */
+        if (!app->have_gnss_time) {
             app->gnss_pend = true;
             app->gnss_pend_ms = c.gnss_kmh / TD_KMH_PER_MS;
             app->gnss_pend_us = now_us;
@@ -301,7 +303,6 @@ static int apply_gnss_time(td_app_t *app, const td_can_frame_t *frame, uint32_t 
         return rc;
     }
     app->have_gnss_time = true;
-    app->gnss_time_us = now_us;
     if (g.valid && !(app->have_seq && g.seq == app->gnss_seq)) {
         app->gnss_pend = true;
         app->gnss_pend_ms = g.speed_kmh / TD_KMH_PER_MS;
@@ -721,6 +722,7 @@ int td_app_step(td_app_t *app, uint32_t now_us, const td_io_in_t *in, td_io_out_
     /* command timeout: strictly longer than cmd_timeout_ms without a valid PcCommand */
     if (td_age_us(now_us, app->last_cmd_us) > (uint32_t)app->p.cmd_timeout_ms * 1000u) {
         st->faults |= TD_FAULT_CMD_TIMEOUT;
+        app->have_gnss_time = false; /* the PC is gone: the next may not speak PcGnssTime */
     }
     /* GNSS: missing (0xFF) or stale; a stale value is dropped for good, so that the clock
      * wrapping 71.6 min later cannot make it fresh again; re-decide at once when it comes or goes */

@@ -53,6 +53,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_SHARE 0.05f  /* the least share */
 #define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
 #define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
+#define OUTAGE_GAIN 10.0f /* in an outage out of cruise, this much less */
 #define CRUISE_SHARE 0.3f
 #define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
 #define FLAT_GNSS_S 0.5f    /* out of cruise a decays so only with a fix this recent (GNSS holds v) */
@@ -285,6 +286,12 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
         /* flat motion, the wheel within its bounce: the bounce wanders over seconds and is no
          * white noise, so GNSS holds the level; a wheel beyond it weighs in full at once */
         r *= WHEEL_FLAT_GAIN;
+    } else if (!gnss_backs && f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < WHEEL_FLAT_REL) {
+        /* an outage that began in cruise: the wheel is all there is, but its slow bounce, read
+         * through eq. 5's slope, is ~1.5 times as large in speed; the estimate averages it over
+         * seconds while the wheel's ~0.3 s mean stays within the band (its fast bounce alone
+         * leaves it often), and follows in full a wheel beyond it or a ramp (no cruise) */
+        r *= OUTAGE_GAIN;
     }
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
      * again, not because the estimate grew uncertain without it */

@@ -192,6 +192,40 @@ static void test_gnss_time_frame(void **state) {
     assert_int_equal(td_app_rx(&r.app, &f, r.now_us), TD_E_LENGTH);
 }
 
+/* A PC that speaks PcGnssTime and loses its fixes (an outage) still repeats the last speed in
+ * its commands until that goes stale: those are no fixes. Once the PC is gone (the command
+ * timeout), a PC without PcGnssTime has its command speeds taken as fixes again. */
+static void test_an_outage_s_repeated_command_speed_is_no_fix(void **state) {
+    (void)state;
+    td_params_t p = fused_params();
+    rig_t r;
+    rig_start(&r, &p, 0u, 8.0, 8.0 * 0.93);
+    r.edge_timing = true;
+    td_gnss_time_t g = { true, 8.0f, 50u, 0u };
+    td_can_frame_t f;
+    for (int k = 0; k < 1000; k++) { /* 10 s: a fix every 200 ms */
+        if (k % 20 == 0) {
+            g.seq = (uint8_t)(g.seq + 1u);
+            assert_int_equal(td_proto_encode_gnss_time(&g, &f), TD_OK);
+            assert_int_equal(td_app_rx(&r.app, &f, r.now_us), TD_OK);
+        }
+        rig_step(&r);
+        (void)rig_drain(&r, 0u);
+    }
+    const uint32_t fixes = rig_st(&r)->gnss_fixes + rig_st(&r)->gnss_rejected;
+    assert_true(fixes >= 49u);
+    rig_run_ms(&r, 3000); /* no PcGnssTime; the commands carry 8 km/h on */
+    assert_int_equal(rig_st(&r)->gnss_fixes + rig_st(&r)->gnss_rejected, fixes);
+    assert_true(rig_st(&r)->gnss_valid); /* the paper's modes still have the command's speed */
+    r.pc_sending = false; /* the PC goes; another, without PcGnssTime, comes */
+    rig_run_ms(&r, (uint32_t)p.cmd_timeout_ms + 100u);
+    assert_true((rig_st(&r)->faults & TD_FAULT_CMD_TIMEOUT) != 0u);
+    r.pc_sending = true;
+    r.next_cmd_us = r.now_us;
+    rig_run_ms(&r, 2000);
+    assert_true(rig_st(&r)->gnss_fixes + rig_st(&r)->gnss_rejected >= fixes + 4u);
+}
+
 /* Look-ahead: braking from 8 km/h to a stop at 1 m/s^2, with 1 s of look-ahead the meters stop
  * before the machine stands, and at least 0.6 s before it. */
 static void test_look_ahead_stops_the_meters_before_standstill(void **state) {
@@ -417,6 +451,7 @@ int main(void) {
         cmocka_unit_test(test_fused_encoder_fault_uses_gnss),
         cmocka_unit_test(test_fused_frozen_receiver_at_standstill),
         cmocka_unit_test(test_gnss_time_frame),
+        cmocka_unit_test(test_an_outage_s_repeated_command_speed_is_no_fix),
         cmocka_unit_test(test_look_ahead_stops_the_meters_before_standstill),
         cmocka_unit_test(test_stop_lead_for_falling_speed),
         cmocka_unit_test(test_edge_timing_first_pulse_and_standstill),
