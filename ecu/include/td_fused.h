@@ -18,7 +18,11 @@
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports); 1000 times that in
  *   flat motion (jerk share < 0.3) while GNSS backs the estimate and the wheel is within 5 % of
  *   it: the bounce wanders over seconds, no white noise, so GNSS holds the level; a wheel beyond
- *   5 % (a brake, a launch) weighs in full at once.
+ *   5 % (a brake, a launch) weighs in full at once. In an outage that began in cruise (no
+ *   accepted fix for 1.5 s, the last one in cruise) the wheel, its ~0.3 s mean within 5 %,
+ *   weighs a tenth: its slow bounce, read through eq. 5's slope ~1.5 times as large in speed,
+ *   is averaged over seconds (a pass 3 % slower is followed with a time constant of ~4 s); a
+ *   ramp ends cruise and is followed in full.
  * Cruise (the last fix was settled and flat, below) above 6 km/h, while the wheel's innovation
  *   (its mean over ~0.3 s) stays within 5 %: a decays with a time constant of 0.5 s, so a fix's
  *   noise left in a does not ramp v until the next fix (a Gauss-Markov acceleration). Below
@@ -46,7 +50,9 @@
  *   other side departs anew), and within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
  *   judged on two 3-bucket means: back near where it was, a bounce; level (within 3.5 %), a
  *   slip step: the scale takes it, v holds, the history before the step is rescaled to the new
- *   scale; still moving the same way, a speed change: v and a restart from the wheel. A scale
+ *   scale; still moving the same way, a speed change: v and a restart from the wheel; going
+ *   back by 3.5 % but still beyond 5 % of where it was (a step's overshoot settling), judged
+ *   once more 0.3 s later, when a wheel still beyond is a step whatever its bounce. A scale
  *   step is undone (scale and history back, v from the wheel) by a second sharp step the same
  *   way, or by GNSS's 1 s mean moving half the step the same way (beyond 3 GNSS sigmas) within
  *   the delay + 0.5 s; confirmed after the delay + 1.5 s. A sharp step the way of a ramp that
@@ -136,6 +142,7 @@ typedef struct {
     bool cruise;               /**< the last fix found the motion flat and settled: GNSS holds the level */
     float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none) */
     float hold_w0_ms;          /**< the wheel's speed before that step, m/s */
+    bool held_more;            /**< the hold was judged once, the wheel still moving, and goes on */
     float stepped_s;           /**< time since the scale took a wheel's step, s (0: none pending GNSS's check) */
     float step_scale0;         /**< the scale before it */
     float step_dv_ms;          /**< the step, as a speed, m/s */

@@ -78,6 +78,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define STEP_BOUNCE_K 0.02f /* that bounce's variance, a running mean over ~5 s of buckets */
 #define STEP_BOUNCE0 0.0009f /* and its start, (3 %)^2 */
 #define STEP_HOLD_S 0.6f    /* then the wheel waits this long before it weighs again */
+#define STEP_MORE_S 0.3f    /* and this long more when it still moved at the first judgement */
 #define STEP_N 3u           /* and is judged on two means of this many buckets */
 #define STEP_VERIFY_S 0.5f  /* GNSS checks a scale step this long after its delay ... */
 #define STEP_CONFIRM_S 1.5f /* ... and has confirmed it this long after */    /* then the wheel waits this long before it weighs again */
@@ -127,6 +128,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->cruise = false;
     f->hold_s = 0.0f;
     f->hold_w0_ms = 0.0f;
+    f->held_more = false;
     f->stepped_s = 0.0f;
     f->step_scale0 = 1.0f;
     f->step_dv_ms = 0.0f;
@@ -396,10 +398,12 @@ static void undo_step(td_fused_t *f) {
  * patch changes the wheel's slip so. Level since: the scale takes the step and the speed holds
  * (GNSS would show the truth only a lag later, and td_fused_gnss checks it then). Still moving
  * the same way: a speed change after all, and the estimate restarts from the wheel. Back where
- * it was: a bounce. A second step the same way soon after a scale step undoes it: a brake. */
+ * it was: a bounce. Going back but not there yet: judged again STEP_MORE_S later. A second step
+ * the same way soon after a scale step undoes it: a brake. */
 static void step_check(td_fused_t *f) {
     if (f->hist_n < 2u * STEP_N) {
         f->hold_s = 0.0f;
+        f->held_more = false;
         return;
     }
     if (f->trend_ago > 0u) {
@@ -416,11 +420,23 @@ static void step_check(td_fused_t *f) {
         const float w_new = hist_mean(f, 0u, STEP_N - 1u);
         const float since = w_new - hist_mean(f, STEP_N, 2u * STEP_N - 2u);
         const float step = w_new - f->hold_w0_ms;
-        if (!(fabsf(step) > STEP_REL * pred) || (fabsf(since) >= STEP_LEVEL_REL * pred && since * step < 0.0f)) {
+        const bool more = f->held_more;
+        f->held_more = false;
+        const bool moved = fabsf(since) >= STEP_LEVEL_REL * pred;
+        if (!(fabsf(step) > STEP_REL * pred)) {
             return; /* the wheel came back: a bounce, nothing changed */
         }
-        if (fabsf(since) >= STEP_LEVEL_REL * pred) {
-            snap_to_wheel(f, w_new, f->hold_w0_ms, STEP_HOLD_S + 2.0f * TD_FUSED_BUCKET_S);
+        if (moved && since * step < 0.0f && !more) {
+            /* going back but still beyond the step's share: a bounce on its way back, or a
+             * step's overshoot settling at its level (a wet patch's end on the bounce). Judged
+             * once more STEP_MORE_S on, when a wheel still beyond the share is a step. (Going
+             * on the same way is not judged again: a brake would wait for it) */
+            f->held_more = true;
+            f->hold_s = STEP_HOLD_S - STEP_MORE_S;
+            return;
+        }
+        if (moved && since * step > 0.0f) {
+            snap_to_wheel(f, w_new, f->hold_w0_ms, STEP_HOLD_S + (more ? STEP_MORE_S : 0.0f) + 2.0f * TD_FUSED_BUCKET_S);
             return;
         }
         float s_new = w_new / (g * f->v_ms);
@@ -526,6 +542,7 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->reopened = false;
         f->q_share = 1.0f;
         f->hold_s = 0.0f;
+        f->held_more = false;
         return;
     }
     f->hist_sum += z_ms * dt_s;
@@ -744,6 +761,7 @@ void td_fused_standstill(td_fused_t *f) {
     f->ramp_s = 0.0f;
     f->cruise = false;
     f->hold_s = 0.0f;
+    f->held_more = false;
 }
 
 float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
