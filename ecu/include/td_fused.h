@@ -18,11 +18,11 @@
  *   R_w = (wheel_noise * z_w)^2 + floor^2 + quantization (counts-only ports); 1000 times that in
  *   flat motion (jerk share < 0.3) while GNSS backs the estimate and the wheel is within 5 % of
  *   it: the bounce wanders over seconds, no white noise, so GNSS holds the level; a wheel beyond
- *   5 % (a brake, a launch) weighs in full at once. In an outage that began in cruise (no
- *   accepted fix for 1.5 s, the last one in cruise) the wheel, its ~0.3 s mean within 5 %,
- *   weighs a tenth: its slow bounce, read through eq. 5's slope ~1.5 times as large in speed,
- *   is averaged over seconds (a pass 3 % slower is followed with a time constant of ~4 s); a
- *   ramp ends cruise and is followed in full.
+ *   5 % (a brake, a launch) weighs in full at once. In an outage (no accepted fix for 1.5 s)
+ *   with the scale learned (its variance below (3 %)^2, which it leaves ~40 s into the outage)
+ *   and in flat motion, the wheel, its ~0.3 s mean within 5 %, weighs a tenth: its slow
+ *   bounce, read through eq. 5's slope ~1.5 times as large in speed, is averaged over seconds
+ *   (a pass 3 % slower is followed with a time constant of ~4 s); a ramp is followed in full.
  * Cruise (the last fix was settled and flat, below) above 6 km/h, while the wheel's innovation
  *   (its mean over ~0.3 s) stays within 5 %: a decays with a time constant of 0.5 s, so a fix's
  *   noise left in a does not ramp v until the next fix (a Gauss-Markov acceleration). Below

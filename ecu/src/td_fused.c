@@ -288,11 +288,13 @@ td_fused_result_t td_fused_wheel(td_fused_t *f, float z_ms, float r_extra, bool 
         /* flat motion, the wheel within its bounce: the bounce wanders over seconds and is no
          * white noise, so GNSS holds the level; a wheel beyond it weighs in full at once */
         r *= WHEEL_FLAT_GAIN;
-    } else if (!gnss_backs && f->cruise && f->q_share < CRUISE_SHARE && fabsf(f->wheel_dev) < WHEEL_FLAT_REL) {
-        /* an outage that began in cruise: the wheel is all there is, but its slow bounce, read
-         * through eq. 5's slope, is ~1.5 times as large in speed; the estimate averages it over
+    } else if (!gnss_backs && f->p[SS] < P_S_REOPEN && f->q_share < CRUISE_SHARE &&
+               fabsf(f->wheel_dev) < WHEEL_FLAT_REL) {
+        /* an outage with the scale learned (its variance, growing without GNSS, leaves that
+         * after ~40 s): the wheel is all there is, but its slow bounce, read through eq. 5's
+         * slope, is ~1.5 times as large in speed; in flat motion the estimate averages it over
          * seconds while the wheel's ~0.3 s mean stays within the band (its fast bounce alone
-         * leaves it often), and follows in full a wheel beyond it or a ramp (no cruise) */
+         * leaves it often), and follows in full a wheel beyond it or a ramp */
         r *= OUTAGE_GAIN;
     }
     /* a wheel already refused while GNSS backs the estimate comes back only when it agrees
@@ -426,7 +428,7 @@ static void step_check(td_fused_t *f) {
         if (!(fabsf(step) > STEP_REL * pred)) {
             return; /* the wheel came back: a bounce, nothing changed */
         }
-        if (moved && since * step < 0.0f && !more) {
+        if (moved && (since * step < 0.0f || step > 0.0f) && !more) {
             /* going back but still beyond the step's share: a bounce on its way back, or a
              * step's overshoot settling at its level (a wet patch's end on the bounce). Judged
              * once more STEP_MORE_S on, when a wheel still beyond the share is a step. (Going
@@ -507,14 +509,19 @@ static void step_check(td_fused_t *f) {
     if (f->departed * side < 0) {
         f->departed = 0;
     }
-    if (f->departed * side >= 2) {
-        return;
-    }
-    f->departed = (int8_t)(f->departed + side);
     const float w_old = hist_mean(f, 2u, 4u);
     const float sharp = STEP_SHARP_K * sqrtf(f->bounce_var);
-    if (!(fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred) ||
-        !(fabsf(b0 - pred) < STEP_MAX_REL * pred)) {
+    const bool stepped = fabsf(b0 - w_old) > (sharp > STEP_SHARP_REL ? sharp : STEP_SHARP_REL) * pred;
+    /* beyond that, a sharp step up still is one: the slow bounce may carry the wheel out of the
+     * band just before a slip step (a wet patch's end on a rising bounce), and a machine in a
+     * pass does not gain speed that sharply (a brake may, and goes on as a ramp) */
+    if (f->departed * side >= 2 && !(stepped && side > 0 && b0 > w_old)) {
+        return;
+    }
+    if (f->departed * side < 2) {
+        f->departed = (int8_t)(f->departed + side);
+    }
+    if (!stepped || !(fabsf(b0 - pred) < STEP_MAX_REL * pred)) {
         return;
     }
     if (f->stepped_s > 0.0f && (b0 - w_old) * f->step_dv_ms > 0.0f) {
