@@ -53,7 +53,7 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define Q_FLAT_SHARE 0.05f  /* the least share */
 #define WHEEL_FLAT_REL 0.05f /* flat motion: the wheel within this share of the estimate is bounce */
 #define WHEEL_FLAT_GAIN 1000.0f /* and weighs this much less */
-#define OUTAGE_GAIN 10.0f /* in an outage out of cruise, this much less */
+#define OUTAGE_GAIN 10.0f /* in an outage with the scale learned, this much less */
 #define CRUISE_SHARE 0.3f
 #define CRUISE_TAU_S 0.5f  /* the acceleration's time constant in cruise */
 #define FLAT_GNSS_S 0.5f    /* out of cruise a decays so only with a fix this recent (GNSS holds v) */

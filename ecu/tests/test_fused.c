@@ -245,9 +245,9 @@ static void field_init(run_t *r) {
  * wheel's slow bounce instead of following it (eq. 5's slope reads the wheel's share ~1.5 times
  * as large in speed), and still follows a wheel that leaves its band or moves for good; not
  * beyond ~40 s, when the scale learned is no longer trusted so.
- * Measured: the wheel 4 % low for 2 s moves the estimate -1.4 % (-4.0 % weighed in full); a
+ * Measured: the wheel 4 % low for 2 s moves the estimate -1.6 % (-4.0 % weighed in full); a
  * wheel 10 % low, the estimate there within 1 s; a pass 3 % slower (the wheel within its band),
- * followed with a time constant of ~4 s: 1.1 % off 4 s on, -0.1 % 8 s on. */
+ * followed with a time constant of ~4 s: 1.0 % off 4 s on, -0.1 % 8 s on. */
 static void outage_from_cruise(run_t *r) {
     field_init(r);
     run(r, 40.0, v_pass, 0.98, true, 1.3, 1.3, true);
