@@ -344,22 +344,33 @@ static void test_a_wet_patch_is_followed_within_seconds(void **state) {
  * still going back, which is no sign of a bounce while it stays beyond the step's share: it is
  * judged again 0.3 s on, and the scale takes the step. Measured: worst +0.6 % (+11.8 % when
  * the first judgement called it a bounce and let the wheel in at the patch's scale). */
+#define WET_SCALE 0.88
+
+/* The patch's scale learned in a pass (s_wet), then 1.5 s of the wheel at WET_SCALE * wheel(k)
+ * (k in 10 ms steps), GNSS 1.3 s late showing nothing yet: the estimate's worst error, share. */
+static double wet_patch_end(run_t *r, double (*wheel)(int k), float *s_wet) {
+    field_init(r);
+    run(r, 40.0, v_pass, WET_SCALE, true, 1.3, 1.3, true);
+    *s_wet = r->f.scale;
+    double worst = 0.0;
+    for (int k = 0; k < 150; k++) {
+        run(r, DT, v_pass, WET_SCALE * wheel(k), true, 1.3, 1.3, false);
+        const double err = (r->f.v_ms - v_pass(0.0)) / v_pass(0.0);
+        worst = fabs(err) > fabs(worst) ? err : worst;
+    }
+    return worst;
+}
+
+static double overshoot(int k) { /* 10 % up, the first 0.3 s 16 % */
+    return k < 30 ? 1.16 : 1.10;
+}
+
 static void test_a_steps_overshoot_going_back_is_judged_again(void **state) {
     (void)state;
     run_t r;
-    field_init(&r);
-    const double wet = 0.88;
-    run(&r, 40.0, v_pass, wet, true, 1.3, 1.3, true);
-    const float s_wet = r.f.scale;
-    double worst = 0.0;
-    for (int k = 0; k < 150; k++) { /* 1.5 s: GNSS, 1.3 s late, shows nothing yet */
-        const double over = k < 30 ? 1.16 : 1.10;
-        run(&r, DT, v_pass, wet * over, true, 1.3, 1.3, false);
-        const double err = (r.f.v_ms - v_pass(0.0)) / v_pass(0.0);
-        worst = fabs(err) > fabs(worst) ? err : worst;
-    }
-    assert_true(fabs(worst) < 0.03);
-    assert_float_equal(r.f.scale, s_wet * 1.10, 0.02);
+    float s_wet = 0.0f;
+    assert_true(fabs(wet_patch_end(&r, overshoot, &s_wet)) < 0.03);
+    assert_float_equal(r.f.scale, s_wet * overshoot(149), 0.02); /* the step taken */
 }
 
 /* A wet patch's end on a rising bounce: the bounce carries the wheel 6 % up (out of its band,
@@ -368,20 +379,17 @@ static void test_a_steps_overshoot_going_back_is_judged_again(void **state) {
  * in a pass does not gain speed so), and still rising at its first judgement it is judged
  * again: the scale takes it. Measured: worst +1.8 % (+41.1 % before: no step was seen out of
  * the band, and the wheel came in at the patch's scale). */
+static double rising(int k) { /* the bounce 6 % up, then the step 10 % up, the bounce rising on */
+    const double bounce = k < 30 ? 1.06 : (k < 70 ? 1.06 + 0.04 * (k - 30) / 40.0 : 1.10);
+    return bounce * (k < 30 ? 1.0 : 1.10);
+}
+
 static void test_a_wet_patch_s_end_on_a_rising_bounce_is_a_slip_step(void **state) {
     (void)state;
     run_t r;
-    field_init(&r);
-    const double wet = 0.88;
-    run(&r, 40.0, v_pass, wet, true, 1.3, 1.3, true);
-    double worst = 0.0;
-    for (int k = 0; k < 150; k++) { /* 1.5 s: GNSS, 1.3 s late, shows nothing yet */
-        const double bounce = k < 30 ? 1.06 : (k < 70 ? 1.06 + 0.04 * (k - 30) / 40.0 : 1.10);
-        run(&r, DT, v_pass, wet * bounce * (k < 30 ? 1.0 : 1.10), true, 1.3, 1.3, false);
-        const double err = (r.f.v_ms - v_pass(0.0)) / v_pass(0.0);
-        worst = fabs(err) > fabs(worst) ? err : worst;
-    }
-    assert_true(fabs(worst) < 0.03);
+    float s_wet = 0.0f;
+    assert_true(fabs(wet_patch_end(&r, rising, &s_wet)) < 0.03);
+    assert_float_equal(r.f.scale, s_wet * rising(149), 0.02);
 }
 
 /* The wet patch as the ECU meets it: the caller's learning (the wheel's CV) still says steady
