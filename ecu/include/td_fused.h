@@ -22,7 +22,9 @@
  *   with the scale learned (its variance below (3 %)^2, which it leaves ~40 s into the outage)
  *   and in flat motion, the wheel, its ~0.3 s mean within 5 %, weighs a tenth: its slow
  *   bounce, read through eq. 5's slope ~1.5 times as large in speed, is averaged over seconds
- *   (a pass 3 % slower is followed with a time constant of ~4 s); a ramp is followed in full.
+ *   (a pass 3 % slower is followed with a time constant of ~4 s, a gentle ramp of 0.02-0.04
+ *   m/s^2 up to 3-5 % behind); a ramp that brings the whole jerk back (the wheel's own
+ *   acceleration ~0.1 m/s^2 and more) is followed in full.
  * Cruise (the last fix was settled and flat, below) above 6 km/h, while the wheel's innovation
  *   (its mean over ~0.3 s) stays within 5 %: a decays with a time constant of 0.5 s, so a fix's
  *   noise left in a does not ramp v until the next fix (a Gauss-Markov acceleration). Below
@@ -47,12 +49,16 @@
  *   newest bucket beyond 5 % of the estimate's wheel speed, moved by 7 % (or 3 sigmas of the
  *   wheel's own bucket-to-bucket bounce) against the buckets 0.2-0.5 s before, on the first two
  *   buckets beyond 5 % on one side (a ramp that went on is no step; a wheel that crosses to the
- *   other side departs anew), and within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
+ *   other side departs anew; a step up is one later too, as the slow bounce may have carried
+ *   the wheel out of the band just before a slip step), and within 25 % (a cut cable is the gate's). The wheel then weighs nothing for 0.6 s and is
  *   judged on two 3-bucket means: back near where it was, a bounce; level (within 3.5 %), a
  *   slip step: the scale takes it, v holds, the history before the step is rescaled to the new
  *   scale; still moving the same way, a speed change: v and a restart from the wheel; going
- *   back by 3.5 % but still beyond 5 % of where it was (a step's overshoot settling), judged
- *   once more 0.3 s later, when a wheel still beyond is a step whatever its bounce. A scale
+ *   back by 3.5 % but still beyond 5 % of where it was (a step's overshoot settling), or a step
+ *   up still rising (a machine in a pass does not gain speed so sharply), judged once more
+ *   0.3 s later, when a wheel still beyond 5 % is a step unless it still moves the same way.
+ *   The history from the bucket that showed the step on (as old as the hold) is after it; the
+ *   older is rescaled to the new scale. A scale
  *   step is undone (scale and history back, v from the wheel) by a second sharp step the same
  *   way, or by GNSS's 1 s mean moving half the step the same way (beyond 3 GNSS sigmas) within
  *   the delay + 0.5 s; confirmed after the delay + 1.5 s. A sharp step the way of a ramp that
@@ -145,6 +151,7 @@ typedef struct {
     bool held_more;            /**< the hold was judged once, the wheel still moving, and goes on */
     float stepped_s;           /**< time since the scale took a wheel's step, s (0: none pending GNSS's check) */
     float step_scale0;         /**< the scale before it */
+    uint8_t step_after_n;      /**< the history's buckets newer than this were after that step when it was taken */
     float step_dv_ms;          /**< the step, as a speed, m/s */
     float step_z0_ms;          /**< GNSS's 1 s mean then, m/s */
     float wheel_dev;           /**< the wheel's innovation, share of its speed, mean over ~0.3 s */

@@ -83,7 +83,6 @@ enum { VV = 0, VA = 1, VS = 2, AA = 3, AS = 4, SS = 5 };
 #define STEP_VERIFY_S 0.5f  /* GNSS checks a scale step this long after its delay ... */
 #define STEP_CONFIRM_S 1.5f /* ... and has confirmed it this long after */    /* then the wheel waits this long before it weighs again */
 #define STEP_LEVEL_REL 0.035f /* the wheel level since within this share: the slip stepped */
-#define STEP_AFTER_N 4u     /* the buckets newer than this are after the step when it is judged */
 #define STEP_GNSS_S 1.5f    /* GNSS this recent backs the hold */
 /* a ramp of the wheel (wheel_trend): a brake or a launch the cruise must not wait for */
 #define TREND_REL 0.06f     /* the wheel's newest 0.3 s beyond this share of the estimate's wheel speed */
@@ -131,6 +130,7 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->held_more = false;
     f->stepped_s = 0.0f;
     f->step_scale0 = 1.0f;
+    f->step_after_n = 0u;
     f->step_dv_ms = 0.0f;
     f->step_z0_ms = 0.0f;
     f->bounce_var = STEP_BOUNCE0;
@@ -390,7 +390,7 @@ static void snap_to_wheel(td_fused_t *f, float w, float w0, float span_s) {
 /* A scale step taken from the wheel proved a speed change: the scale and the history back. */
 static void undo_step(td_fused_t *f) {
     const unsigned since_n = (unsigned)(f->stepped_s / TD_FUSED_BUCKET_S);
-    rescale_history(f, STEP_AFTER_N + since_n, f->step_scale0 / f->scale);
+    rescale_history(f, f->step_after_n + since_n, f->step_scale0 / f->scale);
     f->scale = f->step_scale0;
     f->stepped_s = 0.0f;
 }
@@ -430,9 +430,11 @@ static void step_check(td_fused_t *f) {
         }
         if (moved && (since * step < 0.0f || step > 0.0f) && !more) {
             /* going back but still beyond the step's share: a bounce on its way back, or a
-             * step's overshoot settling at its level (a wet patch's end on the bounce). Judged
-             * once more STEP_MORE_S on, when a wheel still beyond the share is a step. (Going
-             * on the same way is not judged again: a brake would wait for it) */
+             * step's overshoot settling at its level (a wet patch's end on the bounce); or a
+             * step up still rising (a machine in a pass does not gain speed so sharply: the
+             * bounce rising with a wet patch's end). Judged once more STEP_MORE_S on, when a
+             * wheel still beyond the share is a step unless it still moves the same way. (A
+             * step down going on is not judged again: a brake would wait for it) */
             f->held_more = true;
             f->hold_s = STEP_HOLD_S - STEP_MORE_S;
             return;
@@ -444,8 +446,11 @@ static void step_check(td_fused_t *f) {
         float s_new = w_new / (g * f->v_ms);
         s_new = s_new < SCALE_MIN ? SCALE_MIN : (s_new > SCALE_MAX ? SCALE_MAX : s_new);
         /* the wheel's history before the step as the new scale would have read it: GNSS
-         * against it, and the wheel's own acceleration, then see no step */
-        rescale_history(f, STEP_AFTER_N, s_new / f->scale);
+         * against it, and the wheel's own acceleration, then see no step. The buckets from
+         * the one that showed the step (as old as the hold) on are after it */
+        const float held_s = STEP_HOLD_S + (more ? STEP_MORE_S : 0.0f);
+        f->step_after_n = (uint8_t)(held_s / TD_FUSED_BUCKET_S + 0.5f);
+        rescale_history(f, f->step_after_n, s_new / f->scale);
         f->step_scale0 = f->scale;
         f->step_dv_ms = step / (f->scale * g);
         f->step_z0_ms = f->gnss_avg_ms;

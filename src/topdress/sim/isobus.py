@@ -9,7 +9,9 @@ Proprietary A to the TC; the terminal's frames reach the core only from the TC's
 Ground speed: the core's command carries the true speed (a perfect GNSS) by default; with
 `gnss_from_tc` it carries what the ISOBUS firmware gives it (ecu/ports/stm32f4/fw_isobus.c): the
 terminal's last PcGnssTime from the TC's address while fresh (`gnss_timeout_ms`), else "not
-available" (the core on its wheel).
+available" (the core on its wheel). Once the terminal's PcGnssTime reaches the core, the
+command's speed is no fused fix any more (the core takes a PC's fixes from PcGnssTime only,
+docs/protocol.md); it still serves the paper's modes.
 
 Sections: the meters run at the TC's rate times the share of the width switched on (row
 shut-offs at the outlets close the rows switched off), and stop with every section off or no TC
