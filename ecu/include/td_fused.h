@@ -23,7 +23,7 @@
  *   and in flat motion, the wheel, its ~0.3 s mean within 5 %, weighs a tenth: its slow
  *   bounce, read through eq. 5's slope ~1.5 times as large in speed, is averaged over seconds
  *   (a pass 3 % slower is followed with a time constant of ~4 s, a gentle ramp of 0.02-0.04
- *   m/s^2 up to 3-5 % behind); a ramp that brings the whole jerk back (the wheel's own
+ *   m/s^2 up to 2.4-4.4 % behind); a ramp that brings the whole jerk back (the wheel's own
  *   acceleration ~0.1 m/s^2 and more) is followed in full.
  * Cruise (the last fix was settled and flat, below) above 6 km/h, while the wheel's innovation
  *   (its mean over ~0.3 s) stays within 5 %: a decays with a time constant of 0.5 s, so a fix's
