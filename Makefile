@@ -91,7 +91,7 @@ interop: $(STAMP)
 # The system packages first, one apt-get at a time; then two parts side by side, each printed
 # whole when it ends: the C tests, their sanitized run and the C linters at a lower priority
 # (they need no virtual environment and take the CPU that pytest, mostly waiting on a browser,
-# a demo or QEMU, leaves), and the Python linters beside pytest.
+# a demo or QEMU, leaves), and the Python linters and pytest.
 test:
 	for w in python ctest browser qemu office; do PYTHON=$(PYTHON) bash scripts/sysdeps.sh $$w || exit 1; done
 	$(MAKE) --no-print-directory -j2 --output-sync=target test-c test-py
@@ -100,7 +100,7 @@ test-c:
 	nice -n 10 $(MAKE) --no-print-directory ctest ctest-san lint-c
 
 test-py: $(STAMP)
-	$(MAKE) --no-print-directory -j2 lint-py pytest
+	$(MAKE) --no-print-directory lint-py pytest
 
 check: ctest lint pytest-fast
 
