@@ -14,7 +14,7 @@ DURATION ?= 30
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --no-compile -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
 demo: $(STAMP)
