@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed-stamp
 CSRC := $(wildcard ecu/src/*.c ecu/src/gen/*.c ecu/src/gen/*.h ecu/include/*.h src/topdress/sim/csrc/* ecu/isobus/src/*.c ecu/isobus/src/gen/*.c ecu/isobus/src/gen/*.h ecu/isobus/include/*.h) src/topdress/ecu/_build.py src/topdress/isobus/_build.py
 DURATION ?= 30
 
-.PHONY: demo test test-c test-py check ctest ctest-san pytest pytest-fast lint lint-c lint-py bench sysdeps browser qemu office screenshots clean firmware interop
+.PHONY: demo test check ctest ctest-san pytest pytest-fast lint lint-c lint-py bench sysdeps browser qemu office screenshots clean firmware interop
 
 $(STAMP): pyproject.toml setup.py $(CSRC)
 	PYTHON=$(PYTHON) bash scripts/sysdeps.sh python
@@ -88,19 +88,10 @@ screenshots: $(STAMP) browser
 interop: $(STAMP)
 	$(BIN)/python -m pytest -q -m interop tests/test_isobus_interop_j1939.py tests/test_isobus_ddop.py tests/test_isobus_agiso_replay.py tests/test_isobus_tcserver.py tests/test_isobus_tc_j1939.py tests/test_isobus_tc_isoxml.py tests/test_isobus_tc_protocol.py tests/test_isobus_tc_faults.py tests/test_terminal_agiso.py
 
-# The system packages first, one apt-get at a time; then two parts side by side, each printed
-# whole when it ends: the C tests, their sanitized run and the C linters at a lower priority
-# (they need no virtual environment and take the CPU that pytest, mostly waiting on a browser,
-# a demo or QEMU, leaves), and the Python linters and pytest.
-test:
-	for w in python ctest browser qemu office; do PYTHON=$(PYTHON) bash scripts/sysdeps.sh $$w || exit 1; done
-	$(MAKE) --no-print-directory -j2 --output-sync=target test-c test-py
-
-test-c:
-	nice -n 10 $(MAKE) --no-print-directory ctest ctest-san lint-c
-
-test-py: $(STAMP)
-	$(MAKE) --no-print-directory lint-py pytest
+# One part after the other: the wall-clock tests in pytest (real-time demos, pulled adapters, a
+# browser) want the two cores to themselves; beside the C builds (even at a lower priority) a
+# command period or a keystroke was lost under the load, and the whole took no less time.
+test: ctest ctest-san lint pytest
 
 check: ctest lint pytest-fast
 
