@@ -241,6 +241,13 @@ static void field_init(run_t *r) {
     r->f.slip_shape = true;
 }
 
+/* A pass at 8.5 km/h driven for 40 s on a wheel of this scale, GNSS 1.3 s late, learning: the
+ * scale learned and the estimate in cruise. */
+static void field_learned(run_t *r, double scale) {
+    field_init(r);
+    run(r, 40.0, v_pass, scale, true, 1.3, 1.3, true);
+}
+
 /* An outage in a pass at 8.5 km/h, GNSS 1.3 s late before it: the estimate averages the
  * wheel's slow bounce instead of following it (eq. 5's slope reads the wheel's share ~1.5 times
  * as large in speed), and still follows a wheel that leaves its band or moves for good; not
@@ -249,8 +256,7 @@ static void field_init(run_t *r) {
  * wheel 10 % low, the estimate there within 1 s; a pass 3 % slower (the wheel within its band),
  * followed with a time constant of ~4 s: 1.0 % off 4 s on, -0.1 % 8 s on. */
 static void outage_from_cruise(run_t *r) {
-    field_init(r);
-    run(r, 40.0, v_pass, 0.98, true, 1.3, 1.3, true);
+    field_learned(r, 0.98);
     assert_true(r->f.cruise);
     /* beyond the first 1.5 s: a sharp wheel step there is judged as a slip step (step_check) */
     run(r, 2.0, v_pass, 0.98, false, 0.0, 0.0, false);
@@ -310,9 +316,8 @@ static void test_an_outage_follows_a_wheel_beyond_its_band(void **state) {
 static void test_a_wet_patch_is_followed_within_seconds(void **state) {
     (void)state;
     run_t r;
-    field_init(&r);
     const double firm = 0.98;
-    run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
+    field_learned(&r, firm);
     const float s_firm = r.f.scale;
     double sum = 0.0;
     double worst = 0.0;
@@ -351,8 +356,7 @@ static void test_a_wet_patch_is_followed_within_seconds(void **state) {
 /* The patch's scale learned in a pass (s_wet), then 1.5 s of the wheel at WET_SCALE * wheel(k)
  * (k in 10 ms steps), GNSS 1.3 s late showing nothing yet: the estimate's worst error, share. */
 static double wet_patch_end(run_t *r, double (*wheel)(int k), float *s_wet) {
-    field_init(r);
-    run(r, 40.0, v_pass, WET_SCALE, true, 1.3, 1.3, true);
+    field_learned(r, WET_SCALE);
     *s_wet = r->f.scale;
     double worst = 0.0;
     for (int k = 0; k < 150; k++) {
@@ -429,9 +433,8 @@ static void test_a_wet_patch_s_end_on_a_rising_bounce_is_a_slip_step(void **stat
 static void test_a_wet_patch_step_is_taken_by_the_scale(void **state) {
     (void)state;
     run_t r;
-    field_init(&r);
     const double firm = 0.98;
-    run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
+    field_learned(&r, firm);
     const float s_firm = r.f.scale;
     double worst = 0.0;
     for (int k = 0; k < 800; k++) { /* 8 s in the patch, then 8 s out of it */
@@ -521,8 +524,7 @@ static double bump(double u) {
 static void test_a_ramp_the_wheel_turns_back_from_ends(void **state) {
     (void)state;
     run_t r;
-    field_init(&r);
-    run(&r, 40.0, v_pass, 0.98, true, 1.3, 1.3, true);
+    field_learned(&r, 0.98);
     bool ramp = false;
     for (int k = 0; k < 18; k++) {
         run(&r, 0.1, v_pass, 0.98 * bump(0.1 * k + 0.05), true, 1.3, 1.3, true);
@@ -541,10 +543,7 @@ static void test_a_ramp_the_wheel_turns_back_from_ends(void **state) {
  * slow brake, and the estimate restarts from the wheel at once (GNSS, which here says the speed
  * held, then takes it back); the scale stays. */
 static void sharp_step_after(run_t *r, float trend_w_ms, uint8_t ago) {
-    run_init(r);
-    td_fused_tune(&r->f, 0.3f, 0.2f, 15.0f);
-    r->f.slip_shape = true;
-    run(r, 40.0, v_pass, 0.98, true, 1.3, 1.3, true);
+    field_learned(r, 0.98);
     r->f.trend_w_ms = trend_w_ms;
     r->f.trend_ago = ago;
     run(r, 0.3, v_pass, 0.98 * 0.9, true, 1.3, 1.3, true);
@@ -572,9 +571,8 @@ static void test_a_sharp_step_after_a_ramp_goes_on_with_it(void **state) {
 static void test_a_step_back_just_after_cruise_ends_is_held(void **state) {
     (void)state;
     run_t r;
-    field_init(&r);
     const double firm = 0.98;
-    run(&r, 40.0, v_pass, firm, true, 1.3, 1.3, true);
+    field_learned(&r, firm);
     const float s_firm = r.f.scale;
     run(&r, 20.0, v_pass, firm - 0.1, true, 1.3, 1.3, true);
     assert_true(r.f.cruise);
