@@ -146,9 +146,8 @@ typedef struct {
     float ramp_z0_ms;          /**< and GNSS's 1 s mean, m/s */
     bool reopened;             /**< a sustained GNSS innovation re-opened the scale's learning */
     bool cruise;               /**< the last fix found the motion flat and settled: GNSS holds the level */
-    float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none) */
+    float hold_s;              /**< a sharp step of the wheel in cruise held out this long, s (0: none; beyond 0.6 s: judged once, held 0.3 s more) */
     float hold_w0_ms;          /**< the wheel's speed before that step, m/s */
-    bool held_more;            /**< the hold was judged once, the wheel still moving, and goes on */
     float stepped_s;           /**< time since the scale took a wheel's step, s (0: none pending GNSS's check) */
     float step_scale0;         /**< the scale before it */
     uint8_t step_after_n;      /**< the history's buckets newer than this were after that step when it was taken */

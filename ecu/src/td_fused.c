@@ -127,7 +127,6 @@ int td_fused_init(td_fused_t *f, float jerk_ms3, float gnss_std_kmh, float wheel
     f->cruise = false;
     f->hold_s = 0.0f;
     f->hold_w0_ms = 0.0f;
-    f->held_more = false;
     f->stepped_s = 0.0f;
     f->step_scale0 = 1.0f;
     f->step_after_n = 0u;
@@ -405,7 +404,6 @@ static void undo_step(td_fused_t *f) {
 static void step_check(td_fused_t *f) {
     if (f->hist_n < 2u * STEP_N) {
         f->hold_s = 0.0f;
-        f->held_more = false;
         return;
     }
     if (f->trend_ago > 0u) {
@@ -415,15 +413,16 @@ static void step_check(td_fused_t *f) {
     const float pred = f->scale * g * f->v_ms;
     if (f->hold_s > 0.0f) {
         f->hold_s += TD_FUSED_BUCKET_S;
-        if (f->hold_s < STEP_HOLD_S - 0.5f * TD_FUSED_BUCKET_S) {
+        /* past the first judgement: judged again STEP_MORE_S after it */
+        const bool more = f->hold_s > STEP_HOLD_S + 0.5f * TD_FUSED_BUCKET_S;
+        if (f->hold_s < STEP_HOLD_S + (more ? STEP_MORE_S : 0.0f) - 0.5f * TD_FUSED_BUCKET_S) {
             return;
         }
+        const float held_s = f->hold_s;
         f->hold_s = 0.0f;
         const float w_new = hist_mean(f, 0u, STEP_N - 1u);
         const float since = w_new - hist_mean(f, STEP_N, 2u * STEP_N - 2u);
         const float step = w_new - f->hold_w0_ms;
-        const bool more = f->held_more;
-        f->held_more = false;
         const bool moved = fabsf(since) >= STEP_LEVEL_REL * pred;
         if (!(fabsf(step) > STEP_REL * pred)) {
             return; /* the wheel came back: a bounce, nothing changed */
@@ -435,12 +434,11 @@ static void step_check(td_fused_t *f) {
              * bounce rising with a wet patch's end). Judged once more STEP_MORE_S on, when a
              * wheel still beyond the share is a step unless it still moves the same way. (A
              * step down going on is not judged again: a brake would wait for it) */
-            f->held_more = true;
-            f->hold_s = STEP_HOLD_S - STEP_MORE_S;
+            f->hold_s = held_s;
             return;
         }
         if (moved && since * step > 0.0f) {
-            snap_to_wheel(f, w_new, f->hold_w0_ms, STEP_HOLD_S + (more ? STEP_MORE_S : 0.0f) + 2.0f * TD_FUSED_BUCKET_S);
+            snap_to_wheel(f, w_new, f->hold_w0_ms, held_s + 2.0f * TD_FUSED_BUCKET_S);
             return;
         }
         float s_new = w_new / (g * f->v_ms);
@@ -448,7 +446,6 @@ static void step_check(td_fused_t *f) {
         /* the wheel's history before the step as the new scale would have read it: GNSS
          * against it, and the wheel's own acceleration, then see no step. The buckets from
          * the one that showed the step (as old as the hold) on are after it */
-        const float held_s = STEP_HOLD_S + (more ? STEP_MORE_S : 0.0f);
         f->step_after_n = (uint8_t)(held_s / TD_FUSED_BUCKET_S + 0.5f);
         rescale_history(f, f->step_after_n, s_new / f->scale);
         f->step_scale0 = f->scale;
@@ -554,7 +551,6 @@ void td_fused_record(td_fused_t *f, float z_ms, float dt_s) {
         f->reopened = false;
         f->q_share = 1.0f;
         f->hold_s = 0.0f;
-        f->held_more = false;
         return;
     }
     f->hist_sum += z_ms * dt_s;
@@ -773,7 +769,6 @@ void td_fused_standstill(td_fused_t *f) {
     f->ramp_s = 0.0f;
     f->cruise = false;
     f->hold_s = 0.0f;
-    f->held_more = false;
 }
 
 float td_fused_lead_ms(const td_fused_t *f, float lead_s) {
